@@ -1,0 +1,65 @@
+// Bindings and helpers every terrain method shares (descriptor set 0, one set per frame slot).
+// Mirrors `FrameUniforms` in src/render/terrain.rs; a test proves the layouts equal.
+
+struct Frame {
+    // Rotation-only view times reversed-Z projection: positions are camera-relative.
+    view_proj: mat4x4<f32>,
+    // xy: the sample cell the camera is in (floor(camera_xy / spacing)).
+    camera_cell: vec4<i32>,
+    // xy: camera_xy - camera_cell * spacing (metres); z: camera height (m); w: spacing (m).
+    camera_offset: vec4<f32>,
+    // xyz: unit vector towards the sun.
+    sun_dir: vec4<f32>,
+    // xy: height samples per side.
+    data_size: vec4<u32>,
+}
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+// Heights in metres, one texel per sample, read with textureLoad (exact values, no filtering).
+@group(0) @binding(1) var height_tex: texture_2d<f32>;
+// Unit normals per sample (RGBA8 snorm), filtered in the fragment stage.
+@group(0) @binding(2) var normal_tex: texture_2d<f32>;
+// sRGB albedo covering the data extent edge to edge.
+@group(0) @binding(3) var albedo_tex: texture_2d<f32>;
+@group(0) @binding(4) var linear_sampler: sampler;
+
+struct TerrainVertex {
+    @builtin(position) clip: vec4<f32>,
+    // Position in sample units (x = column, y = row), for texturing.
+    @location(0) grid_pos: vec2<f32>,
+}
+
+// Height in metres at an integer sample, clamped to the data.
+fn sample_height(s: vec2<i32>) -> f32 {
+    let hi = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+    return textureLoad(height_tex, clamp(s, vec2<i32>(0), hi), 0).r;
+}
+
+// Bilinear height at a position in sample units; exact at integer positions (weights 1 and 0).
+fn height_at(grid_pos: vec2<f32>) -> f32 {
+    let base = floor(grid_pos);
+    let f = grid_pos - base;
+    let s = vec2<i32>(base);
+    let south = mix(sample_height(s), sample_height(s + vec2<i32>(1, 0)), f.x);
+    let north = mix(sample_height(s + vec2<i32>(0, 1)), sample_height(s + vec2<i32>(1, 1)), f.x);
+    return mix(south, north, f.y);
+}
+
+// Clip position of a surface point given in sample units (integer cell + fraction) and metres.
+// The subtraction of the camera cell is done in integers, so precision does not depend on the
+// distance from the world origin.
+fn project(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec4<f32> {
+    let spacing = frame.camera_offset.w;
+    let rel_xy = vec2<f32>(cell - frame.camera_cell.xy) * spacing + frac * spacing - frame.camera_offset.xy;
+    let rel = vec3<f32>(rel_xy, height_m - frame.camera_offset.z);
+    return frame.view_proj * vec4<f32>(rel, 1.0);
+}
+
+// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map.
+fn shade(grid_pos: vec2<f32>) -> vec4<f32> {
+    let size = vec2<f32>(frame.data_size.xy);
+    let n = normalize(textureSample(normal_tex, linear_sampler, (grid_pos + 0.5) / size).xyz);
+    let albedo = textureSample(albedo_tex, linear_sampler, grid_pos / (size - 1.0)).rgb;
+    let light = LIGHT_AMBIENT + LIGHT_DIFFUSE * max(dot(n, frame.sun_dir.xyz), 0.0);
+    return vec4<f32>(albedo * light, 1.0);
+}

@@ -1,0 +1,38 @@
+//! The `vkterrain` command line: `info` and `render`.
+
+pub mod info;
+pub mod render;
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(name = "vkterrain", version, about = "Headless Vulkan terrain renderer")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Print the chosen Vulkan device, its memory and the features vkterrain uses or could use.
+    Info {
+        /// Configuration file (TOML); built-in defaults without one.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Device override: index or name substring (VKTERRAIN_DEVICE also works).
+        #[arg(long)]
+        device: Option<String>,
+    },
+    /// Render a scenario headless, write selected frames as PNG and print a summary.
+    Render(render::RenderArgs),
+}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Info { config, device } => info::run(config.as_deref(), device),
+        Command::Render(args) => render::run(&args),
+    }
+}

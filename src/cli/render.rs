@@ -1,0 +1,223 @@
+//! `vkterrain render`: the main job. Renders a scenario headless, writes selected frames as PNG
+//! and prints a summary (also written as `summary.json`).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context;
+use clap::Args;
+
+use crate::config::Config;
+use crate::dataset::Heightmap;
+use crate::driver::{Gpu, GpuOptions};
+use crate::lod::MethodKind;
+use crate::output::png::PngSink;
+use crate::render::stats::Summary;
+use crate::render::{RenderOptions, Renderer};
+use crate::scene::Scenario;
+
+#[derive(Args, Debug, Clone, Default)]
+pub struct RenderArgs {
+    /// Configuration file (TOML); built-in defaults without one.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Number of frames (default: the scenario's).
+    #[arg(long)]
+    pub frames: Option<u32>,
+    /// Output directory for PNGs and summary.json (default: the config's `output.dir`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// LOD method (brute).
+    #[arg(long)]
+    pub method: Option<String>,
+    #[arg(long)]
+    pub frames_in_flight: Option<u32>,
+    /// Scenario file (default: the config's `scenario.path`).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Device override: index or name substring.
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Frames excluded from the timing summary (lavapipe compiles shaders lazily).
+    #[arg(long, default_value_t = 5)]
+    pub warmup: usize,
+}
+
+/// Everything a render run needs, checked before any output exists.
+pub struct Prepared {
+    pub config: Config,
+    pub data: Heightmap,
+    pub scenario: Scenario,
+    pub frames: u32,
+    pub method: MethodKind,
+    pub out_dir: PathBuf,
+}
+
+/// Loads and checks config, data set and scenario; creates nothing.
+pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
+    let mut config = Config::load(args.config.as_deref())?;
+    if let Some(w) = args.width {
+        config.render.width = w;
+    }
+    if let Some(h) = args.height {
+        config.render.height = h;
+    }
+    if let Some(n) = args.frames_in_flight {
+        config.render.frames_in_flight = n;
+    }
+    if let Some(m) = &args.method {
+        config.method.name = m.clone();
+    }
+    if let Some(d) = &args.device {
+        config.device.select = Some(d.clone());
+    }
+    config.validate()?;
+    let method = MethodKind::parse(&config.method.name)?;
+    let data = crate::dataset::load(&config)?;
+    let scenario_path = match &args.scenario {
+        Some(p) => p.clone(),
+        None => config.resolve(&config.scenario.path),
+    };
+    let scenario = Scenario::load(&scenario_path, &data)?;
+    let frames = args.frames.unwrap_or(scenario.frames);
+    if frames == 0 {
+        anyhow::bail!("--frames must be at least 1");
+    }
+    let out_dir = match &args.out {
+        Some(p) => p.clone(),
+        None => config.resolve(&config.output.dir),
+    };
+    Ok(Prepared { config, data, scenario, frames, method, out_dir })
+}
+
+/// Frame indices to write: negative entries count from the end.
+pub fn png_frames(selection: &[i64], frames: u32) -> Vec<u64> {
+    let mut out: Vec<u64> = selection
+        .iter()
+        .filter_map(|&i| {
+            let i = if i < 0 { frames as i64 + i } else { i };
+            (0..frames as i64).contains(&i).then_some(i as u64)
+        })
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+    let p = prepare(args)?;
+    let gpu = Gpu::new(
+        &GpuOptions {
+            select: p.config.device.select.clone(),
+            validation: p.config.device.validation,
+            force_legacy: p.config.device.force_legacy,
+        }
+        .with_env(),
+    )?;
+    let mut renderer = Renderer::new(&gpu, &p.data, p.method, RenderOptions::from_config(&p.config.render))?;
+
+    let created_dir = !p.out_dir.exists();
+    std::fs::create_dir_all(&p.out_dir).with_context(|| format!("{}: cannot create", p.out_dir.display()))?;
+    let mut sink = PngSink::new(&p.out_dir, png_frames(&p.config.output.png_frames, p.frames));
+    let result = (|| -> anyhow::Result<()> {
+        for frame in 0..p.frames as u64 {
+            renderer.render(p.scenario.camera(frame), &mut sink)?;
+        }
+        renderer.finish(&mut sink)?;
+        Ok(())
+    })();
+    let written = sink.finish();
+    let written = match result.and_then(|()| written.map_err(anyhow::Error::from)) {
+        Ok(w) => w,
+        Err(e) => {
+            // Nothing half-written: remove this run's frames (and the directory if we made it).
+            cleanup(&p.out_dir, created_dir);
+            return Err(e);
+        }
+    };
+    check_validation(&gpu)?;
+
+    let summary = renderer.stats.summary(args.warmup.min(p.frames.saturating_sub(1) as usize));
+    let report = report(&gpu, &renderer, &p, &summary, &written);
+    print!("{report}");
+    let json = serde_json::json!({
+        "device": gpu.info.name,
+        "device_type": gpu.info.type_name(),
+        "dataset": p.data.name,
+        "method": renderer.method_name(),
+        "scenario": p.scenario.name,
+        "width": renderer.options.width,
+        "height": renderer.options.height,
+        "frames_in_flight": renderer.options.frames_in_flight,
+        "readback_path": renderer.readback_path,
+        "summary": summary,
+        "pngs": written,
+    });
+    crate::output::write_atomic(&p.out_dir.join("summary.json"), serde_json::to_string_pretty(&json)?.as_bytes())?;
+    Ok(())
+}
+
+fn cleanup(dir: &Path, created: bool) {
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if name.starts_with("frame_") && name.ends_with(".png") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+    if created {
+        let _ = std::fs::remove_dir(dir);
+    }
+}
+
+/// Fails when the validation layers reported anything.
+pub fn check_validation(gpu: &Arc<Gpu>) -> anyhow::Result<()> {
+    if let Some(log) = gpu.validation()
+        && log.count() > 0
+    {
+        let first = log.messages().into_iter().next().unwrap_or_default();
+        anyhow::bail!("{} Vulkan validation message(s); first: {}", log.count(), first.replace('\n', " "));
+    }
+    Ok(())
+}
+
+fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf]) -> String {
+    use std::fmt::Write;
+    let mut o = String::new();
+    let _ = writeln!(o, "device:          {} ({})", gpu.info.name, gpu.info.type_name());
+    let _ = writeln!(o, "dataset:         {} ({}x{} samples, {} m)", p.data.name, p.data.width, p.data.height, p.data.spacing);
+    let _ = writeln!(o, "method:          {}", r.method_name());
+    let _ = writeln!(o, "scenario:        {}", p.scenario.name);
+    let _ = writeln!(
+        o,
+        "resolution:      {}x{}, {} frame(s) in flight, readback {:?}, {}",
+        r.options.width,
+        r.options.height,
+        r.options.frames_in_flight,
+        r.readback_path,
+        if gpu.modern { "dynamic rendering + sync2" } else { "render pass + classic barriers" }
+    );
+    let _ = writeln!(o, "frames:          {} ({} warm-up excluded below)", s.frames + s.warmup, s.warmup);
+    let _ = writeln!(o, "triangles/frame: {:.0} (median)", s.triangles.median);
+    let _ = writeln!(o, "frame time:      median {:.2} ms, p99 {:.2} ms, max {:.2} ms", s.frame_ms.median, s.frame_ms.p99, s.frame_ms.max);
+    let _ = writeln!(
+        o,
+        "GPU per pass:    prepass {:.2} ms, terrain {:.2} ms, readback {:.2} ms (medians), total p99 {:.2} ms",
+        s.gpu_prepass_ms.median, s.gpu_terrain_ms.median, s.gpu_readback_ms.median, s.gpu_total_ms.p99
+    );
+    let _ = writeln!(
+        o,
+        "CPU per frame:   record+submit {:.2} ms, wait {:.2} ms, sink {:.2} ms (medians)",
+        s.cpu_record_ms.median, s.cpu_wait_ms.median, s.sink_ms.median
+    );
+    let _ = writeln!(o, "overlap:         {:.0}% of frames delivered while the next was on the GPU", s.overlapped_fraction * 100.0);
+    for w in written {
+        let _ = writeln!(o, "wrote:           {}", w.display());
+    }
+    o
+}

@@ -1,0 +1,191 @@
+//! Terrain data as the renderer consumes it: a height grid in metres (+ optional albedo).
+//!
+//! Convention (see `docs/coordinates.md`): sample `(col, row)` lies at world
+//! `x = col * spacing`, `y = row * spacing` (metres, z up); row 0 is the **south** edge, so
+//! images whose first row is north are flipped when loaded. Heights are metres.
+
+pub mod procedural;
+
+use crate::error::{Error, Result};
+
+/// A regular height grid in metres, with optional albedo of the same extent.
+#[derive(Clone, Debug)]
+pub struct Heightmap {
+    /// Human-readable name of where the data came from (shown in summaries).
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    /// Distance between neighbouring samples in metres (x and y).
+    pub spacing: f64,
+    /// `width * height` heights, row-major, row 0 = south.
+    pub heights: Vec<f32>,
+    /// Optional RGBA8 (sRGB) albedo covering the same extent, row 0 = south.
+    pub albedo: Option<Albedo>,
+}
+
+/// An sRGB RGBA8 image aligned with the height grid by extent.
+#[derive(Clone, Debug)]
+pub struct Albedo {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<u8>,
+}
+
+/// Largest side accepted for a height grid held in one texture (Vulkan guarantees 4096; the
+/// renderer checks the device limit too).
+pub const MAX_SIDE: u32 = 16384;
+
+impl Heightmap {
+    /// Validates and builds a height grid.
+    pub fn new(name: impl Into<String>, width: u32, height: u32, spacing: f64, heights: Vec<f32>) -> Result<Self> {
+        let name = name.into();
+        if width < 2 || height < 2 {
+            return Err(Error::invalid(&name, format!("height grid {width}x{height} is smaller than 2x2")));
+        }
+        if width > MAX_SIDE || height > MAX_SIDE {
+            return Err(Error::invalid(&name, format!("height grid {width}x{height} exceeds {MAX_SIDE} per side")));
+        }
+        if !(spacing.is_finite() && spacing > 0.0) {
+            return Err(Error::invalid(&name, format!("sample spacing {spacing} m is not a positive number")));
+        }
+        if heights.len() != (width as usize) * (height as usize) {
+            return Err(Error::invalid(&name, format!("{} heights for a {width}x{height} grid", heights.len())));
+        }
+        if let Some(i) = heights.iter().position(|h| !h.is_finite()) {
+            return Err(Error::invalid(&name, format!("height at sample {} is {}", i, heights[i])));
+        }
+        Ok(Heightmap { name, width, height, spacing, heights, albedo: None })
+    }
+
+    /// Height of sample `(col, row)` in metres.
+    pub fn sample(&self, col: u32, row: u32) -> f32 {
+        self.heights[row as usize * self.width as usize + col as usize]
+    }
+
+    /// Bilinear height at a world position (clamped to the grid), the same interpolation the
+    /// GPU applies between samples.
+    pub fn height_at(&self, x: f64, y: f64) -> f64 {
+        let gx = (x / self.spacing).clamp(0.0, (self.width - 1) as f64);
+        let gy = (y / self.spacing).clamp(0.0, (self.height - 1) as f64);
+        let (c0, r0) = (gx.floor() as u32, gy.floor() as u32);
+        let (c1, r1) = ((c0 + 1).min(self.width - 1), (r0 + 1).min(self.height - 1));
+        let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
+        let h = |c, r| self.sample(c, r) as f64;
+        let south = h(c0, r0) * (1.0 - fx) + h(c1, r0) * fx;
+        let north = h(c0, r1) * (1.0 - fx) + h(c1, r1) * fx;
+        south * (1.0 - fy) + north * fy
+    }
+
+    /// World extent in metres: `(x_max, y_max)`; the grid starts at the origin.
+    pub fn extent(&self) -> (f64, f64) {
+        ((self.width - 1) as f64 * self.spacing, (self.height - 1) as f64 * self.spacing)
+    }
+
+    /// Minimum and maximum height.
+    pub fn height_range(&self) -> (f32, f32) {
+        self.heights.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| (lo.min(h), hi.max(h)))
+    }
+
+    /// Unit surface normal at each sample from central differences (one-sided at the edges),
+    /// packed as RGBA8 snorm (x, y, z, 0) for the normal texture.
+    pub fn normals_snorm8(&self) -> Vec<u8> {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let mut out = Vec::with_capacity((w * h * 4) as usize);
+        let at = |c: i64, r: i64| self.sample(c.clamp(0, w - 1) as u32, r.clamp(0, h - 1) as u32) as f64;
+        for r in 0..h {
+            for c in 0..w {
+                let (cl, cr) = ((c - 1).max(0), (c + 1).min(w - 1));
+                let (rd, ru) = ((r - 1).max(0), (r + 1).min(h - 1));
+                let dx = (at(cr, r) - at(cl, r)) / ((cr - cl) as f64 * self.spacing);
+                let dy = (at(c, ru) - at(c, rd)) / ((ru - rd) as f64 * self.spacing);
+                let n = glam::DVec3::new(-dx, -dy, 1.0).normalize();
+                for v in [n.x, n.y, n.z, 0.0] {
+                    out.push(((v * 127.0).round().clamp(-127.0, 127.0) as i8) as u8);
+                }
+            }
+        }
+        out
+    }
+
+    /// The albedo to draw: the data's own if it has one, else a colour ramp by height and
+    /// slope (grass, rock, snow), so untextured data still reads well.
+    pub fn albedo_or_ramp(&self) -> Albedo {
+        if let Some(a) = &self.albedo {
+            return a.clone();
+        }
+        let (lo, hi) = self.height_range();
+        let span = (hi - lo).max(1.0);
+        let normals = self.normals_snorm8();
+        let mut rgba = Vec::with_capacity(self.heights.len() * 4);
+        for (i, &h) in self.heights.iter().enumerate() {
+            let t = (h - lo) / span;
+            let nz = (normals[i * 4 + 2] as i8) as f32 / 127.0;
+            let grass = [0.32f32, 0.45, 0.22];
+            let rock = [0.45f32, 0.41, 0.37];
+            let snow = [0.93f32, 0.94, 0.96];
+            let steep = ((0.9 - nz) / 0.25).clamp(0.0, 1.0);
+            let mut c = [0.0f32; 3];
+            for k in 0..3 {
+                c[k] = grass[k] + (rock[k] - grass[k]) * steep.max(((t - 0.55) / 0.2).clamp(0.0, 1.0));
+                let s = ((t - 0.8) / 0.1).clamp(0.0, 1.0) * (1.0 - steep);
+                c[k] += (snow[k] - c[k]) * s;
+            }
+            rgba.extend(c.iter().map(|v| (v * 255.0).round() as u8));
+            rgba.push(255);
+        }
+        Albedo { width: self.width, height: self.height, rgba }
+    }
+}
+
+/// Loads the data set a configuration names.
+pub fn load(config: &crate::config::Config) -> Result<Heightmap> {
+    let d = &config.dataset;
+    match d.kind.as_str() {
+        "procedural" => procedural::generate(&procedural::ProceduralParams {
+            size: d.size,
+            seed: d.seed,
+            spacing: d.spacing,
+            ..Default::default()
+        }),
+        "png16" => {
+            let path = config.resolve(d.path.as_deref().ok_or_else(|| Error::invalid("dataset.path", "missing"))?);
+            let albedo = d.albedo.as_deref().map(|p| config.resolve(p));
+            load_png16(&path, d.spacing, d.vertical_scale, albedo.as_deref())
+        }
+        other => Err(Error::invalid("dataset.kind", format!("unknown kind {other:?}"))),
+    }
+}
+
+/// A 16-bit greyscale PNG height map (`value * vertical_scale` metres) with optional albedo
+/// image covering the same extent. PNG rows run north to south; they are flipped so row 0 is
+/// south.
+pub fn load_png16(path: &std::path::Path, spacing: f64, vertical_scale: f64, albedo: Option<&std::path::Path>) -> Result<Heightmap> {
+    let decode = |p: &std::path::Path| {
+        image::ImageReader::open(p)
+            .map_err(|e| Error::io(p, e))?
+            .with_guessed_format()
+            .map_err(|e| Error::io(p, e))?
+            .decode()
+            .map_err(|e| Error::invalid(p.display().to_string(), e.to_string()))
+    };
+    let img = decode(path)?;
+    if !matches!(img.color(), image::ColorType::L16 | image::ColorType::La16) {
+        return Err(Error::invalid(path.display().to_string(), format!("expected a 16-bit greyscale PNG, found {:?}", img.color())));
+    }
+    let grey = img.to_luma16();
+    let (w, h) = grey.dimensions();
+    let mut heights = Vec::with_capacity((w * h) as usize);
+    for row in (0..h).rev() {
+        for col in 0..w {
+            heights.push((grey.get_pixel(col, row)[0] as f64 * vertical_scale) as f32);
+        }
+    }
+    let mut map = Heightmap::new(path.display().to_string(), w, h, spacing, heights)?;
+    if let Some(ap) = albedo {
+        let rgba = decode(ap)?.to_rgba8();
+        let (aw, ah) = rgba.dimensions();
+        let flipped: Vec<u8> = (0..ah).rev().flat_map(|r| rgba.as_raw()[(r * aw * 4) as usize..((r + 1) * aw * 4) as usize].to_vec()).collect();
+        map.albedo = Some(Albedo { width: aw, height: ah, rgba: flipped });
+    }
+    Ok(map)
+}

@@ -1,0 +1,126 @@
+//! Deterministic procedural terrain: the embedded default data set.
+//!
+//! Gradient-free value noise (hash-based, so any sample can be computed alone, which later lets
+//! a generator work node by node) summed as fBm, with a ridged term for mountain crests and a
+//! power curve that flattens valleys as erosion would. Same seed, same size: same heights, bit
+//! for bit, on every machine (only integer hashing and f64 arithmetic).
+
+use super::Heightmap;
+use crate::error::Result;
+
+/// Parameters of the generator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProceduralParams {
+    pub size: u32,
+    pub seed: u64,
+    /// Sample spacing in metres.
+    pub spacing: f64,
+    /// Height of the tallest possible peak in metres.
+    pub max_height: f64,
+    /// Wavelength of the largest features in metres.
+    pub feature_size: f64,
+}
+
+impl Default for ProceduralParams {
+    fn default() -> Self {
+        ProceduralParams { size: 1025, seed: 1, spacing: 30.0, max_height: 2400.0, feature_size: 12_000.0 }
+    }
+}
+
+fn hash(seed: u64, x: i64, y: i64) -> f64 {
+    // SplitMix64 over the packed lattice coordinates.
+    let mut z = seed
+        .wrapping_add((x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+        .wrapping_add((y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 53) as f64
+}
+
+fn smooth(t: f64) -> f64 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+/// Value noise in [0, 1] at lattice coordinates `(x, y)`.
+fn value_noise(seed: u64, x: f64, y: f64) -> f64 {
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (smooth(x - x0), smooth(y - y0));
+    let (ix, iy) = (x0 as i64, y0 as i64);
+    let a = hash(seed, ix, iy);
+    let b = hash(seed, ix + 1, iy);
+    let c = hash(seed, ix, iy + 1);
+    let d = hash(seed, ix + 1, iy + 1);
+    let south = a + (b - a) * fx;
+    let north = c + (d - c) * fx;
+    south + (north - south) * fy
+}
+
+/// Height in metres at world position `(x, y)`.
+pub fn height(params: &ProceduralParams, x: f64, y: f64) -> f64 {
+    let mut fbm = 0.0;
+    let mut ridge = 0.0;
+    let mut amplitude = 0.5;
+    let mut frequency = 1.0 / params.feature_size;
+    for octave in 0..10u64 {
+        let s = params.seed.wrapping_mul(31).wrapping_add(octave);
+        let n = value_noise(s, x * frequency, y * frequency);
+        fbm += amplitude * n;
+        ridge += amplitude * (1.0 - (2.0 * n - 1.0).abs()).powi(2);
+        amplitude *= 0.5;
+        frequency *= 2.03;
+    }
+    // Mountains where the low-frequency mask is high, rolling hills elsewhere.
+    let mask = smooth(value_noise(params.seed ^ 0xA5A5, x / (params.feature_size * 2.5), y / (params.feature_size * 2.5)));
+    let shaped = (0.55 * fbm + 0.45 * ridge * mask).clamp(0.0, 1.0);
+    params.max_height * shaped.powf(1.6)
+}
+
+/// Generates the whole grid.
+pub fn generate(params: &ProceduralParams) -> Result<Heightmap> {
+    let n = params.size as usize;
+    let mut heights = Vec::with_capacity(n * n);
+    for row in 0..params.size {
+        for col in 0..params.size {
+            let (x, y) = (col as f64 * params.spacing, row as f64 * params.spacing);
+            heights.push(height(params, x, y) as f32);
+        }
+    }
+    Heightmap::new(
+        format!("procedural size={} seed={} spacing={} m", params.size, params.seed, params.spacing),
+        params.size,
+        params.size,
+        params.spacing,
+        heights,
+    )
+}
+
+/// Analytic test surfaces with known geometry (for image tests against exact values).
+pub mod analytic {
+    use super::super::Heightmap;
+    use crate::error::Result;
+
+    /// A plane `z = z0 + gx * x + gy * y`.
+    pub fn plane(size: u32, spacing: f64, z0: f64, gx: f64, gy: f64) -> Result<Heightmap> {
+        let mut h = Vec::with_capacity((size * size) as usize);
+        for r in 0..size {
+            for c in 0..size {
+                h.push((z0 + gx * c as f64 * spacing + gy * r as f64 * spacing) as f32);
+            }
+        }
+        Heightmap::new("analytic plane", size, size, spacing, h)
+    }
+
+    /// A cone of `peak` metres at the grid centre, falling linearly to 0 at `radius`.
+    pub fn cone(size: u32, spacing: f64, peak: f64, radius: f64) -> Result<Heightmap> {
+        let centre = (size - 1) as f64 * spacing / 2.0;
+        let mut h = Vec::with_capacity((size * size) as usize);
+        for r in 0..size {
+            for c in 0..size {
+                let d = ((c as f64 * spacing - centre).powi(2) + (r as f64 * spacing - centre).powi(2)).sqrt();
+                h.push((peak * (1.0 - d / radius)).max(0.0) as f32);
+            }
+        }
+        Heightmap::new("analytic cone", size, size, spacing, h)
+    }
+}

@@ -1,0 +1,210 @@
+//! The driver layer: the one owner of the Vulkan instance, device, queue, memory and sync.
+//!
+//! Everything above this layer holds an `Arc<Gpu>` and the RAII wrappers of [`memory`] and
+//! [`sync`]; nothing above it creates devices or allocates memory by hand.
+
+pub mod barrier;
+pub mod device;
+pub mod instance;
+pub mod memory;
+pub mod shaders;
+pub mod sync;
+
+use std::mem::ManuallyDrop;
+use std::sync::{Arc, Mutex};
+
+use ash::vk;
+
+pub use device::{Capabilities, DeviceInfo};
+pub use instance::ValidationLog;
+
+use crate::error::{Error, Result, VkResultExt};
+
+/// Environment variable that turns the validation layers on (`1`/`true`) for any command.
+pub const VALIDATION_ENV: &str = "VKTERRAIN_VALIDATION";
+
+/// How to create the GPU context.
+#[derive(Clone, Debug, Default)]
+pub struct GpuOptions {
+    /// Device override: index or case-insensitive name substring. `VKTERRAIN_DEVICE` wins.
+    pub select: Option<String>,
+    /// Enable `VK_LAYER_KHRONOS_validation` with synchronization validation.
+    pub validation: bool,
+    /// Use classic render passes and `vkCmdPipelineBarrier` even where Vulkan 1.3's dynamic
+    /// rendering and synchronization2 exist (keeps the fallback path tested).
+    pub force_legacy: bool,
+}
+
+impl GpuOptions {
+    /// Applies the environment overrides (`VKTERRAIN_DEVICE`, `VKTERRAIN_VALIDATION`).
+    pub fn with_env(mut self) -> Self {
+        if let Ok(v) = std::env::var(device::DEVICE_ENV)
+            && !v.trim().is_empty()
+        {
+            self.select = Some(v);
+        }
+        if let Ok(v) = std::env::var(VALIDATION_ENV) {
+            self.validation |= matches!(v.trim(), "1" | "true" | "yes" | "on");
+        }
+        self
+    }
+}
+
+/// The GPU context: instance, chosen device, its one queue, and the memory allocator.
+pub struct Gpu {
+    pub instance: instance::Instance,
+    pub physical: vk::PhysicalDevice,
+    pub info: DeviceInfo,
+    pub device: ash::Device,
+    pub queue: Mutex<vk::Queue>,
+    pub queue_family: u32,
+    /// Dynamic rendering + synchronization2 are in use (Vulkan 1.3 and not forced off).
+    pub modern: bool,
+    allocator: ManuallyDrop<Mutex<gpu_allocator::vulkan::Allocator>>,
+    /// Enabled optional features (a subset of `info.caps`).
+    pub enabled: Capabilities,
+}
+
+impl Gpu {
+    pub fn new(options: &GpuOptions) -> Result<Arc<Gpu>> {
+        let instance = instance::Instance::new(options.validation)?;
+        let candidates = device::enumerate(&instance.raw)?;
+        let (physical, info) = device::choose(&candidates, options.select.as_deref())?;
+        let queue_family = info.universal_queue_family().expect("checked by choose");
+        let offered = info.caps;
+        let modern = offered.dynamic_rendering && offered.synchronization2 && !options.force_legacy;
+
+        let base = vk::PhysicalDeviceFeatures::default()
+            .sampler_anisotropy(offered.sampler_anisotropy)
+            .multi_draw_indirect(offered.multi_draw_indirect)
+            .draw_indirect_first_instance(offered.draw_indirect_first_instance)
+            .pipeline_statistics_query(offered.pipeline_statistics_query);
+        let mut f12 = vk::PhysicalDeviceVulkan12Features::default()
+            .timeline_semaphore(true)
+            .draw_indirect_count(offered.draw_indirect_count);
+        let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
+            .dynamic_rendering(modern)
+            .synchronization2(modern);
+        let priorities = [1.0f32];
+        let queues = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(queue_family)
+            .queue_priorities(&priorities)];
+        let mut create = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queues)
+            .enabled_features(&base)
+            .push_next(&mut f12);
+        if info.api_version >= vk::API_VERSION_1_3 {
+            create = create.push_next(&mut f13);
+        }
+        let device = unsafe { instance.raw.create_device(physical, &create, None) }
+            .vk("vkCreateDevice")?;
+        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+
+        let allocator = gpu_allocator::vulkan::Allocator::new(
+            &gpu_allocator::vulkan::AllocatorCreateDesc {
+                instance: instance.raw.clone(),
+                device: device.clone(),
+                physical_device: physical,
+                debug_settings: Default::default(),
+                buffer_device_address: false,
+                allocation_sizes: Default::default(),
+            },
+        )
+        .map_err(|source| {
+            unsafe { device.destroy_device(None) };
+            Error::Allocation { what: "allocator".into(), source }
+        })?;
+
+        let enabled = Capabilities {
+            dynamic_rendering: modern,
+            synchronization2: modern,
+            ..offered
+        };
+        Ok(Arc::new(Gpu {
+            instance,
+            physical,
+            info,
+            device,
+            queue: Mutex::new(queue),
+            queue_family,
+            modern,
+            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            enabled,
+        }))
+    }
+
+    /// Validation messages so far, when validation is on.
+    pub fn validation(&self) -> Option<&ValidationLog> {
+        self.instance.validation.as_deref()
+    }
+
+    pub(crate) fn allocator(&self) -> std::sync::MutexGuard<'_, gpu_allocator::vulkan::Allocator> {
+        // A panic while holding the lock cannot leave the allocator half-updated in a way that
+        // matters more than the panic itself; keep going with the inner value.
+        self.allocator.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Submits to the one queue.
+    pub fn submit(&self, submits: &[vk::SubmitInfo<'_>], fence: vk::Fence) -> Result<()> {
+        let queue = self.queue.lock().unwrap_or_else(|p| p.into_inner());
+        unsafe { self.device.queue_submit(*queue, submits, fence) }.vk("vkQueueSubmit")
+    }
+
+    /// Waits until the device is idle (shutdown and tests only).
+    pub fn wait_idle(&self) -> Result<()> {
+        unsafe { self.device.device_wait_idle() }.vk("vkDeviceWaitIdle")
+    }
+
+    /// Records and submits a one-shot command buffer and waits for it (set-up uploads only,
+    /// never on the frame path).
+    pub fn one_shot(&self, record: impl FnOnce(vk::CommandBuffer)) -> Result<()> {
+        let d = &self.device;
+        unsafe {
+            let pool = d
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default()
+                        .queue_family_index(self.queue_family)
+                        .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                    None,
+                )
+                .vk("vkCreateCommandPool")?;
+            let result = (|| {
+                let cmd = d
+                    .allocate_command_buffers(
+                        &vk::CommandBufferAllocateInfo::default()
+                            .command_pool(pool)
+                            .command_buffer_count(1),
+                    )
+                    .vk("vkAllocateCommandBuffers")?[0];
+                d.begin_command_buffer(
+                    cmd,
+                    &vk::CommandBufferBeginInfo::default()
+                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
+                .vk("vkBeginCommandBuffer")?;
+                record(cmd);
+                d.end_command_buffer(cmd).vk("vkEndCommandBuffer")?;
+                let fence = d.create_fence(&vk::FenceCreateInfo::default(), None).vk("vkCreateFence")?;
+                let cmds = [cmd];
+                let r = self
+                    .submit(&[vk::SubmitInfo::default().command_buffers(&cmds)], fence)
+                    .and_then(|_| d.wait_for_fences(&[fence], true, u64::MAX).vk("vkWaitForFences"));
+                d.destroy_fence(fence, None);
+                r
+            })();
+            d.destroy_command_pool(pool, None);
+            result
+        }
+    }
+}
+
+impl Drop for Gpu {
+    fn drop(&mut self) {
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+        }
+        // `instance` drops after this, destroying the messenger and the instance.
+    }
+}

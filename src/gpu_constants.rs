@@ -1,0 +1,46 @@
+// Constants shared by the Rust code and the WGSL shaders: the single source of truth.
+//
+// `build.rs` includes this file and prepends a WGSL `const` for every entry of
+// [`WGSL_CONSTANTS`] to each shader, so the two sides cannot drift apart. Keep this file free of
+// `use` statements and crate paths: it is compiled twice (by the build script and the crate).
+
+/// A constant value as it is written into WGSL.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum WgslValue {
+    U32(u32),
+    F32(f32),
+}
+
+impl WgslValue {
+    /// The WGSL type and literal, e.g. `("u32", "64u")`.
+    pub fn wgsl(&self) -> (&'static str, String) {
+        match self {
+            WgslValue::U32(v) => ("u32", format!("{v}u")),
+            // `{:?}` always prints a decimal point or exponent, so WGSL reads it as f32.
+            WgslValue::F32(v) => ("f32", format!("{v:?}")),
+        }
+    }
+}
+
+macro_rules! shared_constants {
+    ($($(#[$doc:meta])* $name:ident : $ty:ident = $value:expr;)*) => {
+        $($(#[$doc])* pub const $name: $ty = $value;)*
+        /// Every shared constant with its WGSL value, in declaration order.
+        pub const WGSL_CONSTANTS: &[(&str, WgslValue)] = &[
+            $((stringify!($name), shared_constants!(@value $ty, $name)),)*
+        ];
+    };
+    (@value u32, $name:ident) => { WgslValue::U32($name) };
+    (@value f32, $name:ident) => { WgslValue::F32($name) };
+}
+
+shared_constants! {
+    /// Quads per side of the shared index grid that brute force instances over the terrain.
+    /// 128 keeps the index buffer small (~400 KB) while an instance still covers 16k triangles,
+    /// so per-instance overhead is negligible.
+    BRUTE_CHUNK_QUADS: u32 = 128;
+    /// Ambient term of the directional light, so slopes facing away from the sun stay readable.
+    LIGHT_AMBIENT: f32 = 0.25;
+    /// Scale applied to the diffuse term (ambient + diffuse <= 1 keeps albedo unsaturated).
+    LIGHT_DIFFUSE: f32 = 0.75;
+}

@@ -1,0 +1,21 @@
+//! vkterrain: a headless Vulkan terrain renderer for embedded boards.
+//!
+//! Data flows through the modules in this order:
+//! [`dataset`] -> [`lod`] (LOD methods) -> [`render`] (frames in flight) -> [`readback`]
+//! (the frame interface) -> [`output`] (PNG, ring). [`driver`] owns device, memory and sync;
+//! [`scene`] holds cameras and scripted paths; [`gpu_constants`] is shared with the shaders.
+
+pub mod cli;
+pub mod config;
+pub mod dataset;
+pub mod driver;
+pub mod error;
+/// Constants shared by Rust and WGSL (generated into every shader by `build.rs`).
+pub mod gpu_constants;
+pub mod lod;
+pub mod output;
+pub mod readback;
+pub mod render;
+pub mod scene;
+
+pub use error::{Error, Result};

@@ -1,0 +1,110 @@
+//! How a finished frame leaves the renderer: one small interface, [`FrameSink`].
+//!
+//! The renderer calls [`FrameSink::frame`] once per frame, in frame order, as soon as the GPU
+//! has finished it, with a [`FrameView`] that borrows the mapped readback memory (no copy).
+//! Sinks that need the pixels later copy them ([`OwnedFrame`]); the PNG writer and the
+//! shared-memory ring are sinks.
+
+use crate::error::Result;
+use crate::scene::Camera;
+
+/// GPU and CPU times of one frame, in milliseconds.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct FrameTimings {
+    /// GPU time of the LOD prepass (compute), from timestamps.
+    pub gpu_prepass_ms: f64,
+    /// GPU time of the terrain pass (clear + draw), from timestamps.
+    pub gpu_terrain_ms: f64,
+    /// GPU time of the readback copy, from timestamps.
+    pub gpu_readback_ms: f64,
+    /// Host time to update, record and submit the frame.
+    pub cpu_record_ms: f64,
+    /// Host time blocked waiting for this frame's GPU work.
+    pub cpu_wait_ms: f64,
+}
+
+impl FrameTimings {
+    pub fn gpu_total_ms(&self) -> f64 {
+        self.gpu_prepass_ms + self.gpu_terrain_ms + self.gpu_readback_ms
+    }
+}
+
+/// A finished frame, borrowed from the readback buffer of its slot.
+pub struct FrameView<'a> {
+    pub index: u64,
+    pub width: u32,
+    pub height: u32,
+    /// Bytes per row of `rgba` (rows are tightly packed: `4 * width`).
+    pub row_stride: usize,
+    /// sRGB-encoded RGBA8 pixels, row 0 at the top.
+    pub rgba: &'a [u8],
+    /// Reversed-Z depth (1 = near plane, 0 = far/sky) when depth readback is on.
+    pub depth: Option<&'a [f32]>,
+    pub camera: Camera,
+    pub timings: FrameTimings,
+    /// Triangles submitted for this frame.
+    pub triangles: u64,
+}
+
+/// Receives frames in order.
+pub trait FrameSink {
+    fn frame(&mut self, frame: &FrameView<'_>) -> Result<()>;
+}
+
+impl<F: FnMut(&FrameView<'_>) -> Result<()>> FrameSink for F {
+    fn frame(&mut self, frame: &FrameView<'_>) -> Result<()> {
+        self(frame)
+    }
+}
+
+/// An owned copy of a frame, e.g. to hand to another thread through a channel.
+#[derive(Clone, Debug)]
+pub struct OwnedFrame {
+    pub index: u64,
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<u8>,
+    pub depth: Option<Vec<f32>>,
+    pub camera: Camera,
+    pub timings: FrameTimings,
+    pub triangles: u64,
+}
+
+impl OwnedFrame {
+    pub fn copy_of(frame: &FrameView<'_>) -> Self {
+        OwnedFrame {
+            index: frame.index,
+            width: frame.width,
+            height: frame.height,
+            rgba: frame.rgba.to_vec(),
+            depth: frame.depth.map(<[f32]>::to_vec),
+            camera: frame.camera,
+            timings: frame.timings,
+            triangles: frame.triangles,
+        }
+    }
+
+    /// RGBA of pixel `(x, y)` (y down from the top).
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
+        let i = (y as usize * self.width as usize + x as usize) * 4;
+        [self.rgba[i], self.rgba[i + 1], self.rgba[i + 2], self.rgba[i + 3]]
+    }
+
+    /// Reversed-Z depth of pixel `(x, y)`, if depth was read back.
+    pub fn depth_at(&self, x: u32, y: u32) -> Option<f32> {
+        self.depth.as_ref().map(|d| d[y as usize * self.width as usize + x as usize])
+    }
+}
+
+/// A sink that keeps a copy of every frame (tests, evaluation).
+#[derive(Default)]
+pub struct CollectSink {
+    pub frames: Vec<OwnedFrame>,
+}
+
+impl FrameSink for CollectSink {
+    fn frame(&mut self, frame: &FrameView<'_>) -> Result<()> {
+        self.frames.push(OwnedFrame::copy_of(frame));
+        Ok(())
+    }
+}

@@ -1,0 +1,570 @@
+//! The render loop: N frames in flight, each slot with its own command buffer, targets,
+//! readback buffers and timestamp queries, ordered by one timeline semaphore.
+//!
+//! Frame `k` uses slot `k % N` and signals timeline value `k + 1`. After submitting frame `k`
+//! the host delivers frame `k - (N - 1)` (waiting for its value only), so with N >= 2 the host
+//! reads frame `k - 1` while the GPU works on frame `k`: it never waits on newer work.
+
+pub mod pipeline;
+pub mod stats;
+pub mod terrain;
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use crate::dataset::Heightmap;
+use crate::driver::Gpu;
+use crate::driver::barrier::{Barriers, ImageAccess, MemoryAccess, color_range, depth_range};
+use crate::driver::memory::{Buffer, Image, ImageDesc};
+use crate::driver::sync::Timeline;
+use crate::error::{Error, Result, VkResultExt};
+use crate::lod::{LodMethod, MethodContext, MethodKind, ViewState};
+use crate::readback::{FrameSink, FrameTimings, FrameView};
+use crate::scene::Camera;
+use pipeline::{COLOR_FORMAT, DEPTH_FORMAT, TargetFormats};
+use stats::RunStats;
+use terrain::{FrameUniforms, TerrainGpu};
+
+/// How long the host waits for one frame before calling the GPU hung.
+const FRAME_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// Timestamps per slot: start, after prepass, after terrain pass, after readback copy.
+const TIMESTAMPS: u32 = 4;
+
+/// Render-target and loop settings.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    pub width: u32,
+    pub height: u32,
+    pub frames_in_flight: usize,
+    pub readback_depth: bool,
+    /// Linear RGB of the sky (clear colour).
+    pub sky: [f32; 3],
+    /// Unit vector towards the sun.
+    pub sun_dir: [f32; 3],
+}
+
+impl RenderOptions {
+    pub fn from_config(r: &crate::config::RenderConfig) -> Self {
+        let (az, el) = (r.sun_azimuth_deg.to_radians(), r.sun_elevation_deg.to_radians());
+        RenderOptions {
+            width: r.width,
+            height: r.height,
+            frames_in_flight: r.frames_in_flight as usize,
+            readback_depth: r.readback_depth,
+            sky: r.sky,
+            sun_dir: [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()],
+        }
+    }
+}
+
+/// One frame to render.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameRequest {
+    pub camera: Camera,
+    /// Clear colour for this frame only (linear RGB); the configured sky otherwise.
+    pub sky: Option<[f32; 3]>,
+}
+
+impl From<Camera> for FrameRequest {
+    fn from(camera: Camera) -> Self {
+        FrameRequest { camera, sky: None }
+    }
+}
+
+struct Pending {
+    index: u64,
+    camera: Camera,
+    cpu_record_ms: f64,
+    triangles: u64,
+}
+
+struct Slot {
+    gpu: Arc<Gpu>,
+    pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
+    color: Image,
+    depth: Image,
+    framebuffer: vk::Framebuffer,
+    readback_color: Buffer,
+    readback_depth: Option<Buffer>,
+    queries: vk::QueryPool,
+    pending: Option<Pending>,
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        unsafe {
+            let d = &self.gpu.device;
+            d.destroy_query_pool(self.queries, None);
+            if self.framebuffer != vk::Framebuffer::null() {
+                d.destroy_framebuffer(self.framebuffer, None);
+            }
+            d.destroy_command_pool(self.pool, None);
+        }
+    }
+}
+
+/// Where the readback buffers live.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum ReadbackPath {
+    /// Device-local *and* host-visible memory (unified memory: Jetson, lavapipe): the copy
+    /// lands where the host reads it, no staging and no bus transfer.
+    Unified,
+    /// Host-visible system memory written by the GPU over the bus (discrete GPUs).
+    HostStaging,
+}
+
+pub struct Renderer {
+    gpu: Arc<Gpu>,
+    pub options: RenderOptions,
+    // Field order is drop order: slots and method hold GPU objects that reference `terrain`'s
+    // layouts; the render pass goes last (see Drop).
+    slots: Vec<Slot>,
+    method: Box<dyn LodMethod>,
+    terrain: TerrainGpu,
+    formats: TargetFormats,
+    timeline: Timeline,
+    timestamps: bool,
+    next_frame: u64,
+    in_flight: VecDeque<usize>,
+    pub readback_path: ReadbackPath,
+    pub stats: RunStats,
+}
+
+impl Renderer {
+    pub fn new(gpu: &Arc<Gpu>, data: &Heightmap, method: MethodKind, options: RenderOptions) -> Result<Self> {
+        let limits = &gpu.info.limits;
+        if options.width == 0
+            || options.height == 0
+            || options.width > limits.max_framebuffer_width
+            || options.height > limits.max_framebuffer_height
+        {
+            return Err(Error::invalid(
+                "resolution",
+                format!(
+                    "{}x{} is outside 1..={}x{} (device limit)",
+                    options.width, options.height, limits.max_framebuffer_width, limits.max_framebuffer_height
+                ),
+            ));
+        }
+        if !(1..=8).contains(&options.frames_in_flight) {
+            return Err(Error::invalid("frames_in_flight", format!("{} is outside 1..=8", options.frames_in_flight)));
+        }
+        let n = options.frames_in_flight;
+        let terrain = TerrainGpu::new(gpu, data, n)?;
+        let render_pass =
+            if gpu.modern { vk::RenderPass::null() } else { pipeline::create_render_pass(gpu)? };
+        let formats = TargetFormats { color: COLOR_FORMAT, depth: DEPTH_FORMAT, render_pass };
+        let method = crate::lod::create(method, &MethodContext { gpu, terrain: &terrain, formats, slots: n })?;
+        let timestamps = gpu.info.queue_families[gpu.queue_family as usize].timestamp_valid_bits > 0;
+        let mut slots = Vec::with_capacity(n);
+        for i in 0..n {
+            slots.push(Self::create_slot(gpu, &options, &formats, i)?);
+        }
+        let readback_path = if slots[0]
+            .readback_color
+            .memory_properties()
+            .contains(vk::MemoryPropertyFlags::DEVICE_LOCAL | vk::MemoryPropertyFlags::HOST_VISIBLE)
+        {
+            ReadbackPath::Unified
+        } else {
+            ReadbackPath::HostStaging
+        };
+        Ok(Renderer {
+            gpu: gpu.clone(),
+            options,
+            slots,
+            method,
+            terrain,
+            formats,
+            timeline: Timeline::new(gpu)?,
+            timestamps,
+            next_frame: 0,
+            in_flight: VecDeque::new(),
+            readback_path,
+            stats: RunStats::default(),
+        })
+    }
+
+    fn create_slot(gpu: &Arc<Gpu>, o: &RenderOptions, formats: &TargetFormats, i: usize) -> Result<Slot> {
+        let d = &gpu.device;
+        let extent = vk::Extent2D { width: o.width, height: o.height };
+        let color = Image::new(
+            gpu,
+            &ImageDesc {
+                name: &format!("color {i}"),
+                format: COLOR_FORMAT,
+                extent,
+                layers: 1,
+                mips: 1,
+                usage: vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+                aspect: vk::ImageAspectFlags::COLOR,
+            },
+        )?;
+        let depth = Image::new(
+            gpu,
+            &ImageDesc {
+                name: &format!("depth {i}"),
+                format: DEPTH_FORMAT,
+                extent,
+                layers: 1,
+                mips: 1,
+                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+                aspect: vk::ImageAspectFlags::DEPTH,
+            },
+        )?;
+        let pixels = o.width as u64 * o.height as u64;
+        // GpuToCpu picks host-visible memory, preferring cached; on unified-memory devices the
+        // only such type is also device-local, so the copy needs no staging there.
+        let readback_color = Buffer::new(
+            gpu,
+            &format!("readback color {i}"),
+            pixels * 4,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+        )?;
+        let readback_depth = if o.readback_depth {
+            Some(Buffer::new(
+                gpu,
+                &format!("readback depth {i}"),
+                pixels * 4,
+                vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuToCpu,
+            )?)
+        } else {
+            None
+        };
+        let pool = unsafe {
+            d.create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(gpu.queue_family)
+                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                None,
+            )
+        }
+        .vk("vkCreateCommandPool")?;
+        let mut slot = Slot {
+            gpu: gpu.clone(),
+            pool,
+            cmd: vk::CommandBuffer::null(),
+            color,
+            depth,
+            framebuffer: vk::Framebuffer::null(),
+            readback_color,
+            readback_depth,
+            queries: vk::QueryPool::null(),
+            pending: None,
+        };
+        slot.cmd = unsafe {
+            d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1))
+        }
+        .vk("vkAllocateCommandBuffers")?[0];
+        slot.queries = unsafe {
+            d.create_query_pool(
+                &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(TIMESTAMPS),
+                None,
+            )
+        }
+        .vk("vkCreateQueryPool")?;
+        if formats.render_pass != vk::RenderPass::null() {
+            let views = [slot.color.view, slot.depth.view];
+            slot.framebuffer = unsafe {
+                d.create_framebuffer(
+                    &vk::FramebufferCreateInfo::default()
+                        .render_pass(formats.render_pass)
+                        .attachments(&views)
+                        .width(o.width)
+                        .height(o.height)
+                        .layers(1),
+                    None,
+                )
+            }
+            .vk("vkCreateFramebuffer")?;
+        }
+        Ok(slot)
+    }
+
+    pub fn gpu(&self) -> &Arc<Gpu> {
+        &self.gpu
+    }
+
+    pub fn terrain(&self) -> &terrain::TerrainInfo {
+        &self.terrain.info
+    }
+
+    pub fn method_name(&self) -> &'static str {
+        self.method.name()
+    }
+
+    /// Frames submitted so far.
+    pub fn frames_submitted(&self) -> u64 {
+        self.next_frame
+    }
+
+    /// Renders one frame; delivers to `sink` every frame that is now older than N - 1 frames.
+    pub fn render(&mut self, request: impl Into<FrameRequest>, sink: &mut dyn FrameSink) -> Result<()> {
+        let request = request.into();
+        request.camera.validate()?;
+        if let Some(sky) = request.sky
+            && sky.iter().any(|v| !v.is_finite())
+        {
+            return Err(Error::invalid("sky colour", "not finite"));
+        }
+        let index = self.next_frame;
+        let slot_index = (index % self.slots.len() as u64) as usize;
+        // The slot's previous frame was delivered after the last submit (N-1 pending at most),
+        // so its GPU work is complete and its buffers are free.
+        debug_assert!(self.slots[slot_index].pending.is_none());
+        let started = Instant::now();
+        let view = ViewState { camera: request.camera, width: self.options.width, height: self.options.height };
+        let aspect = self.options.width as f64 / self.options.height as f64;
+        let uniforms = FrameUniforms::new(&request.camera, aspect, &self.terrain.info, self.options.sun_dir);
+        self.terrain.uniforms[slot_index].write(uniforms.as_bytes())?;
+        self.method.update(slot_index, &view)?;
+        let sky = request.sky.unwrap_or(self.options.sky);
+        self.record(slot_index, sky)?;
+
+        let cmds = [self.slots[slot_index].cmd];
+        let signal = [self.timeline.raw];
+        let values = [index + 1];
+        let mut timeline_info = vk::TimelineSemaphoreSubmitInfo::default().signal_semaphore_values(&values);
+        let submit = vk::SubmitInfo::default()
+            .command_buffers(&cmds)
+            .signal_semaphores(&signal)
+            .push_next(&mut timeline_info);
+        self.gpu.submit(&[submit], vk::Fence::null())?;
+        self.slots[slot_index].pending = Some(Pending {
+            index,
+            camera: request.camera,
+            cpu_record_ms: started.elapsed().as_secs_f64() * 1e3,
+            triangles: self.method.triangles(slot_index),
+        });
+        self.in_flight.push_back(slot_index);
+        self.next_frame += 1;
+        while self.in_flight.len() >= self.slots.len() {
+            self.deliver_oldest(sink)?;
+        }
+        Ok(())
+    }
+
+    /// Delivers every frame still in flight (end of a run).
+    pub fn finish(&mut self, sink: &mut dyn FrameSink) -> Result<()> {
+        while !self.in_flight.is_empty() {
+            self.deliver_oldest(sink)?;
+        }
+        Ok(())
+    }
+
+    fn deliver_oldest(&mut self, sink: &mut dyn FrameSink) -> Result<()> {
+        let Some(slot_index) = self.in_flight.pop_front() else { return Ok(()) };
+        let index = self.slots[slot_index].pending.as_ref().map(|p| p.index).unwrap_or(0);
+        let wait_start = Instant::now();
+        self.timeline.wait(index + 1, FRAME_TIMEOUT)?;
+        let cpu_wait_ms = wait_start.elapsed().as_secs_f64() * 1e3;
+        // Is the next frame still running on the GPU while we read this one? (overlap)
+        let next_in_flight = !self.in_flight.is_empty() && self.timeline.value()? < index + 2;
+        let pending = self.slots[slot_index].pending.take().expect("in-flight slot has a frame");
+        let (prepass, terrain, readback) = self.read_timestamps(slot_index)?;
+        let timings = FrameTimings {
+            gpu_prepass_ms: prepass,
+            gpu_terrain_ms: terrain,
+            gpu_readback_ms: readback,
+            cpu_record_ms: pending.cpu_record_ms,
+            cpu_wait_ms,
+        };
+        let slot = &self.slots[slot_index];
+        let rgba = slot.readback_color.mapped().ok_or_else(|| Error::invalid("readback", "buffer not mapped"))?;
+        let depth = match &slot.readback_depth {
+            Some(b) => {
+                let bytes = b.mapped().ok_or_else(|| Error::invalid("readback", "depth buffer not mapped"))?;
+                // SAFETY: mapped memory is at least 4-byte aligned (Vulkan minMemoryMapAlignment
+                // is >= 64) and holds width*height f32 depth values.
+                Some(unsafe { std::slice::from_raw_parts(bytes.as_ptr() as *const f32, bytes.len() / 4) })
+            }
+            None => None,
+        };
+        let view = FrameView {
+            index: pending.index,
+            width: self.options.width,
+            height: self.options.height,
+            row_stride: self.options.width as usize * 4,
+            rgba,
+            depth,
+            camera: pending.camera,
+            timings,
+            triangles: pending.triangles,
+        };
+        let sink_start = Instant::now();
+        let result = sink.frame(&view);
+        self.stats.record(&timings, pending.triangles, next_in_flight, sink_start.elapsed().as_secs_f64() * 1e3);
+        result
+    }
+
+    fn read_timestamps(&self, slot_index: usize) -> Result<(f64, f64, f64)> {
+        if !self.timestamps {
+            return Ok((0.0, 0.0, 0.0));
+        }
+        let mut ts = [0u64; TIMESTAMPS as usize];
+        unsafe {
+            self.gpu.device.get_query_pool_results(
+                self.slots[slot_index].queries,
+                0,
+                &mut ts,
+                vk::QueryResultFlags::TYPE_64,
+            )
+        }
+        .vk("vkGetQueryPoolResults")?;
+        let period = self.gpu.info.limits.timestamp_period as f64 * 1e-6;
+        let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * period;
+        Ok((ms(ts[0], ts[1]), ms(ts[1], ts[2]), ms(ts[2], ts[3])))
+    }
+
+    fn record(&mut self, slot_index: usize, sky: [f32; 3]) -> Result<()> {
+        let gpu = self.gpu.clone();
+        let d = &gpu.device;
+        let b = Barriers::new(&gpu);
+        let o = &self.options;
+        let slot = &self.slots[slot_index];
+        let cmd = slot.cmd;
+        let extent = vk::Extent2D { width: o.width, height: o.height };
+        unsafe {
+            d.reset_command_pool(slot.pool, vk::CommandPoolResetFlags::empty()).vk("vkResetCommandPool")?;
+            d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))
+                .vk("vkBeginCommandBuffer")?;
+            d.cmd_reset_query_pool(cmd, slot.queries, 0, TIMESTAMPS);
+            d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, slot.queries, 0);
+        }
+        self.method.record_prepass(cmd, slot_index);
+        let slot = &self.slots[slot_index];
+        unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, slot.queries, 1) };
+
+        // The previous use of these images (N frames ago) ended with a copy; their contents are
+        // discarded (UNDEFINED) but the transition must still wait for that copy.
+        b.image(cmd, slot.color.raw, color_range(), ImageAccess::TransferSrcDiscard, ImageAccess::ColorAttachment);
+        b.image(cmd, slot.depth.raw, depth_range(), ImageAccess::TransferSrcDiscard, ImageAccess::DepthAttachment);
+        let clear = [
+            vk::ClearValue { color: vk::ClearColorValue { float32: [sky[0], sky[1], sky[2], 1.0] } },
+            // Reversed-Z: 0 is the far plane.
+            vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } },
+        ];
+        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent };
+        unsafe {
+            if gpu.modern {
+                let color_att = [vk::RenderingAttachmentInfo::default()
+                    .image_view(slot.color.view)
+                    .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                    .load_op(vk::AttachmentLoadOp::CLEAR)
+                    .store_op(vk::AttachmentStoreOp::STORE)
+                    .clear_value(clear[0])];
+                let depth_att = vk::RenderingAttachmentInfo::default()
+                    .image_view(slot.depth.view)
+                    .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+                    .load_op(vk::AttachmentLoadOp::CLEAR)
+                    .store_op(vk::AttachmentStoreOp::STORE)
+                    .clear_value(clear[1]);
+                d.cmd_begin_rendering(
+                    cmd,
+                    &vk::RenderingInfo::default()
+                        .render_area(area)
+                        .layer_count(1)
+                        .color_attachments(&color_att)
+                        .depth_attachment(&depth_att),
+                );
+            } else {
+                d.cmd_begin_render_pass(
+                    cmd,
+                    &vk::RenderPassBeginInfo::default()
+                        .render_pass(self.formats.render_pass)
+                        .framebuffer(slot.framebuffer)
+                        .render_area(area)
+                        .clear_values(&clear),
+                    vk::SubpassContents::INLINE,
+                );
+            }
+            d.cmd_set_viewport(
+                cmd,
+                0,
+                &[vk::Viewport {
+                    x: 0.0,
+                    y: 0.0,
+                    width: o.width as f32,
+                    height: o.height as f32,
+                    min_depth: 0.0,
+                    max_depth: 1.0,
+                }],
+            );
+            d.cmd_set_scissor(cmd, 0, &[area]);
+        }
+        let frame_set = self.terrain.sets[slot_index];
+        self.method.record_draw(cmd, slot_index, frame_set);
+        let slot = &self.slots[slot_index];
+        unsafe {
+            if gpu.modern {
+                d.cmd_end_rendering(cmd);
+            } else {
+                d.cmd_end_render_pass(cmd);
+            }
+            d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, slot.queries, 2);
+        }
+        b.image(cmd, slot.color.raw, color_range(), ImageAccess::ColorAttachment, ImageAccess::TransferSrc);
+        let copy = |aspect| {
+            vk::BufferImageCopy::default()
+                .image_subresource(vk::ImageSubresourceLayers {
+                    aspect_mask: aspect,
+                    mip_level: 0,
+                    base_array_layer: 0,
+                    layer_count: 1,
+                })
+                .image_extent(vk::Extent3D { width: o.width, height: o.height, depth: 1 })
+        };
+        unsafe {
+            d.cmd_copy_image_to_buffer(
+                cmd,
+                slot.color.raw,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                slot.readback_color.raw,
+                &[copy(vk::ImageAspectFlags::COLOR)],
+            );
+        }
+        if let Some(depth_buffer) = &slot.readback_depth {
+            b.image(cmd, slot.depth.raw, depth_range(), ImageAccess::DepthAttachment, ImageAccess::TransferSrc);
+            unsafe {
+                d.cmd_copy_image_to_buffer(
+                    cmd,
+                    slot.depth.raw,
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                    depth_buffer.raw,
+                    &[copy(vk::ImageAspectFlags::DEPTH)],
+                );
+            }
+        } else {
+            // Keep the depth image's state uniform across frames (TransferSrc before reuse).
+            b.image(cmd, slot.depth.raw, depth_range(), ImageAccess::DepthAttachment, ImageAccess::TransferSrc);
+        }
+        b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+        unsafe {
+            d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, slot.queries, 3);
+            d.end_command_buffer(cmd).vk("vkEndCommandBuffer")?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Renderer {
+    fn drop(&mut self) {
+        // Outstanding frames must finish before their command buffers and images go away.
+        let _ = self.timeline.wait(self.next_frame, FRAME_TIMEOUT);
+        let _ = self.gpu.wait_idle();
+        self.slots.clear();
+        if self.formats.render_pass != vk::RenderPass::null() {
+            // The method's pipelines reference the render pass only at creation; destroying it
+            // here (before the method drops) is allowed by the spec.
+            unsafe { self.gpu.device.destroy_render_pass(self.formats.render_pass, None) };
+        }
+    }
+}

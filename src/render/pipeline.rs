@@ -1,0 +1,159 @@
+//! Graphics pipelines for the terrain pass, built the same way for every LOD method.
+
+use std::sync::Arc;
+
+use ash::vk;
+
+use crate::driver::Gpu;
+use crate::error::{Result, VkResultExt};
+
+/// Formats of the frame targets, and the render pass used where dynamic rendering is absent.
+#[derive(Clone, Copy, Debug)]
+pub struct TargetFormats {
+    pub color: vk::Format,
+    pub depth: vk::Format,
+    /// Classic render pass (legacy path); null with dynamic rendering.
+    pub render_pass: vk::RenderPass,
+}
+
+pub const COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_SRGB;
+pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
+
+/// Creates the classic render pass (legacy path): layouts stay in attachment-optimal layouts
+/// inside the pass; explicit barriers outside the pass do all transitions, as on the
+/// dynamic-rendering path, so both paths share one barrier sequence.
+pub fn create_render_pass(gpu: &Gpu) -> Result<vk::RenderPass> {
+    let attachments = [
+        vk::AttachmentDescription::default()
+            .format(COLOR_FORMAT)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
+            .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
+            .initial_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
+        vk::AttachmentDescription::default()
+            .format(DEPTH_FORMAT)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
+            .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
+            .initial_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL)
+            .final_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL),
+    ];
+    let color_ref = [vk::AttachmentReference { attachment: 0, layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL }];
+    let depth_ref = vk::AttachmentReference { attachment: 1, layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL };
+    let subpasses = [vk::SubpassDescription::default()
+        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+        .color_attachments(&color_ref)
+        .depth_stencil_attachment(&depth_ref)];
+    unsafe {
+        gpu.device.create_render_pass(
+            &vk::RenderPassCreateInfo::default().attachments(&attachments).subpasses(&subpasses),
+            None,
+        )
+    }
+    .vk("vkCreateRenderPass")
+}
+
+/// A pipeline and its layout, destroyed together.
+pub struct Pipeline {
+    gpu: Arc<Gpu>,
+    pub raw: vk::Pipeline,
+    pub layout: vk::PipelineLayout,
+}
+
+impl Drop for Pipeline {
+    fn drop(&mut self) {
+        unsafe {
+            self.gpu.device.destroy_pipeline(self.raw, None);
+            self.gpu.device.destroy_pipeline_layout(self.layout, None);
+        }
+    }
+}
+
+/// What differs between terrain pipelines.
+pub struct TerrainPipelineDesc<'a> {
+    pub spv: &'a [u8],
+    pub vertex_entry: &'a std::ffi::CStr,
+    pub fragment_entry: &'a std::ffi::CStr,
+    pub set_layouts: &'a [vk::DescriptorSetLayout],
+    pub topology: vk::PrimitiveTopology,
+}
+
+/// Builds a terrain pipeline: no vertex buffers (vertices come from indices), reversed-Z depth
+/// (GREATER), back faces culled, viewport and scissor dynamic.
+pub fn terrain_pipeline(gpu: &Arc<Gpu>, formats: &TargetFormats, desc: &TerrainPipelineDesc<'_>) -> Result<Pipeline> {
+    let d = &gpu.device;
+    let module = crate::driver::shaders::module(gpu, desc.spv)?;
+    let layout = unsafe {
+        d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(desc.set_layouts), None)
+    }
+    .vk("vkCreatePipelineLayout");
+    let layout = match layout {
+        Ok(l) => l,
+        Err(e) => {
+            unsafe { d.destroy_shader_module(module, None) };
+            return Err(e);
+        }
+    };
+    let stages = [
+        vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::VERTEX)
+            .module(module)
+            .name(desc.vertex_entry),
+        vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::FRAGMENT)
+            .module(module)
+            .name(desc.fragment_entry),
+    ];
+    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
+    let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(desc.topology);
+    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
+    let raster = vk::PipelineRasterizationStateCreateInfo::default()
+        .polygon_mode(vk::PolygonMode::FILL)
+        .cull_mode(vk::CullModeFlags::BACK)
+        // WebGPU-style clip space with naga's y flip: counter-clockwise stays front-facing.
+        .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
+        .line_width(1.0);
+    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
+    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
+        .depth_test_enable(true)
+        .depth_write_enable(true)
+        .depth_compare_op(vk::CompareOp::GREATER);
+    let blend_attachments = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
+    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
+    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
+    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
+    let color_formats = [formats.color];
+    let mut rendering = vk::PipelineRenderingCreateInfo::default()
+        .color_attachment_formats(&color_formats)
+        .depth_attachment_format(formats.depth);
+    let mut info = vk::GraphicsPipelineCreateInfo::default()
+        .stages(&stages)
+        .vertex_input_state(&vertex_input)
+        .input_assembly_state(&assembly)
+        .viewport_state(&viewport)
+        .rasterization_state(&raster)
+        .multisample_state(&multisample)
+        .depth_stencil_state(&depth)
+        .color_blend_state(&blend)
+        .dynamic_state(&dynamic)
+        .layout(layout);
+    if gpu.modern {
+        info = info.push_next(&mut rendering);
+    } else {
+        info = info.render_pass(formats.render_pass).subpass(0);
+    }
+    let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
+    unsafe { d.destroy_shader_module(module, None) };
+    match result {
+        Ok(p) => Ok(Pipeline { gpu: gpu.clone(), raw: p[0], layout }),
+        Err((_, result)) => {
+            unsafe { d.destroy_pipeline_layout(layout, None) };
+            Err(crate::error::Error::Vulkan { call: "vkCreateGraphicsPipelines", result })
+        }
+    }
+}

@@ -1,0 +1,217 @@
+//! The GPU mirror of the data set and the per-frame uniforms every terrain method reads
+//! (descriptor set 0; see `shaders/include/terrain_common.wgsl`).
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use crate::dataset::Heightmap;
+use crate::driver::Gpu;
+use crate::driver::memory::{Buffer, Image};
+use crate::error::{Error, Result, VkResultExt};
+use crate::scene::Camera;
+
+/// `Frame` in `terrain_common.wgsl`, byte for byte (std140: every member 16-byte aligned).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameUniforms {
+    pub view_proj: [f32; 16],
+    pub camera_cell: [i32; 4],
+    pub camera_offset: [f32; 4],
+    pub sun_dir: [f32; 4],
+    pub data_size: [u32; 4],
+}
+
+impl FrameUniforms {
+    /// Splits the camera position into an integer sample cell and a small metric offset, so the
+    /// shader works with camera-relative coordinates at full f32 precision anywhere.
+    pub fn new(camera: &Camera, aspect: f64, data: &TerrainInfo, sun_dir: [f32; 3]) -> Self {
+        let spacing = data.spacing;
+        let cell_x = (camera.position.x / spacing).floor();
+        let cell_y = (camera.position.y / spacing).floor();
+        let view_proj = camera.projection(aspect) * camera.view_rotation();
+        FrameUniforms {
+            view_proj: view_proj.to_cols_array(),
+            camera_cell: [cell_x as i32, cell_y as i32, 0, 0],
+            camera_offset: [
+                (camera.position.x - cell_x * spacing) as f32,
+                (camera.position.y - cell_y * spacing) as f32,
+                camera.position.z as f32,
+                spacing as f32,
+            ],
+            sun_dir: [sun_dir[0], sun_dir[1], sun_dir[2], 0.0],
+            data_size: [data.width, data.height, 0, 0],
+        }
+    }
+
+    pub fn as_bytes(&self) -> &[u8] {
+        // SAFETY: repr(C), plain-old-data fields, no padding (all 16-byte multiples).
+        unsafe { std::slice::from_raw_parts(self as *const Self as *const u8, size_of::<Self>()) }
+    }
+}
+
+/// The facts about the data set that methods and uniforms need.
+#[derive(Clone, Debug)]
+pub struct TerrainInfo {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub spacing: f64,
+    pub min_height: f32,
+    pub max_height: f32,
+}
+
+/// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.
+pub struct TerrainGpu {
+    gpu: Arc<Gpu>,
+    pub info: TerrainInfo,
+    _height: Image,
+    _normal: Image,
+    _albedo: Image,
+    sampler: vk::Sampler,
+    pub set_layout: vk::DescriptorSetLayout,
+    pool: vk::DescriptorPool,
+    /// One descriptor set per frame slot (they differ only in their uniform buffer).
+    pub sets: Vec<vk::DescriptorSet>,
+    pub uniforms: Vec<Buffer>,
+}
+
+impl TerrainGpu {
+    pub fn new(gpu: &Arc<Gpu>, data: &Heightmap, slots: usize) -> Result<Self> {
+        let max_side = gpu.info.limits.max_image_dimension2_d;
+        if data.width > max_side || data.height > max_side {
+            return Err(Error::invalid(
+                &data.name,
+                format!("{}x{} exceeds the device's {max_side} texels per side", data.width, data.height),
+            ));
+        }
+        let extent = vk::Extent2D { width: data.width, height: data.height };
+        let heights: Vec<u8> = data.heights.iter().flat_map(|h| h.to_le_bytes()).collect();
+        let height = Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, &heights)?;
+        let normal =
+            Image::texture_with_data(gpu, "normals", vk::Format::R8G8B8A8_SNORM, extent, &data.normals_snorm8())?;
+        let albedo_data = data.albedo_or_ramp();
+        let albedo = Image::texture_with_data(
+            gpu,
+            "albedo",
+            vk::Format::R8G8B8A8_SRGB,
+            vk::Extent2D { width: albedo_data.width, height: albedo_data.height },
+            &albedo_data.rgba,
+        )?;
+        let (min_height, max_height) = data.height_range();
+        let info = TerrainInfo {
+            name: data.name.clone(),
+            width: data.width,
+            height: data.height,
+            spacing: data.spacing,
+            min_height,
+            max_height,
+        };
+
+        let d = &gpu.device;
+        let anisotropy = gpu.enabled.sampler_anisotropy;
+        let sampler = unsafe {
+            d.create_sampler(
+                &vk::SamplerCreateInfo::default()
+                    .mag_filter(vk::Filter::LINEAR)
+                    .min_filter(vk::Filter::LINEAR)
+                    .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
+                    .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .anisotropy_enable(anisotropy)
+                    .max_anisotropy(if anisotropy { gpu.info.caps.max_anisotropy.min(16.0) } else { 1.0 })
+                    .max_lod(vk::LOD_CLAMP_NONE),
+                None,
+            )
+        }
+        .vk("vkCreateSampler")?;
+        let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT | vk::ShaderStageFlags::COMPUTE;
+        let binding = |b: u32, ty: vk::DescriptorType| {
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(b)
+                .descriptor_type(ty)
+                .descriptor_count(1)
+                .stage_flags(stages)
+        };
+        let bindings = [
+            binding(0, vk::DescriptorType::UNIFORM_BUFFER),
+            binding(1, vk::DescriptorType::SAMPLED_IMAGE),
+            binding(2, vk::DescriptorType::SAMPLED_IMAGE),
+            binding(3, vk::DescriptorType::SAMPLED_IMAGE),
+            binding(4, vk::DescriptorType::SAMPLER),
+        ];
+        let set_layout = unsafe {
+            d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings), None)
+        }
+        .vk("vkCreateDescriptorSetLayout")?;
+        let n = slots as u32;
+        let sizes = [
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: n },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::SAMPLED_IMAGE, descriptor_count: 3 * n },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::SAMPLER, descriptor_count: n },
+        ];
+        let pool = unsafe {
+            d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&sizes), None)
+        }
+        .vk("vkCreateDescriptorPool")?;
+        let layouts = vec![set_layout; slots];
+        let sets =
+            unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts)) }
+                .vk("vkAllocateDescriptorSets")?;
+        let mut uniforms = Vec::with_capacity(slots);
+        for (slot, &set) in sets.iter().enumerate() {
+            let ubo = Buffer::new(
+                gpu,
+                &format!("frame uniforms {slot}"),
+                size_of::<FrameUniforms>() as u64,
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?;
+            let buffer_info = [vk::DescriptorBufferInfo { buffer: ubo.raw, offset: 0, range: vk::WHOLE_SIZE }];
+            let image_info = |view| {
+                [vk::DescriptorImageInfo {
+                    sampler: vk::Sampler::null(),
+                    image_view: view,
+                    image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+                }]
+            };
+            let (hi, ni, ai) = (image_info(height.view), image_info(normal.view), image_info(albedo.view));
+            let si = [vk::DescriptorImageInfo { sampler, ..Default::default() }];
+            let write = |b: u32, ty| vk::WriteDescriptorSet::default().dst_set(set).dst_binding(b).descriptor_type(ty);
+            let writes = [
+                write(0, vk::DescriptorType::UNIFORM_BUFFER).buffer_info(&buffer_info),
+                write(1, vk::DescriptorType::SAMPLED_IMAGE).image_info(&hi),
+                write(2, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ni),
+                write(3, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ai),
+                write(4, vk::DescriptorType::SAMPLER).image_info(&si),
+            ];
+            unsafe { d.update_descriptor_sets(&writes, &[]) };
+            uniforms.push(ubo);
+        }
+        Ok(TerrainGpu {
+            gpu: gpu.clone(),
+            info,
+            _height: height,
+            _normal: normal,
+            _albedo: albedo,
+            sampler,
+            set_layout,
+            pool,
+            sets,
+            uniforms,
+        })
+    }
+}
+
+impl Drop for TerrainGpu {
+    fn drop(&mut self) {
+        unsafe {
+            let d = &self.gpu.device;
+            d.destroy_descriptor_pool(self.pool, None);
+            d.destroy_descriptor_set_layout(self.set_layout, None);
+            d.destroy_sampler(self.sampler, None);
+        }
+    }
+}

@@ -1,0 +1,114 @@
+//! The camera: right-handed, **z up**, x east, y north, metres.
+//!
+//! `yaw` is the heading in degrees clockwise from north (0 looks along +y, 90 along +x);
+//! `pitch` is degrees above the horizon (-90 looks straight down); `roll` turns the image
+//! clockwise about the view direction. Projection is **reversed-Z** (depth 1 at `near`, 0 at
+//! `far`) into a 32-bit float depth buffer, which keeps depth precision roughly constant in
+//! relative terms out to 100+ km. Rendering is camera-relative: the view matrix has no
+//! translation, vertices are made relative to the camera in the shader (see `docs/`).
+
+use glam::{DMat3, DVec3, Mat4, Vec3};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// World position in metres (f64: precise far from the origin).
+    pub position: DVec3,
+    pub yaw_deg: f64,
+    pub pitch_deg: f64,
+    pub roll_deg: f64,
+    /// Vertical field of view in degrees.
+    pub vfov_deg: f64,
+    pub near: f64,
+    pub far: f64,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Camera {
+            position: DVec3::new(0.0, 0.0, 1000.0),
+            yaw_deg: 0.0,
+            pitch_deg: -20.0,
+            roll_deg: 0.0,
+            vfov_deg: 60.0,
+            near: 1.0,
+            far: 200_000.0,
+        }
+    }
+}
+
+impl Camera {
+    /// Rejects NaN/infinite values and absurd parameters with a one-line reason.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid("camera", m));
+        let p = self.position;
+        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
+            return bad(format!("position {p} is not finite"));
+        }
+        for (name, v) in [("yaw", self.yaw_deg), ("pitch", self.pitch_deg), ("roll", self.roll_deg)] {
+            if !v.is_finite() {
+                return bad(format!("{name} {v} is not finite"));
+            }
+        }
+        if !(-90.0..=90.0).contains(&self.pitch_deg) {
+            return bad(format!("pitch {} deg is outside [-90, 90]", self.pitch_deg));
+        }
+        if !(self.vfov_deg.is_finite() && self.vfov_deg > 0.1 && self.vfov_deg < 179.0) {
+            return bad(format!("vertical FOV {} deg is outside (0.1, 179)", self.vfov_deg));
+        }
+        if !(self.near.is_finite() && self.near > 0.0) {
+            return bad(format!("near plane {} m must be positive", self.near));
+        }
+        if !(self.far.is_finite() && self.far > self.near) {
+            return bad(format!("far plane {} m must be finite and beyond near {} m", self.far, self.near));
+        }
+        Ok(())
+    }
+
+    /// Camera basis in world space: (right, up, forward).
+    pub fn basis(&self) -> (DVec3, DVec3, DVec3) {
+        let (yaw, pitch, roll) =
+            (self.yaw_deg.to_radians(), self.pitch_deg.to_radians(), self.roll_deg.to_radians());
+        let forward = DVec3::new(yaw.sin() * pitch.cos(), yaw.cos() * pitch.cos(), pitch.sin());
+        // At pitch +-90 the heading still defines "right", so straight-down views keep a stable
+        // orientation instead of a degenerate cross product.
+        let right0 = DVec3::new(yaw.cos(), -yaw.sin(), 0.0);
+        let up0 = right0.cross(forward);
+        let rot = DMat3::from_axis_angle(forward, -roll);
+        (rot * right0, rot * up0, forward)
+    }
+
+    /// World -> view rotation (no translation: positions are camera-relative).
+    pub fn view_rotation(&self) -> Mat4 {
+        let (_, up, forward) = self.basis();
+        Mat4::look_to_rh(Vec3::ZERO, forward.as_vec3(), up.as_vec3())
+    }
+
+    /// Reversed-Z perspective projection in WebGPU clip space (depth 1 at near, 0 at far).
+    pub fn projection(&self, aspect: f64) -> Mat4 {
+        // glam's [0,1]-depth projection with near and far swapped is exactly reversed-Z.
+        Mat4::perspective_rh(self.vfov_deg.to_radians() as f32, aspect as f32, self.far as f32, self.near as f32)
+    }
+
+    /// View distance along the forward axis for a reversed-Z depth value.
+    pub fn linear_depth(&self, depth: f32) -> f64 {
+        let (n, f) = (self.near, self.far);
+        n * f / (depth as f64 * (f - n) + n)
+    }
+
+    /// Focal length in pixels for an image `height` pixels tall.
+    pub fn focal_px(&self, height: u32) -> f64 {
+        height as f64 / 2.0 / (self.vfov_deg.to_radians() / 2.0).tan()
+    }
+
+    /// World-space direction of the ray through pixel centre `(px, py)` (py down from the top).
+    pub fn pixel_ray(&self, px: f64, py: f64, width: u32, height: u32) -> DVec3 {
+        let (right, up, forward) = self.basis();
+        let f = self.focal_px(height);
+        let sx = px - width as f64 / 2.0;
+        let sy = height as f64 / 2.0 - py;
+        (forward * f + right * sx + up * sy).normalize()
+    }
+}

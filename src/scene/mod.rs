@@ -1,0 +1,7 @@
+//! Cameras and scripted camera paths.
+
+pub mod camera;
+pub mod scenario;
+
+pub use camera::Camera;
+pub use scenario::Scenario;
