@@ -105,20 +105,19 @@ pub struct MethodConfig {
 
 impl Default for MethodConfig {
     fn default() -> Self {
-        MethodConfig { name: "brute".into() }
+        MethodConfig {
+            name: "brute".into(),
+        }
     }
 }
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
+#[derive(Default)]
 pub struct ScenarioConfig {
-    pub path: PathBuf,
-}
-
-impl Default for ScenarioConfig {
-    fn default() -> Self {
-        ScenarioConfig { path: PathBuf::from("scenarios/default.toml") }
-    }
+    /// Scenario file; none: the built-in default flight (`config/scenarios/default.toml`,
+    /// compiled into the binary).
+    pub path: Option<PathBuf>,
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -131,7 +130,10 @@ pub struct OutputConfig {
 
 impl Default for OutputConfig {
     fn default() -> Self {
-        OutputConfig { dir: PathBuf::from("out"), png_frames: vec![0, -1] }
+        OutputConfig {
+            dir: PathBuf::from("out"),
+            png_frames: vec![0, -1],
+        }
     }
 }
 
@@ -144,24 +146,25 @@ impl Default for Config {
             method: Default::default(),
             scenario: Default::default(),
             output: Default::default(),
-            base_dir: default_config_dir(),
+            // No config file: relative paths are relative to the working directory.
+            base_dir: PathBuf::new(),
         }
     }
 }
 
-/// `config/` of the source tree, where the default scenarios live.
-pub fn default_config_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config")
-}
-
 /// Formats a TOML error as `path:line: message`.
 pub fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> Error {
-    let line = e.span().map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+    let line = e
+        .span()
+        .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
     let path = match line {
         Some(l) => PathBuf::from(format!("{}:{l}", path.display())),
         None => path.to_path_buf(),
     };
-    Error::Config { path, message: e.message().trim().replace('\n', " ") }
+    Error::Config {
+        path,
+        message: e.message().trim().replace('\n', " "),
+    }
 }
 
 impl Config {
@@ -173,13 +176,20 @@ impl Config {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let mut config: Config = toml::from_str(&text).map_err(|e| toml_error(path, &text, &e))?;
         config.base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        config.validate().map_err(|e| Error::Config { path: path.to_path_buf(), message: e.to_string() })?;
+        config.validate().map_err(|e| Error::Config {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
         Ok(config)
     }
 
     /// A path from the config, resolved against the config file's directory.
     pub fn resolve(&self, p: &Path) -> PathBuf {
-        if p.is_absolute() { p.to_path_buf() } else { self.base_dir.join(p) }
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base_dir.join(p)
+        }
     }
 
     /// Checks values that serde cannot (ranges, names).
@@ -188,35 +198,67 @@ impl Config {
         if r.width == 0 || r.height == 0 || r.width > MAX_RESOLUTION || r.height > MAX_RESOLUTION {
             return Err(Error::invalid(
                 "resolution",
-                format!("{}x{} is outside 1..={MAX_RESOLUTION} per side", r.width, r.height),
+                format!(
+                    "{}x{} is outside 1..={MAX_RESOLUTION} per side",
+                    r.width, r.height
+                ),
             ));
         }
         if !(1..=8).contains(&r.frames_in_flight) {
-            return Err(Error::invalid("frames_in_flight", format!("{} is outside 1..=8", r.frames_in_flight)));
+            return Err(Error::invalid(
+                "frames_in_flight",
+                format!("{} is outside 1..=8", r.frames_in_flight),
+            ));
         }
-        if r.sky.iter().chain([&r.sun_azimuth_deg, &r.sun_elevation_deg]).any(|v| !v.is_finite()) {
-            return Err(Error::invalid("render", "sky colour and sun angles must be finite"));
+        if r.sky
+            .iter()
+            .chain([&r.sun_azimuth_deg, &r.sun_elevation_deg])
+            .any(|v| !v.is_finite())
+        {
+            return Err(Error::invalid(
+                "render",
+                "sky colour and sun angles must be finite",
+            ));
         }
         match self.dataset.kind.as_str() {
             "procedural" => {
                 if !(2..=crate::dataset::MAX_SIDE).contains(&self.dataset.size) {
-                    return Err(Error::invalid("dataset.size", format!("{} is outside 2..={}", self.dataset.size, crate::dataset::MAX_SIDE)));
+                    return Err(Error::invalid(
+                        "dataset.size",
+                        format!(
+                            "{} is outside 2..={}",
+                            self.dataset.size,
+                            crate::dataset::MAX_SIDE
+                        ),
+                    ));
                 }
             }
             "png16" => {
                 if self.dataset.path.is_none() {
-                    return Err(Error::invalid("dataset.path", "kind = \"png16\" needs a path"));
+                    return Err(Error::invalid(
+                        "dataset.path",
+                        "kind = \"png16\" needs a path",
+                    ));
                 }
             }
             other => {
-                return Err(Error::invalid("dataset.kind", format!("unknown kind {other:?} (expected procedural, png16)")));
+                return Err(Error::invalid(
+                    "dataset.kind",
+                    format!("unknown kind {other:?} (expected procedural, png16)"),
+                ));
             }
         }
         if !(self.dataset.spacing.is_finite() && self.dataset.spacing > 0.0) {
-            return Err(Error::invalid("dataset.spacing", format!("{} m must be positive", self.dataset.spacing)));
+            return Err(Error::invalid(
+                "dataset.spacing",
+                format!("{} m must be positive", self.dataset.spacing),
+            ));
         }
         if !(self.dataset.vertical_scale.is_finite() && self.dataset.vertical_scale > 0.0) {
-            return Err(Error::invalid("dataset.vertical_scale", format!("{} must be positive", self.dataset.vertical_scale)));
+            return Err(Error::invalid(
+                "dataset.vertical_scale",
+                format!("{} must be positive", self.dataset.vertical_scale),
+            ));
         }
         crate::lod::MethodKind::parse(&self.method.name)?;
         Ok(())

@@ -21,7 +21,10 @@ pub enum Error {
     #[error("device {name:?} is unsuitable: {reason}")]
     UnsuitableDevice { name: String, reason: String },
     #[error("Vulkan call {call} failed: {result}")]
-    Vulkan { call: &'static str, result: ash::vk::Result },
+    Vulkan {
+        call: &'static str,
+        result: ash::vk::Result,
+    },
     #[error("GPU memory allocation for {what} failed: {source}")]
     Allocation {
         what: String,
@@ -46,10 +49,16 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
     pub fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
-        Error::Invalid { what: what.into(), message: message.into() }
+        Error::Invalid {
+            what: what.into(),
+            message: message.into(),
+        }
     }
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io { path: path.into(), source }
+        Error::Io {
+            path: path.into(),
+            source,
+        }
     }
 }
 

@@ -87,12 +87,19 @@ impl OwnedFrame {
     /// RGBA of pixel `(x, y)` (y down from the top).
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
         let i = (y as usize * self.width as usize + x as usize) * 4;
-        [self.rgba[i], self.rgba[i + 1], self.rgba[i + 2], self.rgba[i + 3]]
+        [
+            self.rgba[i],
+            self.rgba[i + 1],
+            self.rgba[i + 2],
+            self.rgba[i + 3],
+        ]
     }
 
     /// Reversed-Z depth of pixel `(x, y)`, if depth was read back.
     pub fn depth_at(&self, x: u32, y: u32) -> Option<f32> {
-        self.depth.as_ref().map(|d| d[y as usize * self.width as usize + x as usize])
+        self.depth
+            .as_ref()
+            .map(|d| d[y as usize * self.width as usize + x as usize])
     }
 }
 

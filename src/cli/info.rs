@@ -2,7 +2,6 @@
 
 use std::path::Path;
 
-
 use crate::config::Config;
 use crate::driver::{Gpu, GpuOptions};
 
@@ -32,7 +31,13 @@ pub fn describe(gpu: &Gpu) -> String {
     let c = &i.caps;
     let e = &gpu.enabled;
     let mut s = String::new();
-    let _ = writeln!(s, "device:        [{}] {} ({})", i.index, i.name, i.type_name());
+    let _ = writeln!(
+        s,
+        "device:        [{}] {} ({})",
+        i.index,
+        i.name,
+        i.type_name()
+    );
     let _ = writeln!(s, "driver:        {}", i.driver);
     let _ = writeln!(s, "vulkan:        {}", i.api_version_string());
     let _ = writeln!(
@@ -40,17 +45,33 @@ pub fn describe(gpu: &Gpu) -> String {
         "queue:         family {} (graphics+compute), 1 queue; dedicated transfer family: {}",
         gpu.queue_family,
         match i.dedicated_transfer_family() {
-            Some(f) => format!("{f} (unused: readback is one small copy per frame on the main queue)"),
+            Some(f) =>
+                format!("{f} (unused: readback is one small copy per frame on the main queue)"),
             None => "none".into(),
         }
     );
     let _ = writeln!(s, "memory heaps:");
-    for (h, heap) in i.memory.memory_heaps[..i.memory.memory_heap_count as usize].iter().enumerate() {
-        let _ = writeln!(s, "  heap {h}: {:.1} GiB {:?}", heap.size as f64 / (1u64 << 30) as f64, heap.flags);
+    for (h, heap) in i.memory.memory_heaps[..i.memory.memory_heap_count as usize]
+        .iter()
+        .enumerate()
+    {
+        let _ = writeln!(
+            s,
+            "  heap {h}: {:.1} GiB {:?}",
+            heap.size as f64 / (1u64 << 30) as f64,
+            heap.flags
+        );
     }
     let _ = writeln!(s, "memory types:");
-    for (t, ty) in i.memory.memory_types[..i.memory.memory_type_count as usize].iter().enumerate() {
-        let _ = writeln!(s, "  type {t}: heap {} {:?}", ty.heap_index, ty.property_flags);
+    for (t, ty) in i.memory.memory_types[..i.memory.memory_type_count as usize]
+        .iter()
+        .enumerate()
+    {
+        let _ = writeln!(
+            s,
+            "  type {t}: heap {} {:?}",
+            ty.heap_index, ty.property_flags
+        );
     }
     let _ = writeln!(
         s,
@@ -63,19 +84,79 @@ pub fn describe(gpu: &Gpu) -> String {
     );
     let _ = writeln!(s, "features (offered / used by vkterrain):");
     let rows: [(&str, bool, bool, &str); 14] = [
-        ("timeline semaphores", c.timeline_semaphore, e.timeline_semaphore, "frame ordering"),
-        ("dynamic rendering", c.dynamic_rendering, e.dynamic_rendering, "render pass fallback otherwise"),
-        ("synchronization2", c.synchronization2, e.synchronization2, "classic barriers otherwise"),
-        ("sampler anisotropy", c.sampler_anisotropy, e.sampler_anisotropy, "fragment texturing"),
-        ("multiDrawIndirect", c.multi_draw_indirect, e.multi_draw_indirect, "GPU-driven draws"),
-        ("drawIndirectFirstInstance", c.draw_indirect_first_instance, e.draw_indirect_first_instance, ""),
-        ("drawIndirectCount", c.draw_indirect_count, e.draw_indirect_count, ""),
-        ("pipeline statistics", c.pipeline_statistics_query, e.pipeline_statistics_query, ""),
-        ("timestamps", c.timestamps, c.timestamps, "GPU time per pass"),
-        ("tessellation shader", c.tessellation_shader, false, "not used on purpose"),
-        ("geometry shader", c.geometry_shader, false, "not used on purpose"),
+        (
+            "timeline semaphores",
+            c.timeline_semaphore,
+            e.timeline_semaphore,
+            "frame ordering",
+        ),
+        (
+            "dynamic rendering",
+            c.dynamic_rendering,
+            e.dynamic_rendering,
+            "render pass fallback otherwise",
+        ),
+        (
+            "synchronization2",
+            c.synchronization2,
+            e.synchronization2,
+            "classic barriers otherwise",
+        ),
+        (
+            "sampler anisotropy",
+            c.sampler_anisotropy,
+            e.sampler_anisotropy,
+            "fragment texturing (off on CPU devices: too slow)",
+        ),
+        (
+            "multiDrawIndirect",
+            c.multi_draw_indirect,
+            e.multi_draw_indirect,
+            "GPU-driven draws",
+        ),
+        (
+            "drawIndirectFirstInstance",
+            c.draw_indirect_first_instance,
+            e.draw_indirect_first_instance,
+            "",
+        ),
+        (
+            "drawIndirectCount",
+            c.draw_indirect_count,
+            e.draw_indirect_count,
+            "",
+        ),
+        (
+            "pipeline statistics",
+            c.pipeline_statistics_query,
+            e.pipeline_statistics_query,
+            "",
+        ),
+        (
+            "timestamps",
+            c.timestamps,
+            c.timestamps,
+            "GPU time per pass",
+        ),
+        (
+            "tessellation shader",
+            c.tessellation_shader,
+            false,
+            "not used on purpose",
+        ),
+        (
+            "geometry shader",
+            c.geometry_shader,
+            false,
+            "not used on purpose",
+        ),
         ("mesh shader (EXT)", c.mesh_shader, false, ""),
-        ("external memory host", c.external_memory_host, false, "could map readback into shared memory"),
+        (
+            "external memory host",
+            c.external_memory_host,
+            false,
+            "could map readback into shared memory",
+        ),
         ("BC / ETC2 / ASTC", c.texture_compression_bc, false, ""),
     ];
     for (name, offered, used, note) in rows {
@@ -89,7 +170,12 @@ pub fn describe(gpu: &Gpu) -> String {
         } else {
             note.to_string()
         };
-        let _ = writeln!(s, "  {name:<28} {:>3} / {:<3}  {extra}", yes(offered), yes(used));
+        let _ = writeln!(
+            s,
+            "  {name:<28} {:>3} / {:<3}  {extra}",
+            yes(offered),
+            yes(used)
+        );
     }
     let l = &i.limits;
     let _ = writeln!(
@@ -102,6 +188,14 @@ pub fn describe(gpu: &Gpu) -> String {
         l.timestamp_period,
         l.max_storage_buffer_range >> 20
     );
-    let _ = writeln!(s, "validation:    {}", if gpu.validation().is_some() { "on (with synchronization validation)" } else { "off" });
+    let _ = writeln!(
+        s,
+        "validation:    {}",
+        if gpu.validation().is_some() {
+            "on (with synchronization validation)"
+        } else {
+            "off"
+        }
+    );
     s
 }

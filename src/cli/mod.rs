@@ -8,7 +8,11 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser, Debug)]
-#[command(name = "vkterrain", version, about = "Headless Vulkan terrain renderer")]
+#[command(
+    name = "vkterrain",
+    version,
+    about = "Headless Vulkan terrain renderer"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,

@@ -79,10 +79,13 @@ pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
     let method = MethodKind::parse(&config.method.name)?;
     let data = crate::dataset::load(&config)?;
     let scenario_path = match &args.scenario {
-        Some(p) => p.clone(),
-        None => config.resolve(&config.scenario.path),
+        Some(p) => Some(p.clone()),
+        None => config.scenario.path.as_ref().map(|p| config.resolve(p)),
     };
-    let scenario = Scenario::load(&scenario_path, &data)?;
+    let scenario = match scenario_path {
+        Some(path) => Scenario::load(&path, &data)?,
+        None => Scenario::builtin_default(&data)?,
+    };
     let frames = args.frames.unwrap_or(scenario.frames);
     if frames == 0 {
         anyhow::bail!("--frames must be at least 1");
@@ -91,7 +94,14 @@ pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
         Some(p) => p.clone(),
         None => config.resolve(&config.output.dir),
     };
-    Ok(Prepared { config, data, scenario, frames, method, out_dir })
+    Ok(Prepared {
+        config,
+        data,
+        scenario,
+        frames,
+        method,
+        out_dir,
+    })
 }
 
 /// Frame indices to write: negative entries count from the end.
@@ -118,11 +128,20 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         }
         .with_env(),
     )?;
-    let mut renderer = Renderer::new(&gpu, &p.data, p.method, RenderOptions::from_config(&p.config.render))?;
+    let mut renderer = Renderer::new(
+        &gpu,
+        &p.data,
+        p.method,
+        RenderOptions::from_config(&p.config.render),
+    )?;
 
     let created_dir = !p.out_dir.exists();
-    std::fs::create_dir_all(&p.out_dir).with_context(|| format!("{}: cannot create", p.out_dir.display()))?;
-    let mut sink = PngSink::new(&p.out_dir, png_frames(&p.config.output.png_frames, p.frames));
+    std::fs::create_dir_all(&p.out_dir)
+        .with_context(|| format!("{}: cannot create", p.out_dir.display()))?;
+    let mut sink = PngSink::new(
+        &p.out_dir,
+        png_frames(&p.config.output.png_frames, p.frames),
+    );
     let result = (|| -> anyhow::Result<()> {
         for frame in 0..p.frames as u64 {
             renderer.render(p.scenario.camera(frame), &mut sink)?;
@@ -141,7 +160,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     };
     check_validation(&gpu)?;
 
-    let summary = renderer.stats.summary(args.warmup.min(p.frames.saturating_sub(1) as usize));
+    let summary = renderer
+        .stats
+        .summary(args.warmup.min(p.frames.saturating_sub(1) as usize));
     let report = report(&gpu, &renderer, &p, &summary, &written);
     print!("{report}");
     let json = serde_json::json!({
@@ -156,8 +177,12 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         "readback_path": renderer.readback_path,
         "summary": summary,
         "pngs": written,
+        "per_frame": renderer.stats.frames,
     });
-    crate::output::write_atomic(&p.out_dir.join("summary.json"), serde_json::to_string_pretty(&json)?.as_bytes())?;
+    crate::output::write_atomic(
+        &p.out_dir.join("summary.json"),
+        serde_json::to_string_pretty(&json)?.as_bytes(),
+    )?;
     Ok(())
 }
 
@@ -181,7 +206,11 @@ pub fn check_validation(gpu: &Arc<Gpu>) -> anyhow::Result<()> {
         && log.count() > 0
     {
         let first = log.messages().into_iter().next().unwrap_or_default();
-        anyhow::bail!("{} Vulkan validation message(s); first: {}", log.count(), first.replace('\n', " "));
+        anyhow::bail!(
+            "{} Vulkan validation message(s); first: {}",
+            log.count(),
+            first.replace('\n', " ")
+        );
     }
     Ok(())
 }
@@ -189,8 +218,17 @@ pub fn check_validation(gpu: &Arc<Gpu>) -> anyhow::Result<()> {
 fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf]) -> String {
     use std::fmt::Write;
     let mut o = String::new();
-    let _ = writeln!(o, "device:          {} ({})", gpu.info.name, gpu.info.type_name());
-    let _ = writeln!(o, "dataset:         {} ({}x{} samples, {} m)", p.data.name, p.data.width, p.data.height, p.data.spacing);
+    let _ = writeln!(
+        o,
+        "device:          {} ({})",
+        gpu.info.name,
+        gpu.info.type_name()
+    );
+    let _ = writeln!(
+        o,
+        "dataset:         {} ({}x{} samples, {} m)",
+        p.data.name, p.data.width, p.data.height, p.data.spacing
+    );
     let _ = writeln!(o, "method:          {}", r.method_name());
     let _ = writeln!(o, "scenario:        {}", p.scenario.name);
     let _ = writeln!(
@@ -200,22 +238,42 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
         r.options.height,
         r.options.frames_in_flight,
         r.readback_path,
-        if gpu.modern { "dynamic rendering + sync2" } else { "render pass + classic barriers" }
+        if gpu.modern {
+            "dynamic rendering + sync2"
+        } else {
+            "render pass + classic barriers"
+        }
     );
-    let _ = writeln!(o, "frames:          {} ({} warm-up excluded below)", s.frames + s.warmup, s.warmup);
+    let _ = writeln!(
+        o,
+        "frames:          {} ({} warm-up excluded below)",
+        s.frames + s.warmup,
+        s.warmup
+    );
     let _ = writeln!(o, "triangles/frame: {:.0} (median)", s.triangles.median);
-    let _ = writeln!(o, "frame time:      median {:.2} ms, p99 {:.2} ms, max {:.2} ms", s.frame_ms.median, s.frame_ms.p99, s.frame_ms.max);
+    let _ = writeln!(
+        o,
+        "frame time:      median {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        s.frame_ms.median, s.frame_ms.p99, s.frame_ms.max
+    );
     let _ = writeln!(
         o,
         "GPU per pass:    prepass {:.2} ms, terrain {:.2} ms, readback {:.2} ms (medians), total p99 {:.2} ms",
-        s.gpu_prepass_ms.median, s.gpu_terrain_ms.median, s.gpu_readback_ms.median, s.gpu_total_ms.p99
+        s.gpu_prepass_ms.median,
+        s.gpu_terrain_ms.median,
+        s.gpu_readback_ms.median,
+        s.gpu_total_ms.p99
     );
     let _ = writeln!(
         o,
         "CPU per frame:   record+submit {:.2} ms, wait {:.2} ms, sink {:.2} ms (medians)",
         s.cpu_record_ms.median, s.cpu_wait_ms.median, s.sink_ms.median
     );
-    let _ = writeln!(o, "overlap:         {:.0}% of frames delivered while the next was on the GPU", s.overlapped_fraction * 100.0);
+    let _ = writeln!(
+        o,
+        "overlap:         {:.0}% of frames delivered while the next was on the GPU",
+        s.overlapped_fraction * 100.0
+    );
     for w in written {
         let _ = writeln!(o, "wrote:           {}", w.display());
     }

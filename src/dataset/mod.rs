@@ -37,24 +37,52 @@ pub const MAX_SIDE: u32 = 16384;
 
 impl Heightmap {
     /// Validates and builds a height grid.
-    pub fn new(name: impl Into<String>, width: u32, height: u32, spacing: f64, heights: Vec<f32>) -> Result<Self> {
+    pub fn new(
+        name: impl Into<String>,
+        width: u32,
+        height: u32,
+        spacing: f64,
+        heights: Vec<f32>,
+    ) -> Result<Self> {
         let name = name.into();
         if width < 2 || height < 2 {
-            return Err(Error::invalid(&name, format!("height grid {width}x{height} is smaller than 2x2")));
+            return Err(Error::invalid(
+                &name,
+                format!("height grid {width}x{height} is smaller than 2x2"),
+            ));
         }
         if width > MAX_SIDE || height > MAX_SIDE {
-            return Err(Error::invalid(&name, format!("height grid {width}x{height} exceeds {MAX_SIDE} per side")));
+            return Err(Error::invalid(
+                &name,
+                format!("height grid {width}x{height} exceeds {MAX_SIDE} per side"),
+            ));
         }
         if !(spacing.is_finite() && spacing > 0.0) {
-            return Err(Error::invalid(&name, format!("sample spacing {spacing} m is not a positive number")));
+            return Err(Error::invalid(
+                &name,
+                format!("sample spacing {spacing} m is not a positive number"),
+            ));
         }
         if heights.len() != (width as usize) * (height as usize) {
-            return Err(Error::invalid(&name, format!("{} heights for a {width}x{height} grid", heights.len())));
+            return Err(Error::invalid(
+                &name,
+                format!("{} heights for a {width}x{height} grid", heights.len()),
+            ));
         }
         if let Some(i) = heights.iter().position(|h| !h.is_finite()) {
-            return Err(Error::invalid(&name, format!("height at sample {} is {}", i, heights[i])));
+            return Err(Error::invalid(
+                &name,
+                format!("height at sample {} is {}", i, heights[i]),
+            ));
         }
-        Ok(Heightmap { name, width, height, spacing, heights, albedo: None })
+        Ok(Heightmap {
+            name,
+            width,
+            height,
+            spacing,
+            heights,
+            albedo: None,
+        })
     }
 
     /// Height of sample `(col, row)` in metres.
@@ -78,12 +106,19 @@ impl Heightmap {
 
     /// World extent in metres: `(x_max, y_max)`; the grid starts at the origin.
     pub fn extent(&self) -> (f64, f64) {
-        ((self.width - 1) as f64 * self.spacing, (self.height - 1) as f64 * self.spacing)
+        (
+            (self.width - 1) as f64 * self.spacing,
+            (self.height - 1) as f64 * self.spacing,
+        )
     }
 
     /// Minimum and maximum height.
     pub fn height_range(&self) -> (f32, f32) {
-        self.heights.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| (lo.min(h), hi.max(h)))
+        self.heights
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
+                (lo.min(h), hi.max(h))
+            })
     }
 
     /// Unit surface normal at each sample from central differences (one-sided at the edges),
@@ -91,7 +126,8 @@ impl Heightmap {
     pub fn normals_snorm8(&self) -> Vec<u8> {
         let (w, h) = (self.width as i64, self.height as i64);
         let mut out = Vec::with_capacity((w * h * 4) as usize);
-        let at = |c: i64, r: i64| self.sample(c.clamp(0, w - 1) as u32, r.clamp(0, h - 1) as u32) as f64;
+        let at =
+            |c: i64, r: i64| self.sample(c.clamp(0, w - 1) as u32, r.clamp(0, h - 1) as u32) as f64;
         for r in 0..h {
             for c in 0..w {
                 let (cl, cr) = ((c - 1).max(0), (c + 1).min(w - 1));
@@ -126,14 +162,19 @@ impl Heightmap {
             let steep = ((0.9 - nz) / 0.25).clamp(0.0, 1.0);
             let mut c = [0.0f32; 3];
             for k in 0..3 {
-                c[k] = grass[k] + (rock[k] - grass[k]) * steep.max(((t - 0.55) / 0.2).clamp(0.0, 1.0));
+                c[k] =
+                    grass[k] + (rock[k] - grass[k]) * steep.max(((t - 0.55) / 0.2).clamp(0.0, 1.0));
                 let s = ((t - 0.8) / 0.1).clamp(0.0, 1.0) * (1.0 - steep);
                 c[k] += (snow[k] - c[k]) * s;
             }
             rgba.extend(c.iter().map(|v| (v * 255.0).round() as u8));
             rgba.push(255);
         }
-        Albedo { width: self.width, height: self.height, rgba }
+        Albedo {
+            width: self.width,
+            height: self.height,
+            rgba,
+        }
     }
 }
 
@@ -148,18 +189,30 @@ pub fn load(config: &crate::config::Config) -> Result<Heightmap> {
             ..Default::default()
         }),
         "png16" => {
-            let path = config.resolve(d.path.as_deref().ok_or_else(|| Error::invalid("dataset.path", "missing"))?);
+            let path = config.resolve(
+                d.path
+                    .as_deref()
+                    .ok_or_else(|| Error::invalid("dataset.path", "missing"))?,
+            );
             let albedo = d.albedo.as_deref().map(|p| config.resolve(p));
             load_png16(&path, d.spacing, d.vertical_scale, albedo.as_deref())
         }
-        other => Err(Error::invalid("dataset.kind", format!("unknown kind {other:?}"))),
+        other => Err(Error::invalid(
+            "dataset.kind",
+            format!("unknown kind {other:?}"),
+        )),
     }
 }
 
 /// A 16-bit greyscale PNG height map (`value * vertical_scale` metres) with optional albedo
 /// image covering the same extent. PNG rows run north to south; they are flipped so row 0 is
 /// south.
-pub fn load_png16(path: &std::path::Path, spacing: f64, vertical_scale: f64, albedo: Option<&std::path::Path>) -> Result<Heightmap> {
+pub fn load_png16(
+    path: &std::path::Path,
+    spacing: f64,
+    vertical_scale: f64,
+    albedo: Option<&std::path::Path>,
+) -> Result<Heightmap> {
     let decode = |p: &std::path::Path| {
         image::ImageReader::open(p)
             .map_err(|e| Error::io(p, e))?
@@ -170,7 +223,10 @@ pub fn load_png16(path: &std::path::Path, spacing: f64, vertical_scale: f64, alb
     };
     let img = decode(path)?;
     if !matches!(img.color(), image::ColorType::L16 | image::ColorType::La16) {
-        return Err(Error::invalid(path.display().to_string(), format!("expected a 16-bit greyscale PNG, found {:?}", img.color())));
+        return Err(Error::invalid(
+            path.display().to_string(),
+            format!("expected a 16-bit greyscale PNG, found {:?}", img.color()),
+        ));
     }
     let grey = img.to_luma16();
     let (w, h) = grey.dimensions();
@@ -184,8 +240,17 @@ pub fn load_png16(path: &std::path::Path, spacing: f64, vertical_scale: f64, alb
     if let Some(ap) = albedo {
         let rgba = decode(ap)?.to_rgba8();
         let (aw, ah) = rgba.dimensions();
-        let flipped: Vec<u8> = (0..ah).rev().flat_map(|r| rgba.as_raw()[(r * aw * 4) as usize..((r + 1) * aw * 4) as usize].to_vec()).collect();
-        map.albedo = Some(Albedo { width: aw, height: ah, rgba: flipped });
+        let flipped: Vec<u8> = (0..ah)
+            .rev()
+            .flat_map(|r| {
+                rgba.as_raw()[(r * aw * 4) as usize..((r + 1) * aw * 4) as usize].to_vec()
+            })
+            .collect();
+        map.albedo = Some(Albedo {
+            width: aw,
+            height: ah,
+            rgba: flipped,
+        });
     }
     Ok(map)
 }

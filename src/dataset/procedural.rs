@@ -23,7 +23,13 @@ pub struct ProceduralParams {
 
 impl Default for ProceduralParams {
     fn default() -> Self {
-        ProceduralParams { size: 1025, seed: 1, spacing: 30.0, max_height: 2400.0, feature_size: 12_000.0 }
+        ProceduralParams {
+            size: 1025,
+            seed: 1,
+            spacing: 30.0,
+            max_height: 2400.0,
+            feature_size: 12_000.0,
+        }
     }
 }
 
@@ -71,7 +77,11 @@ pub fn height(params: &ProceduralParams, x: f64, y: f64) -> f64 {
         frequency *= 2.03;
     }
     // Mountains where the low-frequency mask is high, rolling hills elsewhere.
-    let mask = smooth(value_noise(params.seed ^ 0xA5A5, x / (params.feature_size * 2.5), y / (params.feature_size * 2.5)));
+    let mask = smooth(value_noise(
+        params.seed ^ 0xA5A5,
+        x / (params.feature_size * 2.5),
+        y / (params.feature_size * 2.5),
+    ));
     let shaped = (0.55 * fbm + 0.45 * ridge * mask).clamp(0.0, 1.0);
     params.max_height * shaped.powf(1.6)
 }
@@ -87,7 +97,10 @@ pub fn generate(params: &ProceduralParams) -> Result<Heightmap> {
         }
     }
     Heightmap::new(
-        format!("procedural size={} seed={} spacing={} m", params.size, params.seed, params.spacing),
+        format!(
+            "procedural size={} seed={} spacing={} m",
+            params.size, params.seed, params.spacing
+        ),
         params.size,
         params.size,
         params.spacing,
@@ -117,7 +130,9 @@ pub mod analytic {
         let mut h = Vec::with_capacity((size * size) as usize);
         for r in 0..size {
             for c in 0..size {
-                let d = ((c as f64 * spacing - centre).powi(2) + (r as f64 * spacing - centre).powi(2)).sqrt();
+                let d = ((c as f64 * spacing - centre).powi(2)
+                    + (r as f64 * spacing - centre).powi(2))
+                .sqrt();
                 h.push((peak * (1.0 - d / radius)).max(0.0) as f32);
             }
         }

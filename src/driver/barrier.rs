@@ -123,7 +123,10 @@ pub fn color_range() -> vk::ImageSubresourceRange {
 }
 
 pub fn depth_range() -> vk::ImageSubresourceRange {
-    vk::ImageSubresourceRange { aspect_mask: vk::ImageAspectFlags::DEPTH, ..color_range() }
+    vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::DEPTH,
+        ..color_range()
+    }
 }
 
 /// Records barriers with whichever API the device uses.
@@ -162,7 +165,10 @@ impl<'a> Barriers<'a> {
                 .subresource_range(range);
             let barriers = [barrier];
             unsafe {
-                d.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&barriers))
+                d.cmd_pipeline_barrier2(
+                    cmd,
+                    &vk::DependencyInfo::default().image_memory_barriers(&barriers),
+                )
             };
         } else {
             let (src_stage, src_access, old) = from.legacy();
@@ -201,13 +207,28 @@ impl<'a> Barriers<'a> {
                 .src_access_mask(src_access)
                 .dst_stage_mask(dst_stage)
                 .dst_access_mask(dst_access)];
-            unsafe { d.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().memory_barriers(&barriers)) };
+            unsafe {
+                d.cmd_pipeline_barrier2(
+                    cmd,
+                    &vk::DependencyInfo::default().memory_barriers(&barriers),
+                )
+            };
         } else {
             let (src_stage, src_access) = from.legacy();
             let (dst_stage, dst_access) = to.legacy();
-            let barrier = vk::MemoryBarrier::default().src_access_mask(src_access).dst_access_mask(dst_access);
+            let barrier = vk::MemoryBarrier::default()
+                .src_access_mask(src_access)
+                .dst_access_mask(dst_access);
             unsafe {
-                d.cmd_pipeline_barrier(cmd, src_stage, dst_stage, vk::DependencyFlags::empty(), &[barrier], &[], &[])
+                d.cmd_pipeline_barrier(
+                    cmd,
+                    src_stage,
+                    dst_stage,
+                    vk::DependencyFlags::empty(),
+                    &[barrier],
+                    &[],
+                    &[],
+                )
             };
         }
     }

@@ -91,7 +91,9 @@ impl DeviceInfo {
             .iter()
             .position(|f| {
                 f.queue_flags.contains(vk::QueueFlags::TRANSFER)
-                    && !f.queue_flags.intersects(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE)
+                    && !f
+                        .queue_flags
+                        .intersects(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE)
             })
             .map(|i| i as u32)
     }
@@ -139,7 +141,11 @@ pub(crate) fn describe(
             .enumerate_device_extension_properties(pd)
             .vk("vkEnumerateDeviceExtensionProperties")?
             .iter()
-            .filter_map(|e| e.extension_name_as_c_str().ok().map(|s| s.to_string_lossy().into_owned()))
+            .filter_map(|e| {
+                e.extension_name_as_c_str()
+                    .ok()
+                    .map(|s| s.to_string_lossy().into_owned())
+            })
             .collect();
         let memory = instance.get_physical_device_memory_properties(pd);
         let queue_families = instance.get_physical_device_queue_family_properties(pd);
@@ -160,17 +166,26 @@ pub(crate) fn describe(
             .unwrap_or_else(|_| "(unnamed)".into());
         let driver = format!(
             "{} {}",
-            driver_props.driver_name_as_c_str().map(|s| s.to_string_lossy()).unwrap_or_default(),
-            driver_props.driver_info_as_c_str().map(|s| s.to_string_lossy()).unwrap_or_default()
+            driver_props
+                .driver_name_as_c_str()
+                .map(|s| s.to_string_lossy())
+                .unwrap_or_default(),
+            driver_props
+                .driver_info_as_c_str()
+                .map(|s| s.to_string_lossy())
+                .unwrap_or_default()
         );
-        let unified_memory = memory.memory_types[..memory.memory_type_count as usize].iter().any(|t| {
-            t.property_flags.contains(
-                vk::MemoryPropertyFlags::DEVICE_LOCAL | vk::MemoryPropertyFlags::HOST_VISIBLE,
-            )
-        }) && matches!(
-            props.device_type,
-            vk::PhysicalDeviceType::INTEGRATED_GPU | vk::PhysicalDeviceType::CPU
-        );
+        let unified_memory = memory.memory_types[..memory.memory_type_count as usize]
+            .iter()
+            .any(|t| {
+                t.property_flags.contains(
+                    vk::MemoryPropertyFlags::DEVICE_LOCAL | vk::MemoryPropertyFlags::HOST_VISIBLE,
+                )
+            })
+            && matches!(
+                props.device_type,
+                vk::PhysicalDeviceType::INTEGRATED_GPU | vk::PhysicalDeviceType::CPU
+            );
         let mut info = DeviceInfo {
             index,
             name,
@@ -210,14 +225,22 @@ pub(crate) fn describe(
 
 /// Lists every physical device the loader reports.
 pub fn enumerate(instance: &ash::Instance) -> Result<Vec<(vk::PhysicalDevice, DeviceInfo)>> {
-    let devices = unsafe { instance.enumerate_physical_devices() }.map_err(|result| match result {
-        vk::Result::ERROR_INITIALIZATION_FAILED => Error::NoDevice,
-        result => Error::Vulkan { call: "vkEnumeratePhysicalDevices", result },
-    })?;
+    let devices =
+        unsafe { instance.enumerate_physical_devices() }.map_err(|result| match result {
+            vk::Result::ERROR_INITIALIZATION_FAILED => Error::NoDevice,
+            result => Error::Vulkan {
+                call: "vkEnumeratePhysicalDevices",
+                result,
+            },
+        })?;
     if devices.is_empty() {
         return Err(Error::NoDevice);
     }
-    devices.into_iter().enumerate().map(|(i, pd)| Ok((pd, describe(instance, i, pd)?))).collect()
+    devices
+        .into_iter()
+        .enumerate()
+        .map(|(i, pd)| Ok((pd, describe(instance, i, pd)?)))
+        .collect()
 }
 
 /// Chooses the device: `select` (index or name substring) if given, else the most preferred
@@ -238,13 +261,21 @@ pub fn choose(
             candidates.iter().find(|(_, d)| d.index == index)
         } else {
             let lower = wanted.to_lowercase();
-            candidates.iter().find(|(_, d)| d.name.to_lowercase().contains(&lower))
+            candidates
+                .iter()
+                .find(|(_, d)| d.name.to_lowercase().contains(&lower))
         };
         let Some((pd, info)) = found else {
-            return Err(Error::UnknownDevice { wanted: wanted.to_string(), available: available() });
+            return Err(Error::UnknownDevice {
+                wanted: wanted.to_string(),
+                available: available(),
+            });
         };
         if let Some(reason) = info.unsuitable_reason() {
-            return Err(Error::UnsuitableDevice { name: info.name.clone(), reason });
+            return Err(Error::UnsuitableDevice {
+                name: info.name.clone(),
+                reason,
+            });
         }
         return Ok((*pd, info.clone()));
     }

@@ -55,7 +55,9 @@ unsafe extern "system" fn debug_callback(
     let message = if data.p_message.is_null() {
         String::from("(no message)")
     } else {
-        unsafe { CStr::from_ptr(data.p_message) }.to_string_lossy().into_owned()
+        unsafe { CStr::from_ptr(data.p_message) }
+            .to_string_lossy()
+            .into_owned()
     };
     let line = format!("[{severity:?} {kind:?}] {message}");
     tracing::error!(target: "vulkan_validation", "{line}");
@@ -96,7 +98,10 @@ impl Instance {
         if validation {
             let available = unsafe { entry.enumerate_instance_layer_properties() }
                 .vk("vkEnumerateInstanceLayerProperties")?;
-            if !available.iter().any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER)) {
+            if !available
+                .iter()
+                .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER))
+            {
                 return Err(Error::NoValidationLayer);
             }
             layers.push(VALIDATION_LAYER.as_ptr());
@@ -109,7 +114,8 @@ impl Instance {
             .engine_name(c"vkterrain")
             .api_version(api_version);
         let enables = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
-        let mut features = vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
+        let mut features =
+            vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
         let log = Arc::new(ValidationLog::default());
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
             .message_severity(
@@ -133,16 +139,25 @@ impl Instance {
         }
         let raw = unsafe { entry.create_instance(&info, None) }.map_err(|result| match result {
             vk::Result::ERROR_INCOMPATIBLE_DRIVER => Error::NoDevice,
-            result => Error::Vulkan { call: "vkCreateInstance", result },
+            result => Error::Vulkan {
+                call: "vkCreateInstance",
+                result,
+            },
         })?;
 
         let debug = if validation {
             let loader = ash::ext::debug_utils::Instance::new(&entry, &raw);
+            // The create info above was chained into the instance's pNext list; it must stand
+            // alone here.
+            messenger_info.p_next = std::ptr::null();
             match unsafe { loader.create_debug_utils_messenger(&messenger_info, None) } {
                 Ok(m) => Some((loader, m)),
                 Err(result) => {
                     unsafe { raw.destroy_instance(None) };
-                    return Err(Error::Vulkan { call: "vkCreateDebugUtilsMessengerEXT", result });
+                    return Err(Error::Vulkan {
+                        call: "vkCreateDebugUtilsMessengerEXT",
+                        result,
+                    });
                 }
             }
         } else {

@@ -51,30 +51,52 @@ impl Buffer {
             Ok(a) => a,
             Err(source) => {
                 unsafe { d.destroy_buffer(raw, None) };
-                return Err(Error::Allocation { what: name.to_string(), source });
+                return Err(Error::Allocation {
+                    what: name.to_string(),
+                    source,
+                });
             }
         };
-        if let Err(e) = unsafe { d.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) } {
+        if let Err(e) =
+            unsafe { d.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) }
+        {
             unsafe { d.destroy_buffer(raw, None) };
             let _ = gpu.allocator().free(allocation);
-            return Err(Error::Vulkan { call: "vkBindBufferMemory", result: e });
+            return Err(Error::Vulkan {
+                call: "vkBindBufferMemory",
+                result: e,
+            });
         }
-        Ok(Buffer { gpu: gpu.clone(), raw, size, allocation: Some(allocation) })
+        Ok(Buffer {
+            gpu: gpu.clone(),
+            raw,
+            size,
+            allocation: Some(allocation),
+        })
     }
 
     /// Host-visible contents (None for device-only memory).
     pub fn mapped(&self) -> Option<&[u8]> {
-        self.allocation.as_ref()?.mapped_slice().map(|s| &s[..self.size as usize])
+        self.allocation
+            .as_ref()?
+            .mapped_slice()
+            .map(|s| &s[..self.size as usize])
     }
 
     pub fn mapped_mut(&mut self) -> Option<&mut [u8]> {
         let size = self.size as usize;
-        self.allocation.as_mut()?.mapped_slice_mut().map(|s| &mut s[..size])
+        self.allocation
+            .as_mut()?
+            .mapped_slice_mut()
+            .map(|s| &mut s[..size])
     }
 
     /// Memory properties of the memory type backing this buffer.
     pub fn memory_properties(&self) -> vk::MemoryPropertyFlags {
-        self.allocation.as_ref().map(|a| a.memory_properties()).unwrap_or_default()
+        self.allocation
+            .as_ref()
+            .map(|a| a.memory_properties())
+            .unwrap_or_default()
     }
 
     /// Writes `data` at the start of a host-visible buffer.
@@ -83,7 +105,10 @@ impl Buffer {
             .mapped_mut()
             .ok_or_else(|| Error::invalid("buffer write", "buffer is not host-visible"))?;
         if data.len() > dst.len() {
-            return Err(Error::invalid("buffer write", "data larger than the buffer"));
+            return Err(Error::invalid(
+                "buffer write",
+                "data larger than the buffer",
+            ));
         }
         dst[..data.len()].copy_from_slice(data);
         Ok(())
@@ -130,7 +155,11 @@ impl Image {
                 &vk::ImageCreateInfo::default()
                     .image_type(vk::ImageType::TYPE_2D)
                     .format(desc.format)
-                    .extent(vk::Extent3D { width: desc.extent.width, height: desc.extent.height, depth: 1 })
+                    .extent(vk::Extent3D {
+                        width: desc.extent.width,
+                        height: desc.extent.height,
+                        depth: 1,
+                    })
                     .mip_levels(desc.mips)
                     .array_layers(desc.layers)
                     .samples(vk::SampleCountFlags::TYPE_1)
@@ -153,16 +182,24 @@ impl Image {
             Ok(a) => a,
             Err(source) => {
                 unsafe { d.destroy_image(raw, None) };
-                return Err(Error::Allocation { what: desc.name.to_string(), source });
+                return Err(Error::Allocation {
+                    what: desc.name.to_string(),
+                    source,
+                });
             }
         };
         let cleanup = |allocation: Allocation| {
             unsafe { d.destroy_image(raw, None) };
             let _ = gpu.allocator().free(allocation);
         };
-        if let Err(result) = unsafe { d.bind_image_memory(raw, allocation.memory(), allocation.offset()) } {
+        if let Err(result) =
+            unsafe { d.bind_image_memory(raw, allocation.memory(), allocation.offset()) }
+        {
             cleanup(allocation);
-            return Err(Error::Vulkan { call: "vkBindImageMemory", result });
+            return Err(Error::Vulkan {
+                call: "vkBindImageMemory",
+                result,
+            });
         }
         let view_type = if desc.layers > 1 {
             vk::ImageViewType::TYPE_2D_ARRAY
@@ -188,7 +225,10 @@ impl Image {
             Ok(v) => v,
             Err(result) => {
                 cleanup(allocation);
-                return Err(Error::Vulkan { call: "vkCreateImageView", result });
+                return Err(Error::Vulkan {
+                    call: "vkCreateImageView",
+                    result,
+                });
             }
         };
         Ok(Image {
@@ -235,7 +275,13 @@ impl Image {
         let range = super::barrier::color_range();
         gpu.one_shot(|cmd| {
             let b = super::barrier::Barriers::new(gpu);
-            b.image(cmd, image.raw, range, super::barrier::ImageAccess::Undefined, super::barrier::ImageAccess::TransferDst);
+            b.image(
+                cmd,
+                image.raw,
+                range,
+                super::barrier::ImageAccess::Undefined,
+                super::barrier::ImageAccess::TransferDst,
+            );
             let region = vk::BufferImageCopy::default()
                 .image_subresource(vk::ImageSubresourceLayers {
                     aspect_mask: vk::ImageAspectFlags::COLOR,
@@ -243,7 +289,11 @@ impl Image {
                     base_array_layer: 0,
                     layer_count: 1,
                 })
-                .image_extent(vk::Extent3D { width: extent.width, height: extent.height, depth: 1 });
+                .image_extent(vk::Extent3D {
+                    width: extent.width,
+                    height: extent.height,
+                    depth: 1,
+                });
             unsafe {
                 gpu.device.cmd_copy_buffer_to_image(
                     cmd,
@@ -253,7 +303,13 @@ impl Image {
                     &[region],
                 )
             };
-            b.image(cmd, image.raw, range, super::barrier::ImageAccess::TransferDst, super::barrier::ImageAccess::SampledAnyShader);
+            b.image(
+                cmd,
+                image.raw,
+                range,
+                super::barrier::ImageAccess::TransferDst,
+                super::barrier::ImageAccess::SampledAnyShader,
+            );
         })?;
         Ok(image)
     }

@@ -20,11 +20,16 @@ impl Timeline {
             .semaphore_type(vk::SemaphoreType::TIMELINE)
             .initial_value(0);
         let raw = unsafe {
-            gpu.device
-                .create_semaphore(&vk::SemaphoreCreateInfo::default().push_next(&mut kind), None)
+            gpu.device.create_semaphore(
+                &vk::SemaphoreCreateInfo::default().push_next(&mut kind),
+                None,
+            )
         }
         .vk("vkCreateSemaphore")?;
-        Ok(Timeline { gpu: gpu.clone(), raw })
+        Ok(Timeline {
+            gpu: gpu.clone(),
+            raw,
+        })
     }
 
     /// The value the GPU has reached.
@@ -37,13 +42,23 @@ impl Timeline {
     pub fn wait(&self, value: u64, timeout: Duration) -> Result<()> {
         let semaphores = [self.raw];
         let values = [value];
-        let info = vk::SemaphoreWaitInfo::default().semaphores(&semaphores).values(&values);
-        match unsafe { self.gpu.device.wait_semaphores(&info, timeout.as_nanos() as u64) } {
+        let info = vk::SemaphoreWaitInfo::default()
+            .semaphores(&semaphores)
+            .values(&values);
+        match unsafe {
+            self.gpu
+                .device
+                .wait_semaphores(&info, timeout.as_nanos() as u64)
+        } {
             Ok(()) => Ok(()),
-            Err(vk::Result::TIMEOUT) => {
-                Err(Error::Timeout { what: "timeline semaphore", seconds: timeout.as_secs_f64() })
-            }
-            Err(result) => Err(Error::Vulkan { call: "vkWaitSemaphores", result }),
+            Err(vk::Result::TIMEOUT) => Err(Error::Timeout {
+                what: "timeline semaphore",
+                seconds: timeout.as_secs_f64(),
+            }),
+            Err(result) => Err(Error::Vulkan {
+                call: "vkWaitSemaphores",
+                result,
+            }),
         }
     }
 }

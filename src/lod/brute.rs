@@ -29,11 +29,19 @@ pub struct BruteForce {
 /// Counter-clockwise (seen from above) triangle list over a `quads` x `quads` vertex grid.
 pub fn grid_indices(quads: u32) -> Vec<u16> {
     let row = quads + 1;
-    assert!(row * row <= u16::MAX as u32 + 1, "grid too large for 16-bit indices");
+    assert!(
+        row * row <= u16::MAX as u32 + 1,
+        "grid too large for 16-bit indices"
+    );
     let mut out = Vec::with_capacity((quads * quads * 6) as usize);
     for r in 0..quads {
         for c in 0..quads {
-            let (a, b, cc, d) = (r * row + c, r * row + c + 1, (r + 1) * row + c, (r + 1) * row + c + 1);
+            let (a, b, cc, d) = (
+                r * row + c,
+                r * row + c + 1,
+                (r + 1) * row + c,
+                (r + 1) * row + c + 1,
+            );
             out.extend([a, b, cc, b, d, cc].map(|i| i as u16));
         }
     }
@@ -90,7 +98,14 @@ impl LodMethod for BruteForce {
         let d = &self.gpu.device;
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline.raw);
-            d.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline.layout, 0, &[frame_set], &[]);
+            d.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                self.pipeline.layout,
+                0,
+                &[frame_set],
+                &[],
+            );
             d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
             d.cmd_draw_indexed(cmd, self.index_count, self.instances, 0, 0, 0);
         }

@@ -21,14 +21,28 @@ impl MethodKind {
     pub const ALL: &[(&'static str, MethodKind)] = &[("brute", MethodKind::Brute)];
 
     pub fn parse(name: &str) -> Result<Self> {
-        Self::ALL.iter().find(|(n, _)| *n == name).map(|(_, k)| *k).ok_or_else(|| {
-            let names: Vec<_> = Self::ALL.iter().map(|(n, _)| *n).collect();
-            Error::invalid("method", format!("unknown method {name:?} (expected one of {})", names.join(", ")))
-        })
+        Self::ALL
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, k)| *k)
+            .ok_or_else(|| {
+                let names: Vec<_> = Self::ALL.iter().map(|(n, _)| *n).collect();
+                Error::invalid(
+                    "method",
+                    format!(
+                        "unknown method {name:?} (expected one of {})",
+                        names.join(", ")
+                    ),
+                )
+            })
     }
 
     pub fn name(self) -> &'static str {
-        Self::ALL.iter().find(|(_, k)| *k == self).map(|(n, _)| *n).unwrap_or("?")
+        Self::ALL
+            .iter()
+            .find(|(_, k)| *k == self)
+            .map(|(n, _)| *n)
+            .unwrap_or("?")
     }
 }
 

@@ -49,7 +49,11 @@ impl PngSink {
             }
             Ok(written)
         });
-        PngSink { frames, sender: Some(sender), worker: Some(worker) }
+        PngSink {
+            frames,
+            sender: Some(sender),
+            worker: Some(worker),
+        }
     }
 
     /// Waits for the writer; returns the files written.

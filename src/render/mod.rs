@@ -50,7 +50,10 @@ pub struct RenderOptions {
 
 impl RenderOptions {
     pub fn from_config(r: &crate::config::RenderConfig) -> Self {
-        let (az, el) = (r.sun_azimuth_deg.to_radians(), r.sun_elevation_deg.to_radians());
+        let (az, el) = (
+            r.sun_azimuth_deg.to_radians(),
+            r.sun_elevation_deg.to_radians(),
+        );
         RenderOptions {
             width: r.width,
             height: r.height,
@@ -137,7 +140,12 @@ pub struct Renderer {
 }
 
 impl Renderer {
-    pub fn new(gpu: &Arc<Gpu>, data: &Heightmap, method: MethodKind, options: RenderOptions) -> Result<Self> {
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        data: &Heightmap,
+        method: MethodKind,
+        options: RenderOptions,
+    ) -> Result<Self> {
         let limits = &gpu.info.limits;
         if options.width == 0
             || options.height == 0
@@ -148,33 +156,54 @@ impl Renderer {
                 "resolution",
                 format!(
                     "{}x{} is outside 1..={}x{} (device limit)",
-                    options.width, options.height, limits.max_framebuffer_width, limits.max_framebuffer_height
+                    options.width,
+                    options.height,
+                    limits.max_framebuffer_width,
+                    limits.max_framebuffer_height
                 ),
             ));
         }
         if !(1..=8).contains(&options.frames_in_flight) {
-            return Err(Error::invalid("frames_in_flight", format!("{} is outside 1..=8", options.frames_in_flight)));
+            return Err(Error::invalid(
+                "frames_in_flight",
+                format!("{} is outside 1..=8", options.frames_in_flight),
+            ));
         }
         let n = options.frames_in_flight;
         let terrain = TerrainGpu::new(gpu, data, n)?;
-        let render_pass =
-            if gpu.modern { vk::RenderPass::null() } else { pipeline::create_render_pass(gpu)? };
-        let formats = TargetFormats { color: COLOR_FORMAT, depth: DEPTH_FORMAT, render_pass };
-        let method = crate::lod::create(method, &MethodContext { gpu, terrain: &terrain, formats, slots: n })?;
-        let timestamps = gpu.info.queue_families[gpu.queue_family as usize].timestamp_valid_bits > 0;
+        let render_pass = if gpu.modern {
+            vk::RenderPass::null()
+        } else {
+            pipeline::create_render_pass(gpu)?
+        };
+        let formats = TargetFormats {
+            color: COLOR_FORMAT,
+            depth: DEPTH_FORMAT,
+            render_pass,
+        };
+        let method = crate::lod::create(
+            method,
+            &MethodContext {
+                gpu,
+                terrain: &terrain,
+                formats,
+                slots: n,
+            },
+        )?;
+        let timestamps =
+            gpu.info.queue_families[gpu.queue_family as usize].timestamp_valid_bits > 0;
         let mut slots = Vec::with_capacity(n);
         for i in 0..n {
             slots.push(Self::create_slot(gpu, &options, &formats, i)?);
         }
-        let readback_path = if slots[0]
-            .readback_color
-            .memory_properties()
-            .contains(vk::MemoryPropertyFlags::DEVICE_LOCAL | vk::MemoryPropertyFlags::HOST_VISIBLE)
-        {
-            ReadbackPath::Unified
-        } else {
-            ReadbackPath::HostStaging
-        };
+        let readback_path =
+            if slots[0].readback_color.memory_properties().contains(
+                vk::MemoryPropertyFlags::DEVICE_LOCAL | vk::MemoryPropertyFlags::HOST_VISIBLE,
+            ) {
+                ReadbackPath::Unified
+            } else {
+                ReadbackPath::HostStaging
+            };
         Ok(Renderer {
             gpu: gpu.clone(),
             options,
@@ -191,9 +220,17 @@ impl Renderer {
         })
     }
 
-    fn create_slot(gpu: &Arc<Gpu>, o: &RenderOptions, formats: &TargetFormats, i: usize) -> Result<Slot> {
+    fn create_slot(
+        gpu: &Arc<Gpu>,
+        o: &RenderOptions,
+        formats: &TargetFormats,
+        i: usize,
+    ) -> Result<Slot> {
         let d = &gpu.device;
-        let extent = vk::Extent2D { width: o.width, height: o.height };
+        let extent = vk::Extent2D {
+            width: o.width,
+            height: o.height,
+        };
         let color = Image::new(
             gpu,
             &ImageDesc {
@@ -214,7 +251,8 @@ impl Renderer {
                 extent,
                 layers: 1,
                 mips: 1,
-                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT
+                    | vk::ImageUsageFlags::TRANSFER_SRC,
                 aspect: vk::ImageAspectFlags::DEPTH,
             },
         )?;
@@ -261,12 +299,18 @@ impl Renderer {
             pending: None,
         };
         slot.cmd = unsafe {
-            d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1))
+            d.allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .command_buffer_count(1),
+            )
         }
         .vk("vkAllocateCommandBuffers")?[0];
         slot.queries = unsafe {
             d.create_query_pool(
-                &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(TIMESTAMPS),
+                &vk::QueryPoolCreateInfo::default()
+                    .query_type(vk::QueryType::TIMESTAMP)
+                    .query_count(TIMESTAMPS),
                 None,
             )
         }
@@ -307,7 +351,11 @@ impl Renderer {
     }
 
     /// Renders one frame; delivers to `sink` every frame that is now older than N - 1 frames.
-    pub fn render(&mut self, request: impl Into<FrameRequest>, sink: &mut dyn FrameSink) -> Result<()> {
+    pub fn render(
+        &mut self,
+        request: impl Into<FrameRequest>,
+        sink: &mut dyn FrameSink,
+    ) -> Result<()> {
         let request = request.into();
         request.camera.validate()?;
         if let Some(sky) = request.sky
@@ -321,9 +369,18 @@ impl Renderer {
         // so its GPU work is complete and its buffers are free.
         debug_assert!(self.slots[slot_index].pending.is_none());
         let started = Instant::now();
-        let view = ViewState { camera: request.camera, width: self.options.width, height: self.options.height };
+        let view = ViewState {
+            camera: request.camera,
+            width: self.options.width,
+            height: self.options.height,
+        };
         let aspect = self.options.width as f64 / self.options.height as f64;
-        let uniforms = FrameUniforms::new(&request.camera, aspect, &self.terrain.info, self.options.sun_dir);
+        let uniforms = FrameUniforms::new(
+            &request.camera,
+            aspect,
+            &self.terrain.info,
+            self.options.sun_dir,
+        );
         self.terrain.uniforms[slot_index].write(uniforms.as_bytes())?;
         self.method.update(slot_index, &view)?;
         let sky = request.sky.unwrap_or(self.options.sky);
@@ -332,7 +389,8 @@ impl Renderer {
         let cmds = [self.slots[slot_index].cmd];
         let signal = [self.timeline.raw];
         let values = [index + 1];
-        let mut timeline_info = vk::TimelineSemaphoreSubmitInfo::default().signal_semaphore_values(&values);
+        let mut timeline_info =
+            vk::TimelineSemaphoreSubmitInfo::default().signal_semaphore_values(&values);
         let submit = vk::SubmitInfo::default()
             .command_buffers(&cmds)
             .signal_semaphores(&signal)
@@ -361,14 +419,23 @@ impl Renderer {
     }
 
     fn deliver_oldest(&mut self, sink: &mut dyn FrameSink) -> Result<()> {
-        let Some(slot_index) = self.in_flight.pop_front() else { return Ok(()) };
-        let index = self.slots[slot_index].pending.as_ref().map(|p| p.index).unwrap_or(0);
+        let Some(slot_index) = self.in_flight.pop_front() else {
+            return Ok(());
+        };
+        let index = self.slots[slot_index]
+            .pending
+            .as_ref()
+            .map(|p| p.index)
+            .unwrap_or(0);
         let wait_start = Instant::now();
         self.timeline.wait(index + 1, FRAME_TIMEOUT)?;
         let cpu_wait_ms = wait_start.elapsed().as_secs_f64() * 1e3;
         // Is the next frame still running on the GPU while we read this one? (overlap)
         let next_in_flight = !self.in_flight.is_empty() && self.timeline.value()? < index + 2;
-        let pending = self.slots[slot_index].pending.take().expect("in-flight slot has a frame");
+        let pending = self.slots[slot_index]
+            .pending
+            .take()
+            .expect("in-flight slot has a frame");
         let (prepass, terrain, readback) = self.read_timestamps(slot_index)?;
         let timings = FrameTimings {
             gpu_prepass_ms: prepass,
@@ -378,13 +445,20 @@ impl Renderer {
             cpu_wait_ms,
         };
         let slot = &self.slots[slot_index];
-        let rgba = slot.readback_color.mapped().ok_or_else(|| Error::invalid("readback", "buffer not mapped"))?;
+        let rgba = slot
+            .readback_color
+            .mapped()
+            .ok_or_else(|| Error::invalid("readback", "buffer not mapped"))?;
         let depth = match &slot.readback_depth {
             Some(b) => {
-                let bytes = b.mapped().ok_or_else(|| Error::invalid("readback", "depth buffer not mapped"))?;
+                let bytes = b
+                    .mapped()
+                    .ok_or_else(|| Error::invalid("readback", "depth buffer not mapped"))?;
                 // SAFETY: mapped memory is at least 4-byte aligned (Vulkan minMemoryMapAlignment
                 // is >= 64) and holds width*height f32 depth values.
-                Some(unsafe { std::slice::from_raw_parts(bytes.as_ptr() as *const f32, bytes.len() / 4) })
+                Some(unsafe {
+                    std::slice::from_raw_parts(bytes.as_ptr() as *const f32, bytes.len() / 4)
+                })
             }
             None => None,
         };
@@ -401,7 +475,12 @@ impl Renderer {
         };
         let sink_start = Instant::now();
         let result = sink.frame(&view);
-        self.stats.record(&timings, pending.triangles, next_in_flight, sink_start.elapsed().as_secs_f64() * 1e3);
+        self.stats.record(
+            &timings,
+            pending.triangles,
+            next_in_flight,
+            sink_start.elapsed().as_secs_f64() * 1e3,
+        );
         result
     }
 
@@ -431,28 +510,62 @@ impl Renderer {
         let o = &self.options;
         let slot = &self.slots[slot_index];
         let cmd = slot.cmd;
-        let extent = vk::Extent2D { width: o.width, height: o.height };
+        let extent = vk::Extent2D {
+            width: o.width,
+            height: o.height,
+        };
         unsafe {
-            d.reset_command_pool(slot.pool, vk::CommandPoolResetFlags::empty()).vk("vkResetCommandPool")?;
-            d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))
-                .vk("vkBeginCommandBuffer")?;
+            d.reset_command_pool(slot.pool, vk::CommandPoolResetFlags::empty())
+                .vk("vkResetCommandPool")?;
+            d.begin_command_buffer(
+                cmd,
+                &vk::CommandBufferBeginInfo::default()
+                    .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+            )
+            .vk("vkBeginCommandBuffer")?;
             d.cmd_reset_query_pool(cmd, slot.queries, 0, TIMESTAMPS);
             d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, slot.queries, 0);
         }
         self.method.record_prepass(cmd, slot_index);
         let slot = &self.slots[slot_index];
-        unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, slot.queries, 1) };
+        unsafe {
+            d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, slot.queries, 1)
+        };
 
         // The previous use of these images (N frames ago) ended with a copy; their contents are
         // discarded (UNDEFINED) but the transition must still wait for that copy.
-        b.image(cmd, slot.color.raw, color_range(), ImageAccess::TransferSrcDiscard, ImageAccess::ColorAttachment);
-        b.image(cmd, slot.depth.raw, depth_range(), ImageAccess::TransferSrcDiscard, ImageAccess::DepthAttachment);
+        b.image(
+            cmd,
+            slot.color.raw,
+            color_range(),
+            ImageAccess::TransferSrcDiscard,
+            ImageAccess::ColorAttachment,
+        );
+        b.image(
+            cmd,
+            slot.depth.raw,
+            depth_range(),
+            ImageAccess::TransferSrcDiscard,
+            ImageAccess::DepthAttachment,
+        );
         let clear = [
-            vk::ClearValue { color: vk::ClearColorValue { float32: [sky[0], sky[1], sky[2], 1.0] } },
+            vk::ClearValue {
+                color: vk::ClearColorValue {
+                    float32: [sky[0], sky[1], sky[2], 1.0],
+                },
+            },
             // Reversed-Z: 0 is the far plane.
-            vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } },
+            vk::ClearValue {
+                depth_stencil: vk::ClearDepthStencilValue {
+                    depth: 0.0,
+                    stencil: 0,
+                },
+            },
         ];
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent };
+        let area = vk::Rect2D {
+            offset: vk::Offset2D::default(),
+            extent,
+        };
         unsafe {
             if gpu.modern {
                 let color_att = [vk::RenderingAttachmentInfo::default()
@@ -511,7 +624,13 @@ impl Renderer {
             }
             d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, slot.queries, 2);
         }
-        b.image(cmd, slot.color.raw, color_range(), ImageAccess::ColorAttachment, ImageAccess::TransferSrc);
+        b.image(
+            cmd,
+            slot.color.raw,
+            color_range(),
+            ImageAccess::ColorAttachment,
+            ImageAccess::TransferSrc,
+        );
         let copy = |aspect| {
             vk::BufferImageCopy::default()
                 .image_subresource(vk::ImageSubresourceLayers {
@@ -520,7 +639,11 @@ impl Renderer {
                     base_array_layer: 0,
                     layer_count: 1,
                 })
-                .image_extent(vk::Extent3D { width: o.width, height: o.height, depth: 1 })
+                .image_extent(vk::Extent3D {
+                    width: o.width,
+                    height: o.height,
+                    depth: 1,
+                })
         };
         unsafe {
             d.cmd_copy_image_to_buffer(
@@ -532,7 +655,13 @@ impl Renderer {
             );
         }
         if let Some(depth_buffer) = &slot.readback_depth {
-            b.image(cmd, slot.depth.raw, depth_range(), ImageAccess::DepthAttachment, ImageAccess::TransferSrc);
+            b.image(
+                cmd,
+                slot.depth.raw,
+                depth_range(),
+                ImageAccess::DepthAttachment,
+                ImageAccess::TransferSrc,
+            );
             unsafe {
                 d.cmd_copy_image_to_buffer(
                     cmd,
@@ -544,7 +673,13 @@ impl Renderer {
             }
         } else {
             // Keep the depth image's state uniform across frames (TransferSrc before reuse).
-            b.image(cmd, slot.depth.raw, depth_range(), ImageAccess::DepthAttachment, ImageAccess::TransferSrc);
+            b.image(
+                cmd,
+                slot.depth.raw,
+                depth_range(),
+                ImageAccess::DepthAttachment,
+                ImageAccess::TransferSrc,
+            );
         }
         b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
         unsafe {
@@ -564,7 +699,11 @@ impl Drop for Renderer {
         if self.formats.render_pass != vk::RenderPass::null() {
             // The method's pipelines reference the render pass only at creation; destroying it
             // here (before the method drops) is allowed by the spec.
-            unsafe { self.gpu.device.destroy_render_pass(self.formats.render_pass, None) };
+            unsafe {
+                self.gpu
+                    .device
+                    .destroy_render_pass(self.formats.render_pass, None)
+            };
         }
     }
 }

@@ -43,15 +43,23 @@ pub fn create_render_pass(gpu: &Gpu) -> Result<vk::RenderPass> {
             .initial_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL)
             .final_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL),
     ];
-    let color_ref = [vk::AttachmentReference { attachment: 0, layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL }];
-    let depth_ref = vk::AttachmentReference { attachment: 1, layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL };
+    let color_ref = [vk::AttachmentReference {
+        attachment: 0,
+        layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+    }];
+    let depth_ref = vk::AttachmentReference {
+        attachment: 1,
+        layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
+    };
     let subpasses = [vk::SubpassDescription::default()
         .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
         .color_attachments(&color_ref)
         .depth_stencil_attachment(&depth_ref)];
     unsafe {
         gpu.device.create_render_pass(
-            &vk::RenderPassCreateInfo::default().attachments(&attachments).subpasses(&subpasses),
+            &vk::RenderPassCreateInfo::default()
+                .attachments(&attachments)
+                .subpasses(&subpasses),
             None,
         )
     }
@@ -85,11 +93,18 @@ pub struct TerrainPipelineDesc<'a> {
 
 /// Builds a terrain pipeline: no vertex buffers (vertices come from indices), reversed-Z depth
 /// (GREATER), back faces culled, viewport and scissor dynamic.
-pub fn terrain_pipeline(gpu: &Arc<Gpu>, formats: &TargetFormats, desc: &TerrainPipelineDesc<'_>) -> Result<Pipeline> {
+pub fn terrain_pipeline(
+    gpu: &Arc<Gpu>,
+    formats: &TargetFormats,
+    desc: &TerrainPipelineDesc<'_>,
+) -> Result<Pipeline> {
     let d = &gpu.device;
     let module = crate::driver::shaders::module(gpu, desc.spv)?;
     let layout = unsafe {
-        d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(desc.set_layouts), None)
+        d.create_pipeline_layout(
+            &vk::PipelineLayoutCreateInfo::default().set_layouts(desc.set_layouts),
+            None,
+        )
     }
     .vk("vkCreatePipelineLayout");
     let layout = match layout {
@@ -111,19 +126,23 @@ pub fn terrain_pipeline(gpu: &Arc<Gpu>, formats: &TargetFormats, desc: &TerrainP
     ];
     let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
     let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(desc.topology);
-    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
+    let viewport = vk::PipelineViewportStateCreateInfo::default()
+        .viewport_count(1)
+        .scissor_count(1);
     let raster = vk::PipelineRasterizationStateCreateInfo::default()
         .polygon_mode(vk::PolygonMode::FILL)
         .cull_mode(vk::CullModeFlags::BACK)
         // WebGPU-style clip space with naga's y flip: counter-clockwise stays front-facing.
         .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
         .line_width(1.0);
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
+    let multisample = vk::PipelineMultisampleStateCreateInfo::default()
+        .rasterization_samples(vk::SampleCountFlags::TYPE_1);
     let depth = vk::PipelineDepthStencilStateCreateInfo::default()
         .depth_test_enable(true)
         .depth_write_enable(true)
         .depth_compare_op(vk::CompareOp::GREATER);
-    let blend_attachments = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
+    let blend_attachments = [vk::PipelineColorBlendAttachmentState::default()
+        .color_write_mask(vk::ColorComponentFlags::RGBA)];
     let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
     let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
     let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
@@ -150,10 +169,17 @@ pub fn terrain_pipeline(gpu: &Arc<Gpu>, formats: &TargetFormats, desc: &TerrainP
     let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
     unsafe { d.destroy_shader_module(module, None) };
     match result {
-        Ok(p) => Ok(Pipeline { gpu: gpu.clone(), raw: p[0], layout }),
+        Ok(p) => Ok(Pipeline {
+            gpu: gpu.clone(),
+            raw: p[0],
+            layout,
+        }),
         Err((_, result)) => {
             unsafe { d.destroy_pipeline_layout(layout, None) };
-            Err(crate::error::Error::Vulkan { call: "vkCreateGraphicsPipelines", result })
+            Err(crate::error::Error::Vulkan {
+                call: "vkCreateGraphicsPipelines",
+                result,
+            })
         }
     }
 }

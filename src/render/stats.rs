@@ -27,20 +27,42 @@ pub struct FrameRecord {
 }
 
 impl RunStats {
-    pub fn record(&mut self, timings: &FrameTimings, triangles: u64, overlapped: bool, sink_ms: f64) {
+    pub fn record(
+        &mut self,
+        timings: &FrameTimings,
+        triangles: u64,
+        overlapped: bool,
+        sink_ms: f64,
+    ) {
         let now = Instant::now();
-        let interval_ms = self.last_delivery.map(|t| (now - t).as_secs_f64() * 1e3).unwrap_or(0.0);
+        let interval_ms = self
+            .last_delivery
+            .map(|t| (now - t).as_secs_f64() * 1e3)
+            .unwrap_or(0.0);
         self.last_delivery = Some(now);
-        self.frames.push(FrameRecord { timings: *timings, triangles, interval_ms, sink_ms, overlapped });
+        self.frames.push(FrameRecord {
+            timings: *timings,
+            triangles,
+            interval_ms,
+            sink_ms,
+            overlapped,
+        });
     }
 
     /// Summary over the frames after the first `warmup` (lavapipe compiles shaders lazily, so
     /// the first frames are not representative).
     pub fn summary(&self, warmup: usize) -> Summary {
-        let frames = if self.frames.len() > warmup { &self.frames[warmup..] } else { &self.frames[..] };
+        let frames = if self.frames.len() > warmup {
+            &self.frames[warmup..]
+        } else {
+            &self.frames[..]
+        };
         // The first delivered frame has no interval.
-        let intervals: Vec<f64> =
-            frames.iter().map(|f| f.interval_ms).filter(|&v| v > 0.0).collect::<Vec<_>>();
+        let intervals: Vec<f64> = frames
+            .iter()
+            .map(|f| f.interval_ms)
+            .filter(|&v| v > 0.0)
+            .collect::<Vec<_>>();
         let pick = |f: fn(&FrameRecord) -> f64| Percentiles::of(frames.iter().map(f).collect());
         Summary {
             frames: frames.len(),

@@ -83,20 +83,35 @@ impl TerrainGpu {
         if data.width > max_side || data.height > max_side {
             return Err(Error::invalid(
                 &data.name,
-                format!("{}x{} exceeds the device's {max_side} texels per side", data.width, data.height),
+                format!(
+                    "{}x{} exceeds the device's {max_side} texels per side",
+                    data.width, data.height
+                ),
             ));
         }
-        let extent = vk::Extent2D { width: data.width, height: data.height };
+        let extent = vk::Extent2D {
+            width: data.width,
+            height: data.height,
+        };
         let heights: Vec<u8> = data.heights.iter().flat_map(|h| h.to_le_bytes()).collect();
-        let height = Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, &heights)?;
-        let normal =
-            Image::texture_with_data(gpu, "normals", vk::Format::R8G8B8A8_SNORM, extent, &data.normals_snorm8())?;
+        let height =
+            Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, &heights)?;
+        let normal = Image::texture_with_data(
+            gpu,
+            "normals",
+            vk::Format::R8G8B8A8_SNORM,
+            extent,
+            &data.normals_snorm8(),
+        )?;
         let albedo_data = data.albedo_or_ramp();
         let albedo = Image::texture_with_data(
             gpu,
             "albedo",
             vk::Format::R8G8B8A8_SRGB,
-            vk::Extent2D { width: albedo_data.width, height: albedo_data.height },
+            vk::Extent2D {
+                width: albedo_data.width,
+                height: albedo_data.height,
+            },
             &albedo_data.rgba,
         )?;
         let (min_height, max_height) = data.height_range();
@@ -121,13 +136,19 @@ impl TerrainGpu {
                     .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
                     .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
                     .anisotropy_enable(anisotropy)
-                    .max_anisotropy(if anisotropy { gpu.info.caps.max_anisotropy.min(16.0) } else { 1.0 })
+                    .max_anisotropy(if anisotropy {
+                        gpu.info.caps.max_anisotropy.min(16.0)
+                    } else {
+                        1.0
+                    })
                     .max_lod(vk::LOD_CLAMP_NONE),
                 None,
             )
         }
         .vk("vkCreateSampler")?;
-        let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT | vk::ShaderStageFlags::COMPUTE;
+        let stages = vk::ShaderStageFlags::VERTEX
+            | vk::ShaderStageFlags::FRAGMENT
+            | vk::ShaderStageFlags::COMPUTE;
         let binding = |b: u32, ty: vk::DescriptorType| {
             vk::DescriptorSetLayoutBinding::default()
                 .binding(b)
@@ -143,23 +164,45 @@ impl TerrainGpu {
             binding(4, vk::DescriptorType::SAMPLER),
         ];
         let set_layout = unsafe {
-            d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings), None)
+            d.create_descriptor_set_layout(
+                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                None,
+            )
         }
         .vk("vkCreateDescriptorSetLayout")?;
         let n = slots as u32;
         let sizes = [
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: n },
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::SAMPLED_IMAGE, descriptor_count: 3 * n },
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::SAMPLER, descriptor_count: n },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::UNIFORM_BUFFER,
+                descriptor_count: n,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::SAMPLED_IMAGE,
+                descriptor_count: 3 * n,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::SAMPLER,
+                descriptor_count: n,
+            },
         ];
         let pool = unsafe {
-            d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&sizes), None)
+            d.create_descriptor_pool(
+                &vk::DescriptorPoolCreateInfo::default()
+                    .max_sets(n)
+                    .pool_sizes(&sizes),
+                None,
+            )
         }
         .vk("vkCreateDescriptorPool")?;
         let layouts = vec![set_layout; slots];
-        let sets =
-            unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts)) }
-                .vk("vkAllocateDescriptorSets")?;
+        let sets = unsafe {
+            d.allocate_descriptor_sets(
+                &vk::DescriptorSetAllocateInfo::default()
+                    .descriptor_pool(pool)
+                    .set_layouts(&layouts),
+            )
+        }
+        .vk("vkAllocateDescriptorSets")?;
         let mut uniforms = Vec::with_capacity(slots);
         for (slot, &set) in sets.iter().enumerate() {
             let ubo = Buffer::new(
@@ -169,7 +212,11 @@ impl TerrainGpu {
                 vk::BufferUsageFlags::UNIFORM_BUFFER,
                 MemoryLocation::CpuToGpu,
             )?;
-            let buffer_info = [vk::DescriptorBufferInfo { buffer: ubo.raw, offset: 0, range: vk::WHOLE_SIZE }];
+            let buffer_info = [vk::DescriptorBufferInfo {
+                buffer: ubo.raw,
+                offset: 0,
+                range: vk::WHOLE_SIZE,
+            }];
             let image_info = |view| {
                 [vk::DescriptorImageInfo {
                     sampler: vk::Sampler::null(),
@@ -177,9 +224,21 @@ impl TerrainGpu {
                     image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
                 }]
             };
-            let (hi, ni, ai) = (image_info(height.view), image_info(normal.view), image_info(albedo.view));
-            let si = [vk::DescriptorImageInfo { sampler, ..Default::default() }];
-            let write = |b: u32, ty| vk::WriteDescriptorSet::default().dst_set(set).dst_binding(b).descriptor_type(ty);
+            let (hi, ni, ai) = (
+                image_info(height.view),
+                image_info(normal.view),
+                image_info(albedo.view),
+            );
+            let si = [vk::DescriptorImageInfo {
+                sampler,
+                ..Default::default()
+            }];
+            let write = |b: u32, ty| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(b)
+                    .descriptor_type(ty)
+            };
             let writes = [
                 write(0, vk::DescriptorType::UNIFORM_BUFFER).buffer_info(&buffer_info),
                 write(1, vk::DescriptorType::SAMPLED_IMAGE).image_info(&hi),

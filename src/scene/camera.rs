@@ -47,7 +47,11 @@ impl Camera {
         if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
             return bad(format!("position {p} is not finite"));
         }
-        for (name, v) in [("yaw", self.yaw_deg), ("pitch", self.pitch_deg), ("roll", self.roll_deg)] {
+        for (name, v) in [
+            ("yaw", self.yaw_deg),
+            ("pitch", self.pitch_deg),
+            ("roll", self.roll_deg),
+        ] {
             if !v.is_finite() {
                 return bad(format!("{name} {v} is not finite"));
             }
@@ -56,22 +60,35 @@ impl Camera {
             return bad(format!("pitch {} deg is outside [-90, 90]", self.pitch_deg));
         }
         if !(self.vfov_deg.is_finite() && self.vfov_deg > 0.1 && self.vfov_deg < 179.0) {
-            return bad(format!("vertical FOV {} deg is outside (0.1, 179)", self.vfov_deg));
+            return bad(format!(
+                "vertical FOV {} deg is outside (0.1, 179)",
+                self.vfov_deg
+            ));
         }
         if !(self.near.is_finite() && self.near > 0.0) {
             return bad(format!("near plane {} m must be positive", self.near));
         }
         if !(self.far.is_finite() && self.far > self.near) {
-            return bad(format!("far plane {} m must be finite and beyond near {} m", self.far, self.near));
+            return bad(format!(
+                "far plane {} m must be finite and beyond near {} m",
+                self.far, self.near
+            ));
         }
         Ok(())
     }
 
     /// Camera basis in world space: (right, up, forward).
     pub fn basis(&self) -> (DVec3, DVec3, DVec3) {
-        let (yaw, pitch, roll) =
-            (self.yaw_deg.to_radians(), self.pitch_deg.to_radians(), self.roll_deg.to_radians());
-        let forward = DVec3::new(yaw.sin() * pitch.cos(), yaw.cos() * pitch.cos(), pitch.sin());
+        let (yaw, pitch, roll) = (
+            self.yaw_deg.to_radians(),
+            self.pitch_deg.to_radians(),
+            self.roll_deg.to_radians(),
+        );
+        let forward = DVec3::new(
+            yaw.sin() * pitch.cos(),
+            yaw.cos() * pitch.cos(),
+            pitch.sin(),
+        );
         // At pitch +-90 the heading still defines "right", so straight-down views keep a stable
         // orientation instead of a degenerate cross product.
         let right0 = DVec3::new(yaw.cos(), -yaw.sin(), 0.0);
@@ -89,7 +106,12 @@ impl Camera {
     /// Reversed-Z perspective projection in WebGPU clip space (depth 1 at near, 0 at far).
     pub fn projection(&self, aspect: f64) -> Mat4 {
         // glam's [0,1]-depth projection with near and far swapped is exactly reversed-Z.
-        Mat4::perspective_rh(self.vfov_deg.to_radians() as f32, aspect as f32, self.far as f32, self.near as f32)
+        Mat4::perspective_rh(
+            self.vfov_deg.to_radians() as f32,
+            aspect as f32,
+            self.far as f32,
+            self.near as f32,
+        )
     }
 
     /// View distance along the forward axis for a reversed-Z depth value.

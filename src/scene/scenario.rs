@@ -89,7 +89,18 @@ impl Scenario {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let file: ScenarioFile =
             toml::from_str(&text).map_err(|e| crate::config::toml_error(path, &text, &e))?;
-        Self::resolve(&file, data).map_err(|e| Error::Config { path: path.to_path_buf(), message: e.to_string() })
+        Self::resolve(&file, data).map_err(|e| Error::Config {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+    }
+
+    /// The default flight, compiled in so the binary needs no files beside it.
+    pub fn builtin_default(data: &Heightmap) -> Result<Self> {
+        const TEXT: &str = include_str!("../../config/scenarios/default.toml");
+        let file: ScenarioFile =
+            toml::from_str(TEXT).map_err(|e| Error::invalid("built-in scenario", e.to_string()))?;
+        Self::resolve(&file, data)
     }
 
     pub fn resolve(file: &ScenarioFile, data: &Heightmap) -> Result<Self> {
@@ -106,7 +117,9 @@ impl Scenario {
             let position = match (k.position, k.at) {
                 (Some(p), None) => {
                     if k.above_ground.is_some() || k.altitude.is_some() {
-                        return bad(format!("keyframe {i}: `above_ground`/`altitude` go with `at`, not `position`"));
+                        return bad(format!(
+                            "keyframe {i}: `above_ground`/`altitude` go with `at`, not `position`"
+                        ));
                     }
                     DVec3::from_array(p)
                 }
@@ -115,13 +128,27 @@ impl Scenario {
                     let z = match (k.above_ground, k.altitude) {
                         (Some(a), None) => data.height_at(x, y) + a,
                         (None, Some(a)) => a,
-                        _ => return bad(format!("keyframe {i}: `at` needs exactly one of `above_ground`, `altitude`")),
+                        _ => {
+                            return bad(format!(
+                                "keyframe {i}: `at` needs exactly one of `above_ground`, `altitude`"
+                            ));
+                        }
                     };
                     DVec3::new(x, y, z)
                 }
-                _ => return bad(format!("keyframe {i}: give exactly one of `position`, `at`")),
+                _ => {
+                    return bad(format!(
+                        "keyframe {i}: give exactly one of `position`, `at`"
+                    ));
+                }
             };
-            keys.push(Key { t: k.t.unwrap_or(f64::NAN), position, yaw: k.yaw, pitch: k.pitch, roll: k.roll });
+            keys.push(Key {
+                t: k.t.unwrap_or(f64::NAN),
+                position,
+                yaw: k.yaw,
+                pitch: k.pitch,
+                roll: k.roll,
+            });
         }
         match file.speed {
             Some(speed) => {
@@ -157,7 +184,13 @@ impl Scenario {
             near: file.near,
             far: file.far,
         };
-        let scenario = Scenario { name: file.name.clone(), fps: file.fps, frames: file.frames, template, keys };
+        let scenario = Scenario {
+            name: file.name.clone(),
+            fps: file.fps,
+            frames: file.frames,
+            template,
+            keys,
+        };
         for k in &scenario.keys {
             let mut c = template;
             (c.position, c.yaw_deg, c.pitch_deg, c.roll_deg) = (k.position, k.yaw, k.pitch, k.roll);
@@ -176,7 +209,13 @@ impl Scenario {
             pitch: camera.pitch_deg,
             roll: camera.roll_deg,
         };
-        Ok(Scenario { name: name.into(), fps: 30.0, frames, template: camera, keys: vec![key] })
+        Ok(Scenario {
+            name: name.into(),
+            fps: 30.0,
+            frames,
+            template: camera,
+            keys: vec![key],
+        })
     }
 
     /// Scenario time of frame `frame` in seconds.
@@ -193,7 +232,11 @@ impl Scenario {
             i if i >= self.keys.len() => (self.keys[i - 1], self.keys[i - 1]),
             i => (self.keys[i - 1], self.keys[i]),
         };
-        let s = if b.t > a.t { ((t - a.t) / (b.t - a.t)).clamp(0.0, 1.0) } else { 0.0 };
+        let s = if b.t > a.t {
+            ((t - a.t) / (b.t - a.t)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let lerp = |x: f64, y: f64| x + (y - x) * s;
         // Headings interpolate the short way round.
         let dyaw = (b.yaw - a.yaw + 540.0).rem_euclid(360.0) - 180.0;
