@@ -1,0 +1,302 @@
+//! The `vkterrain` binary end to end: the main job works, and bad input gets a one-line error
+//! naming the problem, exit status 1, no panic, and no output directory left behind.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn vkterrain(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args(args)
+        .env("VKTERRAIN_VALIDATION", "1")
+        .env_remove("VKTERRAIN_DEVICE")
+        .output()
+        .expect("run vkterrain")
+}
+
+fn ci_config() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config/ci.toml")
+        .display()
+        .to_string()
+}
+
+/// Runs a command that must fail; returns its one error line.
+fn fails(args: &[&str], out: &Path, expected: &[&str]) -> String {
+    let o = vkterrain(args);
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{args:?} should fail with status 1; stderr: {stderr}"
+    );
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "{args:?}: expected one error line, got: {stderr}"
+    );
+    assert!(lines[0].starts_with("error: "), "{args:?}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    for word in expected {
+        assert!(
+            lines[0].contains(word),
+            "{args:?}: {:?} does not mention {word:?}",
+            lines[0]
+        );
+    }
+    assert!(!out.exists(), "{args:?} left {} behind", out.display());
+    lines[0].to_string()
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn render_writes_pngs_and_summary() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let o = vkterrain(&[
+        "render",
+        "--config",
+        &ci_config(),
+        "--frames",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        stdout.contains("frame time:") && stdout.contains("triangles/frame: 524288"),
+        "{stdout}"
+    );
+    for f in ["frame_00000.png", "frame_00002.png", "summary.json"] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let png = image::open(out.join("frame_00002.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (640, 360));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["per_frame"].as_array().unwrap().len(), 3);
+    // No temporary files remain.
+    let names: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names.len(), 3, "{names:?}");
+}
+
+#[test]
+fn info_names_the_device() {
+    let o = vkterrain(&["info"]);
+    assert!(
+        o.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("device:") && stdout.contains("timeline semaphores"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn missing_config_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let missing = tmp.path().join("nope.toml");
+    fails(
+        &[
+            "render",
+            "--config",
+            missing.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &out,
+        &["nope.toml"],
+    );
+}
+
+#[test]
+fn invalid_config_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let cases = [
+        (
+            "syntax.toml",
+            "[render]\nwidth = = 3\n",
+            vec!["syntax.toml:2"],
+        ),
+        (
+            "unknown.toml",
+            "[render]\nwidht = 640\n",
+            vec!["unknown.toml", "widht"],
+        ),
+        (
+            "type.toml",
+            "[render]\nwidth = \"wide\"\n",
+            vec!["type.toml"],
+        ),
+        (
+            "zero.toml",
+            "[render]\nwidth = 0\n",
+            vec!["zero.toml", "resolution"],
+        ),
+        ("method.toml", "[method]\nname = \"magic\"\n", vec!["magic"]),
+    ];
+    for (name, text, expected) in cases {
+        let path = write(tmp.path(), name, text);
+        fails(
+            &[
+                "render",
+                "--config",
+                path.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &out,
+            &expected,
+        );
+    }
+}
+
+#[test]
+fn absurd_resolutions_and_counts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let o = out.to_str().unwrap();
+    let c = ci_config();
+    fails(
+        &["render", "--config", &c, "--out", o, "--width", "0"],
+        &out,
+        &["resolution"],
+    );
+    fails(
+        &["render", "--config", &c, "--out", o, "--height", "1000000"],
+        &out,
+        &["resolution"],
+    );
+    fails(
+        &["render", "--config", &c, "--out", o, "--frames", "0"],
+        &out,
+        &["frames"],
+    );
+    fails(
+        &[
+            "render",
+            "--config",
+            &c,
+            "--out",
+            o,
+            "--frames-in-flight",
+            "9",
+        ],
+        &out,
+        &["frames_in_flight"],
+    );
+}
+
+#[test]
+fn unknown_device_override() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let o = out.to_str().unwrap();
+    fails(
+        &[
+            "render",
+            "--config",
+            &ci_config(),
+            "--out",
+            o,
+            "--device",
+            "no-such-gpu",
+        ],
+        &out,
+        &["no-such-gpu"],
+    );
+    fails(
+        &[
+            "render",
+            "--config",
+            &ci_config(),
+            "--out",
+            o,
+            "--device",
+            "7",
+        ],
+        &out,
+        &["7"],
+    );
+    let info = vkterrain(&["info", "--device", "no-such-gpu"]);
+    assert_eq!(info.status.code(), Some(1));
+}
+
+#[test]
+fn nan_and_absurd_camera_values_in_scenarios() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let base = "name = \"bad\"\nfps = 30.0\nframes = 2\nvfov_deg = VFOV\nnear = 1.0\nfar = 1000.0\n\
+                [[keyframe]]\nt = 0.0\nposition = [0.0, 0.0, 500.0]\nyaw = 0.0\npitch = PITCH\n";
+    let cases = [
+        (
+            "nan_pitch.toml",
+            base.replace("VFOV", "60.0").replace("PITCH", "nan"),
+            vec!["nan_pitch.toml", "pitch"],
+        ),
+        (
+            "inf_pitch.toml",
+            base.replace("VFOV", "60.0").replace("PITCH", "inf"),
+            vec!["pitch"],
+        ),
+        (
+            "fov.toml",
+            base.replace("VFOV", "0.0").replace("PITCH", "-10.0"),
+            vec!["FOV"],
+        ),
+        (
+            "fov_nan.toml",
+            base.replace("VFOV", "nan").replace("PITCH", "-10.0"),
+            vec!["FOV"],
+        ),
+    ];
+    for (name, text, expected) in cases {
+        let path = write(tmp.path(), name, &text);
+        fails(
+            &[
+                "render",
+                "--config",
+                &ci_config(),
+                "--scenario",
+                path.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &out,
+            &expected,
+        );
+    }
+}
+
+#[test]
+fn no_vulkan_driver_names_the_package() {
+    let o = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .arg("info")
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .env_remove("VKTERRAIN_VALIDATION")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("mesa-vulkan-drivers"), "{stderr}");
+}

@@ -1,0 +1,72 @@
+//! Helpers shared by the integration tests. Every GPU test runs with the validation layers
+//! (including synchronization validation) and fails on any message.
+#![allow(dead_code)]
+
+use std::sync::Arc;
+
+use vkterrain::dataset::Heightmap;
+use vkterrain::driver::{Gpu, GpuOptions};
+use vkterrain::lod::MethodKind;
+use vkterrain::readback::{CollectSink, OwnedFrame};
+use vkterrain::render::{FrameRequest, RenderOptions, Renderer};
+
+/// A validated GPU context; panics with the install hint when Vulkan or the layers are missing.
+pub fn gpu(force_legacy: bool) -> Arc<Gpu> {
+    let options = GpuOptions {
+        select: None,
+        validation: true,
+        force_legacy,
+    }
+    .with_env();
+    Gpu::new(&options).unwrap_or_else(|e| {
+        panic!("no Vulkan device with validation layers ({e}); run `make deps` or see README")
+    })
+}
+
+/// Fails the test when the validation layers reported anything.
+pub fn assert_no_validation_messages(gpu: &Gpu) {
+    let log = gpu.validation().expect("tests run with validation on");
+    assert_eq!(log.count(), 0, "validation messages: {:#?}", log.messages());
+}
+
+pub fn options(width: u32, height: u32, frames_in_flight: usize) -> RenderOptions {
+    RenderOptions {
+        width,
+        height,
+        frames_in_flight,
+        readback_depth: true,
+        sky: [0.2, 0.4, 0.8],
+        sun_dir: [0.0, 0.0, 1.0],
+    }
+}
+
+/// Renders `requests` with the brute-force method and returns every delivered frame, checking
+/// the validation log after the renderer is gone (destruction is validated too).
+pub fn render(
+    gpu: &Arc<Gpu>,
+    data: &Heightmap,
+    options: RenderOptions,
+    requests: &[FrameRequest],
+) -> Vec<OwnedFrame> {
+    let mut sink = CollectSink::default();
+    {
+        let mut renderer = Renderer::new(gpu, data, MethodKind::Brute, options).expect("renderer");
+        for r in requests {
+            renderer.render(*r, &mut sink).expect("render");
+        }
+        renderer.finish(&mut sink).expect("finish");
+    }
+    assert_no_validation_messages(gpu);
+    sink.frames
+}
+
+/// sRGB encoding of a linear value as an 8-bit code (what an `_SRGB` target stores).
+pub fn srgb8(linear: f32) -> u8 {
+    let c = linear.clamp(0.0, 1.0);
+    let s = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
+}
