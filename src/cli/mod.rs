@@ -1,5 +1,6 @@
-//! The `vkterrain` command line: `info` and `render`.
+//! The `vkterrain` command line: `info`, `render` and `bench`.
 
+pub mod bench;
 pub mod info;
 pub mod render;
 
@@ -31,6 +32,8 @@ pub enum Command {
     },
     /// Render a scenario headless, write selected frames as PNG and print a summary.
     Render(render::RenderArgs),
+    /// Frame-time benchmark: the scenario at several resolutions and frames-in-flight counts.
+    Bench(bench::BenchArgs),
 }
 
 /// Runs the parsed command line.
@@ -38,5 +41,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info { config, device } => info::run(config.as_deref(), device),
         Command::Render(args) => render::run(&args),
+        Command::Bench(args) => bench::run(&args),
     }
 }

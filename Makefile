@@ -1,0 +1,26 @@
+# Two commands do everything on a fresh Debian/Ubuntu machine (see README):
+#   make run    render the default scenario on the embedded procedural terrain
+#   make test   the whole test suite, with Vulkan validation (incl. synchronization) on
+# Both install the system packages they need when they are missing (apt-get, as root or via
+# sudo); otherwise they print the exact command to run.
+
+RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers
+TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
+CARGO ?= cargo
+
+.PHONY: run test bench deps deps-test
+
+run: deps
+	$(CARGO) run --release --locked -- render --config config/default.toml
+
+test: deps-test
+	VKTERRAIN_VALIDATION=1 $(CARGO) test --locked
+
+bench: deps
+	$(CARGO) bench --locked --bench frame_time
+
+deps:
+	@scripts/ensure-packages.sh $(RUN_PACKAGES)
+
+deps-test:
+	@scripts/ensure-packages.sh $(TEST_PACKAGES)

@@ -1,0 +1,155 @@
+//! `vkterrain bench`: frame-time benchmark of one LOD method over the scenario, for several
+//! resolutions and numbers of frames in flight, in one process and one device context so the
+//! rows compare as ratios (the machines are noisy; absolute numbers drift between runs).
+//! `benches/frame_time.rs` runs the same code under `cargo bench`.
+
+use std::fmt::Write;
+
+use clap::Args;
+
+use crate::driver::{Gpu, GpuOptions};
+use crate::render::stats::Summary;
+use crate::render::{RenderOptions, Renderer};
+
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    #[command(flatten)]
+    pub render: super::render::RenderArgs,
+    /// Resolutions, comma separated.
+    #[arg(long, default_value = "1280x720,1920x1080", value_delimiter = ',')]
+    pub resolutions: Vec<String>,
+    /// Frames in flight to compare, comma separated.
+    #[arg(
+        long = "compare-frames-in-flight",
+        default_value = "1,2",
+        value_delimiter = ','
+    )]
+    pub compare_frames_in_flight: Vec<u32>,
+    /// Write the results as JSON here as well.
+    #[arg(long)]
+    pub json: Option<std::path::PathBuf>,
+}
+
+#[derive(serde::Serialize)]
+pub struct BenchRow {
+    pub width: u32,
+    pub height: u32,
+    pub frames_in_flight: u32,
+    pub summary: Summary,
+}
+
+fn parse_resolution(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = s
+        .trim()
+        .split_once('x')
+        .ok_or_else(|| anyhow::anyhow!("resolution {s:?} is not WIDTHxHEIGHT"))?;
+    Ok((w.parse()?, h.parse()?))
+}
+
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let p = super::render::prepare(&args.render)?;
+    let resolutions = args
+        .resolutions
+        .iter()
+        .map(|r| parse_resolution(r))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    for &(w, h) in &resolutions {
+        let mut c = p.config.clone();
+        c.render.width = w;
+        c.render.height = h;
+        c.validate()?;
+    }
+    for &n in &args.compare_frames_in_flight {
+        if !(1..=8).contains(&n) {
+            anyhow::bail!("frames in flight {n} is outside 1..=8");
+        }
+    }
+    let gpu = Gpu::new(
+        &GpuOptions {
+            select: p.config.device.select.clone(),
+            validation: p.config.device.validation,
+            force_legacy: p.config.device.force_legacy,
+        }
+        .with_env(),
+    )?;
+    let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
+    let mut rows = Vec::new();
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "device {} ({}); dataset {}; method {}; scenario {}; {} frames, {} warm-up excluded",
+        gpu.info.name,
+        gpu.info.type_name(),
+        p.data.name,
+        p.method.name(),
+        p.scenario.name,
+        p.frames,
+        warmup
+    );
+    let _ = writeln!(
+        out,
+        "{:>10} {:>3} {:>10} {:>10} {:>10} {:>10} {:>10} {:>8}",
+        "resolution", "N", "triangles", "median ms", "p99 ms", "gpu ms", "readback", "overlap"
+    );
+    print!("{out}");
+    for &(w, h) in &resolutions {
+        for &n in &args.compare_frames_in_flight {
+            let mut options = RenderOptions::from_config(&p.config.render);
+            options.width = w;
+            options.height = h;
+            options.frames_in_flight = n as usize;
+            let mut renderer = Renderer::new(&gpu, &p.data, p.method, options)?;
+            // The sink touches every row so the host really reads the frame (as a consumer would).
+            let mut checksum = 0u64;
+            let mut sink = |f: &crate::readback::FrameView<'_>| {
+                checksum = checksum.wrapping_add(
+                    f.rgba
+                        .chunks(f.row_stride)
+                        .map(|r| r[0] as u64)
+                        .sum::<u64>(),
+                );
+                Ok(())
+            };
+            for frame in 0..p.frames as u64 {
+                renderer.render(p.scenario.camera(frame), &mut sink)?;
+            }
+            renderer.finish(&mut sink)?;
+            let s = renderer.stats.summary(warmup);
+            let line = format!(
+                "{:>10} {:>3} {:>10.0} {:>10.2} {:>10.2} {:>10.2} {:>10.3} {:>7.0}%",
+                format!("{w}x{h}"),
+                n,
+                s.triangles.median,
+                s.frame_ms.median,
+                s.frame_ms.p99,
+                s.gpu_total_ms.median,
+                s.gpu_readback_ms.median,
+                s.overlapped_fraction * 100.0
+            );
+            println!("{line}");
+            out.push_str(&line);
+            out.push('\n');
+            rows.push(BenchRow {
+                width: w,
+                height: h,
+                frames_in_flight: n,
+                summary: s,
+            });
+        }
+    }
+    super::render::check_validation(&gpu)?;
+    if let Some(path) = &args.json {
+        let json = serde_json::json!({
+            "device": gpu.info.name,
+            "device_type": gpu.info.type_name(),
+            "dataset": p.data.name,
+            "method": p.method.name(),
+            "scenario": p.scenario.name,
+            "frames": p.frames,
+            "warmup": warmup,
+            "rows": rows,
+        });
+        crate::output::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())?;
+    }
+    Ok(())
+}
