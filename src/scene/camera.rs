@@ -1,8 +1,8 @@
 //! The camera: right-handed, **z up**, x east, y north, metres.
 //!
 //! `yaw` is the heading in degrees clockwise from north (0 looks along +y, 90 along +x);
-//! `pitch` is degrees above the horizon (-90 looks straight down); `roll` turns the image
-//! clockwise about the view direction. Projection is **reversed-Z** (depth 1 at `near`, 0 at
+//! `pitch` is degrees above the horizon (-90 looks straight down); `roll` banks like an
+//! aircraft: positive lowers the right side (the image content turns counter-clockwise). Projection is **reversed-Z** (depth 1 at `near`, 0 at
 //! `far`) into a 32-bit float depth buffer, which keeps depth precision roughly constant in
 //! relative terms out to 100+ km. Rendering is camera-relative: the view matrix has no
 //! translation, vertices are made relative to the camera in the shader (see `docs/`).
@@ -93,7 +93,8 @@ impl Camera {
         // orientation instead of a degenerate cross product.
         let right0 = DVec3::new(yaw.cos(), -yaw.sin(), 0.0);
         let up0 = right0.cross(forward);
-        let rot = DMat3::from_axis_angle(forward, -roll);
+        // A positive angle about `forward` turns `right` towards -z (right-hand rule).
+        let rot = DMat3::from_axis_angle(forward, roll);
         (rot * right0, rot * up0, forward)
     }
 
