@@ -218,7 +218,7 @@ fn procedural_terrain_is_deterministic_and_seeded() {
     assert_eq!(a.heights, b.heights);
     let c = procedural::generate(&ProceduralParams {
         seed: p.seed + 1,
-        ..p.clone()
+        ..p
     })
     .unwrap();
     assert_ne!(a.heights, c.heights);
