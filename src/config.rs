@@ -21,6 +21,7 @@ pub struct Config {
     pub dataset: DatasetConfig,
     pub method: MethodConfig,
     pub scenario: ScenarioConfig,
+    pub lod: crate::lod::LodSettings,
     pub output: OutputConfig,
     /// Directory relative paths are resolved against (the config file's directory).
     #[serde(skip)]
@@ -145,6 +146,7 @@ impl Default for Config {
             dataset: Default::default(),
             method: Default::default(),
             scenario: Default::default(),
+            lod: Default::default(),
             output: Default::default(),
             // No config file: relative paths are relative to the working directory.
             base_dir: PathBuf::new(),
@@ -261,6 +263,7 @@ impl Config {
             ));
         }
         crate::lod::MethodKind::parse(&self.method.name)?;
+        self.lod.validate()?;
         Ok(())
     }
 }

@@ -43,4 +43,10 @@ shared_constants! {
     LIGHT_AMBIENT: f32 = 0.25;
     /// Scale applied to the diffuse term (ambient + diffuse <= 1 keeps albedo unsaturated).
     LIGHT_DIFFUSE: f32 = 0.75;
+    /// Most quadtree levels UDLOD supports (16384 samples with 4-quad tiles need 13).
+    UDLOD_MAX_LEVELS: u32 = 16;
+    /// Split distance meaning "never split / never morph" (beyond the root level).
+    UDLOD_NO_SPLIT: f32 = 3.0e38;
+    /// Threads per workgroup of the tiling passes.
+    UDLOD_WORKGROUP: u32 = 64;
 }

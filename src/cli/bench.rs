@@ -94,7 +94,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     print!("{out}");
     for &(w, h) in &resolutions {
         for &n in &args.compare_frames_in_flight {
-            let mut options = RenderOptions::from_config(&p.config.render);
+            let mut options = RenderOptions::from_config(&p.config);
             options.width = w;
             options.height = h;
             options.frames_in_flight = n as usize;

@@ -132,7 +132,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         &gpu,
         &p.data,
         p.method,
-        RenderOptions::from_config(&p.config.render),
+        RenderOptions::from_config(&p.config),
     )?;
 
     let created_dir = !p.out_dir.exists();

@@ -77,6 +77,11 @@ impl ImageAccess {
 pub enum MemoryAccess {
     ComputeWrite,
     ComputeRead,
+    /// Storage reads, writes and atomics of a compute dispatch.
+    ComputeReadWrite,
+    TransferRead,
+    /// Everything an earlier frame in this queue may still do with a buffer being reused.
+    PreviousFrame,
     IndirectRead,
     VertexShaderRead,
     TransferWrite,
@@ -90,6 +95,12 @@ impl MemoryAccess {
         match self {
             MemoryAccess::ComputeWrite => (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             MemoryAccess::ComputeRead => (S::COMPUTE_SHADER, A::SHADER_STORAGE_READ),
+            MemoryAccess::ComputeReadWrite => (
+                S::COMPUTE_SHADER,
+                A::SHADER_STORAGE_READ | A::SHADER_STORAGE_WRITE,
+            ),
+            MemoryAccess::TransferRead => (S::COPY, A::TRANSFER_READ),
+            MemoryAccess::PreviousFrame => (S::ALL_COMMANDS, A::MEMORY_READ | A::MEMORY_WRITE),
             MemoryAccess::IndirectRead => (S::DRAW_INDIRECT, A::INDIRECT_COMMAND_READ),
             MemoryAccess::VertexShaderRead => (S::VERTEX_SHADER, A::SHADER_STORAGE_READ),
             MemoryAccess::TransferWrite => (S::COPY, A::TRANSFER_WRITE),
@@ -103,6 +114,9 @@ impl MemoryAccess {
         match self {
             MemoryAccess::ComputeWrite => (S::COMPUTE_SHADER, A::SHADER_WRITE),
             MemoryAccess::ComputeRead => (S::COMPUTE_SHADER, A::SHADER_READ),
+            MemoryAccess::ComputeReadWrite => (S::COMPUTE_SHADER, A::SHADER_READ | A::SHADER_WRITE),
+            MemoryAccess::TransferRead => (S::TRANSFER, A::TRANSFER_READ),
+            MemoryAccess::PreviousFrame => (S::ALL_COMMANDS, A::MEMORY_READ | A::MEMORY_WRITE),
             MemoryAccess::IndirectRead => (S::DRAW_INDIRECT, A::INDIRECT_COMMAND_READ),
             MemoryAccess::VertexShaderRead => (S::VERTEX_SHADER, A::SHADER_READ),
             MemoryAccess::TransferWrite => (S::TRANSFER, A::TRANSFER_WRITE),

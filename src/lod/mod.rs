@@ -2,6 +2,7 @@
 //! [`LodMethod`], so brute force and later methods are interchangeable.
 
 pub mod brute;
+pub mod udlod;
 
 use ash::vk;
 
@@ -15,10 +16,13 @@ use crate::scene::Camera;
 pub enum MethodKind {
     /// Every height sample is a vertex: the exact reference.
     Brute,
+    /// GPU quadtree tiling in compute + vertex morphing (Kühnert's UDLOD).
+    Udlod,
 }
 
 impl MethodKind {
-    pub const ALL: &[(&'static str, MethodKind)] = &[("brute", MethodKind::Brute)];
+    pub const ALL: &[(&'static str, MethodKind)] =
+        &[("brute", MethodKind::Brute), ("udlod", MethodKind::Udlod)];
 
     pub fn parse(name: &str) -> Result<Self> {
         Self::ALL
@@ -50,6 +54,8 @@ impl MethodKind {
 pub struct MethodContext<'a> {
     pub gpu: &'a std::sync::Arc<crate::driver::Gpu>,
     pub terrain: &'a TerrainGpu,
+    pub data: &'a crate::dataset::Heightmap,
+    pub settings: &'a LodSettings,
     pub formats: TargetFormats,
     pub slots: usize,
 }
@@ -70,17 +76,96 @@ pub trait LodMethod {
     /// Host-side per-frame work for `slot` (uniforms, CPU selection). The slot's previous GPU
     /// work is complete when this is called.
     fn update(&mut self, slot: usize, view: &ViewState) -> Result<()>;
-    /// Compute work before the render pass (tiling, culling); none by default.
-    fn record_prepass(&mut self, _cmd: vk::CommandBuffer, _slot: usize) {}
+    /// Compute work before the render pass (tiling, culling); none by default. `frame_set` is
+    /// descriptor set 0 of this slot.
+    fn record_prepass(
+        &mut self,
+        _cmd: vk::CommandBuffer,
+        _slot: usize,
+        _frame_set: vk::DescriptorSet,
+    ) {
+    }
     /// Draws inside the terrain pass; `frame_set` is descriptor set 0 of this slot.
     fn record_draw(&mut self, cmd: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet);
-    /// Triangles the last `record_draw` of `slot` submits (including zero-area ones).
+    /// Triangles the last frame of `slot` drew (including zero-area ones). Called once that
+    /// frame's GPU work is complete, so GPU-driven methods can report what the GPU chose.
     fn triangles(&self, slot: usize) -> u64;
+    /// Method-specific counters of the last completed frame of `slot` (e.g. tiles, overflow).
+    fn counters(&self, _slot: usize) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
+    /// Tests only: the tiles the GPU selected in the last completed frame of `slot`.
+    fn debug_tiles(&self, _slot: usize) -> Result<Option<Vec<[u32; 3]>>> {
+        Ok(None)
+    }
 }
 
 /// Creates a method by kind.
 pub fn create(kind: MethodKind, ctx: &MethodContext<'_>) -> Result<Box<dyn LodMethod>> {
     Ok(match kind {
         MethodKind::Brute => Box::new(brute::BruteForce::new(ctx)?),
+        MethodKind::Udlod => Box::new(udlod::Udlod::new(ctx)?),
     })
+}
+
+/// Settings of the LOD methods (config `[lod]`).
+#[derive(Clone, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LodSettings {
+    /// UDLOD: quads per tile side (even, 4..=64).
+    pub grid_size: u32,
+    /// UDLOD: screen-space geometric error target in pixels.
+    pub tau_px: f64,
+    /// UDLOD: fraction of each level's range over which vertices morph (0.05..=0.45).
+    pub morph_range: f64,
+    /// UDLOD: capacity of the final tile list (tiles per frame).
+    pub max_tiles: u32,
+    /// UDLOD: vertex morphing (off only to demonstrate popping and cracks in tests).
+    pub morph: bool,
+    /// UDLOD: frustum culling of tiles.
+    pub cull: bool,
+}
+
+impl Default for LodSettings {
+    fn default() -> Self {
+        LodSettings {
+            grid_size: 16,
+            tau_px: 1.0,
+            morph_range: 0.2,
+            max_tiles: 16384,
+            morph: true,
+            cull: true,
+        }
+    }
+}
+
+impl LodSettings {
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid("lod settings", m));
+        if !(4..=64).contains(&self.grid_size) || self.grid_size % 2 != 0 {
+            return bad(format!(
+                "grid_size {} must be even and within 4..=64",
+                self.grid_size
+            ));
+        }
+        if !(self.tau_px.is_finite() && self.tau_px >= 0.05 && self.tau_px <= 1000.0) {
+            return bad(format!(
+                "tau_px {} must be within 0.05..=1000 pixels",
+                self.tau_px
+            ));
+        }
+        if !(self.morph_range.is_finite() && (0.05..=0.45).contains(&self.morph_range)) {
+            return bad(format!(
+                "morph_range {} must be within 0.05..=0.45",
+                self.morph_range
+            ));
+        }
+        if !(16..=1 << 22).contains(&self.max_tiles) {
+            return bad(format!(
+                "max_tiles {} must be within 16..=4194304",
+                self.max_tiles
+            ));
+        }
+        Ok(())
+    }
 }

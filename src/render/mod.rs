@@ -46,10 +46,13 @@ pub struct RenderOptions {
     pub sky: [f32; 3],
     /// Unit vector towards the sun.
     pub sun_dir: [f32; 3],
+    /// LOD method settings.
+    pub lod: crate::lod::LodSettings,
 }
 
 impl RenderOptions {
-    pub fn from_config(r: &crate::config::RenderConfig) -> Self {
+    pub fn from_config(config: &crate::config::Config) -> Self {
+        let r = &config.render;
         let (az, el) = (
             r.sun_azimuth_deg.to_radians(),
             r.sun_elevation_deg.to_radians(),
@@ -61,6 +64,7 @@ impl RenderOptions {
             readback_depth: r.readback_depth,
             sky: r.sky,
             sun_dir: [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()],
+            lod: config.lod.clone(),
         }
     }
 }
@@ -186,6 +190,8 @@ impl Renderer {
             &MethodContext {
                 gpu,
                 terrain: &terrain,
+                data,
+                settings: &options.lod,
                 formats,
                 slots: n,
             },
@@ -341,6 +347,11 @@ impl Renderer {
         &self.terrain.info
     }
 
+    /// The LOD method (for its counters and, in tests, its tile list).
+    pub fn method(&self) -> &dyn LodMethod {
+        self.method.as_ref()
+    }
+
     pub fn method_name(&self) -> &'static str {
         self.method.name()
     }
@@ -400,7 +411,7 @@ impl Renderer {
             index,
             camera: request.camera,
             cpu_record_ms: started.elapsed().as_secs_f64() * 1e3,
-            triangles: self.method.triangles(slot_index),
+            triangles: 0,
         });
         self.in_flight.push_back(slot_index);
         self.next_frame += 1;
@@ -432,10 +443,12 @@ impl Renderer {
         let cpu_wait_ms = wait_start.elapsed().as_secs_f64() * 1e3;
         // Is the next frame still running on the GPU while we read this one? (overlap)
         let next_in_flight = !self.in_flight.is_empty() && self.timeline.value()? < index + 2;
-        let pending = self.slots[slot_index]
+        let mut pending = self.slots[slot_index]
             .pending
             .take()
             .expect("in-flight slot has a frame");
+        // Known only now for GPU-driven methods.
+        pending.triangles = self.method.triangles(slot_index);
         let (prepass, terrain, readback) = self.read_timestamps(slot_index)?;
         let timings = FrameTimings {
             gpu_prepass_ms: prepass,
@@ -526,7 +539,8 @@ impl Renderer {
             d.cmd_reset_query_pool(cmd, slot.queries, 0, TIMESTAMPS);
             d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, slot.queries, 0);
         }
-        self.method.record_prepass(cmd, slot_index);
+        self.method
+            .record_prepass(cmd, slot_index, self.terrain.sets[slot_index]);
         let slot = &self.slots[slot_index];
         unsafe {
             d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, slot.queries, 1)

@@ -183,3 +183,52 @@ pub fn terrain_pipeline(
         }
     }
 }
+
+/// Builds a compute pipeline for entry point `entry` of a SPIR-V module.
+pub fn compute_pipeline(
+    gpu: &Arc<Gpu>,
+    spv: &[u8],
+    entry: &std::ffi::CStr,
+    set_layouts: &[vk::DescriptorSetLayout],
+) -> Result<Pipeline> {
+    let d = &gpu.device;
+    let module = crate::driver::shaders::module(gpu, spv)?;
+    let layout = unsafe {
+        d.create_pipeline_layout(
+            &vk::PipelineLayoutCreateInfo::default().set_layouts(set_layouts),
+            None,
+        )
+    }
+    .vk("vkCreatePipelineLayout");
+    let layout = match layout {
+        Ok(l) => l,
+        Err(e) => {
+            unsafe { d.destroy_shader_module(module, None) };
+            return Err(e);
+        }
+    };
+    let info = vk::ComputePipelineCreateInfo::default()
+        .stage(
+            vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::COMPUTE)
+                .module(module)
+                .name(entry),
+        )
+        .layout(layout);
+    let result = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &[info], None) };
+    unsafe { d.destroy_shader_module(module, None) };
+    match result {
+        Ok(p) => Ok(Pipeline {
+            gpu: gpu.clone(),
+            raw: p[0],
+            layout,
+        }),
+        Err((_, e)) => {
+            unsafe { d.destroy_pipeline_layout(layout, None) };
+            Err(crate::error::Error::Vulkan {
+                call: "vkCreateComputePipelines",
+                result: e,
+            })
+        }
+    }
+}

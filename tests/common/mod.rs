@@ -37,6 +37,7 @@ pub fn options(width: u32, height: u32, frames_in_flight: usize) -> RenderOption
         readback_depth: true,
         sky: [0.2, 0.4, 0.8],
         sun_dir: [0.0, 0.0, 1.0],
+        lod: Default::default(),
     }
 }
 

@@ -1,0 +1,190 @@
+// UDLOD tiling prepass: the quadtree is refined one level per pass. Each pass is a 1-thread
+// `prepare` (turns the children of the last pass into this pass's parents and writes the
+// indirect dispatch size) and a `refine` over those parents. One temporary list is used from
+// both ends: even passes read parents from the front and write children from the back, odd
+// passes the other way round. Tiles that do not split go to the final list; `finish` writes
+// the indexed indirect draw (one instance per final tile).
+//
+// Capacity: a split first reserves 3 more final-list entries (a split turns one would-be leaf
+// into four), then 4 temporary slots; if either is full the tile is drawn as it is (refusing
+// to split is safe: coarser, never holes) and `overflow` counts it.
+
+//!include terrain_common.wgsl
+//!include udlod_common.wgsl
+
+struct TilingState {
+    // vkCmdDispatchIndirect arguments of the next refine pass.
+    dispatch_x: u32,
+    dispatch_y: u32,
+    dispatch_z: u32,
+    pass_index: u32,
+    // vkCmdDrawIndexedIndirect arguments.
+    index_count: u32,
+    instance_count: u32,
+    first_index: u32,
+    vertex_offset: i32,
+    first_instance: u32,
+    parent_count: u32,
+    child_count: atomic<u32>,
+    final_count: atomic<u32>,
+    reserved_leaves: atomic<u32>,
+    overflow: atomic<u32>,
+    culled: atomic<u32>,
+    // Passes begun this frame (the state is zero-filled before the first).
+    passes_started: u32,
+}
+
+@group(1) @binding(1) var<storage, read_write> state: TilingState;
+@group(1) @binding(2) var<storage, read_write> temp_tiles: array<Tile>;
+@group(1) @binding(3) var<storage, read_write> final_tiles: array<Tile>;
+@group(1) @binding(4) var<storage, read> min_max: array<vec2<f32>>;
+
+@compute @workgroup_size(1)
+fn prepare() {
+    let pass_index = state.passes_started;
+    state.passes_started = pass_index + 1u;
+    state.pass_index = pass_index;
+    var parents: u32;
+    if pass_index == 0u {
+        // First pass: the root tile, read from the front.
+        temp_tiles[0] = Tile(0u, 0u, udlod.sizes.y, 0u);
+        parents = 1u;
+        atomicStore(&state.final_count, 0u);
+        atomicStore(&state.reserved_leaves, 1u);
+        atomicStore(&state.overflow, 0u);
+        atomicStore(&state.culled, 0u);
+    } else {
+        parents = atomicLoad(&state.child_count);
+    }
+    state.parent_count = parents;
+    atomicStore(&state.child_count, 0u);
+    state.dispatch_x = (parents + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;
+    state.dispatch_y = 1u;
+    state.dispatch_z = 1u;
+}
+
+fn parent_slot(i: u32) -> u32 {
+    if (state.pass_index & 1u) == 0u {
+        return i;
+    }
+    return udlod.sizes.w - 1u - i;
+}
+
+fn child_slot(i: u32) -> u32 {
+    if (state.pass_index & 1u) == 0u {
+        return udlod.sizes.w - 1u - i;
+    }
+    return i;
+}
+
+fn tile_min_max(t: Tile) -> vec2<f32> {
+    let level = udlod.levels[t.lod];
+    return min_max[level.x + t.y * level.y + t.x];
+}
+
+// Distance from the viewer to the nearest point of the tile's rectangle at the reference
+// height (mirrors `tile_distance` in src/lod/udlod/select.rs).
+fn tile_distance(t: Tile) -> f32 {
+    let span = i32(udlod.sizes.x << t.lod);
+    let lo = relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
+    let hi = relative_xy(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span));
+    let d = max(lo, min(vec2<f32>(0.0), hi));
+    return length(vec3<f32>(d, udlod.params.x));
+}
+
+// Box (rectangle clamped to the data x the tile's min/max height) against the frustum.
+fn tile_culled(t: Tile) -> bool {
+    let span = i32(udlod.sizes.x << t.lod);
+    let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+    let lo = relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
+    let hi = relative_xy(min(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span), last));
+    let mm = tile_min_max(t) - vec2<f32>(frame.camera_offset.z);
+    let margin = -1e-3 * (f32(span) * frame.camera_offset.w);
+    for (var i = 0u; i < 6u; i++) {
+        let pl = udlod.frustum[i];
+        let p = vec3<f32>(select(lo.x, hi.x, pl.x >= 0.0), select(lo.y, hi.y, pl.y >= 0.0), select(mm.x, mm.y, pl.z >= 0.0));
+        if pl.x * p.x + pl.y * p.y + pl.z * p.z + pl.w < margin {
+            return true;
+        }
+    }
+    return false;
+}
+
+fn emit_final(t: Tile) {
+    let i = atomicAdd(&state.final_count, 1u);
+    // Cannot overflow: every split reserved its leaves first. Guarded anyway.
+    if i < udlod.sizes.z {
+        final_tiles[i] = t;
+    } else {
+        atomicAdd(&state.overflow, 1u);
+    }
+}
+
+// Reserves room for splitting one tile: 3 more final-list entries, then 4 temporary slots.
+// Returns the index of the first child slot, or -1 when a list is full.
+fn reserve_split(parents: u32) -> i32 {
+    var leaves = atomicLoad(&state.reserved_leaves);
+    loop {
+        if leaves + 3u > udlod.sizes.z {
+            return -1;
+        }
+        let r = atomicCompareExchangeWeak(&state.reserved_leaves, leaves, leaves + 3u);
+        if r.exchanged {
+            break;
+        }
+        leaves = r.old_value;
+    }
+    var children = atomicLoad(&state.child_count);
+    loop {
+        if parents + children + 4u > udlod.sizes.w {
+            atomicSub(&state.reserved_leaves, 3u);
+            return -1;
+        }
+        let r = atomicCompareExchangeWeak(&state.child_count, children, children + 4u);
+        if r.exchanged {
+            return i32(children);
+        }
+        children = r.old_value;
+    }
+    return -1;
+}
+
+@compute @workgroup_size(UDLOD_WORKGROUP)
+fn refine(@builtin(global_invocation_id) id: vec3<u32>) {
+    let parents = state.parent_count;
+    if id.x >= parents {
+        return;
+    }
+    let t = temp_tiles[parent_slot(id.x)];
+    let level = udlod.levels[t.lod];
+    if t.x >= level.y || t.y >= level.z {
+        // Outside the data set (a child of an edge tile).
+        return;
+    }
+    if udlod.params.w > 0.5 && tile_culled(t) {
+        atomicAdd(&state.culled, 1u);
+        return;
+    }
+    if t.lod > 0u && tile_distance(t) < udlod.split[t.lod].x {
+        let base = reserve_split(parents);
+        if base >= 0 {
+            for (var k = 0u; k < 4u; k++) {
+                let child = Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u);
+                temp_tiles[child_slot(u32(base) + k)] = child;
+            }
+            return;
+        }
+        atomicAdd(&state.overflow, 1u);
+    }
+    emit_final(t);
+}
+
+@compute @workgroup_size(1)
+fn finish() {
+    let n = min(atomicLoad(&state.final_count), udlod.sizes.z);
+    state.index_count = udlod.counts.x;
+    state.instance_count = n;
+    state.first_index = 0u;
+    state.vertex_offset = 0;
+    state.first_instance = 0u;
+}

@@ -1,0 +1,580 @@
+//! UDLOD (Kühnert): the quadtree is refined on the GPU in compute, one level per pass with
+//! indirect dispatches, into a final tile list drawn with one indexed indirect draw (one
+//! instance per tile over a shared grid); vertices morph between levels in the vertex shader.
+//!
+//! CPU state ([`select::Levels`]: per-tile min/max, per-level errors) is built once; its GPU
+//! mirror is the `min_max` buffer. Per frame the host writes only [`UdlodUniforms`] (split
+//! distances from the pixel error target, frustum planes); the tile lists never come back to
+//! the host in the render path (only 64 bytes of counters, for statistics).
+
+pub mod select;
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use super::{LodMethod, LodSettings, MethodContext, ViewState};
+use crate::driver::Gpu;
+use crate::driver::barrier::{Barriers, MemoryAccess};
+use crate::driver::memory::Buffer;
+use crate::error::{Error, Result, VkResultExt};
+use crate::gpu_constants::UDLOD_MAX_LEVELS;
+use crate::render::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
+use select::{Levels, SelectionParams};
+
+/// Per-frame uniforms of set 1 (`Udlod` in `shaders/include/udlod_common.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct UdlodUniforms {
+    pub frustum: [[f32; 4]; 6],
+    pub split: [[f32; 4]; UDLOD_MAX_LEVELS as usize],
+    pub levels: [[u32; 4]; UDLOD_MAX_LEVELS as usize],
+    pub sizes: [u32; 4],
+    pub params: [f32; 4],
+    pub counts: [u32; 4],
+}
+
+/// The tiling state the GPU keeps per slot (`TilingState` in `shaders/udlod_tiling.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TilingState {
+    pub dispatch: [u32; 3],
+    pub pass_index: u32,
+    pub draw: [u32; 5],
+    pub parent_count: u32,
+    pub child_count: u32,
+    pub final_count: u32,
+    pub reserved_leaves: u32,
+    pub overflow: u32,
+    pub culled: u32,
+    pub passes_started: u32,
+}
+
+const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
+const TILE_BYTES: u64 = 16;
+
+struct SlotBuffers {
+    uniforms: Buffer,
+    state: Buffer,
+    /// Referenced by the descriptor set only.
+    _temp_tiles: Buffer,
+    final_tiles: Buffer,
+    /// Host-readable copy of `state` (counters for statistics).
+    counters: Buffer,
+    set: vk::DescriptorSet,
+}
+
+pub struct Udlod {
+    gpu: Arc<Gpu>,
+    settings: LodSettings,
+    levels: Levels,
+    heights: Arc<crate::dataset::Heightmap>,
+    /// GPU mirror of `levels.min_max` (kept alive for the descriptor sets).
+    _min_max: Buffer,
+    indices: Buffer,
+    index_count: u32,
+    set_layout: vk::DescriptorSetLayout,
+    pool: vk::DescriptorPool,
+    slots: Vec<SlotBuffers>,
+    prepare: Pipeline,
+    refine: Pipeline,
+    finish: Pipeline,
+    draw: Pipeline,
+    temp_capacity: u32,
+}
+
+impl Drop for Udlod {
+    fn drop(&mut self) {
+        unsafe {
+            self.gpu.device.destroy_descriptor_pool(self.pool, None);
+            self.gpu
+                .device
+                .destroy_descriptor_set_layout(self.set_layout, None);
+        }
+    }
+}
+
+fn as_bytes<T: Copy>(v: &T) -> &[u8] {
+    // SAFETY: plain-old-data repr(C) structs of u32/f32 without padding.
+    unsafe { std::slice::from_raw_parts(v as *const T as *const u8, size_of::<T>()) }
+}
+
+impl Udlod {
+    pub fn new(ctx: &MethodContext<'_>) -> Result<Self> {
+        let gpu = ctx.gpu;
+        let settings = ctx.settings.clone();
+        settings.validate()?;
+        let levels = Levels::new(ctx.data, settings.grid_size);
+        if levels.levels() > UDLOD_MAX_LEVELS {
+            return Err(Error::invalid(
+                "udlod",
+                format!(
+                    "{} levels exceed the maximum of {UDLOD_MAX_LEVELS}; raise grid_size",
+                    levels.levels()
+                ),
+            ));
+        }
+        let d = &gpu.device;
+        let storage = |b: u32| {
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(b)
+                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::VERTEX)
+        };
+        let bindings = [
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(0)
+                .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::VERTEX),
+            storage(1),
+            storage(2),
+            storage(3),
+            storage(4),
+        ];
+        let set_layout = unsafe {
+            d.create_descriptor_set_layout(
+                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                None,
+            )
+        }
+        .vk("vkCreateDescriptorSetLayout")?;
+        let n = ctx.slots as u32;
+        let sizes = [
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::UNIFORM_BUFFER,
+                descriptor_count: n,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::STORAGE_BUFFER,
+                descriptor_count: 4 * n,
+            },
+        ];
+        let pool = unsafe {
+            d.create_descriptor_pool(
+                &vk::DescriptorPoolCreateInfo::default()
+                    .max_sets(n)
+                    .pool_sizes(&sizes),
+                None,
+            )
+        };
+        let pool = match pool {
+            Ok(p) => p,
+            Err(e) => {
+                unsafe { d.destroy_descriptor_set_layout(set_layout, None) };
+                return Err(Error::Vulkan {
+                    call: "vkCreateDescriptorPool",
+                    result: e,
+                });
+            }
+        };
+        // From here on `Drop` of a partially built value is not available; build the parts that
+        // can fail before assembling, and clean the pool/layout up on error.
+        let cleanup = |e: Error| {
+            unsafe {
+                d.destroy_descriptor_pool(pool, None);
+                d.destroy_descriptor_set_layout(set_layout, None);
+            }
+            e
+        };
+        let built = Self::build(ctx, &settings, &levels, set_layout, pool).map_err(cleanup)?;
+        let (min_max, indices, index_count, slots, prepare, refine, finish, draw, temp_capacity) =
+            built;
+        Ok(Udlod {
+            gpu: gpu.clone(),
+            settings,
+            heights: Arc::new(ctx.data.clone()),
+            levels,
+            _min_max: min_max,
+            indices,
+            index_count,
+            set_layout,
+            pool,
+            slots,
+            prepare,
+            refine,
+            finish,
+            draw,
+            temp_capacity,
+        })
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn build(
+        ctx: &MethodContext<'_>,
+        settings: &LodSettings,
+        levels: &Levels,
+        set_layout: vk::DescriptorSetLayout,
+        pool: vk::DescriptorPool,
+    ) -> Result<(
+        Buffer,
+        Buffer,
+        u32,
+        Vec<SlotBuffers>,
+        Pipeline,
+        Pipeline,
+        Pipeline,
+        Pipeline,
+        u32,
+    )> {
+        let gpu = ctx.gpu;
+        let d = &gpu.device;
+        let mm_bytes: Vec<u8> = levels
+            .min_max
+            .iter()
+            .flat_map(|m| m.iter().flat_map(|v| v.to_le_bytes()))
+            .collect();
+        let mut min_max = Buffer::new(
+            gpu,
+            "udlod min/max",
+            mm_bytes.len() as u64,
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        min_max.write(&mm_bytes)?;
+        let grid = super::brute::grid_indices(settings.grid_size);
+        let index_bytes: Vec<u8> = grid.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let mut indices = Buffer::new(
+            gpu,
+            "udlod grid indices",
+            index_bytes.len() as u64,
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        indices.write(&index_bytes)?;
+
+        let final_capacity = settings.max_tiles;
+        // Parents and children of one pass share the temporary list: a pass has at most
+        // `4/3 * final_capacity + 1` children (every split reserved 3 final entries).
+        let temp_capacity = 2 * final_capacity + 8;
+        let layouts = vec![set_layout; ctx.slots];
+        let sets = unsafe {
+            d.allocate_descriptor_sets(
+                &vk::DescriptorSetAllocateInfo::default()
+                    .descriptor_pool(pool)
+                    .set_layouts(&layouts),
+            )
+        }
+        .vk("vkAllocateDescriptorSets")?;
+        let mut slots = Vec::with_capacity(ctx.slots);
+        for (i, &set) in sets.iter().enumerate() {
+            let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+            let uniforms = Buffer::new(
+                gpu,
+                &format!("udlod uniforms {i}"),
+                size_of::<UdlodUniforms>() as u64,
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?;
+            let state = Buffer::new(
+                gpu,
+                &format!("udlod state {i}"),
+                size_of::<TilingState>() as u64,
+                storage
+                    | vk::BufferUsageFlags::INDIRECT_BUFFER
+                    | vk::BufferUsageFlags::TRANSFER_DST
+                    | vk::BufferUsageFlags::TRANSFER_SRC,
+                MemoryLocation::GpuOnly,
+            )?;
+            let temp_tiles = Buffer::new(
+                gpu,
+                &format!("udlod temp tiles {i}"),
+                temp_capacity as u64 * TILE_BYTES,
+                storage,
+                MemoryLocation::GpuOnly,
+            )?;
+            let final_tiles = Buffer::new(
+                gpu,
+                &format!("udlod final tiles {i}"),
+                final_capacity as u64 * TILE_BYTES,
+                storage | vk::BufferUsageFlags::TRANSFER_SRC,
+                MemoryLocation::GpuOnly,
+            )?;
+            let counters = Buffer::new(
+                gpu,
+                &format!("udlod counters {i}"),
+                size_of::<TilingState>() as u64,
+                vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuToCpu,
+            )?;
+            let infos = [
+                (0, vk::DescriptorType::UNIFORM_BUFFER, uniforms.raw),
+                (1, vk::DescriptorType::STORAGE_BUFFER, state.raw),
+                (2, vk::DescriptorType::STORAGE_BUFFER, temp_tiles.raw),
+                (3, vk::DescriptorType::STORAGE_BUFFER, final_tiles.raw),
+                (4, vk::DescriptorType::STORAGE_BUFFER, min_max.raw),
+            ];
+            let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = infos
+                .iter()
+                .map(|&(_, _, b)| {
+                    [vk::DescriptorBufferInfo {
+                        buffer: b,
+                        offset: 0,
+                        range: vk::WHOLE_SIZE,
+                    }]
+                })
+                .collect();
+            let writes: Vec<vk::WriteDescriptorSet> = infos
+                .iter()
+                .zip(&buffer_infos)
+                .map(|(&(binding, ty, _), info)| {
+                    vk::WriteDescriptorSet::default()
+                        .dst_set(set)
+                        .dst_binding(binding)
+                        .descriptor_type(ty)
+                        .buffer_info(info)
+                })
+                .collect();
+            unsafe { d.update_descriptor_sets(&writes, &[]) };
+            slots.push(SlotBuffers {
+                uniforms,
+                state,
+                _temp_tiles: temp_tiles,
+                final_tiles,
+                counters,
+                set,
+            });
+        }
+        let set_layouts = [ctx.terrain.set_layout, set_layout];
+        let tiling = crate::driver::shaders::UDLOD_TILING_SPV;
+        let prepare = compute_pipeline(gpu, tiling, c"prepare", &set_layouts)?;
+        let refine = compute_pipeline(gpu, tiling, c"refine", &set_layouts)?;
+        let finish = compute_pipeline(gpu, tiling, c"finish", &set_layouts)?;
+        let draw = terrain_pipeline(
+            gpu,
+            &ctx.formats,
+            &TerrainPipelineDesc {
+                spv: crate::driver::shaders::UDLOD_SPV,
+                vertex_entry: c"vs_main",
+                fragment_entry: c"fs_main",
+                set_layouts: &set_layouts,
+                topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+            },
+        )?;
+        Ok((
+            min_max,
+            indices,
+            grid.len() as u32,
+            slots,
+            prepare,
+            refine,
+            finish,
+            draw,
+            temp_capacity,
+        ))
+    }
+
+    pub fn levels(&self) -> &Levels {
+        &self.levels
+    }
+
+    /// The selection inputs for a view, exactly as uploaded (tests use them for the CPU
+    /// reference).
+    pub fn selection_params(&self, view: &ViewState) -> SelectionParams {
+        let aspect = view.width as f64 / view.height as f64;
+        let focal = view.camera.focal_px(view.height);
+        let split =
+            self.levels
+                .split_distances(focal, self.settings.tau_px, self.settings.morph_range);
+        let mut p = SelectionParams::new(&self.levels, &self.heights, &view.camera, aspect, split);
+        p.cull = self.settings.cull;
+        p
+    }
+
+    fn read_counters(&self, slot: usize) -> TilingState {
+        let mut s = TilingState::default();
+        if let Some(bytes) = self.slots[slot].counters.mapped() {
+            let n = size_of::<TilingState>().min(bytes.len());
+            // SAFETY: TilingState is repr(C) u32s; copying bytes into it is valid.
+            unsafe {
+                std::ptr::copy_nonoverlapping(
+                    bytes.as_ptr(),
+                    &mut s as *mut TilingState as *mut u8,
+                    n,
+                )
+            };
+        }
+        s
+    }
+}
+
+impl LodMethod for Udlod {
+    fn name(&self) -> &'static str {
+        "udlod"
+    }
+
+    fn update(&mut self, slot: usize, view: &ViewState) -> Result<()> {
+        let p = self.selection_params(view);
+        let mut u = UdlodUniforms::default();
+        u.frustum = p.frustum;
+        for (i, d) in p.split.iter().enumerate() {
+            u.split[i] = [*d, 0.0, 0.0, 0.0];
+        }
+        for lod in 0..self.levels.levels() as usize {
+            let (nx, ny) = self.levels.tiles_per_side[lod];
+            u.levels[lod] = [self.levels.level_offsets[lod], nx, ny, 0];
+        }
+        u.sizes = [
+            self.settings.grid_size,
+            self.levels.root_lod,
+            self.settings.max_tiles,
+            self.temp_capacity,
+        ];
+        u.params = [
+            p.z_ref - p.camera_z,
+            self.settings.morph_range as f32,
+            if self.settings.morph { 1.0 } else { 0.0 },
+            if self.settings.cull { 1.0 } else { 0.0 },
+        ];
+        u.counts = [self.index_count, 0, 0, 0];
+        self.slots[slot].uniforms.write(as_bytes(&u))
+    }
+
+    fn record_prepass(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        slot: usize,
+        frame_set: vk::DescriptorSet,
+    ) {
+        let gpu = &self.gpu;
+        let d = &gpu.device;
+        let b = Barriers::new(gpu);
+        let s = &self.slots[slot];
+        let sets = [frame_set, s.set];
+        unsafe {
+            // The buffers were last used by this slot's previous frame (same queue).
+            b.memory(
+                cmd,
+                MemoryAccess::PreviousFrame,
+                MemoryAccess::TransferWrite,
+            );
+            d.cmd_fill_buffer(cmd, s.state.raw, 0, vk::WHOLE_SIZE, 0);
+            b.memory(
+                cmd,
+                MemoryAccess::TransferWrite,
+                MemoryAccess::ComputeReadWrite,
+            );
+            b.memory(
+                cmd,
+                MemoryAccess::PreviousFrame,
+                MemoryAccess::ComputeReadWrite,
+            );
+            d.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                self.refine.layout,
+                0,
+                &sets,
+                &[],
+            );
+            for _ in 0..self.levels.levels() {
+                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.prepare.raw);
+                d.cmd_dispatch(cmd, 1, 1, 1);
+                b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::IndirectRead);
+                b.memory(
+                    cmd,
+                    MemoryAccess::ComputeWrite,
+                    MemoryAccess::ComputeReadWrite,
+                );
+                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.refine.raw);
+                d.cmd_dispatch_indirect(cmd, s.state.raw, 0);
+                b.memory(
+                    cmd,
+                    MemoryAccess::ComputeWrite,
+                    MemoryAccess::ComputeReadWrite,
+                );
+            }
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.finish.raw);
+            d.cmd_dispatch(cmd, 1, 1, 1);
+            b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::IndirectRead);
+            b.memory(
+                cmd,
+                MemoryAccess::ComputeWrite,
+                MemoryAccess::VertexShaderRead,
+            );
+            b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
+            let region = vk::BufferCopy {
+                src_offset: 0,
+                dst_offset: 0,
+                size: size_of::<TilingState>() as u64,
+            };
+            d.cmd_copy_buffer(cmd, s.state.raw, s.counters.raw, &[region]);
+            b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+        }
+    }
+
+    fn record_draw(&mut self, cmd: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet) {
+        let d = &self.gpu.device;
+        let s = &self.slots[slot];
+        unsafe {
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.draw.raw);
+            d.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                self.draw.layout,
+                0,
+                &[frame_set, s.set],
+                &[],
+            );
+            d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
+            d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, 20);
+        }
+    }
+
+    fn triangles(&self, slot: usize) -> u64 {
+        let c = self.read_counters(slot);
+        c.draw[1] as u64 * 2 * (self.settings.grid_size as u64).pow(2)
+    }
+
+    fn counters(&self, slot: usize) -> Vec<(&'static str, u64)> {
+        let c = self.read_counters(slot);
+        vec![
+            ("tiles", c.draw[1] as u64),
+            ("overflow", c.overflow as u64),
+            ("culled", c.culled as u64),
+            ("passes", c.passes_started as u64),
+        ]
+    }
+
+    fn debug_tiles(&self, slot: usize) -> Result<Option<Vec<[u32; 3]>>> {
+        let n = self.read_counters(slot).draw[1] as u64;
+        if n == 0 {
+            return Ok(Some(Vec::new()));
+        }
+        let host = Buffer::new(
+            &self.gpu,
+            "udlod debug tiles",
+            n * TILE_BYTES,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+        )?;
+        let src = self.slots[slot].final_tiles.raw;
+        let b = Barriers::new(&self.gpu);
+        self.gpu.one_shot(|cmd| unsafe {
+            b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
+            self.gpu.device.cmd_copy_buffer(
+                cmd,
+                src,
+                host.raw,
+                &[vk::BufferCopy {
+                    src_offset: 0,
+                    dst_offset: 0,
+                    size: n * TILE_BYTES,
+                }],
+            );
+            b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+        })?;
+        let bytes = host
+            .mapped()
+            .ok_or_else(|| Error::invalid("udlod", "debug buffer not mapped"))?;
+        let words: Vec<u32> = bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        Ok(Some(
+            words.chunks_exact(4).map(|t| [t[0], t[1], t[2]]).collect(),
+        ))
+    }
+}
