@@ -407,8 +407,10 @@ impl LodMethod for Udlod {
 
     fn update(&mut self, slot: usize, view: &ViewState) -> Result<()> {
         let p = self.selection_params(view);
-        let mut u = UdlodUniforms::default();
-        u.frustum = p.frustum;
+        let mut u = UdlodUniforms {
+            frustum: p.frustum,
+            ..Default::default()
+        };
         for (i, d) in p.split.iter().enumerate() {
             u.split[i] = [*d, 0.0, 0.0, 0.0];
         }
