@@ -180,7 +180,7 @@ fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
             }
             // The east neighbour at the next coarser level, if that is what is drawn there.
             let coarse = Tile {
-                x: (t.x + 1) / 2,
+                x: t.x.div_ceil(2),
                 y: t.y / 2,
                 lod: t.lod + 1,
             };

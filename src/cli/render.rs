@@ -42,6 +42,9 @@ pub struct RenderArgs {
     /// Device override: index or name substring.
     #[arg(long)]
     pub device: Option<String>,
+    /// UDLOD screen-space error target in pixels (overrides `lod.tau_px`).
+    #[arg(long)]
+    pub tau: Option<f64>,
     /// Frames excluded from the timing summary (lavapipe compiles shaders lazily).
     #[arg(long, default_value_t = 5)]
     pub warmup: usize,
@@ -68,6 +71,9 @@ pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
     }
     if let Some(n) = args.frames_in_flight {
         config.render.frames_in_flight = n;
+    }
+    if let Some(t) = args.tau {
+        config.lod.tau_px = t;
     }
     if let Some(m) = &args.method {
         config.method.name = m.clone();
