@@ -80,6 +80,9 @@ pub struct DatasetConfig {
     pub path: Option<PathBuf>,
     pub vertical_scale: f64,
     pub albedo: Option<PathBuf>,
+    /// For `tiles` (`path` = a `vkterrain preprocess` output directory): the level to load;
+    /// none: the finest level that fits.
+    pub lod: Option<u32>,
 }
 
 impl Default for DatasetConfig {
@@ -92,6 +95,7 @@ impl Default for DatasetConfig {
             path: None,
             vertical_scale: 1.0,
             albedo: None,
+            lod: None,
         }
     }
 }
@@ -233,18 +237,18 @@ impl Config {
                     ));
                 }
             }
-            "png16" => {
+            "png16" | "tiles" => {
                 if self.dataset.path.is_none() {
                     return Err(Error::invalid(
                         "dataset.path",
-                        "kind = \"png16\" needs a path",
+                        format!("kind = {:?} needs a path", self.dataset.kind),
                     ));
                 }
             }
             other => {
                 return Err(Error::invalid(
                     "dataset.kind",
-                    format!("unknown kind {other:?} (expected procedural, png16)"),
+                    format!("unknown kind {other:?} (expected procedural, png16, tiles)"),
                 ));
             }
         }

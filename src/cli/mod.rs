@@ -1,6 +1,7 @@
-//! The `vkterrain` command line: `info` and `render`.
+//! The `vkterrain` command line: `info`, `render` and `preprocess`.
 
 pub mod info;
+pub mod preprocess;
 pub mod render;
 
 use std::path::PathBuf;
@@ -31,6 +32,8 @@ pub enum Command {
     },
     /// Render a scenario headless, write selected frames as PNG and print a summary.
     Render(render::RenderArgs),
+    /// Build a chunked-clipmap data set (node pyramid + manifest) from DEMs or procedurally.
+    Preprocess(preprocess::PreprocessArgs),
 }
 
 /// Runs the parsed command line.
@@ -38,5 +41,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info { config, device } => info::run(config.as_deref(), device),
         Command::Render(args) => render::run(&args),
+        Command::Preprocess(args) => preprocess::run(&args),
     }
 }
