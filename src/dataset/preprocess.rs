@@ -18,6 +18,8 @@ pub enum Input {
     Files(Vec<PathBuf>),
     /// The procedural generator (`size x size` samples).
     Procedural(ProceduralParams),
+    /// A raster already in memory (voids `NaN`): tests and library users.
+    Raster(Raster),
 }
 
 #[derive(Clone, Debug)]
@@ -444,6 +446,16 @@ pub fn run(opts: &Options, progress: &mut dyn Progress) -> Result<Summary> {
                     "{n} void samples filled by push-pull interpolation (void_mask layer = 1)"
                 ));
             }
+            voids_filled = n;
+            mask = m;
+            raster = Some(r);
+        }
+        Input::Raster(r) => {
+            let mut r = r.clone();
+            if let Some(s) = opts.spacing {
+                r.spacing = [s, s];
+            }
+            let (m, n) = voids::fill(&r.name, &mut r.heights, r.width, r.height)?;
             voids_filled = n;
             mask = m;
             raster = Some(r);
