@@ -71,16 +71,52 @@ pub fn fill(name: &str, heights: &mut [f32], w: u32, h: u32) -> Result<(Vec<u8>,
             let n = v(x0, y1) * (1.0 - fx) + v(x1, y1) * fx;
             (s * (1.0 - fy) + n * fy) as f32
         };
+        let mut holes = Vec::new();
         for y in 0..fh {
             for x in 0..fw {
                 let i = y * fw + x;
                 if fine[i].is_nan() {
                     fine[i] = sample((x as f64 - 0.5) / 2.0, (y as f64 - 0.5) / 2.0);
+                    holes.push((x, y));
                 }
             }
         }
+        relax(fine, fw, fh, &holes);
     }
     Ok((mask, filled))
+}
+
+/// Gauss-Seidel sweeps of the Laplace equation over the filled samples only (valid samples
+/// are fixed): the pulled values are a good start, so a few sweeps per level suffice for the
+/// multigrid-like descent to approach the harmonic fill, which never leaves the range of the
+/// void's rim (no spikes or pits).
+fn relax(v: &mut [f32], w: usize, h: usize, holes: &[(usize, usize)]) {
+    const SWEEPS: usize = 12;
+    for _ in 0..SWEEPS {
+        for &(x, y) in holes {
+            let mut sum = 0f64;
+            let mut n = 0u32;
+            if x > 0 {
+                sum += v[y * w + x - 1] as f64;
+                n += 1;
+            }
+            if x + 1 < w {
+                sum += v[y * w + x + 1] as f64;
+                n += 1;
+            }
+            if y > 0 {
+                sum += v[(y - 1) * w + x] as f64;
+                n += 1;
+            }
+            if y + 1 < h {
+                sum += v[(y + 1) * w + x] as f64;
+                n += 1;
+            }
+            if n > 0 {
+                v[y * w + x] = (sum / n as f64) as f32;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
