@@ -408,7 +408,7 @@ fn bad_srtm_and_mosaics() {
     let x = dir.join("dem.xyz");
     std::fs::write(&x, "1 2 3").unwrap();
     expect_err(
-        read_inputs(&[x.clone()], None, None),
+        read_inputs(std::slice::from_ref(&x), None, None),
         &x,
         &["unknown input type"],
     );

@@ -8,6 +8,9 @@ use super::pyramid::{LEVEL_HEADER, LEVEL_MAGIC, LayerSet, Layout, Node, read_nod
 use super::{Albedo, Heightmap};
 use crate::error::{Error, Result};
 
+/// One level assembled: `(width, height, heights, optional RGBA8 albedo)`, row 0 = south.
+pub type LevelRaster = (u32, u32, Vec<f32>, Option<Vec<u8>>);
+
 /// An opened data set: its manifest and layout.
 #[derive(Clone, Debug)]
 pub struct Dataset {
@@ -101,7 +104,7 @@ impl Dataset {
     }
 
     /// Level `lod`'s valid samples as one raster (row 0 = south), with albedo if present.
-    pub fn level_raster(&self, lod: u32) -> Result<(u32, u32, Vec<f32>, Option<Vec<u8>>)> {
+    pub fn level_raster(&self, lod: u32) -> Result<LevelRaster> {
         let (mut f, path) = self.level_file(lod)?;
         let (w, h) = self.layout.level_size(lod);
         let (nx, ny) = self.layout.nodes(lod);
