@@ -81,6 +81,9 @@ pub struct DatasetConfig {
     pub path: Option<PathBuf>,
     pub vertical_scale: f64,
     pub albedo: Option<PathBuf>,
+    /// For `tiles` (`path` = a `vkterrain preprocess` output directory): the level to load;
+    /// none: the finest level that fits.
+    pub lod: Option<u32>,
 }
 
 impl Default for DatasetConfig {
@@ -93,6 +96,7 @@ impl Default for DatasetConfig {
             path: None,
             vertical_scale: 1.0,
             albedo: None,
+            lod: None,
         }
     }
 }
@@ -235,18 +239,18 @@ impl Config {
                     ));
                 }
             }
-            "png16" => {
+            "png16" | "tiles" => {
                 if self.dataset.path.is_none() {
                     return Err(Error::invalid(
                         "dataset.path",
-                        "kind = \"png16\" needs a path",
+                        format!("kind = {:?} needs a path", self.dataset.kind),
                     ));
                 }
             }
             other => {
                 return Err(Error::invalid(
                     "dataset.kind",
-                    format!("unknown kind {other:?} (expected procedural, png16)"),
+                    format!("unknown kind {other:?} (expected procedural, png16, tiles)"),
                 ));
             }
         }

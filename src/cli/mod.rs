@@ -1,7 +1,8 @@
-//! The `vkterrain` command line: `info`, `render` and `bench`.
+//! The `vkterrain` command line: `info`, `render`, `bench` and `preprocess`.
 
 pub mod bench;
 pub mod info;
+pub mod preprocess;
 pub mod render;
 
 use std::path::PathBuf;
@@ -34,6 +35,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Frame-time benchmark: the scenario at several resolutions and frames-in-flight counts.
     Bench(bench::BenchArgs),
+    /// Build a chunked-clipmap data set (node pyramid + manifest) from DEMs or procedurally.
+    Preprocess(preprocess::PreprocessArgs),
 }
 
 /// Runs the parsed command line.
@@ -42,5 +45,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info { config, device } => info::run(config.as_deref(), device),
         Command::Render(args) => render::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Preprocess(args) => preprocess::run(&args),
     }
 }

@@ -4,7 +4,15 @@
 //! `x = col * spacing`, `y = row * spacing` (metres, z up); row 0 is the **south** edge, so
 //! images whose first row is north are flipped when loaded. Heights are metres.
 
+pub mod geotiff;
+pub mod manifest;
+pub mod preprocess;
 pub mod procedural;
+pub mod pyramid;
+pub mod source;
+pub mod srtm;
+pub mod tiles;
+pub mod voids;
 
 use crate::error::{Error, Result};
 
@@ -196,6 +204,14 @@ pub fn load(config: &crate::config::Config) -> Result<Heightmap> {
             );
             let albedo = d.albedo.as_deref().map(|p| config.resolve(p));
             load_png16(&path, d.spacing, d.vertical_scale, albedo.as_deref())
+        }
+        "tiles" => {
+            let path = config.resolve(
+                d.path
+                    .as_deref()
+                    .ok_or_else(|| Error::invalid("dataset.path", "missing"))?,
+            );
+            tiles::load(&path, d.lod, tiles::DEFAULT_MAX_SAMPLES)
         }
         other => Err(Error::invalid(
             "dataset.kind",

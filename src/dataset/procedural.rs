@@ -139,3 +139,18 @@ pub mod analytic {
         Heightmap::new("analytic cone", size, size, spacing, h)
     }
 }
+
+/// Zero-mean fBm detail of roughly `amplitude` metres with the largest wavelength
+/// `wavelength` metres (4 octaves), used to amplify a real DEM below its resolution.
+pub fn detail(seed: u64, x: f64, y: f64, wavelength: f64, amplitude: f64) -> f64 {
+    let mut sum = 0.0;
+    let mut a = amplitude;
+    let mut f = 1.0 / wavelength;
+    for octave in 0..4u64 {
+        let s = seed.wrapping_mul(0x9E37).wrapping_add(1000 + octave);
+        sum += a * (2.0 * value_noise(s, x * f, y * f) - 1.0);
+        a *= 0.5;
+        f *= 2.0;
+    }
+    sum
+}

@@ -1,0 +1,212 @@
+//! Reading a preprocessed data set directory: the manifest, single nodes, whole levels.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use super::manifest::{self, Manifest};
+use super::pyramid::{LEVEL_HEADER, LEVEL_MAGIC, LayerSet, Layout, Node, read_node_from};
+use super::{Albedo, Heightmap};
+use crate::error::{Error, Result};
+
+/// One level assembled: `(width, height, heights, optional RGBA8 albedo)`, row 0 = south.
+pub type LevelRaster = (u32, u32, Vec<f32>, Option<Vec<u8>>);
+
+/// An opened data set: its manifest and layout.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    pub dir: PathBuf,
+    pub manifest: Manifest,
+    pub layout: Layout,
+    pub layers: LayerSet,
+}
+
+impl Dataset {
+    /// Opens a data set directory; a directory without a manifest (e.g. left by an interrupted
+    /// run) is refused.
+    pub fn open(dir: &Path) -> Result<Self> {
+        let mpath = dir.join(manifest::FILE_NAME);
+        if !mpath.is_file() {
+            return Err(Error::invalid(
+                dir.display().to_string(),
+                format!(
+                    "not a complete vkterrain data set (no {}; an interrupted preprocess leaves none)",
+                    manifest::FILE_NAME
+                ),
+            ));
+        }
+        let text = std::fs::read_to_string(&mpath).map_err(|e| Error::io(&mpath, e))?;
+        let m: Manifest = serde_json::from_str(&text).map_err(|e| {
+            Error::invalid(mpath.display().to_string(), format!("bad manifest: {e}"))
+        })?;
+        if m.format != manifest::FORMAT || m.version != manifest::VERSION {
+            return Err(Error::invalid(
+                mpath.display().to_string(),
+                format!(
+                    "format {:?} version {} is not {:?} version {}",
+                    m.format,
+                    m.version,
+                    manifest::FORMAT,
+                    manifest::VERSION
+                ),
+            ));
+        }
+        let layout = Layout::new(m.width, m.height, m.center_size, m.border_size)?;
+        if layout.levels() as usize != m.levels.len() {
+            return Err(Error::invalid(
+                mpath.display().to_string(),
+                "level count disagrees with the layout",
+            ));
+        }
+        let layers = LayerSet {
+            mask: m.layers.void_mask,
+            albedo: m.layers.albedo.is_some(),
+        };
+        Ok(Dataset {
+            dir: dir.to_path_buf(),
+            manifest: m,
+            layout,
+            layers,
+        })
+    }
+
+    fn level_file(&self, lod: u32) -> Result<(File, PathBuf)> {
+        let info = self.manifest.levels.get(lod as usize).ok_or_else(|| {
+            Error::invalid(
+                self.dir.display().to_string(),
+                format!("no level {lod} (levels 0..{})", self.manifest.levels.len()),
+            )
+        })?;
+        let path = self.dir.join(&info.file);
+        let mut f = File::open(&path).map_err(|e| Error::io(&path, e))?;
+        let len = f.metadata().map_err(|e| Error::io(&path, e))?.len();
+        let want = LEVEL_HEADER + info.nodes_x as u64 * info.nodes_y as u64 * info.record_size;
+        if len != want {
+            return Err(Error::invalid(
+                path.display().to_string(),
+                format!("{len} bytes, expected {want}: truncated or altered"),
+            ));
+        }
+        let mut magic = [0u8; 8];
+        std::io::Read::read_exact(&mut f, &mut magic).map_err(|e| Error::io(&path, e))?;
+        if &magic != LEVEL_MAGIC {
+            return Err(Error::invalid(
+                path.display().to_string(),
+                "not a vkterrain level file",
+            ));
+        }
+        Ok((f, path))
+    }
+
+    /// Reads one node alone (one seek, one read of its record).
+    pub fn read_node(&self, lod: u32, x: u32, y: u32) -> Result<Node> {
+        let (mut f, path) = self.level_file(lod)?;
+        read_node_from(&mut f, &path, &self.layout, lod, self.layers, x, y)
+    }
+
+    /// Level `lod`'s valid samples as one raster (row 0 = south), with albedo if present.
+    pub fn level_raster(&self, lod: u32) -> Result<LevelRaster> {
+        let (mut f, path) = self.level_file(lod)?;
+        let (w, h) = self.layout.level_size(lod);
+        let (nx, ny) = self.layout.nodes(lod);
+        let c = self.layout.center as u64;
+        let mut heights = vec![0f32; (w * h) as usize];
+        let mut rgba = self.layers.albedo.then(|| vec![0u8; (w * h * 4) as usize]);
+        for y in 0..ny {
+            for x in 0..nx {
+                let n = read_node_from(&mut f, &path, &self.layout, lod, self.layers, x, y)?;
+                let s = self.layout.side() as usize;
+                let b = self.layout.border as usize;
+                for j in 0..c.min(h - y as u64 * c) {
+                    for i in 0..c.min(w - x as u64 * c) {
+                        let (gu, gv) = (x as u64 * c + i, y as u64 * c + j);
+                        let src = (j as usize + b) * s + i as usize + b;
+                        let dst = (gv * w + gu) as usize;
+                        heights[dst] = n.heights[src];
+                        if let Some(a) = rgba.as_mut() {
+                            a[dst * 4..dst * 4 + 4].copy_from_slice(&n.rgba[src * 4..src * 4 + 4]);
+                        }
+                    }
+                }
+            }
+        }
+        Ok((w as u32, h as u32, heights, rgba))
+    }
+}
+
+/// Default bound on the samples of a level assembled into one [`Heightmap`].
+pub const DEFAULT_MAX_SAMPLES: u64 = 4097 * 4097;
+
+/// Loads level `lod` (or, without one, the finest level of at most `max_samples` samples
+/// that fits [`super::MAX_SIDE`]) as a [`Heightmap`] for the brute-force renderer. Coarser levels
+/// have `2^lod` times the spacing; non-square spacing (geographic data) is resampled
+/// east-west to the north-south spacing.
+pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap> {
+    let ds = Dataset::open(dir)?;
+    let fits = |l: u32| {
+        let (w, h) = ds.layout.level_size(l);
+        w <= super::MAX_SIDE as u64 && h <= super::MAX_SIDE as u64 && w * h <= max_samples
+    };
+    let lod = match lod {
+        Some(l) => {
+            let (w, h) = ds.layout.level_size(l);
+            if l as usize >= ds.manifest.levels.len() {
+                return Err(Error::invalid(
+                    "dataset.lod",
+                    format!(
+                        "{l} but {} has levels 0..{}",
+                        dir.display(),
+                        ds.manifest.levels.len()
+                    ),
+                ));
+            }
+            if w > super::MAX_SIDE as u64 || h > super::MAX_SIDE as u64 {
+                return Err(Error::invalid(
+                    "dataset.lod",
+                    format!("level {l} is {w}x{h}, over {} per side", super::MAX_SIDE),
+                ));
+            }
+            l
+        }
+        None => (0..ds.manifest.levels.len() as u32)
+            .find(|&l| fits(l))
+            .unwrap_or(ds.manifest.levels.len() as u32 - 1),
+    };
+    let (w, h, heights, rgba) = ds.level_raster(lod)?;
+    let scale = (1u64 << lod) as f64;
+    let [sx, sy] = ds.manifest.spacing.map(|s| s * scale);
+    let (w2, heights) = if ((sx - sy) / sy).abs() > 1e-9 {
+        let w2 = (((w - 1) as f64 * sx / sy).round() as u32 + 1).max(2);
+        let mut out = Vec::with_capacity(w2 as usize * h as usize);
+        for r in 0..h as usize {
+            let row = &heights[r * w as usize..(r + 1) * w as usize];
+            for c in 0..w2 {
+                let g = (c as f64 * sy / sx).min((w - 1) as f64);
+                let c0 = g.floor() as usize;
+                let c1 = (c0 + 1).min(w as usize - 1);
+                let f = g - c0 as f64;
+                out.push((row[c0] as f64 * (1.0 - f) + row[c1] as f64 * f) as f32);
+            }
+        }
+        (w2, out)
+    } else {
+        (w, heights)
+    };
+    let label = if lod == 0 {
+        String::new()
+    } else {
+        format!(" level {lod}")
+    };
+    let mut map = Heightmap::new(
+        format!("{}{label} ({})", ds.manifest.name, ds.manifest.content),
+        w2,
+        h,
+        sy,
+        heights,
+    )?;
+    map.albedo = rgba.map(|rgba| Albedo {
+        width: w,
+        height: h,
+        rgba,
+    });
+    Ok(map)
+}
