@@ -333,3 +333,23 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn config_kind_tiles_loads_a_dataset() {
+    let dir = tmpdir("config");
+    let ds = build(&dir, raster(50, 40, false), 16, 2);
+    std::fs::write(
+        dir.join("c.toml"),
+        "[dataset]\nkind = \"tiles\"\npath = \"ds\"\nlod = 1\n",
+    )
+    .unwrap();
+    let cfg = vkterrain::config::Config::load(Some(&dir.join("c.toml"))).unwrap();
+    let map = vkterrain::dataset::load(&cfg).unwrap();
+    assert_eq!((map.width, map.height, map.spacing), (25, 20, 20.0));
+    assert_eq!(
+        map.sample(3, 4),
+        ds.read_node(1, 0, 0).unwrap().centre(&ds.layout, 3, 4)
+    );
+    std::fs::write(dir.join("bad.toml"), "[dataset]\nkind = \"tiles\"\n").unwrap();
+    assert!(vkterrain::config::Config::load(Some(&dir.join("bad.toml"))).is_err());
+}

@@ -25,7 +25,10 @@ impl Dataset {
     /// run) is refused.
     pub fn open(dir: &Path) -> Result<Self> {
         let mpath = dir.join(manifest::FILE_NAME);
-        if !mpath.is_file() {
+        let partial = dir
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().ends_with(".partial"));
+        if partial || !mpath.is_file() {
             return Err(Error::invalid(
                 dir.display().to_string(),
                 format!(
