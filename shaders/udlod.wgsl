@@ -9,15 +9,16 @@
 
 @group(1) @binding(3) var<storage, read> final_tiles: array<Tile>;
 
-// 0 = the tile's own grid, 1 = fully on the parent's grid. `d` is the distance from the viewer
-// to the un-morphed vertex at the reference height; `parent_split` the parent level's split
-// distance; the morph runs over the last `morph_range` of it (mirrors `morph_factor` in
-// src/lod/udlod/select.rs).
+// 0 = the tile's own grid, 1 = fully on the parent's grid. `d` is the distance from the LOD
+// viewer to the un-morphed vertex at the reference height, scaled by the parent level's error
+// field; `parent_split` the parent level's split distance; the morph runs over the last
+// `morph_range` of it (mirrors `morph_factor` in src/lod/udlod/select.rs).
 fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
-    let d = length(vec3<f32>(relative_xy(sample), udlod.params.x));
+    let d = length(vec3<f32>(viewer_xy(sample), udlod.viewer.z));
+    let scaled = d * field_at(sample, lod + 1u);
     let parent_split = udlod.split[lod + 1u].x;
     let morph_range = udlod.params.y;
-    return clamp(1.0 - (1.0 - d / parent_split) / morph_range, 0.0, 1.0) * udlod.params.z;
+    return clamp(1.0 - (1.0 - scaled / parent_split) / morph_range, 0.0, 1.0) * udlod.params.z;
 }
 
 @vertex

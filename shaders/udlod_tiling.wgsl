@@ -82,14 +82,14 @@ fn tile_min_max(t: Tile) -> vec2<f32> {
     return min_max[level.x + t.y * level.y + t.x];
 }
 
-// Distance from the viewer to the nearest point of the tile's rectangle at the reference
+// Distance from the LOD viewer to the nearest point of the tile's rectangle at the reference
 // height (mirrors `tile_distance` in src/lod/udlod/select.rs).
 fn tile_distance(t: Tile) -> f32 {
     let span = i32(udlod.sizes.x << t.lod);
-    let lo = relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
-    let hi = relative_xy(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span));
+    let lo = viewer_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
+    let hi = viewer_xy(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span));
     let d = max(lo, min(vec2<f32>(0.0), hi));
-    return length(vec3<f32>(d, udlod.params.x));
+    return length(vec3<f32>(d, udlod.viewer.z));
 }
 
 // Box (rectangle clamped to the data x the tile's min/max height) against the frustum.
@@ -165,7 +165,9 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>) {
         atomicAdd(&state.culled, 1u);
         return;
     }
-    if t.lod > 0u && tile_distance(t) < udlod.split[t.lod].x {
+    // Split on the smallest scaled distance over the tile: the field's minimum (its corners)
+    // times the distance to the nearest point (mirrors `tile_splits` in select.rs).
+    if t.lod > 0u && field_range(t.x, t.y, t.lod).x * tile_distance(t) < udlod.split[t.lod].x {
         let base = reserve_split(parents);
         if base >= 0 {
             for (var k = 0u; k < 4u; k++) {

@@ -29,6 +29,7 @@ fn run(frames_in_flight: usize) {
                 ..Camera::default()
             },
             sky: Some(sky_of(k)),
+            lod_viewer: None,
         })
         .collect();
     let frames = common::render(

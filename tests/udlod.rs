@@ -85,7 +85,7 @@ fn gpu_and_cpu_tiles(
     let mut out = Vec::new();
     {
         let mut r = Renderer::new(&gpu, data, MethodKind::Udlod, options).unwrap();
-        let levels = Levels::new(data, lod.grid_size);
+        let levels = Levels::new(data, lod.grid_size, lod.error_field_max);
         let mut sink = CollectSink::default();
         for cam in cameras {
             r.render(*cam, &mut sink).unwrap();
@@ -98,10 +98,7 @@ fn gpu_and_cpu_tiles(
                 .into_iter()
                 .map(|[x, y, lod]| Tile { x, y, lod })
                 .collect();
-            let focal = cam.focal_px(H);
-            let split = levels.split_distances(focal, lod.tau_px, lod.morph_range);
-            let mut p = SelectionParams::new(&levels, data, cam, W as f64 / H as f64, split);
-            p.cull = lod.cull;
+            let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
             out.push((gpu_tiles, select::select_tiles(&levels, &p)));
             let counters: HashMap<_, _> = r.method().counters(0).into_iter().collect();
             assert_eq!(counters["overflow"], 0);
@@ -152,12 +149,10 @@ fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
         cull: false,
         ..settings()
     };
-    let levels = Levels::new(&data, lod.grid_size);
+    let levels = Levels::new(&data, lod.grid_size, lod.error_field_max);
     let mut checked_edges = 0;
     for cam in poses(&data, 200) {
-        let split = levels.split_distances(cam.focal_px(H), lod.tau_px, lod.morph_range);
-        let mut p = SelectionParams::new(&levels, &data, &cam, W as f64 / H as f64, split);
-        p.cull = false;
+        let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
         let tiles = select::select_tiles(&levels, &p);
         let cells = leaf_levels(&tiles);
         for (&(x, y), &l) in &cells {
@@ -222,12 +217,10 @@ fn pure_rotation_keeps_the_tile_set_without_culling() {
         cull: false,
         ..settings()
     };
-    let levels = Levels::new(&data, lod.grid_size);
+    let levels = Levels::new(&data, lod.grid_size, lod.error_field_max);
     for base in poses(&data, 20) {
         let sel = |c: &Camera| {
-            let split = levels.split_distances(c.focal_px(H), lod.tau_px, lod.morph_range);
-            let mut p = SelectionParams::new(&levels, &data, c, W as f64 / H as f64, split);
-            p.cull = false;
+            let p = SelectionParams::new(&levels, &data, &lod, c, c.position, W, H);
             let mut t = select::select_tiles(&levels, &p);
             t.sort();
             t
@@ -246,10 +239,9 @@ fn pure_rotation_keeps_the_tile_set_without_culling() {
 fn culling_keeps_every_tile_a_brute_force_box_test_keeps() {
     let data = terrain(257, 30.0);
     let lod = settings();
-    let levels = Levels::new(&data, lod.grid_size);
+    let levels = Levels::new(&data, lod.grid_size, lod.error_field_max);
     for cam in poses(&data, 60) {
-        let split = levels.split_distances(cam.focal_px(H), lod.tau_px, lod.morph_range);
-        let p = SelectionParams::new(&levels, &data, &cam, W as f64 / H as f64, split);
+        let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
         let mut no_cull = p.clone();
         no_cull.cull = false;
         let kept: HashSet<Tile> = select::select_tiles(&levels, &p).into_iter().collect();
@@ -324,6 +316,7 @@ fn watertight_over_200_poses() {
                     FrameRequest {
                         camera: *c,
                         sky: Some(sentinel),
+                        lod_viewer: None,
                     },
                     &mut sink,
                 )

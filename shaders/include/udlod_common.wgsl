@@ -6,13 +6,16 @@ struct Udlod {
     frustum: array<vec4<f32>, 6>,
     // x: split distance D of each level in metres (UDLOD_NO_SPLIT past the root).
     split: array<vec4<f32>, UDLOD_MAX_LEVELS>,
-    // x: offset of the level's min/max entries, y/z: tiles per side of the level.
+    // x: offset of the level's min/max entries, y/z: tiles per side of the level, w: offset
+    // of the level's error-field corners ((y + 1) x (z + 1) values).
     levels: array<vec4<u32>, UDLOD_MAX_LEVELS>,
     // x: quads per tile side, y: root level, z: final list capacity, w: temporary list capacity.
     sizes: vec4<u32>,
-    // x: reference height relative to the camera (m), y: morph range, z: 1 = morphing on,
-    // w: 1 = frustum culling on.
+    // x: unused, y: morph range, z: 1 = morphing on, w: 1 = frustum culling on.
     params: vec4<f32>,
+    // The LOD viewer (distances for levels and morphs are measured from it): x/y relative to
+    // the camera (m), z: reference height (terrain under the LOD viewer) minus its height.
+    viewer: vec4<f32>,
     // x: indices per tile (6 * quads^2).
     counts: vec4<u32>,
 }
@@ -25,8 +28,52 @@ struct Tile {
 }
 
 @group(1) @binding(0) var<uniform> udlod: Udlod;
+// Per-region error field: corner values of every level's tiles (see `ErrorField` in
+// src/lod/udlod/select.rs).
+@group(1) @binding(5) var<storage, read> error_field: array<f32>;
 
 // Camera-relative metres of an integer sample position (integers subtracted first: exact).
 fn relative_xy(sample: vec2<i32>) -> vec2<f32> {
     return vec2<f32>(sample - frame.camera_cell.xy) * frame.camera_offset.w - frame.camera_offset.xy;
+}
+
+// LOD-viewer-relative metres of an integer sample position.
+fn viewer_xy(sample: vec2<i32>) -> vec2<f32> {
+    return relative_xy(sample) - udlod.viewer.xy;
+}
+
+fn field_corner(lod: u32, i: u32, j: u32) -> f32 {
+    let level = udlod.levels[lod];
+    return error_field[level.w + j * (level.y + 1u) + i];
+}
+
+// (min, max) of the error field over a tile of level `lod` at (x, y): its corners.
+fn field_range(x: u32, y: u32, lod: u32) -> vec2<f32> {
+    let c00 = field_corner(lod, x, y);
+    let c10 = field_corner(lod, x + 1u, y);
+    let c01 = field_corner(lod, x, y + 1u);
+    let c11 = field_corner(lod, x + 1u, y + 1u);
+    return vec2<f32>(min(min(c00, c10), min(c01, c11)), max(max(c00, c10), max(c01, c11)));
+}
+
+// The error field of level `lod` at an integer sample position: bilinear in the level's tile
+// cell, clamped to the cell's corner range; 1 past the root (mirrors `ErrorField::at`).
+fn field_at(sample: vec2<i32>, lod: u32) -> f32 {
+    if lod > udlod.sizes.y {
+        return 1.0;
+    }
+    let span = i32(udlod.sizes.x << lod);
+    let level = udlod.levels[lod];
+    let cell = clamp(sample / span, vec2<i32>(0), vec2<i32>(i32(level.y) - 1, i32(level.z) - 1));
+    let f = vec2<f32>(sample - cell * span) / f32(span);
+    let c = vec2<u32>(cell);
+    let c00 = field_corner(lod, c.x, c.y);
+    let c10 = field_corner(lod, c.x + 1u, c.y);
+    let c01 = field_corner(lod, c.x, c.y + 1u);
+    let c11 = field_corner(lod, c.x + 1u, c.y + 1u);
+    let south = c00 * (1.0 - f.x) + c10 * f.x;
+    let north = c01 * (1.0 - f.x) + c11 * f.x;
+    let v = south * (1.0 - f.y) + north * f.y;
+    let range = field_range(c.x, c.y, lod);
+    return clamp(v, range.x, range.y);
 }

@@ -45,6 +45,9 @@ pub struct RenderArgs {
     /// UDLOD screen-space error target in pixels (overrides `lod.tau_px`).
     #[arg(long)]
     pub tau: Option<f64>,
+    /// UDLOD error-field cap (overrides `lod.error_field_max`; 1 = distance-only selection).
+    #[arg(long)]
+    pub error_field_max: Option<f64>,
     /// Frames excluded from the timing summary (lavapipe compiles shaders lazily).
     #[arg(long, default_value_t = 5)]
     pub warmup: usize,
@@ -71,6 +74,9 @@ pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
     }
     if let Some(n) = args.frames_in_flight {
         config.render.frames_in_flight = n;
+    }
+    if let Some(m) = args.error_field_max {
+        config.lod.error_field_max = m;
     }
     if let Some(t) = args.tau {
         config.lod.tau_px = t;

@@ -112,6 +112,27 @@ impl Heightmap {
         south * (1.0 - fy) + north * fy
     }
 
+    /// Height of the exact surface at world `(x, y)`: the full-resolution triangle mesh the
+    /// brute-force method draws (every sample a vertex, quads split along the diagonal from
+    /// `(c + 1, r)` to `(c, r + 1)`, as `lod::brute::grid_indices`). Clamped to the data.
+    pub fn mesh_height_at(&self, x: f64, y: f64) -> f64 {
+        let gx = (x / self.spacing).clamp(0.0, (self.width - 1) as f64);
+        let gy = (y / self.spacing).clamp(0.0, (self.height - 1) as f64);
+        let (c0, r0) = (
+            (gx.floor() as u32).min(self.width.saturating_sub(2)),
+            (gy.floor() as u32).min(self.height.saturating_sub(2)),
+        );
+        let (c1, r1) = ((c0 + 1).min(self.width - 1), (r0 + 1).min(self.height - 1));
+        let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
+        let h = |c, r| self.sample(c, r) as f64;
+        let (h00, h10, h01, h11) = (h(c0, r0), h(c1, r0), h(c0, r1), h(c1, r1));
+        if fx + fy <= 1.0 {
+            h00 + (h10 - h00) * fx + (h01 - h00) * fy
+        } else {
+            h11 + (h01 - h11) * (1.0 - fx) + (h10 - h11) * (1.0 - fy)
+        }
+    }
+
     /// World extent in metres: `(x_max, y_max)`; the grid starts at the origin.
     pub fn extent(&self) -> (f64, f64) {
         (

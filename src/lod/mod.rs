@@ -64,6 +64,9 @@ pub struct MethodContext<'a> {
 #[derive(Clone, Copy, Debug)]
 pub struct ViewState {
     pub camera: Camera,
+    /// Where LOD distances are measured from (the camera's position unless a test separates
+    /// them).
+    pub lod_viewer: glam::DVec3,
     pub width: u32,
     pub height: u32,
 }
@@ -124,6 +127,9 @@ pub struct LodSettings {
     pub morph: bool,
     /// UDLOD: frustum culling of tiles.
     pub cull: bool,
+    /// UDLOD: cap of the per-region error field (1 = distance-only selection: every region
+    /// refined for the level's worst error). Larger lets smooth regions keep coarser levels.
+    pub error_field_max: f64,
 }
 
 impl Default for LodSettings {
@@ -135,6 +141,7 @@ impl Default for LodSettings {
             max_tiles: 16384,
             morph: true,
             cull: true,
+            error_field_max: 8.0,
         }
     }
 }
@@ -164,6 +171,12 @@ impl LodSettings {
             return bad(format!(
                 "max_tiles {} must be within 16..=4194304",
                 self.max_tiles
+            ));
+        }
+        if !(self.error_field_max.is_finite() && (1.0..=1024.0).contains(&self.error_field_max)) {
+            return bad(format!(
+                "error_field_max {} must be within 1..=1024",
+                self.error_field_max
             ));
         }
         Ok(())

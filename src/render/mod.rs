@@ -75,11 +75,18 @@ pub struct FrameRequest {
     pub camera: Camera,
     /// Clear colour for this frame only (linear RGB); the configured sky otherwise.
     pub sky: Option<[f32; 3]>,
+    /// Where LOD methods measure distances from, if not the camera (tests use it to watch one
+    /// method's surface change from a fixed viewpoint while its LOD viewer moves).
+    pub lod_viewer: Option<glam::DVec3>,
 }
 
 impl From<Camera> for FrameRequest {
     fn from(camera: Camera) -> Self {
-        FrameRequest { camera, sky: None }
+        FrameRequest {
+            camera,
+            sky: None,
+            lod_viewer: None,
+        }
     }
 }
 
@@ -382,6 +389,7 @@ impl Renderer {
         let started = Instant::now();
         let view = ViewState {
             camera: request.camera,
+            lod_viewer: request.lod_viewer.unwrap_or(request.camera.position),
             width: self.options.width,
             height: self.options.height,
         };

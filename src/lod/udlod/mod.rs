@@ -32,6 +32,7 @@ pub struct UdlodUniforms {
     pub levels: [[u32; 4]; UDLOD_MAX_LEVELS as usize],
     pub sizes: [u32; 4],
     pub params: [f32; 4],
+    pub viewer: [f32; 4],
     pub counts: [u32; 4],
 }
 
@@ -70,8 +71,10 @@ pub struct Udlod {
     settings: LodSettings,
     levels: Levels,
     heights: Arc<crate::dataset::Heightmap>,
-    /// GPU mirror of `levels.min_max` (kept alive for the descriptor sets).
+    /// GPU mirrors of `levels.min_max` and `levels.field.corners` (kept alive for the
+    /// descriptor sets).
     _min_max: Buffer,
+    _error_field: Buffer,
     indices: Buffer,
     index_count: u32,
     set_layout: vk::DescriptorSetLayout,
@@ -105,7 +108,7 @@ impl Udlod {
         let gpu = ctx.gpu;
         let settings = ctx.settings.clone();
         settings.validate()?;
-        let levels = Levels::new(ctx.data, settings.grid_size);
+        let levels = Levels::new(ctx.data, settings.grid_size, settings.error_field_max);
         if levels.levels() > UDLOD_MAX_LEVELS {
             return Err(Error::invalid(
                 "udlod",
@@ -133,6 +136,7 @@ impl Udlod {
             storage(2),
             storage(3),
             storage(4),
+            storage(5),
         ];
         let set_layout = unsafe {
             d.create_descriptor_set_layout(
@@ -149,7 +153,7 @@ impl Udlod {
             },
             vk::DescriptorPoolSize {
                 ty: vk::DescriptorType::STORAGE_BUFFER,
-                descriptor_count: 4 * n,
+                descriptor_count: 5 * n,
             },
         ];
         let pool = unsafe {
@@ -180,14 +184,24 @@ impl Udlod {
             e
         };
         let built = Self::build(ctx, &settings, &levels, set_layout, pool).map_err(cleanup)?;
-        let (min_max, indices, index_count, slots, prepare, refine, finish, draw, temp_capacity) =
-            built;
+        let (
+            (min_max, error_field),
+            indices,
+            index_count,
+            slots,
+            prepare,
+            refine,
+            finish,
+            draw,
+            temp_capacity,
+        ) = built;
         Ok(Udlod {
             gpu: gpu.clone(),
             settings,
             heights: Arc::new(ctx.data.clone()),
             levels,
             _min_max: min_max,
+            _error_field: error_field,
             indices,
             index_count,
             set_layout,
@@ -209,7 +223,7 @@ impl Udlod {
         set_layout: vk::DescriptorSetLayout,
         pool: vk::DescriptorPool,
     ) -> Result<(
-        Buffer,
+        (Buffer, Buffer),
         Buffer,
         u32,
         Vec<SlotBuffers>,
@@ -234,6 +248,20 @@ impl Udlod {
             MemoryLocation::CpuToGpu,
         )?;
         min_max.write(&mm_bytes)?;
+        let field_bytes: Vec<u8> = levels
+            .field
+            .corners
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let mut error_field = Buffer::new(
+            gpu,
+            "udlod error field",
+            field_bytes.len() as u64,
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        error_field.write(&field_bytes)?;
         let grid = super::brute::grid_indices(settings.grid_size);
         let index_bytes: Vec<u8> = grid.iter().flat_map(|i| i.to_le_bytes()).collect();
         let mut indices = Buffer::new(
@@ -305,6 +333,7 @@ impl Udlod {
                 (2, vk::DescriptorType::STORAGE_BUFFER, temp_tiles.raw),
                 (3, vk::DescriptorType::STORAGE_BUFFER, final_tiles.raw),
                 (4, vk::DescriptorType::STORAGE_BUFFER, min_max.raw),
+                (5, vk::DescriptorType::STORAGE_BUFFER, error_field.raw),
             ];
             let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = infos
                 .iter()
@@ -354,7 +383,7 @@ impl Udlod {
             },
         )?;
         Ok((
-            min_max,
+            (min_max, error_field),
             indices,
             grid.len() as u32,
             slots,
@@ -373,14 +402,15 @@ impl Udlod {
     /// The selection inputs for a view, exactly as uploaded (tests use them for the CPU
     /// reference).
     pub fn selection_params(&self, view: &ViewState) -> SelectionParams {
-        let aspect = view.width as f64 / view.height as f64;
-        let focal = view.camera.focal_px(view.height);
-        let split =
-            self.levels
-                .split_distances(focal, self.settings.tau_px, self.settings.morph_range);
-        let mut p = SelectionParams::new(&self.levels, &self.heights, &view.camera, aspect, split);
-        p.cull = self.settings.cull;
-        p
+        SelectionParams::new(
+            &self.levels,
+            &self.heights,
+            &self.settings,
+            &view.camera,
+            view.lod_viewer,
+            view.width,
+            view.height,
+        )
     }
 
     fn read_counters(&self, slot: usize) -> TilingState {
@@ -416,7 +446,12 @@ impl LodMethod for Udlod {
         }
         for lod in 0..self.levels.levels() as usize {
             let (nx, ny) = self.levels.tiles_per_side[lod];
-            u.levels[lod] = [self.levels.level_offsets[lod], nx, ny, 0];
+            u.levels[lod] = [
+                self.levels.level_offsets[lod],
+                nx,
+                ny,
+                self.levels.field.corner_offsets[lod],
+            ];
         }
         u.sizes = [
             self.settings.grid_size,
@@ -424,8 +459,9 @@ impl LodMethod for Udlod {
             self.settings.max_tiles,
             self.temp_capacity,
         ];
+        u.viewer = [p.viewer[0], p.viewer[1], p.viewer[2], 0.0];
         u.params = [
-            p.z_ref - p.camera_z,
+            0.0,
             self.settings.morph_range as f32,
             if self.settings.morph { 1.0 } else { 0.0 },
             if self.settings.cull { 1.0 } else { 0.0 },

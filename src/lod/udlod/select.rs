@@ -1,16 +1,23 @@
-//! UDLOD on the CPU: the level structure, per-tile min/max heights, per-level geometric
-//! errors, the split-distance table derived from the screen-space error target, the frustum,
-//! the morph function, and a reference implementation of the GPU's tile selection (tests
-//! compare the GPU's final tile list against it).
+//! UDLOD on the CPU: the level structure, per-tile min/max heights and geometric errors, the
+//! per-region error field, the split-distance table derived from the screen-space error
+//! target, the frustum, the morph function, and a reference implementation of the GPU's tile
+//! selection (tests compare the GPU's final tile list against it).
 //!
-//! Arithmetic that must agree with the shaders (`select_tiles`, `morph_factor`) is written in
-//! f32 in the same order as `shaders/udlod_tiling.wgsl` and `shaders/udlod.wgsl`.
+//! Arithmetic that must agree with the shaders (`select_tiles`, `morph_factor`, `field_at`) is
+//! written in f32 in the same order as `shaders/udlod_tiling.wgsl`, `shaders/udlod.wgsl` and
+//! `shaders/include/udlod_common.wgsl`.
 
 use glam::{DVec3, Vec3};
 
+use super::super::LodSettings;
 use crate::dataset::Heightmap;
 use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
 use crate::scene::Camera;
+
+/// Largest ratio between the error field of level `l + 1` anywhere over a level-`l` tile and
+/// the field's minimum on that tile (`sigma` in `split_distances`). Bounding it keeps the
+/// crack-free chain of split distances close to the distance-only one.
+pub const FIELD_LEVEL_RATIO: f64 = 1.25;
 
 /// A quadtree tile: `(x, y)` in tiles of its level, `lod` 0 = full resolution.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -32,18 +39,23 @@ pub struct Levels {
     pub spacing: f64,
     /// Tiles per side of each level (only tiles that touch the data).
     pub tiles_per_side: Vec<(u32, u32)>,
-    /// Offset of each level's entries in `min_max`.
+    /// Offset of each level's entries in `min_max` and `tile_error`.
     pub level_offsets: Vec<u32>,
     /// (min, max) height in metres of every tile's samples (and of its morph targets, which are
     /// samples of the same tile).
     pub min_max: Vec<[f32; 2]>,
-    /// Geometric error of each level in metres: the largest height difference between the
-    /// full-resolution samples and the level's triangulated grid (0 for level 0).
+    /// Geometric error of every tile in metres: the largest height difference between the
+    /// full-resolution samples inside the tile and the tile's triangulated grid.
+    pub tile_error: Vec<f32>,
+    /// Geometric error of each level (the largest of its tiles'; 0 for level 0).
     pub level_error: Vec<f64>,
+    /// The per-region error field (all ones: distance-only selection).
+    pub field: ErrorField,
 }
 
 impl Levels {
-    pub fn new(data: &Heightmap, grid_size: u32) -> Self {
+    /// Builds the levels; `field_max` (>= 1) caps the error field (1: distance-only).
+    pub fn new(data: &Heightmap, grid_size: u32, field_max: f64) -> Self {
         let quads = (data.width - 1).max(data.height - 1);
         let mut root_lod = 0;
         while (grid_size << root_lod) < quads {
@@ -52,20 +64,26 @@ impl Levels {
         let mut tiles_per_side = Vec::new();
         let mut level_offsets = Vec::new();
         let mut min_max = Vec::new();
+        let mut tile_error = Vec::new();
+        let mut level_error = Vec::new();
         for lod in 0..=root_lod {
             let span = grid_size << lod;
             let nx = (data.width - 1).div_ceil(span);
             let ny = (data.height - 1).div_ceil(span);
             tiles_per_side.push((nx, ny));
             level_offsets.push(min_max.len() as u32);
+            let mut worst = 0.0f64;
             for ty in 0..ny {
                 for tx in 0..nx {
-                    min_max.push(tile_min_max(data, tx * span, ty * span, span));
+                    let (mm, e) = tile_stats(data, lod, tx * span, ty * span, span);
+                    min_max.push(mm);
+                    tile_error.push(e as f32);
+                    worst = worst.max(e);
                 }
             }
+            level_error.push(worst);
         }
-        let level_error = (0..=root_lod).map(|lod| level_error(data, lod)).collect();
-        Levels {
+        let mut levels = Levels {
             grid_size,
             root_lod,
             width: data.width,
@@ -74,8 +92,12 @@ impl Levels {
             tiles_per_side,
             level_offsets,
             min_max,
+            tile_error,
             level_error,
-        }
+            field: ErrorField::default(),
+        };
+        levels.field = ErrorField::new(&levels, field_max);
+        levels
     }
 
     pub fn levels(&self) -> u32 {
@@ -87,9 +109,17 @@ impl Levels {
         (self.grid_size << lod) as f64 * self.spacing
     }
 
-    pub fn tile_min_max(&self, t: Tile) -> [f32; 2] {
+    fn tile_index(&self, t: Tile) -> usize {
         let (nx, _) = self.tiles_per_side[t.lod as usize];
-        self.min_max[(self.level_offsets[t.lod as usize] + t.y * nx + t.x) as usize]
+        (self.level_offsets[t.lod as usize] + t.y * nx + t.x) as usize
+    }
+
+    pub fn tile_min_max(&self, t: Tile) -> [f32; 2] {
+        self.min_max[self.tile_index(t)]
+    }
+
+    pub fn tile_error(&self, t: Tile) -> f32 {
+        self.tile_error[self.tile_index(t)]
     }
 
     /// Does the tile touch the data set?
@@ -102,26 +132,38 @@ impl Levels {
     pub fn split_distances(&self, focal_px: f64, tau_px: f64, morph_range: f64) -> Vec<f32> {
         split_distances(self, focal_px, tau_px, morph_range)
     }
+
+    /// The error field of level `lod` at integer sample `sample` (1 past the root level).
+    pub fn field_at(&self, sample: [i32; 2], lod: u32) -> f32 {
+        self.field.at(self, sample, lod)
+    }
 }
 
-fn tile_min_max(data: &Heightmap, c0: u32, r0: u32, span: u32) -> [f32; 2] {
+/// Min/max height of a tile's samples and its geometric error (level `lod` grid vs samples).
+fn tile_stats(data: &Heightmap, lod: u32, c0: u32, r0: u32, span: u32) -> ([f32; 2], f64) {
     let (c1, r1) = (
         (c0 + span).min(data.width - 1),
         (r0 + span).min(data.height - 1),
     );
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut error = 0.0f64;
     for r in r0..=r1 {
         for c in c0..=c1 {
             let h = data.sample(c, r);
             lo = lo.min(h);
             hi = hi.max(h);
+            if lod > 0 {
+                error = error.max((level_height(data, lod, c, r) - h as f64).abs());
+            }
         }
     }
-    [lo, hi]
+    ([lo, hi], error)
 }
 
 /// Height of the level-`lod` triangulated grid at full-resolution sample `(c, r)`. Quads are
-/// split along the diagonal from (1, 0) to (0, 1), as `grid_indices` does.
+/// split along the diagonal from (1, 0) to (0, 1), as `grid_indices` does. The level's edges
+/// run along full-resolution edges, so the largest difference between the two meshes is at a
+/// full-resolution sample: the per-sample maximum is the exact mesh-to-mesh error.
 fn level_height(data: &Heightmap, lod: u32, c: u32, r: u32) -> f64 {
     let step = 1u32 << lod;
     let s = |c: u32, r: u32| data.sample(c.min(data.width - 1), r.min(data.height - 1)) as f64;
@@ -140,27 +182,188 @@ fn level_height(data: &Heightmap, lod: u32, c: u32, r: u32) -> f64 {
     }
 }
 
-fn level_error(data: &Heightmap, lod: u32) -> f64 {
-    if lod == 0 {
-        return 0.0;
-    }
-    let mut worst = 0.0f64;
-    for r in 0..data.height {
-        for c in 0..data.width {
-            worst = worst.max((level_height(data, lod, c, r) - data.sample(c, r) as f64).abs());
-        }
-    }
-    worst
+/// The per-region error field `m_l(p) >= 1`: how much farther than the level's global error
+/// requires a region may keep level `l`, because its own error is smaller. Selection uses the
+/// scaled distance `g_l(p) = m_l(p) * d(p)` instead of `d(p)`; see `docs/udlod.md` for the
+/// three properties that keep the error bound, crack-freedom and the one-level rule:
+/// 1. `m_l(p) * e_local_l(p) <= e_l` (the level's global error): the pixel target still holds;
+/// 2. a tile's split test uses the minimum of `m_l` over the tile (bilinear: its corners), so
+///    an unsplit tile has `g_l >= D[l]` everywhere on it;
+/// 3. the chain of split distances uses `sigma[l]` (largest `m_{l+1}` over a level-`l` tile /
+///    that tile's minimum of `m_l`, <= [`FIELD_LEVEL_RATIO`]) and `mu[l]` (largest `m_{l+1}`).
+///
+/// Values live at the corners of each level's tiles and are interpolated bilinearly.
+#[derive(Clone, Debug, Default)]
+pub struct ErrorField {
+    /// Corner values of every level, `(nx + 1) x (ny + 1)` row-major per level.
+    pub corners: Vec<f32>,
+    /// Offset of each level's corners in `corners`.
+    pub corner_offsets: Vec<u32>,
+    /// Per level `l`: largest `m_{l+1}` over a level-`l` tile / that tile's minimum of `m_l`.
+    pub sigma: Vec<f64>,
+    /// Per level `l`: largest value of `m_{l+1}`.
+    pub mu: Vec<f64>,
 }
 
-/// Split distance `D[lod]` (metres): a tile of level `lod` splits when the viewer is nearer
-/// than that. Three constraints, all from the morph construction:
-/// 1. screen error: a level-`l` tile is drawn at distances >= `(1 - morph_range) * D[l]`
-///    at the least (inside its morph zone), where its geometric error `e[l]` must project to
-///    at most `tau` pixels: `D[l] >= e[l] * focal / (tau * (1 - morph_range))`;
+impl ErrorField {
+    pub fn new(levels: &Levels, field_max: f64) -> Self {
+        let field_max = field_max.max(1.0);
+        let levels_n = levels.levels() as usize;
+        let dims: Vec<(usize, usize)> = levels
+            .tiles_per_side
+            .iter()
+            .map(|&(nx, ny)| (nx as usize + 1, ny as usize + 1))
+            .collect();
+        let mut per_level: Vec<Vec<f64>> = Vec::with_capacity(levels_n);
+        for lod in 0..levels_n {
+            let (cw, ch) = dims[lod];
+            let (nx, ny) = levels.tiles_per_side[lod];
+            let global = levels.level_error[lod];
+            let mut v = vec![field_max; cw * ch];
+            if lod > 0 && field_max > 1.0 {
+                // Property 1: a corner is bounded by every tile it belongs to.
+                for ty in 0..ny {
+                    for tx in 0..nx {
+                        let e = levels.tile_error(Tile {
+                            x: tx,
+                            y: ty,
+                            lod: lod as u32,
+                        }) as f64;
+                        let limit = if e > 0.0 {
+                            (global / e).clamp(1.0, field_max)
+                        } else {
+                            field_max
+                        };
+                        for (i, j) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                            let k = (ty as usize + j) * cw + tx as usize + i;
+                            v[k] = v[k].min(limit);
+                        }
+                    }
+                }
+            } else {
+                v.fill(1.0);
+            }
+            if lod >= 2 {
+                // Property 3: over each level-(lod-1) tile, m_lod <= ratio * min m_(lod-1).
+                let (fw, _) = dims[lod - 1];
+                let (fnx, fny) = levels.tiles_per_side[lod - 1];
+                let fine = &per_level[lod - 1];
+                for ty in 0..fny as usize {
+                    for tx in 0..fnx as usize {
+                        let fine_min = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                            .iter()
+                            .map(|&(i, j)| fine[(ty + j) * fw + tx + i])
+                            .fold(f64::INFINITY, f64::min);
+                        let bound = FIELD_LEVEL_RATIO * fine_min;
+                        for (i, j) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                            let k = (ty / 2 + j) * cw + tx / 2 + i;
+                            v[k] = v[k].min(bound).max(1.0);
+                        }
+                    }
+                }
+            }
+            per_level.push(v);
+        }
+        // f32 as uploaded; sigma and mu from the f32 values.
+        let mut corners = Vec::new();
+        let mut corner_offsets = Vec::new();
+        for v in &per_level {
+            corner_offsets.push(corners.len() as u32);
+            corners.extend(v.iter().map(|&x| x as f32));
+        }
+        let mut field = ErrorField {
+            corners,
+            corner_offsets,
+            sigma: vec![1.0; levels_n],
+            mu: vec![1.0; levels_n],
+        };
+        for lod in 0..levels_n.saturating_sub(1) {
+            let (nx, ny) = levels.tiles_per_side[lod];
+            let (mut sigma, mut mu) = (1.0f64, 1.0f64);
+            for ty in 0..ny {
+                for tx in 0..nx {
+                    let own = field.tile_range(
+                        levels,
+                        Tile {
+                            x: tx,
+                            y: ty,
+                            lod: lod as u32,
+                        },
+                    );
+                    let parent = field.tile_range(
+                        levels,
+                        Tile {
+                            x: tx / 2,
+                            y: ty / 2,
+                            lod: lod as u32 + 1,
+                        },
+                    );
+                    mu = mu.max(parent[1] as f64);
+                    if lod > 0 {
+                        sigma = sigma.max(parent[1] as f64 / own[0] as f64);
+                    }
+                }
+            }
+            field.sigma[lod] = sigma;
+            field.mu[lod] = mu;
+        }
+        field
+    }
+
+    fn corner(&self, levels: &Levels, lod: u32, i: u32, j: u32) -> f32 {
+        let (nx, _) = levels.tiles_per_side[lod as usize];
+        self.corners[(self.corner_offsets[lod as usize] + j * (nx + 1) + i) as usize]
+    }
+
+    /// (min, max) of the field over a tile: its corners (bilinear interpolation).
+    pub fn tile_range(&self, levels: &Levels, t: Tile) -> [f32; 2] {
+        let c = [(0, 0), (1, 0), (0, 1), (1, 1)]
+            .map(|(i, j)| self.corner(levels, t.lod, t.x + i, t.y + j));
+        [
+            c[0].min(c[1]).min(c[2].min(c[3])),
+            c[0].max(c[1]).max(c[2].max(c[3])),
+        ]
+    }
+
+    /// The field of level `lod` at integer sample `sample` (mirrors `field_at` in
+    /// `udlod_common.wgsl`): bilinear in the level's tile cell, clamped to the cell's corner
+    /// range so rounding never leaves it; 1 past the root level.
+    pub fn at(&self, levels: &Levels, sample: [i32; 2], lod: u32) -> f32 {
+        if lod > levels.root_lod {
+            return 1.0;
+        }
+        let span = (levels.grid_size << lod) as i32;
+        let (nx, ny) = levels.tiles_per_side[lod as usize];
+        let cx = (sample[0] / span).clamp(0, nx as i32 - 1);
+        let cy = (sample[1] / span).clamp(0, ny as i32 - 1);
+        let fx = (sample[0] - cx * span) as f32 / span as f32;
+        let fy = (sample[1] - cy * span) as f32 / span as f32;
+        let t = Tile {
+            x: cx as u32,
+            y: cy as u32,
+            lod,
+        };
+        let c = [(0, 0), (1, 0), (0, 1), (1, 1)]
+            .map(|(i, j)| self.corner(levels, lod, t.x + i, t.y + j));
+        let south = c[0] * (1.0 - fx) + c[1] * fx;
+        let north = c[2] * (1.0 - fx) + c[3] * fx;
+        let v = south * (1.0 - fy) + north * fy;
+        let [lo, hi] = self.tile_range(levels, t);
+        v.clamp(lo, hi)
+    }
+}
+
+/// Split distance `D[lod]` (metres of scaled distance `g = m * d`): a tile of level `lod`
+/// splits when `min(m) * d_min` over it is below that. Three constraints, all from the morph
+/// construction:
+/// 1. screen error: a level-`l` tile is drawn at scaled distances >= `(1 - morph_range) * D[l]`
+///    at the least (inside its morph zone), where its geometric error `e[l]` (divided by the
+///    field, property 1 of [`ErrorField`]) must project to at most `tau` pixels:
+///    `D[l] >= e[l] * focal / (tau * (1 - morph_range))`;
 /// 2. crack-free: where a level-`l` tile meets a level `l - 1` tile it must not have started
-///    morphing, i.e. `D[l] + sqrt(2) * extent(l) <= (1 - morph_range) * D[l + 1]`, which also
-///    implies that neighbours differ by at most one level;
+///    morphing: `sigma[l] * D[l] + mu[l] * sqrt(2) * extent(l) <= (1 - morph_range) * D[l + 1]`,
+///    which also implies that neighbours differ by at most one level (with a field of ones,
+///    `sigma = mu = 1`: the distance-only chain);
 /// 3. `D[root + 1]` is infinite: the root level never morphs.
 ///
 /// Entry `l` holds `D[l]`; entries past the root hold [`UDLOD_NO_SPLIT`].
@@ -171,7 +374,11 @@ pub fn split_distances(levels: &Levels, focal_px: f64, tau_px: f64, morph_range:
     for lod in 0..=levels.root_lod {
         let screen = levels.level_error[lod as usize] * focal_px / (tau_px * keep);
         let chain = match prev {
-            Some(p) => (p + std::f64::consts::SQRT_2 * levels.tile_extent(lod - 1)) / keep,
+            Some(p) => {
+                let below = lod as usize - 1;
+                let (sigma, mu) = (levels.field.sigma[below], levels.field.mu[below]);
+                (sigma * p + mu * std::f64::consts::SQRT_2 * levels.tile_extent(lod - 1)) / keep
+            }
             None => 0.0,
         };
         // Level 0 never splits, but its D anchors the chain (a floor of one tile extent keeps
@@ -218,8 +425,10 @@ pub struct SelectionParams {
     /// Camera position inside its cell (metres) and its height.
     pub camera_offset: [f32; 2],
     pub camera_z: f32,
-    /// Reference height for distances (terrain height under the viewer), metres.
-    pub z_ref: f32,
+    /// The LOD viewer (whose distances choose levels and morphs; normally the camera)
+    /// relative to the camera in x and y, and `z`: the reference height (terrain under the
+    /// LOD viewer) minus the LOD viewer's height.
+    pub viewer: [f32; 3],
     pub spacing: f32,
     pub split: Vec<f32>,
     pub frustum: [[f32; 4]; 6],
@@ -227,17 +436,27 @@ pub struct SelectionParams {
 }
 
 impl SelectionParams {
+    /// The inputs for `camera` (frustum, camera-relative coordinates) with levels and morphs
+    /// chosen for `lod_viewer` (the camera's position except in tests that separate the two).
     pub fn new(
         levels: &Levels,
         data: &Heightmap,
+        settings: &LodSettings,
         camera: &Camera,
-        aspect: f64,
-        split: Vec<f32>,
+        lod_viewer: DVec3,
+        width: u32,
+        height: u32,
     ) -> Self {
         let s = levels.spacing;
         let (cx, cy) = (
             (camera.position.x / s).floor(),
             (camera.position.y / s).floor(),
+        );
+        let z_ref = data.height_at(lod_viewer.x, lod_viewer.y);
+        let split = levels.split_distances(
+            camera.focal_px(height),
+            settings.tau_px,
+            settings.morph_range,
         );
         SelectionParams {
             camera_cell: [cx as i32, cy as i32],
@@ -246,11 +465,15 @@ impl SelectionParams {
                 (camera.position.y - cy * s) as f32,
             ],
             camera_z: camera.position.z as f32,
-            z_ref: data.height_at(camera.position.x, camera.position.y) as f32,
+            viewer: [
+                (lod_viewer.x - camera.position.x) as f32,
+                (lod_viewer.y - camera.position.y) as f32,
+                (z_ref - lod_viewer.z) as f32,
+            ],
             spacing: s as f32,
             split,
-            frustum: frustum_planes(camera, aspect),
-            cull: true,
+            frustum: frustum_planes(camera, width as f64 / height as f64),
+            cull: settings.cull,
         }
     }
 
@@ -261,17 +484,30 @@ impl SelectionParams {
             (sample[1] - self.camera_cell[1]) as f32 * self.spacing - self.camera_offset[1],
         ]
     }
+
+    /// LOD-viewer-relative metres of a sample position (`viewer_xy` in the shaders).
+    pub fn from_viewer(&self, sample: [i32; 2]) -> [f32; 2] {
+        let r = self.relative(sample);
+        [r[0] - self.viewer[0], r[1] - self.viewer[1]]
+    }
 }
 
-/// Distance from the viewer to the nearest point of the tile's rectangle at `z_ref`.
+/// Distance from the LOD viewer to the nearest point of the tile's rectangle at the reference
+/// height.
 pub fn tile_distance(levels: &Levels, p: &SelectionParams, t: Tile) -> f32 {
     let span = (levels.grid_size << t.lod) as i32;
-    let lo = p.relative([t.x as i32 * span, t.y as i32 * span]);
-    let hi = p.relative([(t.x as i32 + 1) * span, (t.y as i32 + 1) * span]);
+    let lo = p.from_viewer([t.x as i32 * span, t.y as i32 * span]);
+    let hi = p.from_viewer([(t.x as i32 + 1) * span, (t.y as i32 + 1) * span]);
     let dx = lo[0].max(0.0f32.min(hi[0]));
     let dy = lo[1].max(0.0f32.min(hi[1]));
-    let dz = p.z_ref - p.camera_z;
-    Vec3::new(dx, dy, dz).length()
+    Vec3::new(dx, dy, p.viewer[2]).length()
+}
+
+/// Does the tile split? Its smallest scaled distance (field minimum x distance) against the
+/// level's split distance (`refine` in `udlod_tiling.wgsl`).
+pub fn tile_splits(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
+    let field_min = levels.field.tile_range(levels, t)[0];
+    t.lod > 0 && field_min * tile_distance(levels, p, t) < p.split[t.lod as usize]
 }
 
 /// Is the tile's box (rectangle clamped to the data x min/max height) outside the frustum?
@@ -309,7 +545,7 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
             if !levels.inside(t) || (p.cull && tile_culled(levels, p, t)) {
                 continue;
             }
-            if t.lod > 0 && tile_distance(levels, p, t) < p.split[t.lod as usize] {
+            if tile_splits(levels, p, t) {
                 for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                     next.push(Tile {
                         x: t.x * 2 + dx,
@@ -327,13 +563,21 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
 }
 
 /// Morph factor of a vertex of a level-`lod` tile at integer sample `sample` (0 = own level,
-/// 1 = fully on the parent level's grid). A pure function of the vertex's world position and
+/// 1 = fully on the parent level's grid): the parent level's scaled distance against the last
+/// `morph_range` of its split distance. A pure function of the vertex's world position and
 /// the tile's level, so vertices shared by tiles agree.
-pub fn morph_factor(p: &SelectionParams, sample: [i32; 2], lod: u32, morph_range: f32) -> f32 {
-    let rel = p.relative(sample);
-    let d = Vec3::new(rel[0], rel[1], p.z_ref - p.camera_z).length();
+pub fn morph_factor(
+    levels: &Levels,
+    p: &SelectionParams,
+    sample: [i32; 2],
+    lod: u32,
+    morph_range: f32,
+) -> f32 {
+    let rel = p.from_viewer(sample);
+    let d = Vec3::new(rel[0], rel[1], p.viewer[2]).length();
+    let scaled = d * levels.field_at(sample, lod + 1);
     let parent_split = p.split[lod as usize + 1];
-    (1.0 - (1.0 - d / parent_split) / morph_range).clamp(0.0, 1.0)
+    (1.0 - (1.0 - scaled / parent_split) / morph_range).clamp(0.0, 1.0)
 }
 
 /// Where a vertex of a level-`lod` tile ends up after morphing, in samples (the CPU mirror of
@@ -351,7 +595,7 @@ pub fn morphed_position(
         (t.x * span + local[0] * step) as i32,
         (t.y * span + local[1] * step) as i32,
     ];
-    let m = morph_factor(p, sample, t.lod, morph_range);
+    let m = morph_factor(levels, p, sample, t.lod, morph_range);
     let hi = [levels.width as f32 - 1.0, levels.height as f32 - 1.0];
     std::array::from_fn(|i| {
         let odd = (local[i] & 1) as f32;
