@@ -2,16 +2,55 @@
 //! against naga's reflection of the composed shader, and the shared constants against the
 //! values the shader was built with.
 
+use std::mem::{offset_of, size_of};
+
+use vkterrain::driver::shaders::{BRUTE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL};
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
+use vkterrain::lod::udlod::{TilingState, UdlodUniforms};
 use vkterrain::render::terrain::FrameUniforms;
 
-fn composed_shaders() -> [(&'static str, &'static str); 1] {
-    [("brute", vkterrain::driver::shaders::BRUTE_WGSL)]
+fn composed_shaders() -> [(&'static str, &'static str); 3] {
+    [
+        ("brute", BRUTE_WGSL),
+        ("udlod", UDLOD_WGSL),
+        ("udlod_tiling", UDLOD_TILING_WGSL),
+    ]
+}
+
+/// Asserts that the WGSL struct `struct_name` in each of `shaders` has exactly the member
+/// names/offsets `rust` (in order; WGSL names may differ from Rust ones only where `rust`
+/// says so) and the size `size`.
+fn assert_struct_layout(
+    shaders: &[(&str, &str)],
+    struct_name: &str,
+    rust: &[(&str, usize)],
+    size: usize,
+) {
+    for (name, source) in shaders {
+        let module = naga::front::wgsl::parse_str(source).expect("composed shader parses");
+        let ty = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(struct_name))
+            .unwrap_or_else(|| panic!("{name}: no struct {struct_name}"))
+            .1;
+        let naga::TypeInner::Struct { members, span } = &ty.inner else {
+            panic!("{name}: {struct_name} is not a struct")
+        };
+        let wgsl: Vec<(&str, usize)> = members
+            .iter()
+            .map(|m| (m.name.as_deref().unwrap_or("?"), m.offset as usize))
+            .collect();
+        assert_eq!(
+            wgsl, rust,
+            "{name}: {struct_name} member names/offsets differ"
+        );
+        assert_eq!(*span as usize, size, "{name}: {struct_name} size differs");
+    }
 }
 
 #[test]
 fn frame_uniforms_match_the_wgsl_struct() {
-    use std::mem::{offset_of, size_of};
     let rust = [
         ("view_proj", offset_of!(FrameUniforms, view_proj)),
         ("camera_cell", offset_of!(FrameUniforms, camera_cell)),
@@ -19,28 +58,71 @@ fn frame_uniforms_match_the_wgsl_struct() {
         ("sun_dir", offset_of!(FrameUniforms, sun_dir)),
         ("data_size", offset_of!(FrameUniforms, data_size)),
     ];
-    for (name, source) in composed_shaders() {
-        let module = naga::front::wgsl::parse_str(source).expect("composed shader parses");
-        let frame = module
-            .types
-            .iter()
-            .find(|(_, t)| t.name.as_deref() == Some("Frame"))
-            .unwrap_or_else(|| panic!("{name}: no struct Frame"))
-            .1;
-        let naga::TypeInner::Struct { members, span } = &frame.inner else {
-            panic!("{name}: Frame is not a struct")
-        };
-        let wgsl: Vec<(&str, usize)> = members
-            .iter()
-            .map(|m| (m.name.as_deref().unwrap_or("?"), m.offset as usize))
-            .collect();
-        assert_eq!(wgsl, rust, "{name}: member names/offsets differ");
-        assert_eq!(
-            *span as usize,
-            size_of::<FrameUniforms>(),
-            "{name}: size differs"
-        );
-    }
+    assert_struct_layout(
+        &composed_shaders(),
+        "Frame",
+        &rust,
+        size_of::<FrameUniforms>(),
+    );
+}
+
+#[test]
+fn udlod_uniforms_match_the_wgsl_struct() {
+    let rust = [
+        ("frustum", offset_of!(UdlodUniforms, frustum)),
+        ("split", offset_of!(UdlodUniforms, split)),
+        ("levels", offset_of!(UdlodUniforms, levels)),
+        ("sizes", offset_of!(UdlodUniforms, sizes)),
+        ("params", offset_of!(UdlodUniforms, params)),
+        ("viewer", offset_of!(UdlodUniforms, viewer)),
+        ("counts", offset_of!(UdlodUniforms, counts)),
+    ];
+    let shaders = composed_shaders();
+    assert_struct_layout(&shaders[1..], "Udlod", &rust, size_of::<UdlodUniforms>());
+}
+
+#[test]
+fn tiling_state_matches_the_wgsl_struct() {
+    // The WGSL side spells the indirect-argument arrays out member by member.
+    let draw = offset_of!(TilingState, draw);
+    let rust = [
+        ("dispatch_x", offset_of!(TilingState, dispatch)),
+        ("dispatch_y", offset_of!(TilingState, dispatch) + 4),
+        ("dispatch_z", offset_of!(TilingState, dispatch) + 8),
+        ("pass_index", offset_of!(TilingState, pass_index)),
+        ("index_count", draw),
+        ("instance_count", draw + 4),
+        ("first_index", draw + 8),
+        ("vertex_offset", draw + 12),
+        ("first_instance", draw + 16),
+        ("parent_count", offset_of!(TilingState, parent_count)),
+        ("child_count", offset_of!(TilingState, child_count)),
+        ("final_count", offset_of!(TilingState, final_count)),
+        ("reserved_leaves", offset_of!(TilingState, reserved_leaves)),
+        ("overflow", offset_of!(TilingState, overflow)),
+        ("culled", offset_of!(TilingState, culled)),
+        ("passes_started", offset_of!(TilingState, passes_started)),
+    ];
+    assert_struct_layout(
+        &[("udlod_tiling", UDLOD_TILING_WGSL)],
+        "TilingState",
+        &rust,
+        size_of::<TilingState>(),
+    );
+    // The vkCmdDispatchIndirect / vkCmdDrawIndexedIndirect argument layouts.
+    assert_eq!(offset_of!(TilingState, dispatch), 0);
+    assert_eq!(draw % 4, 0);
+    assert_eq!(size_of::<[u32; 5]>(), 20);
+}
+
+#[test]
+fn tile_record_matches_the_wgsl_struct() {
+    assert_struct_layout(
+        &composed_shaders()[1..],
+        "Tile",
+        &[("x", 0), ("y", 4), ("lod", 8), ("pad", 12)],
+        vkterrain::lod::udlod::TILE_BYTES as usize,
+    );
 }
 
 #[test]

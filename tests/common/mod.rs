@@ -49,9 +49,20 @@ pub fn render(
     options: RenderOptions,
     requests: &[FrameRequest],
 ) -> Vec<OwnedFrame> {
+    render_method(gpu, data, MethodKind::Brute, options, requests)
+}
+
+/// [`render`] with any method.
+pub fn render_method(
+    gpu: &Arc<Gpu>,
+    data: &Heightmap,
+    method: MethodKind,
+    options: RenderOptions,
+    requests: &[FrameRequest],
+) -> Vec<OwnedFrame> {
     let mut sink = CollectSink::default();
     {
-        let mut renderer = Renderer::new(gpu, data, MethodKind::Brute, options).expect("renderer");
+        let mut renderer = Renderer::new(gpu, data, method, options).expect("renderer");
         for r in requests {
             renderer.render(*r, &mut sink).expect("render");
         }

@@ -53,7 +53,7 @@ pub struct TilingState {
 }
 
 const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
-const TILE_BYTES: u64 = 16;
+pub const TILE_BYTES: u64 = 16;
 
 struct SlotBuffers {
     uniforms: Buffer,
