@@ -8,7 +8,7 @@ RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers
 TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
 CARGO ?= cargo
 
-.PHONY: run test bench deps deps-test
+.PHONY: run test bench bench-udlod data-srtm deps deps-test
 
 run: deps
 	$(CARGO) run --release --locked -- render --config config/default.toml
@@ -18,6 +18,15 @@ test: deps-test
 
 bench: deps
 	$(CARGO) bench --locked --bench frame_time
+
+# UDLOD vs brute force on the procedural, Puget Sound and SRTM data (../shared/data).
+bench-udlod: deps data-srtm
+	$(CARGO) bench --locked --bench udlod
+
+data-srtm: target/data/n48w125/manifest.json
+
+target/data/n48w125/manifest.json:
+	$(CARGO) run --release --locked -- preprocess ../shared/data/srtm/N48W125.hgt.zip --out target/data/n48w125
 
 deps:
 	@scripts/ensure-packages.sh $(RUN_PACKAGES)

@@ -43,10 +43,7 @@ impl Summary {
             return Summary::default();
         }
         values.sort_by(|a, b| a.total_cmp(b));
-        let rank = |q: f64| {
-            let i = (q * values.len() as f64).ceil() as usize;
-            values[i.clamp(1, values.len()) - 1]
-        };
+        let rank = |q: f64| crate::render::stats::nearest_rank(values, q);
         Summary {
             count: values.len(),
             mean: values.iter().sum::<f64>() / values.len() as f64,

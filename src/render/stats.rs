@@ -101,7 +101,7 @@ impl Percentiles {
             return Percentiles::default();
         }
         v.sort_by(f64::total_cmp);
-        let rank = |p: f64| v[((p * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1];
+        let rank = |p: f64| nearest_rank(&v, p);
         Percentiles {
             median: rank(0.5),
             p90: rank(0.9),
@@ -128,4 +128,9 @@ pub struct Summary {
     pub triangles: Percentiles,
     /// Fraction of frames delivered while the next frame was still on the GPU.
     pub overlapped_fraction: f64,
+}
+
+/// Nearest-rank percentile `q` (0..=1) of ascending `sorted` values (not empty).
+pub fn nearest_rank(sorted: &[f64], q: f64) -> f64 {
+    sorted[((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1]
 }
