@@ -49,4 +49,10 @@ shared_constants! {
     UDLOD_NO_SPLIT: f32 = 3.0e38;
     /// Threads per workgroup of the tiling passes.
     UDLOD_WORKGROUP: u32 = 64;
+    /// Most levels a clipmap quadtree holds (per-level windows in the quadtree header).
+    CLIPMAP_MAX_LEVELS: u32 = 16;
+    /// A quadtree entry is `atlas_index | atlas_lod << CLIPMAP_LOD_SHIFT` (R16G16_UINT-like).
+    CLIPMAP_LOD_SHIFT: u32 = 16;
+    /// Threads per workgroup of the height probe (tests: GPU heights read back).
+    CLIPMAP_PROBE_WORKGROUP: u32 = 64;
 }

@@ -7,6 +7,7 @@
 //! [`eval`] measures rendered frames against the exact surface.
 
 pub mod cli;
+pub mod clipmap;
 pub mod config;
 pub mod dataset;
 pub mod driver;

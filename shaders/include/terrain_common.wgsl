@@ -22,6 +22,8 @@ struct Frame {
 // sRGB albedo covering the data extent edge to edge.
 @group(0) @binding(3) var albedo_tex: texture_2d<f32>;
 @group(0) @binding(4) var linear_sampler: sampler;
+// Bindings 5 and 6: the chunked clipmap (atlas + this view's quadtree).
+//!include clipmap.wgsl
 
 struct TerrainVertex {
     @builtin(position) clip: vec4<f32>,
@@ -29,10 +31,21 @@ struct TerrainVertex {
     @location(0) grid_pos: vec2<f32>,
 }
 
-// Height in metres at an integer sample, clamped to the data.
-fn sample_height(s: vec2<i32>) -> f32 {
+// Height in metres at an integer sample of the single height texture, clamped to the data.
+fn texture_height(s: vec2<i32>) -> f32 {
     let hi = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
     return textureLoad(height_tex, clamp(s, vec2<i32>(0), hi), 0).r;
+}
+
+// Height in metres at an integer sample, clamped to the data: through the clipmap when it is
+// enabled (a uniform branch), else from the single height texture.
+fn sample_height(s: vec2<i32>) -> f32 {
+    let hi = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+    let c = clamp(s, vec2<i32>(0), hi);
+    if clipmap.params.x != 0u {
+        return clipmap_height(vec2<f32>(c));
+    }
+    return textureLoad(height_tex, c, 0).r;
 }
 
 // Bilinear height at a position in sample units; exact at integer positions (weights 1 and 0).

@@ -16,6 +16,8 @@ use std::time::{Duration, Instant};
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
+use crate::clipmap::Clipmap;
+use crate::clipmap::gpu::ClipmapGpu;
 use crate::dataset::Heightmap;
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, ImageAccess, MemoryAccess, color_range, depth_range};
@@ -141,6 +143,8 @@ pub struct Renderer {
     slots: Vec<Slot>,
     method: Box<dyn LodMethod>,
     terrain: TerrainGpu,
+    clipmap: Option<Clipmap>,
+    clipmap_gpu: ClipmapGpu,
     formats: TargetFormats,
     timeline: Timeline,
     timestamps: bool,
@@ -156,6 +160,18 @@ impl Renderer {
         data: &Heightmap,
         method: MethodKind,
         options: RenderOptions,
+    ) -> Result<Self> {
+        Self::with_clipmap(gpu, data, method, options, None)
+    }
+
+    /// [`Renderer::new`] with heights sampled through `clipmap` (its level 0 must be `data`:
+    /// `data` still provides the normal map and albedo).
+    pub fn with_clipmap(
+        gpu: &Arc<Gpu>,
+        data: &Heightmap,
+        method: MethodKind,
+        options: RenderOptions,
+        clipmap: Option<Clipmap>,
     ) -> Result<Self> {
         let limits = &gpu.info.limits;
         if options.width == 0
@@ -181,7 +197,28 @@ impl Renderer {
             ));
         }
         let n = options.frames_in_flight;
-        let terrain = TerrainGpu::new(gpu, data, n)?;
+        if let Some(c) = &clipmap
+            && (c.geometry.width, c.geometry.height) != (data.width as u64, data.height as u64)
+        {
+            return Err(Error::invalid(
+                "clipmap",
+                format!(
+                    "level 0 is {}x{} but the height map is {}x{} (use the data set's level 0)",
+                    c.geometry.width, c.geometry.height, data.width, data.height
+                ),
+            ));
+        }
+        let clipmap_gpu = match &clipmap {
+            Some(c) => ClipmapGpu::new(
+                gpu,
+                Some(&c.geometry),
+                &c.settings,
+                c.settings.node_count,
+                n,
+            )?,
+            None => ClipmapGpu::new(gpu, None, &Default::default(), 2, n)?,
+        };
+        let terrain = TerrainGpu::new(gpu, data, n, &clipmap_gpu)?;
         let render_pass = if gpu.modern {
             vk::RenderPass::null()
         } else {
@@ -223,6 +260,8 @@ impl Renderer {
             slots,
             method,
             terrain,
+            clipmap,
+            clipmap_gpu,
             formats,
             timeline: Timeline::new(gpu)?,
             timestamps,
@@ -359,6 +398,30 @@ impl Renderer {
         self.method.as_ref()
     }
 
+    /// The clipmap, when heights come through one (counters, CPU `sample_height`).
+    pub fn clipmap(&self) -> Option<&Clipmap> {
+        self.clipmap.as_ref()
+    }
+
+    /// Tests and tools: GPU heights at level-0 sample positions for the state of the last
+    /// rendered frame, `[clipmap_height, single-texture bilinear]` each. Call after
+    /// [`Renderer::finish`]; waits for the GPU.
+    pub fn probe_heights(&self, points: &[[f32; 2]]) -> Result<Vec<[f32; 2]>> {
+        if self.next_frame == 0 || !self.in_flight.is_empty() {
+            return Err(Error::invalid(
+                "probe_heights",
+                "needs a rendered, finished frame",
+            ));
+        }
+        let slot = ((self.next_frame - 1) % self.slots.len() as u64) as usize;
+        crate::clipmap::gpu::probe_heights(
+            &self.gpu,
+            self.terrain.set_layout,
+            self.terrain.sets[slot],
+            points,
+        )
+    }
+
     pub fn method_name(&self) -> &'static str {
         self.method.name()
     }
@@ -401,6 +464,18 @@ impl Renderer {
             self.options.sun_dir,
         );
         self.terrain.uniforms[slot_index].write(uniforms.as_bytes())?;
+        if let Some(cm) = &mut self.clipmap {
+            let spacing = self.terrain.info.spacing;
+            let viewer = glam::DVec2::new(view.lod_viewer.x / spacing, view.lod_viewer.y / spacing);
+            let uploads = cm.update(&[viewer]);
+            self.clipmap_gpu.write_slot(
+                slot_index,
+                &cm.geometry,
+                &cm.views[0],
+                &cm.atlas,
+                &uploads,
+            )?;
+        }
         self.method.update(slot_index, &view)?;
         let sky = request.sky.unwrap_or(self.options.sky);
         self.record(slot_index, sky)?;
@@ -547,6 +622,8 @@ impl Renderer {
             d.cmd_reset_query_pool(cmd, slot.queries, 0, TIMESTAMPS);
             d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, slot.queries, 0);
         }
+        // New atlas nodes first: after every earlier frame's sampling, before this frame's.
+        self.clipmap_gpu.record_uploads(cmd, slot_index);
         self.method
             .record_prepass(cmd, slot_index, self.terrain.sets[slot_index]);
         let slot = &self.slots[slot_index];

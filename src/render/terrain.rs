@@ -78,7 +78,14 @@ pub struct TerrainGpu {
 }
 
 impl TerrainGpu {
-    pub fn new(gpu: &Arc<Gpu>, data: &Heightmap, slots: usize) -> Result<Self> {
+    /// `clipmap`: the clipmap's device mirror bound at bindings 5 (atlas) and 6 (the slot's
+    /// quadtree); a disabled placeholder keeps the single-texture path.
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        data: &Heightmap,
+        slots: usize,
+        clipmap: &crate::clipmap::gpu::ClipmapGpu,
+    ) -> Result<Self> {
         let max_side = gpu.info.limits.max_image_dimension2_d;
         if data.width > max_side || data.height > max_side {
             return Err(Error::invalid(
@@ -162,6 +169,8 @@ impl TerrainGpu {
             binding(2, vk::DescriptorType::SAMPLED_IMAGE),
             binding(3, vk::DescriptorType::SAMPLED_IMAGE),
             binding(4, vk::DescriptorType::SAMPLER),
+            binding(5, vk::DescriptorType::SAMPLED_IMAGE),
+            binding(6, vk::DescriptorType::STORAGE_BUFFER),
         ];
         let set_layout = unsafe {
             d.create_descriptor_set_layout(
@@ -178,7 +187,11 @@ impl TerrainGpu {
             },
             vk::DescriptorPoolSize {
                 ty: vk::DescriptorType::SAMPLED_IMAGE,
-                descriptor_count: 3 * n,
+                descriptor_count: 4 * n,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::STORAGE_BUFFER,
+                descriptor_count: n,
             },
             vk::DescriptorPoolSize {
                 ty: vk::DescriptorType::SAMPLER,
@@ -224,11 +237,17 @@ impl TerrainGpu {
                     image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
                 }]
             };
-            let (hi, ni, ai) = (
+            let (hi, ni, ai, ci) = (
                 image_info(height.view),
                 image_info(normal.view),
                 image_info(albedo.view),
+                image_info(clipmap.atlas.view),
             );
+            let qi = [vk::DescriptorBufferInfo {
+                buffer: clipmap.quadtrees[slot].raw,
+                offset: 0,
+                range: vk::WHOLE_SIZE,
+            }];
             let si = [vk::DescriptorImageInfo {
                 sampler,
                 ..Default::default()
@@ -245,6 +264,8 @@ impl TerrainGpu {
                 write(2, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ni),
                 write(3, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ai),
                 write(4, vk::DescriptorType::SAMPLER).image_info(&si),
+                write(5, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ci),
+                write(6, vk::DescriptorType::STORAGE_BUFFER).buffer_info(&qi),
             ];
             unsafe { d.update_descriptor_sets(&writes, &[]) };
             uniforms.push(ubo);

@@ -1,0 +1,72 @@
+// The chunked clipmap lookup (docs/clipmap.md). Mirrors `ViewQuadtree::lookup` in
+// src/clipmap/quadtree.rs operation for operation; tests/clipmap.rs reads GPU heights back and
+// proves them equal to the CPU's.
+
+struct Clipmap {
+    // x: enabled (0: heights come from height_tex), y: levels, z: node_count, w: centre texels.
+    params: vec4<u32>,
+    // x: border texels, y: texels per layer side.
+    params2: vec4<u32>,
+    // Per level: window origin (nodes) xy, the level's node counts zw.
+    levels: array<vec4<i32>, CLIPMAP_MAX_LEVELS>,
+    // levels x node_count x node_count, index (l * n + y % n) * n + x % n:
+    // atlas layer | atlas lod << CLIPMAP_LOD_SHIFT; 0xffffffff: nothing resident.
+    entries: array<u32>,
+}
+
+// Heights of resident nodes, one layer per atlas slot, read with textureLoad (exact texels).
+@group(0) @binding(5) var atlas_height: texture_2d_array<f32>;
+@group(0) @binding(6) var<storage, read> clipmap: Clipmap;
+
+// 2^-l exactly (from the exponent bits; no division or exp2 whose precision varies).
+fn clipmap_inv_pow2(l: u32) -> f32 {
+    return bitcast<f32>((127u - l) << 23u);
+}
+
+// Level-l texel coordinate of a level-0 sample position (texel centres at integers).
+fn clipmap_level_coord(p: vec2<f32>, l: u32) -> vec2<f32> {
+    let half = (f32(1u << l) - 1.0) * 0.5;
+    return (p - vec2<f32>(half)) * clipmap_inv_pow2(l);
+}
+
+// Height in metres at a level-0 sample position. Constant time: at most `levels` integer
+// window tests, one entry read, four texel loads.
+fn clipmap_height(p: vec2<f32>) -> f32 {
+    let n = i32(clipmap.params.z);
+    let c = i32(clipmap.params.w);
+    let lods = clipmap.params.y;
+    var l = 0u;
+    var node = vec2<i32>(0);
+    loop {
+        let lv = clipmap.levels[l];
+        let t = clipmap_level_coord(p, l);
+        node = clamp(vec2<i32>(floor(t)) / c, vec2<i32>(0), lv.zw - vec2<i32>(1));
+        let hi = lv.xy + min(vec2<i32>(n), lv.zw);
+        if (all(node >= lv.xy) && all(node < hi)) || l + 1u >= lods {
+            break;
+        }
+        l += 1u;
+    }
+    let cell = (i32(l) * n + node.y % n) * n + node.x % n;
+    let e = clipmap.entries[cell];
+    if e == 0xffffffffu {
+        return 0.0;
+    }
+    let layer = i32(e & ((1u << CLIPMAP_LOD_SHIFT) - 1u));
+    let al = e >> CLIPMAP_LOD_SHIFT;
+    let b = i32(clipmap.params2.x);
+    let side = i32(clipmap.params2.y);
+    let anc = node >> vec2<u32>(al - l);
+    let t = clipmap_level_coord(p, al);
+    let local = t - vec2<f32>(anc * c);
+    let base = floor(local);
+    let f = local - base;
+    let ij = clamp(vec2<i32>(base) + vec2<i32>(b), vec2<i32>(0), vec2<i32>(side - 2));
+    let h00 = textureLoad(atlas_height, ij, layer, 0).r;
+    let h10 = textureLoad(atlas_height, ij + vec2<i32>(1, 0), layer, 0).r;
+    let h01 = textureLoad(atlas_height, ij + vec2<i32>(0, 1), layer, 0).r;
+    let h11 = textureLoad(atlas_height, ij + vec2<i32>(1, 1), layer, 0).r;
+    let south = h00 + (h10 - h00) * f.x;
+    let north = h01 + (h11 - h01) * f.x;
+    return south + (north - south) * f.y;
+}

@@ -1,0 +1,334 @@
+//! The clipmap on the device: the height atlas (an R32F 2D-array texture, one layer per atlas
+//! slot), one quadtree storage buffer per frame slot and one staging buffer per frame slot.
+//!
+//! Per frame, [`ClipmapGpu::write_slot`] (host, after the slot's previous GPU work completed)
+//! fills the slot's quadtree buffer and copies the frame's new nodes into the slot's staging
+//! buffer; [`ClipmapGpu::record_uploads`] records, at the start of the frame's command buffer,
+//! per layer: a barrier after every earlier sampling of the layer (earlier frames in the queue),
+//! the copy, and a barrier before this frame's shaders. The host never waits for an upload.
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use super::atlas::Atlas;
+use super::quadtree::{HEADER_BYTES, ViewQuadtree};
+use super::{ClipmapSettings, Geometry};
+use crate::driver::Gpu;
+use crate::driver::barrier::{Barriers, ImageAccess, MemoryAccess};
+use crate::driver::memory::{Buffer, Image, ImageDesc};
+use crate::error::{Error, Result, VkResultExt};
+use crate::gpu_constants::CLIPMAP_PROBE_WORKGROUP;
+
+pub struct ClipmapGpu {
+    gpu: Arc<Gpu>,
+    pub atlas: Image,
+    pub quadtrees: Vec<Buffer>,
+    staging: Vec<Option<Buffer>>,
+    staged: Vec<Vec<u16>>,
+    side: u32,
+    scratch: Vec<u8>,
+}
+
+fn layer_range(layer: u32) -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: layer,
+        layer_count: 1,
+    }
+}
+
+impl ClipmapGpu {
+    /// The device mirror; `geometry` None: a disabled placeholder (tiny atlas, header with
+    /// `enabled = 0`) so the bindings exist for the single-texture path.
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        geometry: Option<&Geometry>,
+        settings: &ClipmapSettings,
+        node_count: u32,
+        slots: usize,
+    ) -> Result<Self> {
+        let (side, layers, cells) = match geometry {
+            Some(g) => {
+                let max_layers = gpu.info.limits.max_image_array_layers;
+                if settings.atlas_capacity > max_layers {
+                    return Err(Error::invalid(
+                        "clipmap.atlas_capacity",
+                        format!(
+                            "{} exceeds the device's {max_layers} array layers",
+                            settings.atlas_capacity
+                        ),
+                    ));
+                }
+                (
+                    g.side(),
+                    settings.atlas_capacity.max(2),
+                    g.levels.len() as u64 * (node_count as u64).pow(2),
+                )
+            }
+            None => (1, 2, 1),
+        };
+        let atlas = Image::new(
+            gpu,
+            &ImageDesc {
+                name: "clipmap height atlas",
+                format: vk::Format::R32_SFLOAT,
+                extent: vk::Extent2D {
+                    width: side,
+                    height: side,
+                },
+                layers,
+                mips: 1,
+                usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
+                aspect: vk::ImageAspectFlags::COLOR,
+            },
+        )?;
+        let all = vk::ImageSubresourceRange {
+            layer_count: layers,
+            ..layer_range(0)
+        };
+        gpu.one_shot(|cmd| {
+            Barriers::new(gpu).image(
+                cmd,
+                atlas.raw,
+                all,
+                ImageAccess::Undefined,
+                ImageAccess::SampledAnyShader,
+            )
+        })?;
+        let mut quadtrees = Vec::with_capacity(slots);
+        let mut staging = Vec::with_capacity(slots);
+        for s in 0..slots {
+            let mut q = Buffer::new(
+                gpu,
+                &format!("clipmap quadtree {s}"),
+                HEADER_BYTES + cells * 4,
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?;
+            if let Some(m) = q.mapped_mut() {
+                m.fill(0);
+            }
+            quadtrees.push(q);
+            staging.push(match geometry {
+                Some(_) => Some(Buffer::new(
+                    gpu,
+                    &format!("clipmap staging {s}"),
+                    settings.max_uploads_per_frame as u64 * (side as u64).pow(2) * 4,
+                    vk::BufferUsageFlags::TRANSFER_SRC,
+                    MemoryLocation::CpuToGpu,
+                )?),
+                None => None,
+            });
+        }
+        Ok(ClipmapGpu {
+            gpu: gpu.clone(),
+            atlas,
+            quadtrees,
+            staging,
+            staged: vec![Vec::new(); slots],
+            side,
+            scratch: Vec::new(),
+        })
+    }
+
+    /// Host side of a frame in `slot` (whose previous GPU work is complete): the quadtree of
+    /// `view` into the slot's buffer and the `uploads` layers into the slot's staging buffer.
+    pub fn write_slot(
+        &mut self,
+        slot: usize,
+        geometry: &Geometry,
+        view: &ViewQuadtree,
+        atlas: &Atlas,
+        uploads: &[u16],
+    ) -> Result<()> {
+        view.gpu_bytes(geometry, &mut self.scratch);
+        self.quadtrees[slot].write(&self.scratch)?;
+        let texels = (self.side as usize).pow(2);
+        let staging = self.staging[slot]
+            .as_mut()
+            .and_then(|b| b.mapped_mut())
+            .ok_or_else(|| Error::invalid("clipmap", "staging buffer not mapped"))?;
+        if uploads.len() * texels * 4 > staging.len() {
+            return Err(Error::invalid("clipmap", "more uploads than staging space"));
+        }
+        for (k, &layer) in uploads.iter().enumerate() {
+            let dst = &mut staging[k * texels * 4..(k + 1) * texels * 4];
+            for j in 0..self.side {
+                for i in 0..self.side {
+                    let t = (j * self.side + i) as usize * 4;
+                    dst[t..t + 4].copy_from_slice(&atlas.texel(layer, i, j).to_le_bytes());
+                }
+            }
+        }
+        self.staged[slot] = uploads.to_vec();
+        Ok(())
+    }
+
+    /// Records the slot's staged uploads (before anything of the frame samples the atlas).
+    pub fn record_uploads(&mut self, cmd: vk::CommandBuffer, slot: usize) {
+        let layers = std::mem::take(&mut self.staged[slot]);
+        let Some(staging) = self.staging[slot].as_ref() else {
+            return;
+        };
+        let b = Barriers::new(&self.gpu);
+        let bytes = (self.side as u64).pow(2) * 4;
+        for (k, &layer) in layers.iter().enumerate() {
+            let range = layer_range(layer as u32);
+            b.image(
+                cmd,
+                self.atlas.raw,
+                range,
+                ImageAccess::SampledAnyShader,
+                ImageAccess::TransferDst,
+            );
+            let region = vk::BufferImageCopy::default()
+                .buffer_offset(k as u64 * bytes)
+                .image_subresource(vk::ImageSubresourceLayers {
+                    aspect_mask: vk::ImageAspectFlags::COLOR,
+                    mip_level: 0,
+                    base_array_layer: layer as u32,
+                    layer_count: 1,
+                })
+                .image_extent(vk::Extent3D {
+                    width: self.side,
+                    height: self.side,
+                    depth: 1,
+                });
+            unsafe {
+                self.gpu.device.cmd_copy_buffer_to_image(
+                    cmd,
+                    staging.raw,
+                    self.atlas.raw,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    &[region],
+                )
+            };
+            b.image(
+                cmd,
+                self.atlas.raw,
+                range,
+                ImageAccess::TransferDst,
+                ImageAccess::SampledAnyShader,
+            );
+        }
+    }
+}
+
+/// Tests and tools: evaluates `clipmap_height(p)` (x) and the single-texture bilinear
+/// `texture_height_at(p)` (y) on the GPU for each point (level-0 sample units), through
+/// descriptor set 0 `frame_set` (the state of the frame that set last rendered). Waits.
+pub fn probe_heights(
+    gpu: &Arc<Gpu>,
+    frame_layout: vk::DescriptorSetLayout,
+    frame_set: vk::DescriptorSet,
+    points: &[[f32; 2]],
+) -> Result<Vec<[f32; 2]>> {
+    if points.is_empty() {
+        return Ok(Vec::new());
+    }
+    let d = &gpu.device;
+    let mut io = Buffer::new(
+        gpu,
+        "clipmap probe",
+        16 + points.len() as u64 * 16,
+        vk::BufferUsageFlags::STORAGE_BUFFER,
+        MemoryLocation::GpuToCpu,
+    )?;
+    let mut bytes = Vec::with_capacity(16 + points.len() * 16);
+    for v in [points.len() as u32, 0, 0, 0] {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    for p in points {
+        for v in [p[0], p[1], 0.0, 0.0] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    io.write(&bytes)?;
+    let binding = [vk::DescriptorSetLayoutBinding::default()
+        .binding(0)
+        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+        .descriptor_count(1)
+        .stage_flags(vk::ShaderStageFlags::COMPUTE)];
+    let layout = unsafe {
+        d.create_descriptor_set_layout(
+            &vk::DescriptorSetLayoutCreateInfo::default().bindings(&binding),
+            None,
+        )
+    }
+    .vk("vkCreateDescriptorSetLayout")?;
+    let result = (|| {
+        let sizes = [vk::DescriptorPoolSize {
+            ty: vk::DescriptorType::STORAGE_BUFFER,
+            descriptor_count: 1,
+        }];
+        let pool = unsafe {
+            d.create_descriptor_pool(
+                &vk::DescriptorPoolCreateInfo::default()
+                    .max_sets(1)
+                    .pool_sizes(&sizes),
+                None,
+            )
+        }
+        .vk("vkCreateDescriptorPool")?;
+        let r = (|| {
+            let set = unsafe {
+                d.allocate_descriptor_sets(
+                    &vk::DescriptorSetAllocateInfo::default()
+                        .descriptor_pool(pool)
+                        .set_layouts(&[layout]),
+                )
+            }
+            .vk("vkAllocateDescriptorSets")?[0];
+            let info = [vk::DescriptorBufferInfo {
+                buffer: io.raw,
+                offset: 0,
+                range: vk::WHOLE_SIZE,
+            }];
+            unsafe {
+                d.update_descriptor_sets(
+                    &[vk::WriteDescriptorSet::default()
+                        .dst_set(set)
+                        .dst_binding(0)
+                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                        .buffer_info(&info)],
+                    &[],
+                )
+            };
+            let pipeline = crate::render::pipeline::compute_pipeline(
+                gpu,
+                crate::driver::shaders::CLIPMAP_PROBE_SPV,
+                c"probe_main",
+                &[frame_layout, layout],
+            )?;
+            let groups = (points.len() as u32).div_ceil(CLIPMAP_PROBE_WORKGROUP);
+            gpu.one_shot(|cmd| unsafe {
+                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
+                d.cmd_bind_descriptor_sets(
+                    cmd,
+                    vk::PipelineBindPoint::COMPUTE,
+                    pipeline.layout,
+                    0,
+                    &[frame_set, set],
+                    &[],
+                );
+                d.cmd_dispatch(cmd, groups, 1, 1);
+                Barriers::new(gpu).memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::HostRead);
+            })
+        })();
+        unsafe { d.destroy_descriptor_pool(pool, None) };
+        r
+    })();
+    unsafe { d.destroy_descriptor_set_layout(layout, None) };
+    result?;
+    let m = io
+        .mapped()
+        .ok_or_else(|| Error::invalid("clipmap probe", "buffer not mapped"))?;
+    let f = |o: usize| f32::from_le_bytes([m[o], m[o + 1], m[o + 2], m[o + 3]]);
+    Ok((0..points.len())
+        .map(|i| [f(16 + i * 16 + 8), f(16 + i * 16 + 12)])
+        .collect())
+}

@@ -1,0 +1,387 @@
+//! The chunked clipmap (background.md §2): a node atlas shared by all views, one clipped
+//! quadtree per view, asynchronous streaming with the four-step update every frame, and a CPU
+//! `sample_height` that returns what the GPU samples.
+//!
+//! `Clipmap` is the host side; [`gpu::ClipmapGpu`] mirrors it on the device (atlas texture
+//! array, per-slot quadtree buffers, per-slot staging). See `docs/clipmap.md`.
+
+pub mod atlas;
+pub mod gpu;
+pub mod quadtree;
+pub mod streaming;
+
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::DVec2;
+
+use crate::dataset::tiles::Dataset;
+use crate::error::{Error, Result};
+use crate::gpu_constants::CLIPMAP_MAX_LEVELS;
+use atlas::Atlas;
+use quadtree::ViewQuadtree;
+use streaming::{LoadResult, Streamer};
+
+/// A node of the pyramid: level and position in that level's node grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct NodeKey {
+    pub lod: u32,
+    pub x: u32,
+    pub y: u32,
+}
+
+impl NodeKey {
+    pub fn parent(self) -> NodeKey {
+        NodeKey {
+            lod: self.lod + 1,
+            x: self.x / 2,
+            y: self.y / 2,
+        }
+    }
+}
+
+/// Where node heights come from (the data set on disk; tests wrap it to fail or delay nodes).
+/// Called on worker threads.
+pub trait NodeSource: Send + Sync {
+    /// The node's `side x side` heights (borders included, row 0 = south).
+    fn load(&self, key: NodeKey) -> Result<Vec<f32>>;
+}
+
+/// A `vkterrain preprocess` data set as a node source.
+pub struct DatasetSource {
+    pub dataset: Dataset,
+}
+
+impl DatasetSource {
+    pub fn open(dir: &Path) -> Result<Self> {
+        Ok(DatasetSource {
+            dataset: Dataset::open(dir)?,
+        })
+    }
+}
+
+impl NodeSource for DatasetSource {
+    fn load(&self, key: NodeKey) -> Result<Vec<f32>> {
+        let node = self.dataset.read_node(key.lod, key.x, key.y)?;
+        let want = (self.dataset.layout.side() as usize).pow(2);
+        if node.heights.len() != want {
+            return Err(Error::invalid(
+                format!("node {}/{}/{}", key.lod, key.x, key.y),
+                format!("{} heights, expected {want}", node.heights.len()),
+            ));
+        }
+        if let Some(bad) = node.heights.iter().position(|h| !h.is_finite()) {
+            return Err(Error::invalid(
+                format!("node {}/{}/{}", key.lod, key.x, key.y),
+                format!("height {bad} is not finite: corrupt node"),
+            ));
+        }
+        Ok(node.heights)
+    }
+}
+
+/// Node geometry of a pyramid: centre and border texels, node counts per level.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Geometry {
+    /// Level-0 samples per side.
+    pub width: u64,
+    pub height: u64,
+    pub center: u32,
+    pub border: u32,
+    pub levels: Vec<(u32, u32)>,
+}
+
+impl Geometry {
+    pub fn of(ds: &Dataset) -> Self {
+        let l = &ds.layout;
+        Geometry {
+            width: l.width,
+            height: l.height,
+            center: l.center,
+            border: l.border,
+            levels: (0..l.levels()).map(|lod| l.nodes(lod)).collect(),
+        }
+    }
+
+    pub fn side(&self) -> u32 {
+        self.center + 2 * self.border
+    }
+}
+
+/// `[clipmap]` in the config.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClipmapSettings {
+    /// Sample heights through the clipmap (needs `dataset.kind = "tiles"`); off: one texture.
+    pub enabled: bool,
+    /// Atlas layers (one node each); fixed for the run: the GPU atlas memory budget.
+    pub atlas_capacity: u32,
+    /// Nodes per side of each level's window in the quadtree (even).
+    pub node_count: u32,
+    /// Most loads queued or finished-but-not-uploaded at once.
+    pub max_in_flight: u32,
+    /// Most nodes copied into the atlas per frame (sizes each slot's staging buffer).
+    pub max_uploads_per_frame: u32,
+    /// Loader threads.
+    pub workers: u32,
+    /// Frames before a node whose load failed is requested again.
+    pub retry_frames: u32,
+}
+
+impl Default for ClipmapSettings {
+    fn default() -> Self {
+        ClipmapSettings {
+            enabled: false,
+            atlas_capacity: 192,
+            node_count: 6,
+            max_in_flight: 16,
+            max_uploads_per_frame: 8,
+            workers: 1,
+            retry_frames: 120,
+        }
+    }
+}
+
+impl ClipmapSettings {
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid("clipmap", m));
+        if !(2..=65535).contains(&self.atlas_capacity) {
+            return bad(format!(
+                "atlas_capacity {} must be within 2..=65535",
+                self.atlas_capacity
+            ));
+        }
+        if !(2..=64).contains(&self.node_count) || self.node_count % 2 != 0 {
+            return bad(format!(
+                "node_count {} must be even and within 2..=64",
+                self.node_count
+            ));
+        }
+        if !(1..=1024).contains(&self.max_in_flight) {
+            return bad(format!(
+                "max_in_flight {} must be within 1..=1024",
+                self.max_in_flight
+            ));
+        }
+        if !(1..=256).contains(&self.max_uploads_per_frame) {
+            return bad(format!(
+                "max_uploads_per_frame {} must be within 1..=256",
+                self.max_uploads_per_frame
+            ));
+        }
+        if !(1..=16).contains(&self.workers) {
+            return bad(format!("workers {} must be within 1..=16", self.workers));
+        }
+        Ok(())
+    }
+}
+
+/// What streaming did so far (all counts since creation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Counters {
+    pub requested: u64,
+    pub loaded: u64,
+    pub uploaded: u64,
+    /// Loads that failed (missing/corrupt file, loader error); retried after `retry_frames`.
+    pub load_errors: u64,
+    /// Requests dropped because no view wanted the node any more (before or after loading).
+    pub cancelled: u64,
+    /// Node-frames a wanted node was not requested or not stored because every atlas layer
+    /// held a wanted node (atlas exhausted).
+    pub deferred: u64,
+    pub evictions: u64,
+    /// Frames in which some quadtree cell of view 0 pointed at a coarser (fallback) node.
+    pub fallback_frames: u64,
+}
+
+/// The host side of the clipmap.
+pub struct Clipmap {
+    pub geometry: Geometry,
+    pub settings: ClipmapSettings,
+    pub atlas: Atlas,
+    pub views: Vec<ViewQuadtree>,
+    streamer: Streamer,
+    frame: u64,
+    in_flight: HashSet<NodeKey>,
+    ready: VecDeque<(NodeKey, Vec<f32>)>,
+    failed: HashMap<NodeKey, u64>,
+    pending_uploads: Vec<u16>,
+    pub counters: Counters,
+}
+
+impl Clipmap {
+    /// Creates the atlas and `views` quadtrees, and loads the root level synchronously (set-up
+    /// time, pinned), so every lookup has a resident ancestor from the first frame.
+    pub fn new(
+        geometry: Geometry,
+        settings: ClipmapSettings,
+        source: Arc<dyn NodeSource>,
+        views: usize,
+    ) -> Result<Self> {
+        settings.validate()?;
+        let lods = geometry.levels.len() as u32;
+        if lods == 0 || lods > CLIPMAP_MAX_LEVELS {
+            return Err(Error::invalid(
+                "clipmap",
+                format!("{lods} levels, supported 1..={CLIPMAP_MAX_LEVELS}"),
+            ));
+        }
+        let root = NodeKey {
+            lod: lods - 1,
+            x: 0,
+            y: 0,
+        };
+        if geometry.levels[root.lod as usize] != (1, 1) {
+            return Err(Error::invalid(
+                "clipmap",
+                "the coarsest level must be a single node",
+            ));
+        }
+        let mut atlas = Atlas::new(settings.atlas_capacity, geometry.side());
+        let heights = source
+            .load(root)
+            .map_err(|e| Error::invalid("clipmap root node", e.to_string()))?;
+        let layer = atlas
+            .allocate(root, 0, true)
+            .ok_or_else(|| Error::invalid("clipmap", "atlas has no layer for the root"))?;
+        atlas.store(layer, heights);
+        let streamer = Streamer::new(source, settings.workers);
+        Ok(Clipmap {
+            views: (0..views.max(1))
+                .map(|_| ViewQuadtree::new(&geometry, settings.node_count))
+                .collect(),
+            geometry,
+            settings,
+            atlas,
+            streamer,
+            frame: 0,
+            in_flight: HashSet::new(),
+            ready: VecDeque::new(),
+            failed: HashMap::new(),
+            pending_uploads: vec![layer],
+            counters: Counters::default(),
+        })
+    }
+
+    /// Bytes of the GPU atlas (the memory budget the configuration fixes).
+    pub fn atlas_bytes(&self) -> u64 {
+        self.settings.atlas_capacity as u64 * (self.geometry.side() as u64).pow(2) * 4
+    }
+
+    /// Loads still queued or waiting for upload.
+    pub fn busy(&self) -> usize {
+        self.in_flight.len() + self.ready.len()
+    }
+
+    /// The four-step update for one frame. `viewers`: one position per view in level-0 sample
+    /// units. Returns the atlas layers whose contents changed (to upload this frame, in this
+    /// order; their data is [`Atlas::texel`]'s copy).
+    pub fn update(&mut self, viewers: &[DVec2]) -> Vec<u16> {
+        self.frame += 1;
+        let frame = self.frame;
+        // (1) recentre each view, collect wanted nodes; (2) union over views.
+        let mut wanted: HashMap<NodeKey, (u32, u64)> = HashMap::new();
+        for (view, &viewer) in self.views.iter_mut().zip(viewers) {
+            for (key, prio) in view.recentre(&self.geometry, viewer) {
+                let e = wanted.entry(key).or_insert(prio);
+                *e = (*e).min(prio);
+            }
+        }
+        for key in wanted.keys() {
+            self.atlas.touch(*key, frame);
+        }
+        self.streamer
+            .set_wanted(wanted.keys().copied().collect::<HashSet<_>>());
+
+        // Finished loads (never waits).
+        for (key, result) in self.streamer.poll() {
+            self.in_flight.remove(&key);
+            match result {
+                LoadResult::Loaded(h) if wanted.contains_key(&key) => {
+                    self.counters.loaded += 1;
+                    self.ready.push_back((key, h));
+                }
+                LoadResult::Loaded(_) | LoadResult::Cancelled => self.counters.cancelled += 1,
+                LoadResult::Failed(e) => {
+                    self.counters.load_errors += 1;
+                    tracing::warn!(
+                        "clipmap: node {}/{}/{} failed to load: {e}",
+                        key.lod,
+                        key.x,
+                        key.y
+                    );
+                    self.failed.insert(key, frame);
+                }
+            }
+        }
+
+        // (3) copy finished loads into the atlas, bounded per frame.
+        let mut uploads = std::mem::take(&mut self.pending_uploads);
+        while uploads.len() < self.settings.max_uploads_per_frame as usize {
+            let Some((key, heights)) = self.ready.pop_front() else {
+                break;
+            };
+            if !wanted.contains_key(&key) {
+                self.counters.cancelled += 1;
+                continue;
+            }
+            match self.atlas.allocate(key, frame, false) {
+                Some(layer) => {
+                    self.atlas.store(layer, heights);
+                    uploads.push(layer);
+                    self.counters.uploaded += 1;
+                }
+                None => self.counters.deferred += 1,
+            }
+        }
+
+        // New requests: coarse first, then near; bounded in flight and by free atlas layers.
+        let retry = self.settings.retry_frames as u64;
+        self.failed.retain(|_, f| frame - *f < retry);
+        let mut missing: Vec<(NodeKey, (u32, u64))> = wanted
+            .iter()
+            .filter(|(k, _)| {
+                self.atlas.layer_of(**k).is_none()
+                    && !self.in_flight.contains(k)
+                    && !self.failed.contains_key(k)
+                    && !self.ready.iter().any(|(r, _)| r == *k)
+            })
+            .map(|(k, p)| (*k, *p))
+            .collect();
+        missing.sort_by_key(|(k, p)| (*p, *k));
+        let wanted_resident = wanted
+            .keys()
+            .filter(|k| self.atlas.layer_of(**k).is_some())
+            .count();
+        let room = (self.atlas.capacity() as usize).saturating_sub(wanted_resident + self.busy());
+        let slots = (self.settings.max_in_flight as usize).saturating_sub(self.busy());
+        let n = missing.len().min(room).min(slots);
+        self.counters.deferred += (missing.len() - missing.len().min(room)) as u64;
+        for (key, _) in missing.into_iter().take(n) {
+            if self.streamer.request(key) {
+                self.in_flight.insert(key);
+                self.counters.requested += 1;
+            }
+        }
+
+        // (4) re-point every cell at its best resident node.
+        for view in &mut self.views {
+            view.resolve(&self.geometry, &self.atlas);
+        }
+        if self.views[0].fallback_cells > 0 {
+            self.counters.fallback_frames += 1;
+        }
+        self.counters.evictions = self.atlas.evictions;
+        uploads
+    }
+
+    /// Height in metres at a level-0 sample position as `view` samples it now (what the GPU
+    /// returns for the state of the last [`Clipmap::update`]).
+    pub fn sample_height(&self, view: usize, p: [f32; 2]) -> f32 {
+        self.views
+            .get(view)
+            .map(|v| v.lookup(&self.geometry, &self.atlas, p))
+            .unwrap_or(0.0)
+    }
+}

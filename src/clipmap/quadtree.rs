@@ -1,0 +1,228 @@
+//! The clipped quadtree of one view: per level a `node_count x node_count` window of nodes
+//! centred on the viewer (clamped into the level), addressed toroidally, each entry pointing at
+//! the best *resident* node covering it (`{atlas_index, atlas_lod}`; the nearest resident
+//! ancestor when the node itself is missing).
+//!
+//! [`lookup`] is the one height formula: `shaders/include/clipmap.wgsl` performs the same f32
+//! operations in the same order (power-of-two scales built from exponent bits, integer node
+//! arithmetic, no division or transcendental), and `tests/clipmap.rs` reads GPU heights back
+//! and proves them equal.
+
+use glam::DVec2;
+
+use super::atlas::Atlas;
+use super::{Geometry, NodeKey};
+use crate::gpu_constants::{CLIPMAP_LOD_SHIFT, CLIPMAP_MAX_LEVELS};
+
+/// Entry of a quadtree cell that has no resident node at all (never after the root is
+/// loaded, which [`super::Clipmap::new`] does before the first frame).
+pub const NO_NODE: u32 = u32::MAX;
+
+/// `2^-l` exactly, built from the exponent bits (the shader does the same).
+pub fn inv_pow2(l: u32) -> f32 {
+    f32::from_bits((127 - l) << 23)
+}
+
+/// Level-`l` continuous texel coordinate of a level-0 sample position (texel centres at
+/// integers; a level-`l` texel `u` covers samples `2^l u .. 2^l (u + 1) - 1`).
+pub fn level_coord(p: [f32; 2], l: u32) -> [f32; 2] {
+    let half = ((1u32 << l) as f32 - 1.0) * 0.5;
+    let inv = inv_pow2(l);
+    [(p[0] - half) * inv, (p[1] - half) * inv]
+}
+
+/// The state of one view's quadtree as the GPU reads it.
+#[derive(Clone, Debug)]
+pub struct ViewQuadtree {
+    pub node_count: u32,
+    /// Per level: window origin (nodes) and the level's node counts.
+    pub levels: Vec<[i32; 4]>,
+    /// `lod_count x n x n` packed entries, index `(l * n + y % n) * n + x % n`.
+    pub entries: Vec<u32>,
+    /// The node each cell holds (toroidal slot -> node), for tests and change tracking.
+    pub keys: Vec<Option<NodeKey>>,
+    /// Cells per level whose node changed in the last recentre.
+    pub changed: Vec<u32>,
+    /// Cells (within the data) that point at a coarser node than their own in the last frame.
+    pub fallback_cells: u64,
+}
+
+impl ViewQuadtree {
+    pub fn new(geometry: &Geometry, node_count: u32) -> Self {
+        let cells = geometry.levels.len() * (node_count * node_count) as usize;
+        ViewQuadtree {
+            node_count,
+            levels: vec![[0; 4]; geometry.levels.len()],
+            entries: vec![NO_NODE; cells],
+            keys: vec![None; cells],
+            changed: vec![0; geometry.levels.len()],
+            fallback_cells: 0,
+        }
+    }
+
+    fn cell(&self, l: u32, x: u32, y: u32) -> usize {
+        let n = self.node_count;
+        ((l * n + y % n) * n + x % n) as usize
+    }
+
+    /// Recentres every level's window on `viewer` (level-0 sample units) and returns the nodes
+    /// of all windows with a priority key (smaller = sooner: coarse first, then near).
+    pub fn recentre(&mut self, geometry: &Geometry, viewer: DVec2) -> Vec<(NodeKey, (u32, u64))> {
+        let n = self.node_count as i64;
+        let c = geometry.center as f64;
+        let lods = geometry.levels.len() as u32;
+        let mut wanted = Vec::new();
+        self.changed.iter_mut().for_each(|c| *c = 0);
+        for l in 0..lods {
+            let (nx, ny) = geometry.levels[l as usize];
+            let half = ((1u64 << l) as f64 - 1.0) * 0.5;
+            let s = (1u64 << l) as f64;
+            let centre = |v: f64, nodes: u32| {
+                let node = (((v - half) / s) / c).floor() as i64;
+                (node - n / 2).clamp(0, (nodes as i64 - n).max(0))
+            };
+            let (ox, oy) = (centre(viewer.x, nx), centre(viewer.y, ny));
+            self.levels[l as usize] = [ox as i32, oy as i32, nx as i32, ny as i32];
+            let (vx, vy) = (
+                ((viewer.x - half) / s / c).floor(),
+                ((viewer.y - half) / s / c).floor(),
+            );
+            for y in oy..(oy + n).min(ny as i64) {
+                for x in ox..(ox + n).min(nx as i64) {
+                    let key = NodeKey {
+                        lod: l,
+                        x: x as u32,
+                        y: y as u32,
+                    };
+                    let cell = self.cell(l, key.x, key.y);
+                    if self.keys[cell] != Some(key) {
+                        self.keys[cell] = Some(key);
+                        self.changed[l as usize] += 1;
+                    }
+                    let d = (x as f64 - vx).abs().max((y as f64 - vy).abs()) as u64;
+                    wanted.push((key, (lods - 1 - l, d)));
+                }
+            }
+        }
+        wanted
+    }
+
+    /// Points every cell of every window at its best resident node.
+    pub fn resolve(&mut self, geometry: &Geometry, atlas: &Atlas) {
+        let n = self.node_count as i32;
+        let lods = geometry.levels.len() as u32;
+        self.fallback_cells = 0;
+        for l in 0..lods {
+            let [ox, oy, nx, ny] = self.levels[l as usize];
+            for y in oy..(oy + n).min(ny) {
+                for x in ox..(ox + n).min(nx) {
+                    let mut key = NodeKey {
+                        lod: l,
+                        x: x as u32,
+                        y: y as u32,
+                    };
+                    let entry = loop {
+                        if let Some(layer) = atlas.layer_of(key) {
+                            break layer as u32 | key.lod << CLIPMAP_LOD_SHIFT;
+                        }
+                        if key.lod + 1 >= lods {
+                            break NO_NODE;
+                        }
+                        key = key.parent();
+                    };
+                    if entry == NO_NODE || entry >> CLIPMAP_LOD_SHIFT != l {
+                        self.fallback_cells += 1;
+                    }
+                    let cell = self.cell(l, x as u32, y as u32);
+                    self.entries[cell] = entry;
+                }
+            }
+        }
+    }
+
+    /// The quadtree level and node a position is looked up in: the finest level whose window
+    /// contains the position's node (the root level always does).
+    pub fn locate(&self, geometry: &Geometry, p: [f32; 2]) -> (u32, [i32; 2]) {
+        let n = self.node_count as i32;
+        let c = geometry.center as i32;
+        let lods = geometry.levels.len() as u32;
+        let mut l = 0;
+        loop {
+            let [ox, oy, nx, ny] = self.levels[l as usize];
+            let t = level_coord(p, l);
+            let node = [
+                ((t[0].floor() as i32) / c).clamp(0, nx - 1),
+                ((t[1].floor() as i32) / c).clamp(0, ny - 1),
+            ];
+            let inside = node[0] >= ox
+                && node[1] >= oy
+                && node[0] < ox + n.min(nx)
+                && node[1] < oy + n.min(ny);
+            if inside || l + 1 >= lods {
+                return (l, node);
+            }
+            l += 1;
+        }
+    }
+
+    /// Height at a level-0 sample position: exactly what `clipmap_height` in
+    /// `shaders/include/clipmap.wgsl` returns for the same state.
+    pub fn lookup(&self, geometry: &Geometry, atlas: &Atlas, p: [f32; 2]) -> f32 {
+        let (l, node) = self.locate(geometry, p);
+        let e = self.entries[self.cell(l, node[0] as u32, node[1] as u32)];
+        if e == NO_NODE {
+            return 0.0;
+        }
+        let layer = (e & ((1 << CLIPMAP_LOD_SHIFT) - 1)) as u16;
+        let al = e >> CLIPMAP_LOD_SHIFT;
+        let c = geometry.center as i32;
+        let b = geometry.border as i32;
+        let side = c + 2 * b;
+        let shift = al - l;
+        let anc = [node[0] >> shift, node[1] >> shift];
+        let t = level_coord(p, al);
+        let local = [t[0] - (anc[0] * c) as f32, t[1] - (anc[1] * c) as f32];
+        let base = [local[0].floor(), local[1].floor()];
+        let f = [local[0] - base[0], local[1] - base[1]];
+        let i = (base[0] as i32 + b).clamp(0, side - 2) as u32;
+        let j = (base[1] as i32 + b).clamp(0, side - 2) as u32;
+        let h00 = atlas.texel(layer, i, j);
+        let h10 = atlas.texel(layer, i + 1, j);
+        let h01 = atlas.texel(layer, i, j + 1);
+        let h11 = atlas.texel(layer, i + 1, j + 1);
+        let south = h00 + (h10 - h00) * f[0];
+        let north = h01 + (h11 - h01) * f[0];
+        south + (north - south) * f[1]
+    }
+
+    /// The GPU form: header (`params`, `params2`, `CLIPMAP_MAX_LEVELS` level windows) followed by
+    /// the entries, little-endian (`Clipmap` in `shaders/include/clipmap.wgsl`).
+    pub fn gpu_bytes(&self, geometry: &Geometry, out: &mut Vec<u8>) {
+        out.clear();
+        let side = geometry.center + 2 * geometry.border;
+        for v in [
+            1,
+            geometry.levels.len() as u32,
+            self.node_count,
+            geometry.center,
+            geometry.border,
+            side,
+            0,
+            0,
+        ] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for l in 0..CLIPMAP_MAX_LEVELS as usize {
+            let lv = self.levels.get(l).copied().unwrap_or([0, 0, 1, 1]);
+            for v in lv {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        for e in &self.entries {
+            out.extend_from_slice(&e.to_le_bytes());
+        }
+    }
+}
+
+/// Bytes of the GPU header before the entries.
+pub const HEADER_BYTES: u64 = 32 + 16 * CLIPMAP_MAX_LEVELS as u64;
