@@ -1,0 +1,425 @@
+//! The chunked clipmap: graceful degradation while nodes are missing, convergence to the
+//! full-data render, toroidal recentring, CPU/GPU agreement of `sample_height`, atlas
+//! exhaustion and loader errors. GPU tests run with validation (incl. synchronization) on.
+
+mod common;
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+
+use glam::{DVec2, DVec3};
+use vkterrain::clipmap::quadtree::NO_NODE;
+use vkterrain::clipmap::{Clipmap, ClipmapSettings, DatasetSource, Geometry, NodeKey, NodeSource};
+use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
+use vkterrain::dataset::procedural::ProceduralParams;
+use vkterrain::dataset::{Heightmap, tiles};
+use vkterrain::gpu_constants::CLIPMAP_LOD_SHIFT;
+use vkterrain::lod::MethodKind;
+use vkterrain::readback::{CollectSink, OwnedFrame};
+use vkterrain::render::Renderer;
+use vkterrain::scene::Camera;
+
+const SIZE: u32 = 513;
+const CENTER: u32 = 32;
+
+/// A 513² procedural data set with 32-texel nodes (17x17 leaf nodes, 6 levels), built once.
+fn dataset() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("vkterrain-clipmap-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("p513");
+        let opts = Options {
+            input: Input::Procedural(ProceduralParams {
+                size: SIZE,
+                seed: 3,
+                ..Default::default()
+            }),
+            out: out.clone(),
+            center_size: CENTER,
+            ..Default::default()
+        };
+        preprocess::run(&opts, &mut NoProgress).unwrap();
+        out
+    })
+}
+
+fn heightmap() -> Heightmap {
+    tiles::load(dataset(), Some(0), u64::MAX).unwrap()
+}
+
+/// Fails every node in `withheld` until `release` is set (a loader that loses nodes).
+struct Withholding {
+    inner: DatasetSource,
+    withheld: HashSet<NodeKey>,
+    release: AtomicBool,
+}
+
+impl NodeSource for Withholding {
+    fn load(&self, key: NodeKey) -> vkterrain::Result<Vec<f32>> {
+        if !self.release.load(Ordering::SeqCst) && self.withheld.contains(&key) {
+            return Err(vkterrain::Error::invalid("test", "node withheld"));
+        }
+        self.inner.load(key)
+    }
+}
+
+/// About `percent` % of the non-root nodes, chosen by a fixed hash.
+fn withheld(geometry: &Geometry, percent: u64) -> HashSet<NodeKey> {
+    let mut out = HashSet::new();
+    for (lod, &(nx, ny)) in geometry.levels.iter().enumerate() {
+        if lod + 1 == geometry.levels.len() {
+            continue;
+        }
+        for y in 0..ny {
+            for x in 0..nx {
+                let h =
+                    (x as u64 * 73_856_093) ^ (y as u64 * 19_349_663) ^ (lod as u64 * 83_492_791);
+                if h.wrapping_mul(2_654_435_761) % 100 < percent {
+                    out.insert(NodeKey {
+                        lod: lod as u32,
+                        x,
+                        y,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+fn settings(node_count: u32, capacity: u32) -> ClipmapSettings {
+    ClipmapSettings {
+        enabled: true,
+        atlas_capacity: capacity,
+        node_count,
+        max_in_flight: 64,
+        max_uploads_per_frame: 32,
+        workers: 2,
+        retry_frames: 3,
+    }
+}
+
+/// Straight down over the centre, the whole image covered by terrain.
+fn camera_over(data: &Heightmap, fx: f64, fy: f64) -> Camera {
+    let (ex, ey) = data.extent();
+    let (_, hi) = data.height_range();
+    Camera {
+        position: DVec3::new(fx * ex, fy * ey, hi as f64 + 0.25 * ex),
+        yaw_deg: 0.0,
+        pitch_deg: -90.0,
+        ..Camera::default()
+    }
+}
+
+/// Every cell of every view's windows points at a resident ancestor (or itself).
+fn assert_cells_resolve(cm: &Clipmap) {
+    for view in &cm.views {
+        let n = view.node_count;
+        for (l, lv) in view.levels.iter().enumerate() {
+            let [ox, oy, nx, ny] = *lv;
+            for y in oy..(oy + n as i32).min(ny) {
+                for x in ox..(ox + n as i32).min(nx) {
+                    let cell = ((l as u32 * n + y as u32 % n) * n + x as u32 % n) as usize;
+                    let e = view.entries[cell];
+                    assert_ne!(e, NO_NODE, "cell {l}/{x}/{y} has no node");
+                    let layer = (e & 0xffff) as u16;
+                    let al = e >> CLIPMAP_LOD_SHIFT;
+                    assert!(al as usize >= l);
+                    let s = al - l as u32;
+                    let want = NodeKey {
+                        lod: al,
+                        x: x as u32 >> s,
+                        y: y as u32 >> s,
+                    };
+                    assert_eq!(cm.atlas.layer_of(want), Some(layer), "cell {l}/{x}/{y}");
+                }
+            }
+        }
+    }
+}
+
+fn no_sky(frame: &OwnedFrame) -> bool {
+    frame.depth.as_ref().unwrap().iter().all(|&d| d > 0.0)
+}
+
+#[test]
+fn withheld_nodes_fall_back_then_converge_to_the_full_data_render() {
+    let gpu = common::gpu(false);
+    let data = heightmap();
+    let ds = DatasetSource::open(dataset()).unwrap();
+    let geometry = Geometry::of(&ds.dataset);
+    let withheld = withheld(&geometry, 35);
+    assert!(withheld.len() > 50);
+    let source = Arc::new(Withholding {
+        inner: ds,
+        withheld,
+        release: AtomicBool::new(false),
+    });
+    // A window as large as level 0 (17 nodes): once converged every cell is a level-0 node.
+    let cm = Clipmap::new(geometry, settings(18, 420), source.clone(), 1).unwrap();
+    let options = common::options(256, 160, 2);
+    let cam = camera_over(&data, 0.5, 0.5);
+    let reference = common::render(&gpu, &data, options.clone(), &[cam.into()]);
+    let mut sink = CollectSink::default();
+    let mut renderer =
+        Renderer::with_clipmap(&gpu, &data, MethodKind::Brute, options, Some(cm)).unwrap();
+    // Withheld: streaming settles with fallbacks; every frame is watertight.
+    for _ in 0..30 {
+        renderer.render(cam, &mut sink).unwrap();
+        assert_cells_resolve(renderer.clipmap().unwrap());
+    }
+    renderer.finish(&mut sink).unwrap();
+    let c = renderer.clipmap().unwrap().counters;
+    assert!(c.load_errors > 0, "{c:?}");
+    assert!(renderer.clipmap().unwrap().views[0].fallback_cells > 0);
+    assert!(sink.frames.iter().all(no_sky), "a frame has holes");
+    // CPU sample_height == GPU clipmap_height with fallbacks in place (fractional lookups).
+    let mut points = Vec::new();
+    for k in 0..4096u32 {
+        let u = (k as f32 * 0.618_034).fract() * (SIZE - 1) as f32;
+        let v = (k as f32 * 0.414_213_6).fract() * (SIZE - 1) as f32;
+        points.push(if k % 2 == 0 {
+            [u.floor(), v.floor()]
+        } else {
+            [u, v]
+        });
+    }
+    let gpu_h = renderer.probe_heights(&points).unwrap();
+    let cm = renderer.clipmap().unwrap();
+    let mut worst = 0f32;
+    for (p, g) in points.iter().zip(&gpu_h) {
+        let cpu = cm.sample_height(0, *p);
+        let d = (cpu - g[0]).abs();
+        worst = worst.max(d);
+        assert!(
+            d <= 4.0 * f32::EPSILON * cpu.abs().max(1.0),
+            "at {p:?}: cpu {cpu} gpu {}",
+            g[0]
+        );
+    }
+    eprintln!("max |cpu - gpu| with fallbacks: {worst:e} m");
+
+    // Released: retried nodes arrive; the image converges to the full-data render exactly.
+    source.release.store(true, Ordering::SeqCst);
+    let mut frames = 0;
+    loop {
+        renderer.render(cam, &mut sink).unwrap();
+        assert_cells_resolve(renderer.clipmap().unwrap());
+        frames += 1;
+        let cm = renderer.clipmap().unwrap();
+        if cm.busy() == 0 && cm.views[0].fallback_cells == 0 {
+            break;
+        }
+        assert!(frames < 300, "no convergence: {:?}", cm.counters);
+    }
+    renderer.finish(&mut sink).unwrap();
+    let last = sink.frames.last().unwrap();
+    assert!(
+        last.rgba == reference[0].rgba,
+        "colour differs from the full-data render"
+    );
+    assert!(
+        last.depth == reference[0].depth,
+        "depth differs from the full-data render"
+    );
+    // Converged at level 0: GPU clipmap heights equal the single texture's at every sample.
+    let samples: Vec<[f32; 2]> = (0..SIZE)
+        .step_by(7)
+        .flat_map(|y| (0..SIZE).step_by(5).map(move |x| [x as f32, y as f32]))
+        .collect();
+    let h = renderer.probe_heights(&samples).unwrap();
+    for (p, g) in samples.iter().zip(&h) {
+        assert_eq!(g[0], g[1], "at {p:?}");
+        assert_eq!(g[0], data.sample(p[0] as u32, p[1] as u32), "at {p:?}");
+    }
+    drop(renderer);
+    common::assert_no_validation_messages(&gpu);
+}
+
+#[test]
+fn moving_by_one_node_changes_one_row_or_column_per_level() {
+    let ds = DatasetSource::open(dataset()).unwrap();
+    let geometry = Geometry::of(&ds.dataset);
+    let n = 6;
+    let mut cm = Clipmap::new(geometry, settings(n, 300), Arc::new(ds), 1).unwrap();
+    let c = CENTER as f64;
+    let start = DVec2::new(8.3 * c, 7.6 * c);
+    for (step, d) in [
+        DVec2::new(c, 0.0),
+        DVec2::new(0.0, c),
+        DVec2::new(-c, 0.0),
+        DVec2::new(0.0, -c),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        cm.update(&[start]);
+        let before = cm.views[0].keys.clone();
+        cm.update(&[start + d]);
+        let view = &cm.views[0];
+        assert_eq!(view.changed[0], n, "step {step}: level 0");
+        let cells = (n * n) as usize;
+        for (l, &ch) in view.changed.iter().enumerate() {
+            assert!(
+                ch == 0 || ch == n,
+                "step {step}: level {l} changed {ch} cells"
+            );
+            let old: HashSet<_> = before[l * cells..(l + 1) * cells].iter().collect();
+            let new: HashSet<_> = view.keys[l * cells..(l + 1) * cells].iter().collect();
+            for k in l * cells..(l + 1) * cells {
+                // Toroidal: a cell changes only when its node left the window; nodes that stay
+                // keep their cell.
+                if before[k] != view.keys[k] {
+                    assert!(
+                        !new.contains(&before[k]),
+                        "step {step}: {:?} moved",
+                        before[k]
+                    );
+                    assert!(
+                        !old.contains(&view.keys[k]),
+                        "step {step}: {:?} moved",
+                        view.keys[k]
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn views_share_one_atlas() {
+    let ds = DatasetSource::open(dataset()).unwrap();
+    let geometry = Geometry::of(&ds.dataset);
+    let src: Arc<dyn NodeSource> = Arc::new(ds);
+    let mut one = Clipmap::new(geometry.clone(), settings(6, 300), src.clone(), 1).unwrap();
+    let mut two = Clipmap::new(geometry, settings(6, 300), src, 2).unwrap();
+    let p = DVec2::new(100.0, 200.0);
+    for _ in 0..200 {
+        one.update(&[p]);
+        two.update(&[p, p]);
+        if one.busy() == 0 && two.busy() == 0 && one.counters.requested > 0 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    // Two identical views: the same nodes, requested and stored once.
+    assert_eq!(one.counters.requested, two.counters.requested);
+    assert_eq!(one.atlas.resident(), two.atlas.resident());
+    assert_eq!(one.atlas_bytes(), two.atlas_bytes());
+    // Two distant views: both resolve, within the one fixed-capacity atlas.
+    for _ in 0..200 {
+        two.update(&[p, DVec2::new(480.0, 20.0)]);
+        if two.busy() == 0 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    assert!(two.atlas.resident() <= 300);
+    assert_cells_resolve(&two);
+    assert_eq!(two.views[1].fallback_cells, 0);
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    let _ = std::fs::remove_dir_all(to);
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+    }
+}
+
+#[test]
+fn atlas_exhaustion_and_loader_errors_degrade_gracefully() {
+    let gpu = common::gpu(false);
+    let data = heightmap();
+    // Missing L1.bin, and a NaN in node (2, 2) of L2: errors, not crashes.
+    let broken = dataset().with_file_name("broken");
+    copy_dir(dataset(), &broken);
+    let record = tiles::Dataset::open(&broken).unwrap().manifest.levels[2].record_size;
+    std::fs::remove_file(broken.join("L1.bin")).unwrap();
+    {
+        use std::io::{Seek, SeekFrom, Write};
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .open(broken.join("L2.bin"))
+            .unwrap();
+        f.seek(SeekFrom::Start(64 + 12 * record + 16 + 40)).unwrap();
+        f.write_all(&f32::NAN.to_le_bytes()).unwrap();
+    }
+    let ds = DatasetSource::open(&broken).unwrap();
+    let geometry = Geometry::of(&ds.dataset);
+    // 50 layers for a wanted set of ~110 nodes (levels 2.. need 39): exhausted.
+    let mut s = settings(6, 50);
+    s.retry_frames = 1000;
+    let cm = Clipmap::new(geometry, s, Arc::new(ds), 1).unwrap();
+    let mut sink = CollectSink::default();
+    let mut renderer = Renderer::with_clipmap(
+        &gpu,
+        &data,
+        MethodKind::Udlod,
+        common::options(192, 120, 2),
+        Some(cm),
+    )
+    .unwrap();
+    for k in 0..24 {
+        let f = 0.3 + 0.4 * k as f64 / 24.0;
+        renderer
+            .render(camera_over(&data, f, 0.5), &mut sink)
+            .unwrap();
+        let cm = renderer.clipmap().unwrap();
+        assert!(cm.atlas.resident() <= 50);
+        assert_cells_resolve(cm);
+    }
+    renderer.finish(&mut sink).unwrap();
+    let c = renderer.clipmap().unwrap().counters;
+    eprintln!("{c:?}");
+    assert!(c.load_errors > 0, "{c:?}");
+    assert!(c.deferred > 0, "{c:?}");
+    assert!(c.evictions > 0, "{c:?}");
+    assert!(sink.frames.iter().all(no_sky), "a frame has holes");
+    drop(renderer);
+    common::assert_no_validation_messages(&gpu);
+}
+
+#[test]
+fn bad_settings_and_mismatched_data_are_one_line_errors() {
+    let ds = DatasetSource::open(dataset()).unwrap();
+    let geometry = Geometry::of(&ds.dataset);
+    let src: Arc<dyn NodeSource> = Arc::new(ds);
+    for s in [
+        ClipmapSettings {
+            node_count: 5,
+            ..settings(6, 64)
+        },
+        settings(6, 1),
+        ClipmapSettings {
+            max_in_flight: 0,
+            ..settings(6, 64)
+        },
+    ] {
+        let e = Clipmap::new(geometry.clone(), s, src.clone(), 1)
+            .err()
+            .expect("rejected")
+            .to_string();
+        assert!(!e.contains('\n'), "{e}");
+    }
+    let gpu = common::gpu(false);
+    let cm = Clipmap::new(geometry, settings(6, 64), src, 1).unwrap();
+    let small = tiles::load(dataset(), Some(1), u64::MAX).unwrap();
+    let e = Renderer::with_clipmap(
+        &gpu,
+        &small,
+        MethodKind::Brute,
+        common::options(64, 64, 1),
+        Some(cm),
+    )
+    .err()
+    .expect("level 1 is not level 0")
+    .to_string();
+    assert!(e.contains("level 0"), "{e}");
+    common::assert_no_validation_messages(&gpu);
+}
