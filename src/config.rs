@@ -22,6 +22,8 @@ pub struct Config {
     pub method: MethodConfig,
     pub scenario: ScenarioConfig,
     pub lod: crate::lod::LodSettings,
+    /// Heights through the chunked clipmap (`dataset.kind = "tiles"` only).
+    pub clipmap: crate::clipmap::ClipmapSettings,
     pub output: OutputConfig,
     /// Directory relative paths are resolved against (the config file's directory).
     #[serde(skip)]
@@ -151,6 +153,7 @@ impl Default for Config {
             method: Default::default(),
             scenario: Default::default(),
             lod: Default::default(),
+            clipmap: Default::default(),
             output: Default::default(),
             // No config file: relative paths are relative to the working directory.
             base_dir: PathBuf::new(),
@@ -268,6 +271,22 @@ impl Config {
         }
         crate::lod::MethodKind::parse(&self.method.name)?;
         self.lod.validate()?;
+        self.clipmap.validate()?;
+        if self.clipmap.enabled && self.dataset.kind != "tiles" {
+            return Err(Error::invalid(
+                "clipmap.enabled",
+                format!(
+                    "needs dataset.kind = \"tiles\" (a vkterrain preprocess data set), not {:?}",
+                    self.dataset.kind
+                ),
+            ));
+        }
+        if self.clipmap.enabled && self.dataset.lod.is_some_and(|l| l != 0) {
+            return Err(Error::invalid(
+                "clipmap.enabled",
+                "the clipmap streams every level; dataset.lod must be 0 or absent",
+            ));
+        }
         Ok(())
     }
 }

@@ -152,3 +152,38 @@ fn shared_constants_are_in_every_shader_with_their_rust_values() {
         }
     }
 }
+
+#[test]
+fn clipmap_header_matches_the_wgsl_struct() {
+    use vkterrain::clipmap::quadtree::HEADER_BYTES;
+    use vkterrain::driver::shaders::CLIPMAP_PROBE_WGSL;
+    let mut shaders = composed_shaders().to_vec();
+    shaders.push(("clipmap_probe", CLIPMAP_PROBE_WGSL));
+    for (name, source) in shaders {
+        let module = naga::front::wgsl::parse_str(source).expect("composed shader parses");
+        let ty = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some("Clipmap"))
+            .unwrap_or_else(|| panic!("{name}: no struct Clipmap"))
+            .1;
+        let naga::TypeInner::Struct { members, .. } = &ty.inner else {
+            panic!("{name}: Clipmap is not a struct")
+        };
+        let wgsl: Vec<(&str, u64)> = members
+            .iter()
+            .map(|m| (m.name.as_deref().unwrap_or("?"), m.offset as u64))
+            .collect();
+        // `ViewQuadtree::gpu_bytes`: two vec4<u32>, CLIPMAP_MAX_LEVELS vec4<i32>, then entries.
+        assert_eq!(
+            wgsl,
+            [
+                ("params", 0),
+                ("params2", 16),
+                ("levels", 32),
+                ("entries", HEADER_BYTES)
+            ],
+            "{name}"
+        );
+    }
+}

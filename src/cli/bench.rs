@@ -98,7 +98,13 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             options.width = w;
             options.height = h;
             options.frames_in_flight = n as usize;
-            let mut renderer = Renderer::new(&gpu, &p.data, p.method, options)?;
+            let mut renderer = Renderer::with_clipmap(
+                &gpu,
+                &p.data,
+                p.method,
+                options,
+                crate::clipmap::from_config(&p.config)?,
+            )?;
             // The sink touches every row so the host really reads the frame (as a consumer would).
             let mut checksum = 0u64;
             let mut sink = |f: &crate::readback::FrameView<'_>| {

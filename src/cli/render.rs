@@ -140,11 +140,12 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         }
         .with_env(),
     )?;
-    let mut renderer = Renderer::new(
+    let mut renderer = Renderer::with_clipmap(
         &gpu,
         &p.data,
         p.method,
         RenderOptions::from_config(&p.config),
+        crate::clipmap::from_config(&p.config)?,
     )?;
 
     let created_dir = !p.out_dir.exists();
@@ -190,6 +191,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         "summary": summary,
         "pngs": written,
         "per_frame": renderer.stats.frames,
+        "clipmap": renderer.clipmap().map(|c| serde_json::json!({
+            "counters": c.counters,
+            "atlas_bytes": c.atlas_bytes(),
+            "resident_nodes": c.atlas.resident(),
+        })),
     });
     crate::output::write_atomic(
         &p.out_dir.join("summary.json"),
@@ -242,6 +248,21 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
         p.data.name, p.data.width, p.data.height, p.data.spacing
     );
     let _ = writeln!(o, "method:          {}", r.method_name());
+    if let Some(c) = r.clipmap() {
+        let k = &c.counters;
+        let _ = writeln!(
+            o,
+            "clipmap:         atlas {} layers ({:.1} MiB), {} resident; {} loaded, {} load errors, {} deferred, {} evictions, {} frames with fallback data",
+            c.settings.atlas_capacity,
+            c.atlas_bytes() as f64 / (1u64 << 20) as f64,
+            c.atlas.resident(),
+            k.loaded,
+            k.load_errors,
+            k.deferred,
+            k.evictions,
+            k.fallback_frames
+        );
+    }
     let _ = writeln!(o, "scenario:        {}", p.scenario.name);
     let _ = writeln!(
         o,

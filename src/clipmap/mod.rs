@@ -81,6 +81,23 @@ impl NodeSource for DatasetSource {
     }
 }
 
+/// The clipmap a configuration asks for (`[clipmap] enabled` with a `tiles` data set), with
+/// one view; `None` when disabled.
+pub fn from_config(config: &crate::config::Config) -> Result<Option<Clipmap>> {
+    if !config.clipmap.enabled {
+        return Ok(None);
+    }
+    let path = config
+        .dataset
+        .path
+        .as_ref()
+        .map(|p| config.resolve(p))
+        .ok_or_else(|| Error::invalid("dataset.path", "the clipmap needs a tiles data set"))?;
+    let source = DatasetSource::open(&path)?;
+    let geometry = Geometry::of(&source.dataset);
+    Clipmap::new(geometry, config.clipmap.clone(), Arc::new(source), 1).map(Some)
+}
+
 /// Node geometry of a pyramid: centre and border texels, node counts per level.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Geometry {
