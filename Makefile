@@ -8,7 +8,7 @@ RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers
 TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
 CARGO ?= cargo
 
-.PHONY: run test bench bench-udlod data-srtm deps deps-test
+.PHONY: run test bench bench-udlod bench-clipmap data-srtm data-proc4k deps deps-test
 
 run: deps
 	$(CARGO) run --release --locked -- render --config config/default.toml
@@ -24,6 +24,15 @@ bench-udlod: deps data-srtm
 	$(CARGO) bench --locked --bench udlod
 
 data-srtm: target/data/n48w125/manifest.json
+
+# The clipmap's fast flight over a 4097² procedural pyramid much larger than the atlas.
+bench-clipmap: deps data-proc4k
+	$(CARGO) bench --locked --bench clipmap
+
+data-proc4k: target/data/proc4k/manifest.json
+
+target/data/proc4k/manifest.json:
+	$(CARGO) run --release --locked -- preprocess --procedural --size 4097 --node-size 64 --out target/data/proc4k
 
 target/data/n48w125/manifest.json:
 	$(CARGO) run --release --locked -- preprocess ../shared/data/srtm/N48W125.hgt.zip --out target/data/n48w125

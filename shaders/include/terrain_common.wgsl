@@ -49,7 +49,12 @@ fn sample_height(s: vec2<i32>) -> f32 {
 }
 
 // Bilinear height at a position in sample units; exact at integer positions (weights 1 and 0).
+// Through the clipmap: one lookup, bilinear within the best resident node (clamped to the data).
 fn height_at(grid_pos: vec2<f32>) -> f32 {
+    if clipmap.params.x != 0u {
+        let hi = vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0);
+        return clipmap_height(clamp(grid_pos, vec2<f32>(0.0), hi));
+    }
     let base = floor(grid_pos);
     let f = grid_pos - base;
     let s = vec2<i32>(base);
