@@ -100,6 +100,7 @@ fn settings(node_count: u32, capacity: u32) -> ClipmapSettings {
         max_uploads_per_frame: 32,
         workers: 2,
         retry_frames: 3,
+        blend_nodes: 0.5,
     }
 }
 
@@ -142,6 +143,38 @@ fn assert_cells_resolve(cm: &Clipmap) {
     }
 }
 
+/// CPU `sample_height` == GPU `clipmap_height` for the last frame's state, at integer and
+/// fractional positions all over the data (float precision: a few ulp at most).
+fn assert_cpu_equals_gpu(renderer: &Renderer, what: &str) {
+    let mut points = Vec::new();
+    for k in 0..8192u32 {
+        let u = (k as f32 * 0.618_034).fract() * (SIZE - 1) as f32;
+        let v = (k as f32 * 0.414_213_6).fract() * (SIZE - 1) as f32;
+        points.push(if k % 2 == 0 {
+            [u.floor(), v.floor()]
+        } else {
+            [u, v]
+        });
+    }
+    let gpu_h = renderer.probe_heights(&points).unwrap();
+    let cm = renderer.clipmap().unwrap();
+    let mut worst = 0f32;
+    for (p, g) in points.iter().zip(&gpu_h) {
+        let cpu = cm.sample_height(0, *p);
+        let d = (cpu - g[0]).abs();
+        worst = worst.max(d);
+        assert!(
+            d <= 4.0 * f32::EPSILON * cpu.abs().max(1.0),
+            "{what}: at {p:?}: cpu {cpu} gpu {}",
+            g[0]
+        );
+    }
+    eprintln!(
+        "{what}: max |cpu - gpu| over {} points: {worst:e} m",
+        points.len()
+    );
+}
+
 fn no_sky(frame: &OwnedFrame) -> bool {
     frame.depth.as_ref().unwrap().iter().all(|&d| d > 0.0)
 }
@@ -177,31 +210,7 @@ fn withheld_nodes_fall_back_then_converge_to_the_full_data_render() {
     assert!(c.load_errors > 0, "{c:?}");
     assert!(renderer.clipmap().unwrap().views[0].fallback_cells > 0);
     assert!(sink.frames.iter().all(no_sky), "a frame has holes");
-    // CPU sample_height == GPU clipmap_height with fallbacks in place (fractional lookups).
-    let mut points = Vec::new();
-    for k in 0..4096u32 {
-        let u = (k as f32 * 0.618_034).fract() * (SIZE - 1) as f32;
-        let v = (k as f32 * 0.414_213_6).fract() * (SIZE - 1) as f32;
-        points.push(if k % 2 == 0 {
-            [u.floor(), v.floor()]
-        } else {
-            [u, v]
-        });
-    }
-    let gpu_h = renderer.probe_heights(&points).unwrap();
-    let cm = renderer.clipmap().unwrap();
-    let mut worst = 0f32;
-    for (p, g) in points.iter().zip(&gpu_h) {
-        let cpu = cm.sample_height(0, *p);
-        let d = (cpu - g[0]).abs();
-        worst = worst.max(d);
-        assert!(
-            d <= 4.0 * f32::EPSILON * cpu.abs().max(1.0),
-            "at {p:?}: cpu {cpu} gpu {}",
-            g[0]
-        );
-    }
-    eprintln!("max |cpu - gpu| with fallbacks: {worst:e} m");
+    assert_cpu_equals_gpu(&renderer, "fallbacks");
 
     // Released: retried nodes arrive; the image converges to the full-data render exactly.
     source.release.store(true, Ordering::SeqCst);
@@ -381,6 +390,8 @@ fn atlas_exhaustion_and_loader_errors_degrade_gracefully() {
     assert!(c.deferred > 0, "{c:?}");
     assert!(c.evictions > 0, "{c:?}");
     assert!(sink.frames.iter().all(no_sky), "a frame has holes");
+    // Several levels, blend bands, fallbacks over missing and corrupt nodes: still one formula.
+    assert_cpu_equals_gpu(&renderer, "exhausted atlas");
     drop(renderer);
     common::assert_no_validation_messages(&gpu);
 }
@@ -422,4 +433,69 @@ fn bad_settings_and_mismatched_data_are_one_line_errors() {
     .to_string();
     assert!(e.contains("level 0"), "{e}");
     common::assert_no_validation_messages(&gpu);
+}
+
+/// Updates until every wanted node is resident (or panics after a while).
+fn settle(cm: &mut Clipmap, viewers: &[DVec2]) {
+    for _ in 0..2000 {
+        cm.update(viewers);
+        if cm.busy() == 0 && cm.views.iter().all(|v| v.fallback_cells == 0) {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    panic!("streaming did not settle: {:?}", cm.counters);
+}
+
+/// Largest height step between neighbouring points 1/256 sample apart on a line from the viewer
+/// outwards across several ring edges (a continuous surface gives ~slope / 256; a step at a
+/// ring edge gives the whole difference between the levels).
+fn max_step(cm: &Clipmap, viewer: DVec2) -> f32 {
+    let mut worst = 0f32;
+    let mut prev = cm.sample_height(0, [viewer.x as f32, viewer.y as f32]);
+    for k in 1..(256 * 240) {
+        let p = [viewer.x as f32 + k as f32 / 256.0, viewer.y as f32];
+        let h = cm.sample_height(0, p);
+        worst = worst.max((h - prev).abs());
+        prev = h;
+    }
+    worst
+}
+
+#[test]
+fn ring_edges_blend_without_steps() {
+    let ds = DatasetSource::open(dataset()).unwrap();
+    let data = heightmap();
+    let geometry = Geometry::of(&ds.dataset);
+    let src: Arc<dyn NodeSource> = Arc::new(ds);
+    let viewer = DVec2::new(200.3, 251.7);
+    let mut blended = Clipmap::new(geometry.clone(), settings(4, 300), src.clone(), 1).unwrap();
+    let mut stepped = Clipmap::new(
+        geometry,
+        ClipmapSettings {
+            blend_nodes: 0.0,
+            ..settings(4, 300)
+        },
+        src,
+        1,
+    )
+    .unwrap();
+    settle(&mut blended, &[viewer]);
+    settle(&mut stepped, &[viewer]);
+    // The full-resolution surface's largest step on the same line (bilinear, 1/256 sample).
+    let mut exact = 0f64;
+    for k in 1..(256 * 240) {
+        let x = |k: i32| (viewer.x + k as f64 / 256.0) * data.spacing;
+        let y = viewer.y * data.spacing;
+        exact = exact.max((data.height_at(x(k), y) - data.height_at(x(k - 1), y)).abs());
+    }
+    let (b, s) = (max_step(&blended, viewer), max_step(&stepped, viewer));
+    eprintln!(
+        "largest step per 1/256 sample: exact {exact:.4} m, blended {b:.4} m, unblended {s:.4} m"
+    );
+    assert!(
+        s as f64 > 5.0 * exact,
+        "no step at the ring edges to remove"
+    );
+    assert!((b as f64) < 2.0 * exact, "blending leaves a step");
 }

@@ -5,7 +5,8 @@
 struct Clipmap {
     // x: enabled (0: heights come from height_tex), y: levels, z: node_count, w: centre texels.
     params: vec4<u32>,
-    // x: border texels, y: texels per layer side.
+    // x: border texels, y: texels per layer side, z: f32 bits of 1 / blend band (level texels;
+    // 0: no blending between levels).
     params2: vec4<u32>,
     // Per level: window origin (nodes) xy, the level's node counts zw.
     levels: array<vec4<i32>, CLIPMAP_MAX_LEVELS>,
@@ -29,24 +30,11 @@ fn clipmap_level_coord(p: vec2<f32>, l: u32) -> vec2<f32> {
     return (p - vec2<f32>(half)) * clipmap_inv_pow2(l);
 }
 
-// Height in metres at a level-0 sample position. Constant time: at most `levels` integer
-// window tests, one entry read, four texel loads.
-fn clipmap_height(p: vec2<f32>) -> f32 {
+// Height at p from the entry of quadtree level l for `node` (a node of level l in its window):
+// bilinear within the best resident node.
+fn clipmap_level_height(p: vec2<f32>, l: u32, node: vec2<i32>) -> f32 {
     let n = i32(clipmap.params.z);
     let c = i32(clipmap.params.w);
-    let lods = clipmap.params.y;
-    var l = 0u;
-    var node = vec2<i32>(0);
-    loop {
-        let lv = clipmap.levels[l];
-        let t = clipmap_level_coord(p, l);
-        node = clamp(vec2<i32>(floor(t)) / c, vec2<i32>(0), lv.zw - vec2<i32>(1));
-        let hi = lv.xy + min(vec2<i32>(n), lv.zw);
-        if (all(node >= lv.xy) && all(node < hi)) || l + 1u >= lods {
-            break;
-        }
-        l += 1u;
-    }
     let cell = (i32(l) * n + node.y % n) * n + node.x % n;
     let e = clipmap.entries[cell];
     if e == 0xffffffffu {
@@ -69,4 +57,60 @@ fn clipmap_height(p: vec2<f32>) -> f32 {
     let south = h00 + (h10 - h00) * f.x;
     let north = h01 + (h11 - h01) * f.x;
     return south + (north - south) * f.y;
+}
+
+// The node of level l containing p (clamped into the level's node grid).
+fn clipmap_node(p: vec2<f32>, l: u32) -> vec2<i32> {
+    let c = i32(clipmap.params.w);
+    let t = clipmap_level_coord(p, l);
+    return clamp(vec2<i32>(floor(t)) / c, vec2<i32>(0), clipmap.levels[l].zw - vec2<i32>(1));
+}
+
+// Whether a node of level l lies in that level's window.
+fn clipmap_in_window(node: vec2<i32>, l: u32) -> bool {
+    let lv = clipmap.levels[l];
+    let hi = lv.xy + min(vec2<i32>(i32(clipmap.params.z)), lv.zw);
+    return all(node >= lv.xy) && all(node < hi);
+}
+
+// Height in metres at a level-0 sample position. Constant time: at most `levels` integer
+// window tests, then one entry and four texel loads (two of each within the blend band near a
+// window's inner edge, where the level and the next coarser one are mixed).
+fn clipmap_height(p: vec2<f32>) -> f32 {
+    let lods = clipmap.params.y;
+    var l = 0u;
+    var node = vec2<i32>(0);
+    loop {
+        node = clipmap_node(p, l);
+        if clipmap_in_window(node, l) || l + 1u >= lods {
+            break;
+        }
+        l += 1u;
+    }
+    let h = clipmap_level_height(p, l, node);
+    let blend_inv = bitcast<f32>(clipmap.params2.z);
+    if l + 1u >= lods || blend_inv == 0.0 {
+        return h;
+    }
+    // Distance (level-l texels) to the window's edges that are not the data's edges.
+    let c = i32(clipmap.params.w);
+    let lv = clipmap.levels[l];
+    let w = min(vec2<i32>(i32(clipmap.params.z)), lv.zw);
+    let t = clipmap_level_coord(p, l);
+    let lo = t - vec2<f32>(lv.xy * c);
+    let hi = vec2<f32>((lv.xy + w) * c) - t;
+    let far = vec2<f32>(3.0e38);
+    let dlo = select(lo, far, lv.xy == vec2<i32>(0));
+    let dhi = select(hi, far, lv.xy + w >= lv.zw);
+    let d = min(min(dlo.x, dlo.y), min(dhi.x, dhi.y));
+    let weight = clamp(d * blend_inv, 0.0, 1.0);
+    if weight >= 1.0 {
+        return h;
+    }
+    let node1 = clipmap_node(p, l + 1u);
+    if !clipmap_in_window(node1, l + 1u) {
+        return h;
+    }
+    let h1 = clipmap_level_height(p, l + 1u, node1);
+    return h1 + (h - h1) * weight;
 }

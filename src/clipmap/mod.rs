@@ -144,6 +144,9 @@ pub struct ClipmapSettings {
     pub workers: u32,
     /// Frames before a node whose load failed is requested again.
     pub retry_frames: u32,
+    /// Width (in nodes of the level) of the band at each window's inner edge over which the
+    /// level blends into the next coarser one (0: no blending; steps at ring edges).
+    pub blend_nodes: f64,
 }
 
 impl Default for ClipmapSettings {
@@ -156,6 +159,7 @@ impl Default for ClipmapSettings {
             max_uploads_per_frame: 8,
             workers: 1,
             retry_frames: 120,
+            blend_nodes: 0.5,
         }
     }
 }
@@ -185,6 +189,12 @@ impl ClipmapSettings {
             return bad(format!(
                 "max_uploads_per_frame {} must be within 1..=256",
                 self.max_uploads_per_frame
+            ));
+        }
+        if !(self.blend_nodes.is_finite() && (0.0..=2.0).contains(&self.blend_nodes)) {
+            return bad(format!(
+                "blend_nodes {} must be within 0..=2",
+                self.blend_nodes
             ));
         }
         if !(1..=16).contains(&self.workers) {
@@ -266,7 +276,7 @@ impl Clipmap {
         let streamer = Streamer::new(source, settings.workers);
         Ok(Clipmap {
             views: (0..views.max(1))
-                .map(|_| ViewQuadtree::new(&geometry, settings.node_count))
+                .map(|_| ViewQuadtree::new(&geometry, settings.node_count, settings.blend_nodes))
                 .collect(),
             geometry,
             settings,

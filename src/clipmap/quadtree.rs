@@ -45,10 +45,13 @@ pub struct ViewQuadtree {
     pub changed: Vec<u32>,
     /// Cells (within the data) that point at a coarser node than their own in the last frame.
     pub fallback_cells: u64,
+    /// 1 / width of the band (level texels) at a window's inner edge in which the level is
+    /// blended with the next coarser one; 0: no blending.
+    pub blend_inv: f32,
 }
 
 impl ViewQuadtree {
-    pub fn new(geometry: &Geometry, node_count: u32) -> Self {
+    pub fn new(geometry: &Geometry, node_count: u32, blend_nodes: f64) -> Self {
         let cells = geometry.levels.len() * (node_count * node_count) as usize;
         ViewQuadtree {
             node_count,
@@ -57,6 +60,11 @@ impl ViewQuadtree {
             keys: vec![None; cells],
             changed: vec![0; geometry.levels.len()],
             fallback_cells: 0,
+            blend_inv: if blend_nodes > 0.0 {
+                (1.0 / (blend_nodes * geometry.center as f64)) as f32
+            } else {
+                0.0
+            },
         }
     }
 
@@ -140,35 +148,46 @@ impl ViewQuadtree {
         }
     }
 
+    /// The node of level `l` containing `p` (clamped into the level's node grid).
+    fn node_of(&self, geometry: &Geometry, p: [f32; 2], l: u32) -> [i32; 2] {
+        let c = geometry.center as i32;
+        let [_, _, nx, ny] = self.levels[l as usize];
+        let t = level_coord(p, l);
+        [
+            ((t[0].floor() as i32) / c).clamp(0, nx - 1),
+            ((t[1].floor() as i32) / c).clamp(0, ny - 1),
+        ]
+    }
+
+    fn in_window(&self, node: [i32; 2], l: u32) -> bool {
+        let n = self.node_count as i32;
+        let [ox, oy, nx, ny] = self.levels[l as usize];
+        node[0] >= ox && node[1] >= oy && node[0] < ox + n.min(nx) && node[1] < oy + n.min(ny)
+    }
+
     /// The quadtree level and node a position is looked up in: the finest level whose window
     /// contains the position's node (the root level always does).
     pub fn locate(&self, geometry: &Geometry, p: [f32; 2]) -> (u32, [i32; 2]) {
-        let n = self.node_count as i32;
-        let c = geometry.center as i32;
         let lods = geometry.levels.len() as u32;
         let mut l = 0;
         loop {
-            let [ox, oy, nx, ny] = self.levels[l as usize];
-            let t = level_coord(p, l);
-            let node = [
-                ((t[0].floor() as i32) / c).clamp(0, nx - 1),
-                ((t[1].floor() as i32) / c).clamp(0, ny - 1),
-            ];
-            let inside = node[0] >= ox
-                && node[1] >= oy
-                && node[0] < ox + n.min(nx)
-                && node[1] < oy + n.min(ny);
-            if inside || l + 1 >= lods {
+            let node = self.node_of(geometry, p, l);
+            if self.in_window(node, l) || l + 1 >= lods {
                 return (l, node);
             }
             l += 1;
         }
     }
 
-    /// Height at a level-0 sample position: exactly what `clipmap_height` in
-    /// `shaders/include/clipmap.wgsl` returns for the same state.
-    pub fn lookup(&self, geometry: &Geometry, atlas: &Atlas, p: [f32; 2]) -> f32 {
-        let (l, node) = self.locate(geometry, p);
+    /// Bilinear height within the best resident node of cell `node` of level `l`.
+    fn level_height(
+        &self,
+        geometry: &Geometry,
+        atlas: &Atlas,
+        p: [f32; 2],
+        l: u32,
+        node: [i32; 2],
+    ) -> f32 {
         let e = self.entries[self.cell(l, node[0] as u32, node[1] as u32)];
         if e == NO_NODE {
             return 0.0;
@@ -195,6 +214,45 @@ impl ViewQuadtree {
         south + (north - south) * f[1]
     }
 
+    /// Height at a level-0 sample position: exactly what `clipmap_height` in
+    /// `shaders/include/clipmap.wgsl` returns for the same state (level `l`, blended with level
+    /// `l + 1` within the blend band of the window's inner edges).
+    pub fn lookup(&self, geometry: &Geometry, atlas: &Atlas, p: [f32; 2]) -> f32 {
+        let lods = geometry.levels.len() as u32;
+        let (l, node) = self.locate(geometry, p);
+        let h = self.level_height(geometry, atlas, p, l, node);
+        if l + 1 >= lods || self.blend_inv == 0.0 {
+            return h;
+        }
+        let c = geometry.center as i32;
+        let n = self.node_count as i32;
+        let [ox, oy, nx, ny] = self.levels[l as usize];
+        let (wx, wy) = (n.min(nx), n.min(ny));
+        let t = level_coord(p, l);
+        let far = 3.0e38f32;
+        let lo = [t[0] - (ox * c) as f32, t[1] - (oy * c) as f32];
+        let hi = [((ox + wx) * c) as f32 - t[0], ((oy + wy) * c) as f32 - t[1]];
+        let dlo = [
+            if ox == 0 { far } else { lo[0] },
+            if oy == 0 { far } else { lo[1] },
+        ];
+        let dhi = [
+            if ox + wx >= nx { far } else { hi[0] },
+            if oy + wy >= ny { far } else { hi[1] },
+        ];
+        let d = dlo[0].min(dlo[1]).min(dhi[0].min(dhi[1]));
+        let weight = (d * self.blend_inv).clamp(0.0, 1.0);
+        if weight >= 1.0 {
+            return h;
+        }
+        let node1 = self.node_of(geometry, p, l + 1);
+        if !self.in_window(node1, l + 1) {
+            return h;
+        }
+        let h1 = self.level_height(geometry, atlas, p, l + 1, node1);
+        h1 + (h - h1) * weight
+    }
+
     /// The GPU form: header (`params`, `params2`, `CLIPMAP_MAX_LEVELS` level windows) followed by
     /// the entries, little-endian (`Clipmap` in `shaders/include/clipmap.wgsl`).
     pub fn gpu_bytes(&self, geometry: &Geometry, out: &mut Vec<u8>) {
@@ -207,7 +265,7 @@ impl ViewQuadtree {
             geometry.center,
             geometry.border,
             side,
-            0,
+            self.blend_inv.to_bits(),
             0,
         ] {
             out.extend_from_slice(&v.to_le_bytes());
