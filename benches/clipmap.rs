@@ -1,0 +1,194 @@
+//! The chunked clipmap under a fast flight (config/clipmap.toml: 300 m/s at 500 m above ground
+//! over the 4097² procedural pyramid with 64-texel nodes, UDLOD meshing) against the same
+//! flight with heights from one texture, in one process so the rows compare as ratios.
+//!
+//! Reports frame time (median, p99, max), the largest frame time among frames that uploaded
+//! nodes divided by the median, the CPU time of record+submit (which includes the clipmap's
+//! update), the atlas and staging memory against the configured budget, the most resident
+//! nodes, frames drawn with fallback data, and the streaming counters.
+//!
+//! `make bench-clipmap` (= `make data-proc4k` then `cargo bench --bench clipmap`).
+//! `VKTERRAIN_CLIPMAP_FRAMES=N` (default 300) and `VKTERRAIN_CLIPMAP_CONFIG=F` override;
+//! results are also written to `target/bench/clipmap.json`.
+
+use std::sync::Arc;
+
+use clap::Parser;
+use vkterrain::cli::render::{RenderArgs, prepare};
+use vkterrain::driver::{Gpu, GpuOptions};
+use vkterrain::readback::FrameView;
+use vkterrain::render::stats::{Percentiles, nearest_rank};
+use vkterrain::render::{RenderOptions, Renderer};
+
+#[derive(Parser)]
+struct Wrapper {
+    #[command(flatten)]
+    args: RenderArgs,
+}
+
+#[derive(serde::Serialize)]
+struct Row {
+    variant: String,
+    frame_ms: Percentiles,
+    cpu_record_ms: Percentiles,
+    streaming_frames: usize,
+    max_streaming_over_median: f64,
+    fallback_frames: u64,
+    max_resident_nodes: usize,
+    atlas_capacity: u32,
+    atlas_bytes: u64,
+    staging_bytes: u64,
+    counters: Option<vkterrain::clipmap::Counters>,
+}
+
+fn main() -> anyhow::Result<()> {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let config = std::env::var("VKTERRAIN_CLIPMAP_CONFIG")
+        .unwrap_or_else(|_| format!("{root}/config/clipmap.toml"));
+    let frames: u32 = std::env::var("VKTERRAIN_CLIPMAP_FRAMES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(300);
+    let warmup = 10usize;
+    let args = Wrapper::try_parse_from([
+        "clipmap",
+        "--config",
+        &config,
+        "--frames",
+        &frames.to_string(),
+    ])?
+    .args;
+    let p = match prepare(&args) {
+        Ok(p) => p,
+        Err(e) => {
+            println!("skipping {config}: {e:#} (run `make data-proc4k` first)");
+            return Ok(());
+        }
+    };
+    let gpu: Arc<Gpu> = Gpu::new(
+        &GpuOptions {
+            select: p.config.device.select.clone(),
+            validation: false,
+            force_legacy: p.config.device.force_legacy,
+        }
+        .with_env(),
+    )?;
+    println!(
+        "{} ({}x{}, {} frames of {}, {warmup} warm-up, method {}, device {})",
+        p.data.name,
+        p.config.render.width,
+        p.config.render.height,
+        frames,
+        p.scenario.name,
+        p.method.name(),
+        gpu.info.name
+    );
+    println!(
+        "{:<16} {:>9} {:>8} {:>8} {:>10} {:>12} {:>9} {:>9} {:>14} {:>10}",
+        "variant",
+        "median ms",
+        "p99 ms",
+        "max ms",
+        "stream fr",
+        "max strm/med",
+        "cpu rec",
+        "fallback",
+        "resident/cap",
+        "atlas MiB"
+    );
+    let mut rows = Vec::new();
+    for clipmap in [false, true] {
+        let mut config = p.config.clone();
+        config.clipmap.enabled = clipmap;
+        let cm = vkterrain::clipmap::from_config(&config)?;
+        let (capacity, atlas_bytes, layer_bytes) = cm
+            .as_ref()
+            .map(|c| {
+                (
+                    c.settings.atlas_capacity,
+                    c.atlas_bytes(),
+                    (c.geometry.side() as u64).pow(2) * 4,
+                )
+            })
+            .unwrap_or((0, 0, 0));
+        let options = RenderOptions::from_config(&config);
+        let staging_bytes = layer_bytes
+            * config.clipmap.max_uploads_per_frame as u64
+            * options.frames_in_flight as u64;
+        let mut renderer = Renderer::with_clipmap(&gpu, &p.data, p.method, options, cm)?;
+        let mut sink = |_: &FrameView<'_>| Ok(());
+        let mut uploads = Vec::with_capacity(frames as usize);
+        let mut max_resident = 0;
+        for frame in 0..frames as u64 {
+            let before = renderer.clipmap().map(|c| c.counters.uploaded).unwrap_or(0);
+            renderer.render(p.scenario.camera(frame), &mut sink)?;
+            if let Some(c) = renderer.clipmap() {
+                uploads.push(c.counters.uploaded - before);
+                max_resident = max_resident.max(c.atlas.resident());
+                assert!(c.atlas.resident() <= capacity as usize);
+            } else {
+                uploads.push(0);
+            }
+        }
+        renderer.finish(&mut sink)?;
+        let recs = &renderer.stats.frames[warmup..];
+        let frame_ms = Percentiles::of(recs.iter().map(|r| r.interval_ms).collect());
+        let cpu_record_ms = Percentiles::of(recs.iter().map(|r| r.timings.cpu_record_ms).collect());
+        let streaming: Vec<f64> = recs
+            .iter()
+            .zip(&uploads[warmup..])
+            .filter(|(_, u)| **u > 0)
+            .map(|(r, _)| r.interval_ms)
+            .collect();
+        let max_streaming = streaming.iter().cloned().fold(0.0, f64::max);
+        let mut sorted: Vec<f64> = recs.iter().map(|r| r.interval_ms).collect();
+        sorted.sort_by(f64::total_cmp);
+        let median = nearest_rank(&sorted, 0.5);
+        let counters = renderer.clipmap().map(|c| c.counters);
+        let row = Row {
+            variant: if clipmap { "clipmap" } else { "one texture" }.into(),
+            frame_ms,
+            cpu_record_ms,
+            streaming_frames: streaming.len(),
+            max_streaming_over_median: if streaming.is_empty() {
+                0.0
+            } else {
+                max_streaming / median
+            },
+            fallback_frames: counters.map(|c| c.fallback_frames).unwrap_or(0),
+            max_resident_nodes: max_resident,
+            atlas_capacity: capacity,
+            atlas_bytes,
+            staging_bytes,
+            counters,
+        };
+        println!(
+            "{:<16} {:>9.1} {:>8.1} {:>8.1} {:>10} {:>12.2} {:>9.2} {:>9} {:>14} {:>10.2}",
+            row.variant,
+            row.frame_ms.median,
+            row.frame_ms.p99,
+            row.frame_ms.max,
+            row.streaming_frames,
+            row.max_streaming_over_median,
+            row.cpu_record_ms.median,
+            row.fallback_frames,
+            format!("{}/{}", row.max_resident_nodes, row.atlas_capacity),
+            row.atlas_bytes as f64 / (1u64 << 20) as f64
+        );
+        if let Some(c) = &row.counters {
+            println!(
+                "{:<16} {c:?}; staging {:.2} MiB",
+                "",
+                row.staging_bytes as f64 / (1u64 << 20) as f64
+            );
+        }
+        rows.push(row);
+    }
+    let out = format!("{root}/target/bench");
+    std::fs::create_dir_all(&out)?;
+    std::fs::write(
+        format!("{out}/clipmap.json"),
+        serde_json::to_string_pretty(&rows)?,
+    )?;
+    Ok(())
+}
