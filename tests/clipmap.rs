@@ -279,20 +279,13 @@ fn moving_by_one_node_changes_one_row_or_column_per_level() {
             );
             let old: HashSet<_> = before[l * cells..(l + 1) * cells].iter().collect();
             let new: HashSet<_> = view.keys[l * cells..(l + 1) * cells].iter().collect();
-            for k in l * cells..(l + 1) * cells {
+            let range = l * cells..(l + 1) * cells;
+            for (was, now) in before[range.clone()].iter().zip(&view.keys[range]) {
                 // Toroidal: a cell changes only when its node left the window; nodes that stay
                 // keep their cell.
-                if before[k] != view.keys[k] {
-                    assert!(
-                        !new.contains(&before[k]),
-                        "step {step}: {:?} moved",
-                        before[k]
-                    );
-                    assert!(
-                        !old.contains(&view.keys[k]),
-                        "step {step}: {:?} moved",
-                        view.keys[k]
-                    );
+                if was != now {
+                    assert!(!new.contains(was), "step {step}: {was:?} moved");
+                    assert!(!old.contains(now), "step {step}: {now:?} moved");
                 }
             }
         }
