@@ -6,7 +6,7 @@ struct Clipmap {
     // x: enabled (0: heights come from height_tex), y: levels, z: node_count, w: centre texels.
     params: vec4<u32>,
     // x: border texels, y: texels per layer side, z: f32 bits of 1 / blend band (level texels;
-    // 0: no blending between levels).
+    // 0: no blending between levels), w: f32 bits of 1 / centre texels.
     params2: vec4<u32>,
     // Per level: window origin (nodes) xy, the level's node counts zw.
     levels: array<vec4<i32>, CLIPMAP_MAX_LEVELS>,
@@ -61,9 +61,12 @@ fn clipmap_level_height(p: vec2<f32>, l: u32, node: vec2<i32>) -> f32 {
 
 // The node of level l containing p (clamped into the level's node grid).
 fn clipmap_node(p: vec2<f32>, l: u32) -> vec2<i32> {
-    let c = i32(clipmap.params.w);
+    // floor(t * (1 / centre)) rather than an integer division (slow on CPU rasterizers); the
+    // reciprocal is the same f32 on both sides and a position on a node boundary may land in
+    // either node (both cover it, with the border).
     let t = clipmap_level_coord(p, l);
-    return clamp(vec2<i32>(floor(t)) / c, vec2<i32>(0), clipmap.levels[l].zw - vec2<i32>(1));
+    let inv_c = bitcast<f32>(clipmap.params2.w);
+    return clamp(vec2<i32>(floor(t * inv_c)), vec2<i32>(0), clipmap.levels[l].zw - vec2<i32>(1));
 }
 
 // Whether a node of level l lies in that level's window.

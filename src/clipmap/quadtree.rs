@@ -23,6 +23,11 @@ pub fn inv_pow2(l: u32) -> f32 {
     f32::from_bits((127 - l) << 23)
 }
 
+/// `1 / center` as the f32 both sides multiply by to find a node.
+pub fn inv_center(geometry: &Geometry) -> f32 {
+    1.0 / geometry.center as f32
+}
+
 /// Level-`l` continuous texel coordinate of a level-0 sample position (texel centres at
 /// integers; a level-`l` texel `u` covers samples `2^l u .. 2^l (u + 1) - 1`).
 pub fn level_coord(p: [f32; 2], l: u32) -> [f32; 2] {
@@ -150,12 +155,12 @@ impl ViewQuadtree {
 
     /// The node of level `l` containing `p` (clamped into the level's node grid).
     fn node_of(&self, geometry: &Geometry, p: [f32; 2], l: u32) -> [i32; 2] {
-        let c = geometry.center as i32;
+        let inv_c = inv_center(geometry);
         let [_, _, nx, ny] = self.levels[l as usize];
         let t = level_coord(p, l);
         [
-            ((t[0].floor() as i32) / c).clamp(0, nx - 1),
-            ((t[1].floor() as i32) / c).clamp(0, ny - 1),
+            ((t[0] * inv_c).floor() as i32).clamp(0, nx - 1),
+            ((t[1] * inv_c).floor() as i32).clamp(0, ny - 1),
         ]
     }
 
@@ -266,7 +271,7 @@ impl ViewQuadtree {
             geometry.border,
             side,
             self.blend_inv.to_bits(),
-            0,
+            inv_center(geometry).to_bits(),
         ] {
             out.extend_from_slice(&v.to_le_bytes());
         }
