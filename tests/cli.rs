@@ -152,6 +152,16 @@ fn invalid_config_files() {
             vec!["zero.toml", "resolution"],
         ),
         ("method.toml", "[method]\nname = \"magic\"\n", vec!["magic"]),
+        (
+            "clipmap_kind.toml",
+            "[clipmap]\nenabled = true\n",
+            vec!["clipmap", "tiles"],
+        ),
+        (
+            "clipmap_nodes.toml",
+            "[clipmap]\nnode_count = 7\n",
+            vec!["node_count 7"],
+        ),
     ];
     for (name, text, expected) in cases {
         let path = write(tmp.path(), name, text);
@@ -299,4 +309,49 @@ fn no_vulkan_driver_names_the_package() {
     assert_eq!(o.status.code(), Some(1), "{stderr}");
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(stderr.contains("mesa-vulkan-drivers"), "{stderr}");
+}
+
+#[test]
+fn render_through_the_clipmap_reports_streaming() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("ds");
+    let o = vkterrain(&[
+        "preprocess",
+        "--procedural",
+        "--size",
+        "257",
+        "--node-size",
+        "32",
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let config = write(
+        tmp.path(),
+        "clip.toml",
+        &format!(
+            "[render]\nwidth = 96\nheight = 64\n[dataset]\nkind = \"tiles\"\npath = {:?}\n\
+             [clipmap]\nenabled = true\natlas_capacity = 40\nnode_count = 4\n",
+            data.display().to_string()
+        ),
+    );
+    let out = tmp.path().join("out");
+    let o = vkterrain(&[
+        "render",
+        "--config",
+        config.to_str().unwrap(),
+        "--frames",
+        "4",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("clipmap:"), "{stdout}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let c = &summary["clipmap"];
+    assert_eq!(c["atlas_bytes"], 40 * 36 * 36 * 4);
+    assert!(c["resident_nodes"].as_u64().unwrap() >= 1);
+    assert!(c["resident_nodes"].as_u64().unwrap() <= 40);
 }
