@@ -11,7 +11,9 @@ use std::sync::{Arc, OnceLock};
 
 use glam::{DVec2, DVec3};
 use vkterrain::clipmap::quadtree::NO_NODE;
-use vkterrain::clipmap::{Clipmap, ClipmapSettings, DatasetSource, Geometry, NodeKey, NodeSource};
+use vkterrain::clipmap::{
+    Clipmap, ClipmapSettings, DatasetSource, Geometry, NodeData, NodeKey, NodeSource,
+};
 use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
 use vkterrain::dataset::procedural::ProceduralParams;
 use vkterrain::dataset::{Heightmap, tiles};
@@ -23,6 +25,9 @@ use vkterrain::scene::Camera;
 
 const SIZE: u32 = 513;
 const CENTER: u32 = 32;
+/// Largest colour difference (8-bit codes) between a converged clipmap frame and the
+/// single-texture render of the same data.
+const COLOUR_TOLERANCE: u8 = 2;
 
 /// A 513² procedural data set with 32-texel nodes (17x17 leaf nodes, 6 levels), built once.
 fn dataset() -> &'static Path {
@@ -59,7 +64,7 @@ struct Withholding {
 }
 
 impl NodeSource for Withholding {
-    fn load(&self, key: NodeKey) -> vkterrain::Result<Vec<f32>> {
+    fn load(&self, key: NodeKey) -> vkterrain::Result<NodeData> {
         if !self.release.load(Ordering::SeqCst) && self.withheld.contains(&key) {
             return Err(vkterrain::Error::invalid("test", "node withheld"));
         }
@@ -228,12 +233,23 @@ fn withheld_nodes_fall_back_then_converge_to_the_full_data_render() {
     renderer.finish(&mut sink).unwrap();
     let last = sink.frames.last().unwrap();
     assert!(
-        last.rgba == reference[0].rgba,
-        "colour differs from the full-data render"
-    );
-    assert!(
         last.depth == reference[0].depth,
         "depth differs from the full-data render"
+    );
+    // Colour: normals and albedo now come from the atlas (texel-centred, filtered per node);
+    // the single-texture path maps albedo edge to edge, so allow filtering differences.
+    let diffs: Vec<u8> = last
+        .rgba
+        .iter()
+        .zip(&reference[0].rgba)
+        .map(|(a, b)| a.abs_diff(*b))
+        .collect();
+    let max = diffs.iter().copied().max().unwrap();
+    let mean = diffs.iter().map(|&d| d as f64).sum::<f64>() / diffs.len() as f64;
+    eprintln!("colour vs the full-data render: max {max}, mean {mean:.3} codes");
+    assert!(
+        max <= COLOUR_TOLERANCE && mean <= 0.05,
+        "max {max}, mean {mean}"
     );
     // Converged at level 0: GPU clipmap heights equal the single texture's at every sample.
     let samples: Vec<[f32; 2]> = (0..SIZE)
@@ -242,7 +258,6 @@ fn withheld_nodes_fall_back_then_converge_to_the_full_data_render() {
         .collect();
     let h = renderer.probe_heights(&samples).unwrap();
     for (p, g) in samples.iter().zip(&h) {
-        assert_eq!(g[0], g[1], "at {p:?}");
         assert_eq!(g[0], data.sample(p[0] as u32, p[1] as u32), "at {p:?}");
     }
     drop(renderer);

@@ -174,13 +174,15 @@ fn clipmap_header_matches_the_wgsl_struct() {
             .iter()
             .map(|m| (m.name.as_deref().unwrap_or("?"), m.offset as u64))
             .collect();
-        // `ViewQuadtree::gpu_bytes`: two vec4<u32>, CLIPMAP_MAX_LEVELS vec4<i32>, then entries.
+        // `ViewQuadtree::gpu_bytes`: two vec4<u32>, a vec4<f32>, CLIPMAP_MAX_LEVELS vec4<i32>, then
+        // entries.
         assert_eq!(
             wgsl,
             [
                 ("params", 0),
                 ("params2", 16),
-                ("levels", 32),
+                ("viewer", 32),
+                ("levels", 48),
                 ("entries", HEADER_BYTES)
             ],
             "{name}"

@@ -9,6 +9,8 @@ struct Clipmap {
     // 0: no blending between levels), w: f32 bits of 1 / centre texels.
     params2: vec4<u32>,
     // Per level: window origin (nodes) xy, the level's node counts zw.
+    // xy: the viewer in level-0 samples, clamped into the data.
+    viewer: vec4<f32>,
     levels: array<vec4<i32>, CLIPMAP_MAX_LEVELS>,
     // levels x node_count x node_count, index (l * n + y % n) * n + x % n:
     // atlas layer | atlas lod << CLIPMAP_LOD_SHIFT; 0xffffffff: nothing resident.
@@ -18,6 +20,9 @@ struct Clipmap {
 // Heights of resident nodes, one layer per atlas slot, read with textureLoad (exact texels).
 @group(0) @binding(5) var atlas_height: texture_2d_array<f32>;
 @group(0) @binding(6) var<storage, read> clipmap: Clipmap;
+// Unit normals (RGBA8 snorm) and albedo (RGBA8 sRGB) of the same layers, filtered.
+@group(0) @binding(7) var atlas_normal: texture_2d_array<f32>;
+@group(0) @binding(8) var atlas_albedo: texture_2d_array<f32>;
 
 // 2^-l exactly (from the exponent bits; no division or exp2 whose precision varies).
 fn clipmap_inv_pow2(l: u32) -> f32 {
@@ -76,12 +81,26 @@ fn clipmap_in_window(node: vec2<i32>, l: u32) -> bool {
     return all(node >= lv.xy) && all(node < hi);
 }
 
+// A level no finer than the finest window holding p: a window spans n nodes around the
+// (clamped) viewer's node, so levels l with max|p - viewer| >= n * centre * 2^l cannot hold p.
+// One level of margin absorbs log2's imprecision; the search result is then the same as
+// searching from level 0 (which the CPU does).
+fn clipmap_first_level(p: vec2<f32>) -> u32 {
+    let d = max(abs(p.x - clipmap.viewer.x), abs(p.y - clipmap.viewer.y));
+    let span = f32(clipmap.params.z * clipmap.params.w);
+    if d < 2.0 * span {
+        return 0u;
+    }
+    let l = u32(floor(log2(d / span)));
+    return min(l, clipmap.params.y - 1u);
+}
+
 // Height in metres at a level-0 sample position. Constant time: at most `levels` integer
 // window tests, then one entry and four texel loads (two of each within the blend band near a
 // window's inner edge, where the level and the next coarser one are mixed).
 fn clipmap_height(p: vec2<f32>) -> f32 {
     let lods = clipmap.params.y;
-    var l = 0u;
+    var l = clipmap_first_level(p);
     var node = vec2<i32>(0);
     loop {
         node = clipmap_node(p, l);
@@ -116,4 +135,47 @@ fn clipmap_height(p: vec2<f32>) -> f32 {
     }
     let h1 = clipmap_level_height(p, l + 1u, node1);
     return h1 + (h - h1) * weight;
+}
+
+struct ClipmapSurface {
+    normal: vec3<f32>,
+    albedo: vec3<f32>,
+}
+
+// Fragment stage: normal and albedo at a level-0 sample position from the best resident node
+// of the finest level whose window holds it, with explicit gradients (`gx`, `gy`: the screen
+// derivatives of p, taken in uniform control flow) scaled to the node's level and layer size,
+// so filtering (and anisotropy where enabled) follows the node's own texel density.
+fn clipmap_surface(p: vec2<f32>, gx: vec2<f32>, gy: vec2<f32>) -> ClipmapSurface {
+    let lods = clipmap.params.y;
+    var l = clipmap_first_level(p);
+    var node = vec2<i32>(0);
+    loop {
+        node = clipmap_node(p, l);
+        if clipmap_in_window(node, l) || l + 1u >= lods {
+            break;
+        }
+        l += 1u;
+    }
+    let n = i32(clipmap.params.z);
+    let c = i32(clipmap.params.w);
+    let e = clipmap.entries[(i32(l) * n + node.y % n) * n + node.x % n];
+    var out: ClipmapSurface;
+    out.normal = vec3<f32>(0.0, 0.0, 1.0);
+    out.albedo = vec3<f32>(0.5);
+    if e == 0xffffffffu {
+        return out;
+    }
+    let layer = i32(e & ((1u << CLIPMAP_LOD_SHIFT) - 1u));
+    let al = e >> CLIPMAP_LOD_SHIFT;
+    let b = f32(clipmap.params2.x);
+    let side = f32(clipmap.params2.y);
+    let anc = node >> vec2<u32>(al - l);
+    let local = clipmap_level_coord(p, al) - vec2<f32>(anc * c);
+    // Texel centres at integers in `local` -> normalized layer coordinates.
+    let uv = (local + vec2<f32>(b + 0.5)) / side;
+    let scale = clipmap_inv_pow2(al) / side;
+    out.normal = normalize(textureSampleGrad(atlas_normal, linear_sampler, uv, layer, gx * scale, gy * scale).xyz);
+    out.albedo = textureSampleGrad(atlas_albedo, linear_sampler, uv, layer, gx * scale, gy * scale).rgb;
+    return out;
 }

@@ -74,10 +74,21 @@ fn project(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec4<f32> {
 }
 
 // Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map.
+// Through the clipmap both come from the atlas (`clipmap_surface`).
 fn shade(grid_pos: vec2<f32>) -> vec4<f32> {
-    let size = vec2<f32>(frame.data_size.xy);
-    let n = normalize(textureSample(normal_tex, linear_sampler, (grid_pos + 0.5) / size).xyz);
-    let albedo = textureSample(albedo_tex, linear_sampler, grid_pos / (size - 1.0)).rgb;
+    let gx = dpdx(grid_pos);
+    let gy = dpdy(grid_pos);
+    var n: vec3<f32>;
+    var albedo: vec3<f32>;
+    if clipmap.params.x != 0u {
+        let s = clipmap_surface(grid_pos, gx, gy);
+        n = s.normal;
+        albedo = s.albedo;
+    } else {
+        let size = vec2<f32>(frame.data_size.xy);
+        n = normalize(textureSampleGrad(normal_tex, linear_sampler, (grid_pos + 0.5) / size, gx / size, gy / size).xyz);
+        albedo = textureSampleGrad(albedo_tex, linear_sampler, grid_pos / (size - 1.0), gx / (size - 1.0), gy / (size - 1.0)).rgb;
+    }
     let light = LIGHT_AMBIENT + LIGHT_DIFFUSE * max(dot(n, frame.sun_dir.xyz), 0.0);
     return vec4<f32>(albedo * light, 1.0);
 }

@@ -14,16 +14,26 @@ use gpu_allocator::MemoryLocation;
 
 use super::atlas::Atlas;
 use super::quadtree::{HEADER_BYTES, ViewQuadtree};
-use super::{ClipmapSettings, Geometry};
+use super::{ClipmapSettings, Geometry, Upload};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, ImageAccess, MemoryAccess};
 use crate::driver::memory::{Buffer, Image, ImageDesc};
 use crate::error::{Error, Result, VkResultExt};
 use crate::gpu_constants::CLIPMAP_PROBE_WORKGROUP;
 
+/// Bytes per atlas texel over the three attachments: height (R32F), normal (RGBA8 snorm),
+/// albedo (RGBA8 sRGB); a staging slot holds the three planes of a layer in that order.
+const TEXEL_BYTES: u64 = 12;
+
 pub struct ClipmapGpu {
     gpu: Arc<Gpu>,
+    /// Heights (R32F), one layer per atlas slot.
     pub atlas: Image,
+    /// Unit normals (RGBA8 snorm) and albedo (RGBA8 sRGB) of the same layers.
+    pub normals: Image,
+    pub albedo: Image,
+    /// Whether heights come through the clipmap (false: placeholders).
+    pub enabled: bool,
     pub quadtrees: Vec<Buffer>,
     staging: Vec<Option<Buffer>>,
     staged: Vec<Vec<u16>>,
@@ -71,33 +81,40 @@ impl ClipmapGpu {
             }
             None => (1, 2, 1),
         };
-        let atlas = Image::new(
-            gpu,
-            &ImageDesc {
-                name: "clipmap height atlas",
-                format: vk::Format::R32_SFLOAT,
-                extent: vk::Extent2D {
-                    width: side,
-                    height: side,
+        let make = |name: &str, format| {
+            Image::new(
+                gpu,
+                &ImageDesc {
+                    name,
+                    format,
+                    extent: vk::Extent2D {
+                        width: side,
+                        height: side,
+                    },
+                    layers,
+                    mips: 1,
+                    usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
+                    aspect: vk::ImageAspectFlags::COLOR,
                 },
-                layers,
-                mips: 1,
-                usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
-                aspect: vk::ImageAspectFlags::COLOR,
-            },
-        )?;
+            )
+        };
+        let atlas = make("clipmap height atlas", vk::Format::R32_SFLOAT)?;
+        let normals = make("clipmap normal atlas", vk::Format::R8G8B8A8_SNORM)?;
+        let albedo = make("clipmap albedo atlas", vk::Format::R8G8B8A8_SRGB)?;
         let all = vk::ImageSubresourceRange {
             layer_count: layers,
             ..layer_range(0)
         };
         gpu.one_shot(|cmd| {
-            Barriers::new(gpu).image(
-                cmd,
-                atlas.raw,
-                all,
-                ImageAccess::Undefined,
-                ImageAccess::SampledAnyShader,
-            )
+            for image in [&atlas, &normals, &albedo] {
+                Barriers::new(gpu).image(
+                    cmd,
+                    image.raw,
+                    all,
+                    ImageAccess::Undefined,
+                    ImageAccess::SampledAnyShader,
+                )
+            }
         })?;
         let mut quadtrees = Vec::with_capacity(slots);
         let mut staging = Vec::with_capacity(slots);
@@ -117,7 +134,7 @@ impl ClipmapGpu {
                 Some(_) => Some(Buffer::new(
                     gpu,
                     &format!("clipmap staging {s}"),
-                    settings.max_uploads_per_frame as u64 * (side as u64).pow(2) * 4,
+                    settings.max_uploads_per_frame as u64 * (side as u64).pow(2) * TEXEL_BYTES,
                     vk::BufferUsageFlags::TRANSFER_SRC,
                     MemoryLocation::CpuToGpu,
                 )?),
@@ -127,6 +144,9 @@ impl ClipmapGpu {
         Ok(ClipmapGpu {
             gpu: gpu.clone(),
             atlas,
+            normals,
+            albedo,
+            enabled: geometry.is_some(),
             quadtrees,
             staging,
             staged: vec![Vec::new(); slots],
@@ -143,28 +163,36 @@ impl ClipmapGpu {
         geometry: &Geometry,
         view: &ViewQuadtree,
         atlas: &Atlas,
-        uploads: &[u16],
+        uploads: &[Upload],
     ) -> Result<()> {
         view.gpu_bytes(geometry, &mut self.scratch);
         self.quadtrees[slot].write(&self.scratch)?;
         let texels = (self.side as usize).pow(2);
+        let per_layer = texels * TEXEL_BYTES as usize;
         let staging = self.staging[slot]
             .as_mut()
             .and_then(|b| b.mapped_mut())
             .ok_or_else(|| Error::invalid("clipmap", "staging buffer not mapped"))?;
-        if uploads.len() * texels * 4 > staging.len() {
+        if uploads.len() * per_layer > staging.len() {
             return Err(Error::invalid("clipmap", "more uploads than staging space"));
         }
-        for (k, &layer) in uploads.iter().enumerate() {
-            let dst = &mut staging[k * texels * 4..(k + 1) * texels * 4];
+        for (k, up) in uploads.iter().enumerate() {
+            let dst = &mut staging[k * per_layer..(k + 1) * per_layer];
+            if up.shading.len() != texels * 8 {
+                return Err(Error::invalid(
+                    "clipmap",
+                    "shading planes of the wrong size",
+                ));
+            }
             for j in 0..self.side {
                 for i in 0..self.side {
                     let t = (j * self.side + i) as usize * 4;
-                    dst[t..t + 4].copy_from_slice(&atlas.texel(layer, i, j).to_le_bytes());
+                    dst[t..t + 4].copy_from_slice(&atlas.texel(up.layer, i, j).to_le_bytes());
                 }
             }
+            dst[texels * 4..].copy_from_slice(&up.shading);
         }
-        self.staged[slot] = uploads.to_vec();
+        self.staged[slot] = uploads.iter().map(|u| u.layer).collect();
         Ok(())
     }
 
@@ -175,45 +203,52 @@ impl ClipmapGpu {
             return;
         };
         let b = Barriers::new(&self.gpu);
-        let bytes = (self.side as u64).pow(2) * 4;
+        let texels = (self.side as u64).pow(2);
         for (k, &layer) in layers.iter().enumerate() {
             let range = layer_range(layer as u32);
-            b.image(
-                cmd,
-                self.atlas.raw,
-                range,
-                ImageAccess::SampledAnyShader,
-                ImageAccess::TransferDst,
-            );
-            let region = vk::BufferImageCopy::default()
-                .buffer_offset(k as u64 * bytes)
-                .image_subresource(vk::ImageSubresourceLayers {
-                    aspect_mask: vk::ImageAspectFlags::COLOR,
-                    mip_level: 0,
-                    base_array_layer: layer as u32,
-                    layer_count: 1,
-                })
-                .image_extent(vk::Extent3D {
-                    width: self.side,
-                    height: self.side,
-                    depth: 1,
-                });
-            unsafe {
-                self.gpu.device.cmd_copy_buffer_to_image(
+            let base = k as u64 * texels * TEXEL_BYTES;
+            for (image, offset) in [
+                (&self.atlas, 0),
+                (&self.normals, texels * 4),
+                (&self.albedo, texels * 8),
+            ] {
+                b.image(
                     cmd,
-                    staging.raw,
-                    self.atlas.raw,
-                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                    &[region],
-                )
-            };
-            b.image(
-                cmd,
-                self.atlas.raw,
-                range,
-                ImageAccess::TransferDst,
-                ImageAccess::SampledAnyShader,
-            );
+                    image.raw,
+                    range,
+                    ImageAccess::SampledAnyShader,
+                    ImageAccess::TransferDst,
+                );
+                let region = vk::BufferImageCopy::default()
+                    .buffer_offset(base + offset)
+                    .image_subresource(vk::ImageSubresourceLayers {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        mip_level: 0,
+                        base_array_layer: layer as u32,
+                        layer_count: 1,
+                    })
+                    .image_extent(vk::Extent3D {
+                        width: self.side,
+                        height: self.side,
+                        depth: 1,
+                    });
+                unsafe {
+                    self.gpu.device.cmd_copy_buffer_to_image(
+                        cmd,
+                        staging.raw,
+                        image.raw,
+                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                        &[region],
+                    )
+                };
+                b.image(
+                    cmd,
+                    image.raw,
+                    range,
+                    ImageAccess::TransferDst,
+                    ImageAccess::SampledAnyShader,
+                );
+            }
         }
     }
 }

@@ -41,11 +41,18 @@ impl NodeKey {
     }
 }
 
-/// Where node heights come from (the data set on disk; tests wrap it to fail or delay nodes).
+/// One node as loaded: `side x side` texels, borders included, row 0 = south.
+#[derive(Clone, Debug, Default)]
+pub struct NodeData {
+    pub heights: Vec<f32>,
+    /// RGBA8 sRGB albedo when the data set has an albedo layer.
+    pub rgba: Option<Vec<u8>>,
+}
+
+/// Where nodes come from (the data set on disk; tests wrap it to fail or withhold nodes).
 /// Called on worker threads.
 pub trait NodeSource: Send + Sync {
-    /// The node's `side x side` heights (borders included, row 0 = south).
-    fn load(&self, key: NodeKey) -> Result<Vec<f32>>;
+    fn load(&self, key: NodeKey) -> Result<NodeData>;
 }
 
 /// A `vkterrain preprocess` data set as a node source.
@@ -62,10 +69,10 @@ impl DatasetSource {
 }
 
 impl NodeSource for DatasetSource {
-    fn load(&self, key: NodeKey) -> Result<Vec<f32>> {
+    fn load(&self, key: NodeKey) -> Result<NodeData> {
         let node = self.dataset.read_node(key.lod, key.x, key.y)?;
         let want = (self.dataset.layout.side() as usize).pow(2);
-        if node.heights.len() != want {
+        if node.heights.len() != want || !(node.rgba.is_empty() || node.rgba.len() == want * 4) {
             return Err(Error::invalid(
                 format!("node {}/{}/{}", key.lod, key.x, key.y),
                 format!("{} heights, expected {want}", node.heights.len()),
@@ -77,7 +84,10 @@ impl NodeSource for DatasetSource {
                 format!("height {bad} is not finite: corrupt node"),
             ));
         }
-        Ok(node.heights)
+        Ok(NodeData {
+            heights: node.heights,
+            rgba: (!node.rgba.is_empty()).then_some(node.rgba),
+        })
     }
 }
 
@@ -99,7 +109,7 @@ pub fn from_config(config: &crate::config::Config) -> Result<Option<Clipmap>> {
 }
 
 /// Node geometry of a pyramid: centre and border texels, node counts per level.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Geometry {
     /// Level-0 samples per side.
     pub width: u64,
@@ -107,6 +117,10 @@ pub struct Geometry {
     pub center: u32,
     pub border: u32,
     pub levels: Vec<(u32, u32)>,
+    /// Metres between level-0 samples (north-south; the clipmap needs square spacing).
+    pub spacing: f64,
+    /// Level-0 height range (metres), for the colour ramp of untextured data.
+    pub height_range: [f32; 2],
 }
 
 impl Geometry {
@@ -118,7 +132,43 @@ impl Geometry {
             center: l.center,
             border: l.border,
             levels: (0..l.levels()).map(|lod| l.nodes(lod)).collect(),
+            spacing: ds.manifest.spacing[1],
+            height_range: ds.manifest.height_range,
         }
+    }
+
+    /// The shading planes of a node for the atlas: `side²` RGBA8 snorm normals (central
+    /// differences inside the node, borders included; one-sided at its outer texels) followed
+    /// by `side²` RGBA8 sRGB albedo (the data set's, else the height/slope ramp).
+    pub fn shading(&self, lod: u32, node: &NodeData) -> Vec<u8> {
+        let s = self.side() as i64;
+        let texels = (s * s) as usize;
+        let h = |i: i64, j: i64| {
+            node.heights[(j.clamp(0, s - 1) * s + i.clamp(0, s - 1)) as usize] as f64
+        };
+        let step = self.spacing * (1u64 << lod.min(62)) as f64;
+        let mut out = Vec::with_capacity(texels * 8);
+        for j in 0..s {
+            for i in 0..s {
+                let (il, ir) = ((i - 1).max(0), (i + 1).min(s - 1));
+                let (jd, ju) = ((j - 1).max(0), (j + 1).min(s - 1));
+                let dx = (h(ir, j) - h(il, j)) / ((ir - il) as f64 * step);
+                let dy = (h(i, ju) - h(i, jd)) / ((ju - jd) as f64 * step);
+                out.extend(crate::dataset::normal_snorm8(dx, dy));
+            }
+        }
+        match &node.rgba {
+            Some(rgba) => out.extend_from_slice(rgba),
+            None => {
+                let [lo, hi] = self.height_range;
+                let span = (hi - lo).max(1.0);
+                for t in 0..texels {
+                    let nz = out[t * 4 + 2];
+                    out.extend(crate::dataset::ramp_rgba(node.heights[t], lo, span, nz));
+                }
+            }
+        }
+        out
     }
 
     pub fn side(&self) -> u32 {
@@ -204,6 +254,14 @@ impl ClipmapSettings {
     }
 }
 
+/// A node to copy into the atlas this frame: its layer (heights are the atlas's CPU copy) and
+/// its shading planes ([`Geometry::shading`]).
+#[derive(Clone, Debug)]
+pub struct Upload {
+    pub layer: u16,
+    pub shading: Vec<u8>,
+}
+
 /// What streaming did so far (all counts since creation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Counters {
@@ -231,9 +289,9 @@ pub struct Clipmap {
     streamer: Streamer,
     frame: u64,
     in_flight: HashSet<NodeKey>,
-    ready: VecDeque<(NodeKey, Vec<f32>)>,
+    ready: VecDeque<(NodeKey, NodeData, Vec<u8>)>,
     failed: HashMap<NodeKey, u64>,
-    pending_uploads: Vec<u16>,
+    pending_uploads: Vec<Upload>,
     pub counters: Counters,
 }
 
@@ -266,14 +324,15 @@ impl Clipmap {
             ));
         }
         let mut atlas = Atlas::new(settings.atlas_capacity, geometry.side());
-        let heights = source
+        let node = source
             .load(root)
             .map_err(|e| Error::invalid("clipmap root node", e.to_string()))?;
+        let shading = geometry.shading(root.lod, &node);
         let layer = atlas
             .allocate(root, 0, true)
             .ok_or_else(|| Error::invalid("clipmap", "atlas has no layer for the root"))?;
-        atlas.store(layer, heights);
-        let streamer = Streamer::new(source, settings.workers);
+        atlas.store(layer, node.heights);
+        let streamer = Streamer::new(source, settings.workers, geometry.clone());
         Ok(Clipmap {
             views: (0..views.max(1))
                 .map(|_| ViewQuadtree::new(&geometry, settings.node_count, settings.blend_nodes))
@@ -286,7 +345,7 @@ impl Clipmap {
             in_flight: HashSet::new(),
             ready: VecDeque::new(),
             failed: HashMap::new(),
-            pending_uploads: vec![layer],
+            pending_uploads: vec![Upload { layer, shading }],
             counters: Counters::default(),
         })
     }
@@ -303,8 +362,8 @@ impl Clipmap {
 
     /// The four-step update for one frame. `viewers`: one position per view in level-0 sample
     /// units. Returns the atlas layers whose contents changed (to upload this frame, in this
-    /// order; their data is [`Atlas::texel`]'s copy).
-    pub fn update(&mut self, viewers: &[DVec2]) -> Vec<u16> {
+    /// order; their heights are [`Atlas::texel`]'s copy).
+    pub fn update(&mut self, viewers: &[DVec2]) -> Vec<Upload> {
         self.frame += 1;
         let frame = self.frame;
         // (1) recentre each view, collect wanted nodes; (2) union over views.
@@ -325,11 +384,11 @@ impl Clipmap {
         for (key, result) in self.streamer.poll() {
             self.in_flight.remove(&key);
             match result {
-                LoadResult::Loaded(h) if wanted.contains_key(&key) => {
+                LoadResult::Loaded(node, shading) if wanted.contains_key(&key) => {
                     self.counters.loaded += 1;
-                    self.ready.push_back((key, h));
+                    self.ready.push_back((key, node, shading));
                 }
-                LoadResult::Loaded(_) | LoadResult::Cancelled => self.counters.cancelled += 1,
+                LoadResult::Loaded(..) | LoadResult::Cancelled => self.counters.cancelled += 1,
                 LoadResult::Failed(e) => {
                     self.counters.load_errors += 1;
                     tracing::warn!(
@@ -346,7 +405,7 @@ impl Clipmap {
         // (3) copy finished loads into the atlas, bounded per frame.
         let mut uploads = std::mem::take(&mut self.pending_uploads);
         while uploads.len() < self.settings.max_uploads_per_frame as usize {
-            let Some((key, heights)) = self.ready.pop_front() else {
+            let Some((key, node, shading)) = self.ready.pop_front() else {
                 break;
             };
             if !wanted.contains_key(&key) {
@@ -355,8 +414,8 @@ impl Clipmap {
             }
             match self.atlas.allocate(key, frame, false) {
                 Some(layer) => {
-                    self.atlas.store(layer, heights);
-                    uploads.push(layer);
+                    self.atlas.store(layer, node.heights);
+                    uploads.push(Upload { layer, shading });
                     self.counters.uploaded += 1;
                 }
                 None => self.counters.deferred += 1,
@@ -372,7 +431,7 @@ impl Clipmap {
                 self.atlas.layer_of(**k).is_none()
                     && !self.in_flight.contains(k)
                     && !self.failed.contains_key(k)
-                    && !self.ready.iter().any(|(r, _)| r == *k)
+                    && !self.ready.iter().any(|(r, ..)| r == *k)
             })
             .map(|(k, p)| (*k, *p))
             .collect();

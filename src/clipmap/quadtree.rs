@@ -53,6 +53,8 @@ pub struct ViewQuadtree {
     /// 1 / width of the band (level texels) at a window's inner edge in which the level is
     /// blended with the next coarser one; 0: no blending.
     pub blend_inv: f32,
+    /// The viewer (level-0 samples, clamped into the data) of the last recentre.
+    pub viewer: [f32; 2],
 }
 
 impl ViewQuadtree {
@@ -65,6 +67,7 @@ impl ViewQuadtree {
             keys: vec![None; cells],
             changed: vec![0; geometry.levels.len()],
             fallback_cells: 0,
+            viewer: [0.0; 2],
             blend_inv: if blend_nodes > 0.0 {
                 (1.0 / (blend_nodes * geometry.center as f64)) as f32
             } else {
@@ -81,6 +84,13 @@ impl ViewQuadtree {
     /// Recentres every level's window on `viewer` (level-0 sample units) and returns the nodes
     /// of all windows with a priority key (smaller = sooner: coarse first, then near).
     pub fn recentre(&mut self, geometry: &Geometry, viewer: DVec2) -> Vec<(NodeKey, (u32, u64))> {
+        // Outside the data the windows are those of the nearest point inside (clamping the
+        // origins gives the same); the shader's level estimate relies on the clamped viewer.
+        let viewer = viewer.clamp(
+            DVec2::ZERO,
+            DVec2::new(geometry.width as f64 - 1.0, geometry.height as f64 - 1.0),
+        );
+        self.viewer = [viewer.x as f32, viewer.y as f32];
         let n = self.node_count as i64;
         let c = geometry.center as f64;
         let lods = geometry.levels.len() as u32;
@@ -272,6 +282,10 @@ impl ViewQuadtree {
             side,
             self.blend_inv.to_bits(),
             inv_center(geometry).to_bits(),
+            self.viewer[0].to_bits(),
+            self.viewer[1].to_bits(),
+            0,
+            0,
         ] {
             out.extend_from_slice(&v.to_le_bytes());
         }
@@ -288,4 +302,4 @@ impl ViewQuadtree {
 }
 
 /// Bytes of the GPU header before the entries.
-pub const HEADER_BYTES: u64 = 32 + 16 * CLIPMAP_MAX_LEVELS as u64;
+pub const HEADER_BYTES: u64 = 48 + 16 * CLIPMAP_MAX_LEVELS as u64;

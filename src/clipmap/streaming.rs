@@ -10,11 +10,12 @@ use std::thread::JoinHandle;
 
 use crossbeam_channel::{Receiver, Sender, unbounded};
 
-use super::{NodeKey, NodeSource};
+use super::{Geometry, NodeData, NodeKey, NodeSource};
 
 /// What a worker did with a request.
 pub enum LoadResult {
-    Loaded(Vec<f32>),
+    /// The node and its shading planes (normals, albedo), computed on the worker.
+    Loaded(NodeData, Vec<u8>),
     Failed(String),
     Cancelled,
 }
@@ -27,17 +28,18 @@ pub struct Streamer {
 }
 
 impl Streamer {
-    pub fn new(source: Arc<dyn NodeSource>, workers: u32) -> Self {
+    pub fn new(source: Arc<dyn NodeSource>, workers: u32, geometry: Geometry) -> Self {
         let (req_tx, req_rx) = unbounded::<NodeKey>();
         let (res_tx, res_rx) = unbounded();
         let wanted = Arc::new(Mutex::new(HashSet::new()));
         let handles = (0..workers.max(1))
             .map(|i| {
-                let (rx, tx, src, wanted) = (
+                let (rx, tx, src, wanted, geometry) = (
                     req_rx.clone(),
                     res_tx.clone(),
                     source.clone(),
                     wanted.clone(),
+                    geometry.clone(),
                 );
                 std::thread::Builder::new()
                     .name(format!("clipmap-loader-{i}"))
@@ -53,9 +55,12 @@ impl Streamer {
                                 LoadResult::Cancelled
                             } else {
                                 match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                                    src.load(key)
+                                    src.load(key).map(|n| {
+                                        let shading = geometry.shading(key.lod, &n);
+                                        (n, shading)
+                                    })
                                 })) {
-                                    Ok(Ok(h)) => LoadResult::Loaded(h),
+                                    Ok(Ok((n, s))) => LoadResult::Loaded(n, s),
                                     Ok(Err(e)) => LoadResult::Failed(e.to_string()),
                                     Err(_) => LoadResult::Failed("loader panicked".into()),
                                 }

@@ -163,10 +163,7 @@ impl Heightmap {
                 let (rd, ru) = ((r - 1).max(0), (r + 1).min(h - 1));
                 let dx = (at(cr, r) - at(cl, r)) / ((cr - cl) as f64 * self.spacing);
                 let dy = (at(c, ru) - at(c, rd)) / ((ru - rd) as f64 * self.spacing);
-                let n = glam::DVec3::new(-dx, -dy, 1.0).normalize();
-                for v in [n.x, n.y, n.z, 0.0] {
-                    out.push(((v * 127.0).round().clamp(-127.0, 127.0) as i8) as u8);
-                }
+                out.extend(normal_snorm8(dx, dy));
             }
         }
         out
@@ -183,21 +180,7 @@ impl Heightmap {
         let normals = self.normals_snorm8();
         let mut rgba = Vec::with_capacity(self.heights.len() * 4);
         for (i, &h) in self.heights.iter().enumerate() {
-            let t = (h - lo) / span;
-            let nz = (normals[i * 4 + 2] as i8) as f32 / 127.0;
-            let grass = [0.32f32, 0.45, 0.22];
-            let rock = [0.45f32, 0.41, 0.37];
-            let snow = [0.93f32, 0.94, 0.96];
-            let steep = ((0.9 - nz) / 0.25).clamp(0.0, 1.0);
-            let mut c = [0.0f32; 3];
-            for k in 0..3 {
-                c[k] =
-                    grass[k] + (rock[k] - grass[k]) * steep.max(((t - 0.55) / 0.2).clamp(0.0, 1.0));
-                let s = ((t - 0.8) / 0.1).clamp(0.0, 1.0) * (1.0 - steep);
-                c[k] += (snow[k] - c[k]) * s;
-            }
-            rgba.extend(c.iter().map(|v| (v * 255.0).round() as u8));
-            rgba.push(255);
+            rgba.extend(ramp_rgba(h, lo, span, normals[i * 4 + 2]));
         }
         Albedo {
             width: self.width,
@@ -205,6 +188,31 @@ impl Heightmap {
             rgba,
         }
     }
+}
+
+/// A unit normal from the height gradient (metres per metre), as RGBA8 snorm `(x, y, z, 0)`.
+pub fn normal_snorm8(dx: f64, dy: f64) -> [u8; 4] {
+    let n = glam::DVec3::new(-dx, -dy, 1.0).normalize();
+    [n.x, n.y, n.z, 0.0].map(|v| ((v * 127.0).round().clamp(-127.0, 127.0) as i8) as u8)
+}
+
+/// The colour ramp of untextured data (grass, rock, snow) for height `h` in a data set
+/// spanning `lo .. lo + span` metres, given the packed normal's z byte (slope).
+pub fn ramp_rgba(h: f32, lo: f32, span: f32, normal_z: u8) -> [u8; 4] {
+    let t = (h - lo) / span;
+    let nz = (normal_z as i8) as f32 / 127.0;
+    let grass = [0.32f32, 0.45, 0.22];
+    let rock = [0.45f32, 0.41, 0.37];
+    let snow = [0.93f32, 0.94, 0.96];
+    let steep = ((0.9 - nz) / 0.25).clamp(0.0, 1.0);
+    let mut c = [0.0f32; 3];
+    for k in 0..3 {
+        c[k] = grass[k] + (rock[k] - grass[k]) * steep.max(((t - 0.55) / 0.2).clamp(0.0, 1.0));
+        let s = ((t - 0.8) / 0.1).clamp(0.0, 1.0) * (1.0 - steep);
+        c[k] += (snow[k] - c[k]) * s;
+    }
+    let q = |v: f32| (v * 255.0).round() as u8;
+    [q(c[0]), q(c[1]), q(c[2]), 255]
 }
 
 /// Loads the data set a configuration names.

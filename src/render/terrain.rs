@@ -100,27 +100,42 @@ impl TerrainGpu {
             width: data.width,
             height: data.height,
         };
-        let heights: Vec<u8> = data.heights.iter().flat_map(|h| h.to_le_bytes()).collect();
-        let height =
-            Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, &heights)?;
-        let normal = Image::texture_with_data(
-            gpu,
-            "normals",
-            vk::Format::R8G8B8A8_SNORM,
-            extent,
-            &data.normals_snorm8(),
-        )?;
-        let albedo_data = data.albedo_or_ramp();
-        let albedo = Image::texture_with_data(
-            gpu,
-            "albedo",
-            vk::Format::R8G8B8A8_SRGB,
-            vk::Extent2D {
-                width: albedo_data.width,
-                height: albedo_data.height,
-            },
-            &albedo_data.rgba,
-        )?;
+        let (height, normal, albedo) = if clipmap.enabled {
+            // Heights, normals and albedo all come through the clipmap's atlas: 1x1
+            // placeholders keep the bindings valid without the full-resolution textures.
+            let one = vk::Extent2D {
+                width: 1,
+                height: 1,
+            };
+            (
+                Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, one, &[0; 4])?,
+                Image::texture_with_data(gpu, "normals", vk::Format::R8G8B8A8_SNORM, one, &[0; 4])?,
+                Image::texture_with_data(gpu, "albedo", vk::Format::R8G8B8A8_SRGB, one, &[0; 4])?,
+            )
+        } else {
+            let heights: Vec<u8> = data.heights.iter().flat_map(|h| h.to_le_bytes()).collect();
+            let height =
+                Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, &heights)?;
+            let normal = Image::texture_with_data(
+                gpu,
+                "normals",
+                vk::Format::R8G8B8A8_SNORM,
+                extent,
+                &data.normals_snorm8(),
+            )?;
+            let albedo_data = data.albedo_or_ramp();
+            let albedo = Image::texture_with_data(
+                gpu,
+                "albedo",
+                vk::Format::R8G8B8A8_SRGB,
+                vk::Extent2D {
+                    width: albedo_data.width,
+                    height: albedo_data.height,
+                },
+                &albedo_data.rgba,
+            )?;
+            (height, normal, albedo)
+        };
         let (min_height, max_height) = data.height_range();
         let info = TerrainInfo {
             name: data.name.clone(),
@@ -171,6 +186,8 @@ impl TerrainGpu {
             binding(4, vk::DescriptorType::SAMPLER),
             binding(5, vk::DescriptorType::SAMPLED_IMAGE),
             binding(6, vk::DescriptorType::STORAGE_BUFFER),
+            binding(7, vk::DescriptorType::SAMPLED_IMAGE),
+            binding(8, vk::DescriptorType::SAMPLED_IMAGE),
         ];
         let set_layout = unsafe {
             d.create_descriptor_set_layout(
@@ -187,7 +204,7 @@ impl TerrainGpu {
             },
             vk::DescriptorPoolSize {
                 ty: vk::DescriptorType::SAMPLED_IMAGE,
-                descriptor_count: 4 * n,
+                descriptor_count: 6 * n,
             },
             vk::DescriptorPoolSize {
                 ty: vk::DescriptorType::STORAGE_BUFFER,
@@ -243,6 +260,10 @@ impl TerrainGpu {
                 image_info(albedo.view),
                 image_info(clipmap.atlas.view),
             );
+            let (cn, ca) = (
+                image_info(clipmap.normals.view),
+                image_info(clipmap.albedo.view),
+            );
             let qi = [vk::DescriptorBufferInfo {
                 buffer: clipmap.quadtrees[slot].raw,
                 offset: 0,
@@ -266,6 +287,8 @@ impl TerrainGpu {
                 write(4, vk::DescriptorType::SAMPLER).image_info(&si),
                 write(5, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ci),
                 write(6, vk::DescriptorType::STORAGE_BUFFER).buffer_info(&qi),
+                write(7, vk::DescriptorType::SAMPLED_IMAGE).image_info(&cn),
+                write(8, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ca),
             ];
             unsafe { d.update_descriptor_sets(&writes, &[]) };
             uniforms.push(ubo);
