@@ -38,7 +38,22 @@ struct Row {
     atlas_capacity: u32,
     atlas_bytes: u64,
     staging_bytes: u64,
+    /// Process resident memory at the end of the variant (lavapipe's "GPU" memory is host
+    /// memory, so this includes the textures; the level-0 height map is held in both).
+    rss_mib: f64,
     counters: Option<vkterrain::clipmap::Counters>,
+}
+
+fn rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map(|kb| kb / 1024.0)
+        .unwrap_or(0.0)
 }
 
 fn main() -> anyhow::Result<()> {
@@ -84,7 +99,7 @@ fn main() -> anyhow::Result<()> {
         gpu.info.name
     );
     println!(
-        "{:<16} {:>9} {:>8} {:>8} {:>10} {:>12} {:>9} {:>9} {:>14} {:>10}",
+        "{:<16} {:>9} {:>8} {:>8} {:>10} {:>12} {:>9} {:>9} {:>14} {:>10} {:>8}",
         "variant",
         "median ms",
         "p99 ms",
@@ -94,7 +109,8 @@ fn main() -> anyhow::Result<()> {
         "cpu rec",
         "fallback",
         "resident/cap",
-        "atlas MiB"
+        "atlas MiB",
+        "RSS MiB"
     );
     let mut rows = Vec::new();
     for clipmap in [false, true] {
@@ -103,13 +119,7 @@ fn main() -> anyhow::Result<()> {
         let cm = vkterrain::clipmap::from_config(&config)?;
         let (capacity, atlas_bytes, layer_bytes) = cm
             .as_ref()
-            .map(|c| {
-                (
-                    c.settings.atlas_capacity,
-                    c.atlas_bytes(),
-                    (c.geometry.side() as u64).pow(2) * 4,
-                )
-            })
+            .map(|c| (c.settings.atlas_capacity, c.atlas_bytes(), c.layer_bytes()))
             .unwrap_or((0, 0, 0));
         let options = RenderOptions::from_config(&config);
         let staging_bytes = layer_bytes
@@ -160,10 +170,11 @@ fn main() -> anyhow::Result<()> {
             atlas_capacity: capacity,
             atlas_bytes,
             staging_bytes,
+            rss_mib: rss_mib(),
             counters,
         };
         println!(
-            "{:<16} {:>9.1} {:>8.1} {:>8.1} {:>10} {:>12.2} {:>9.2} {:>9} {:>14} {:>10.2}",
+            "{:<16} {:>9.1} {:>8.1} {:>8.1} {:>10} {:>12.2} {:>9.2} {:>9} {:>14} {:>10.2} {:>8.0}",
             row.variant,
             row.frame_ms.median,
             row.frame_ms.p99,
@@ -173,7 +184,8 @@ fn main() -> anyhow::Result<()> {
             row.cpu_record_ms.median,
             row.fallback_frames,
             format!("{}/{}", row.max_resident_nodes, row.atlas_capacity),
-            row.atlas_bytes as f64 / (1u64 << 20) as f64
+            row.atlas_bytes as f64 / (1u64 << 20) as f64,
+            row.rss_mib
         );
         if let Some(c) = &row.counters {
             println!(

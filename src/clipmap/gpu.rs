@@ -23,7 +23,7 @@ use crate::gpu_constants::CLIPMAP_PROBE_WORKGROUP;
 
 /// Bytes per atlas texel over the three attachments: height (R32F), normal (RGBA8 snorm),
 /// albedo (RGBA8 sRGB); a staging slot holds the three planes of a layer in that order.
-const TEXEL_BYTES: u64 = 12;
+pub const TEXEL_BYTES: u64 = 12;
 
 pub struct ClipmapGpu {
     gpu: Arc<Gpu>,

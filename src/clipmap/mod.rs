@@ -350,9 +350,14 @@ impl Clipmap {
         })
     }
 
-    /// Bytes of the GPU atlas (the memory budget the configuration fixes).
+    /// Bytes of the GPU atlas, all attachments (the memory budget the configuration fixes).
     pub fn atlas_bytes(&self) -> u64 {
-        self.settings.atlas_capacity as u64 * (self.geometry.side() as u64).pow(2) * 4
+        self.settings.atlas_capacity as u64 * self.layer_bytes()
+    }
+
+    /// Bytes of one atlas layer over its attachments: height (R32F), normal and albedo (RGBA8).
+    pub fn layer_bytes(&self) -> u64 {
+        (self.geometry.side() as u64).pow(2) * gpu::TEXEL_BYTES
     }
 
     /// Loads still queued or waiting for upload.
