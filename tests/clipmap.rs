@@ -507,3 +507,100 @@ fn ring_edges_blend_without_steps() {
     );
     assert!((b as f64) < 2.0 * exact, "blending leaves a step");
 }
+
+/// A loader that takes `delay` per node of levels 0 and 1 (coarser ones are immediate).
+struct Slow {
+    inner: DatasetSource,
+    delay: std::time::Duration,
+}
+
+impl NodeSource for Slow {
+    fn load(&self, key: NodeKey) -> vkterrain::Result<NodeData> {
+        if key.lod <= 1 {
+            std::thread::sleep(self.delay);
+        }
+        self.inner.load(key)
+    }
+}
+
+#[test]
+fn slow_loads_are_bounded_prioritised_and_cancelled_when_unwanted() {
+    let ds = DatasetSource::open(dataset()).unwrap();
+    let geometry = Geometry::of(&ds.dataset);
+    let src = Arc::new(Slow {
+        inner: ds,
+        delay: std::time::Duration::from_millis(15),
+    });
+    let mut s = settings(6, 300);
+    s.workers = 1;
+    s.max_in_flight = 6;
+    let mut cm = Clipmap::new(geometry, s, src, 1).unwrap();
+    let a = DVec2::new(40.0, 40.0);
+    let started = std::time::Instant::now();
+    cm.update(&[a]);
+    // The update never waits for the loader.
+    assert!(started.elapsed() < std::time::Duration::from_millis(15));
+    assert!(cm.busy() <= 6);
+    // Coarse first: levels 2.. (39 nodes) become resident before any level-1 or level-0 node.
+    let coarse = |cm: &Clipmap| {
+        cm.views[0]
+            .keys
+            .iter()
+            .flatten()
+            .filter(|k| k.lod >= 2 && cm.atlas.layer_of(**k).is_some())
+            .count()
+    };
+    let mut frames = 0;
+    while coarse(&cm) < 39 {
+        let fine = cm.atlas.resident() - coarse(&cm);
+        assert_eq!(fine, 0, "a level-0/1 node arrived before the coarse levels");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        cm.update(&[a]);
+        assert!(cm.busy() <= 6);
+        frames += 1;
+        assert!(frames < 500, "{:?}", cm.counters);
+    }
+    // Now level-1/0 nodes around `a` are queued (15 ms each). Jump to the far corner: they are
+    // no longer wanted and are skipped or dropped.
+    for _ in 0..3 {
+        cm.update(&[a]);
+    }
+    let b = DVec2::new(500.0, 500.0);
+    for _ in 0..40 {
+        cm.update(&[b]);
+        assert!(cm.busy() <= 6);
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert!(cm.counters.cancelled > 0, "{:?}", cm.counters);
+    assert_cells_resolve(&cm);
+}
+
+#[test]
+fn legacy_barrier_path_streams_without_validation_messages() {
+    let gpu = common::gpu(true);
+    let data = heightmap();
+    let ds = DatasetSource::open(dataset()).unwrap();
+    let geometry = Geometry::of(&ds.dataset);
+    let cm = Clipmap::new(geometry, settings(6, 80), Arc::new(ds), 1).unwrap();
+    let mut sink = CollectSink::default();
+    let mut renderer = Renderer::with_clipmap(
+        &gpu,
+        &data,
+        MethodKind::Brute,
+        common::options(128, 80, 3),
+        Some(cm),
+    )
+    .unwrap();
+    for k in 0..12 {
+        let f = 0.35 + 0.3 * k as f64 / 12.0;
+        renderer
+            .render(camera_over(&data, f, 0.5), &mut sink)
+            .unwrap();
+    }
+    renderer.finish(&mut sink).unwrap();
+    assert!(renderer.clipmap().unwrap().counters.uploaded > 0);
+    assert!(sink.frames.iter().all(no_sky));
+    assert_cpu_equals_gpu(&renderer, "legacy path");
+    drop(renderer);
+    common::assert_no_validation_messages(&gpu);
+}
