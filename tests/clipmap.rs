@@ -604,3 +604,40 @@ fn legacy_barrier_path_streams_without_validation_messages() {
     drop(renderer);
     common::assert_no_validation_messages(&gpu);
 }
+
+#[test]
+fn shading_planes_carry_normals_albedo_and_their_mips() {
+    let ds = DatasetSource::open(dataset()).unwrap();
+    let geometry = Geometry::of(&ds.dataset);
+    let key = NodeKey { lod: 0, x: 3, y: 4 };
+    let node = ds.load(key).unwrap();
+    let planes = geometry.shading(0, &node);
+    let side = geometry.side() as usize;
+    assert_eq!(geometry.shading_mips(), 4);
+    assert_eq!(planes.len() as u64, geometry.shading_texels() * 8);
+    // Normal of a centre texel = the single-texture path's normal of the same sample.
+    let data = heightmap();
+    let normals = data.normals_snorm8();
+    let (b, c) = (geometry.border as usize, CENTER as usize);
+    for (i, j) in [(0usize, 0usize), (5, 17), (31, 31)] {
+        let (u, v) = (3 * c + i, 4 * c + j);
+        let at = ((j + b) * side + i + b) * 4;
+        let want = (v * data.width as usize + u) * 4;
+        assert_eq!(planes[at..at + 4], normals[want..want + 4], "texel {i},{j}");
+    }
+    // Albedo mip 1 texel (x, y) = rounded mean of mip-0 texels (2x..2x+1, 2y..2y+1).
+    let albedo = geometry.shading_texels() as usize * 4;
+    let mip1 = albedo + side * side * 4;
+    let half = geometry.mip_side(1) as usize;
+    for (x, y) in [(0usize, 0usize), (7, 11), (half - 1, half - 1)] {
+        for ch in 0..4 {
+            let t = |i: usize, j: usize| planes[albedo + (j * side + i) * 4 + ch] as f32;
+            let mean = (t(2 * x, 2 * y)
+                + t(2 * x + 1, 2 * y)
+                + t(2 * x, 2 * y + 1)
+                + t(2 * x + 1, 2 * y + 1))
+                / 4.0;
+            assert_eq!(planes[mip1 + (y * half + x) * 4 + ch], mean.round() as u8);
+        }
+    }
+}

@@ -21,9 +21,11 @@ use crate::driver::memory::{Buffer, Image, ImageDesc};
 use crate::error::{Error, Result, VkResultExt};
 use crate::gpu_constants::CLIPMAP_PROBE_WORKGROUP;
 
-/// Bytes per atlas texel over the three attachments: height (R32F), normal (RGBA8 snorm),
-/// albedo (RGBA8 sRGB); a staging slot holds the three planes of a layer in that order.
-pub const TEXEL_BYTES: u64 = 12;
+/// Bytes of one layer over the three attachments: height (R32F), normal (RGBA8 snorm, mips),
+/// albedo (RGBA8 sRGB, mips); a staging slot holds them in that order.
+pub fn layer_bytes(g: &Geometry) -> u64 {
+    (g.side() as u64).pow(2) * 4 + g.shading_texels() * 8
+}
 
 pub struct ClipmapGpu {
     gpu: Arc<Gpu>,
@@ -38,6 +40,8 @@ pub struct ClipmapGpu {
     staging: Vec<Option<Buffer>>,
     staged: Vec<Vec<u16>>,
     side: u32,
+    /// Mip sides of the normal and albedo layers.
+    mips: Vec<u32>,
     scratch: Vec<u8>,
 }
 
@@ -61,6 +65,11 @@ impl ClipmapGpu {
         node_count: u32,
         slots: usize,
     ) -> Result<Self> {
+        let mips: Vec<u32> = match geometry {
+            Some(g) => (0..g.shading_mips()).map(|m| g.mip_side(m)).collect(),
+            None => vec![1],
+        };
+        let per_layer = geometry.map(layer_bytes).unwrap_or(0);
         let (side, layers, cells) = match geometry {
             Some(g) => {
                 let max_layers = gpu.info.limits.max_image_array_layers;
@@ -81,7 +90,7 @@ impl ClipmapGpu {
             }
             None => (1, 2, 1),
         };
-        let make = |name: &str, format| {
+        let make = |name: &str, format, mips: u32| {
             Image::new(
                 gpu,
                 &ImageDesc {
@@ -92,25 +101,26 @@ impl ClipmapGpu {
                         height: side,
                     },
                     layers,
-                    mips: 1,
+                    mips,
                     usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
                     aspect: vk::ImageAspectFlags::COLOR,
                 },
             )
         };
-        let atlas = make("clipmap height atlas", vk::Format::R32_SFLOAT)?;
-        let normals = make("clipmap normal atlas", vk::Format::R8G8B8A8_SNORM)?;
-        let albedo = make("clipmap albedo atlas", vk::Format::R8G8B8A8_SRGB)?;
-        let all = vk::ImageSubresourceRange {
-            layer_count: layers,
-            ..layer_range(0)
-        };
+        let m = mips.len() as u32;
+        let atlas = make("clipmap height atlas", vk::Format::R32_SFLOAT, 1)?;
+        let normals = make("clipmap normal atlas", vk::Format::R8G8B8A8_SNORM, m)?;
+        let albedo = make("clipmap albedo atlas", vk::Format::R8G8B8A8_SRGB, m)?;
         gpu.one_shot(|cmd| {
             for image in [&atlas, &normals, &albedo] {
                 Barriers::new(gpu).image(
                     cmd,
                     image.raw,
-                    all,
+                    vk::ImageSubresourceRange {
+                        layer_count: layers,
+                        level_count: image.mips,
+                        ..layer_range(0)
+                    },
                     ImageAccess::Undefined,
                     ImageAccess::SampledAnyShader,
                 )
@@ -134,7 +144,7 @@ impl ClipmapGpu {
                 Some(_) => Some(Buffer::new(
                     gpu,
                     &format!("clipmap staging {s}"),
-                    settings.max_uploads_per_frame as u64 * (side as u64).pow(2) * TEXEL_BYTES,
+                    settings.max_uploads_per_frame as u64 * per_layer,
                     vk::BufferUsageFlags::TRANSFER_SRC,
                     MemoryLocation::CpuToGpu,
                 )?),
@@ -151,6 +161,7 @@ impl ClipmapGpu {
             staging,
             staged: vec![Vec::new(); slots],
             side,
+            mips,
             scratch: Vec::new(),
         })
     }
@@ -168,7 +179,7 @@ impl ClipmapGpu {
         view.gpu_bytes(geometry, &mut self.scratch);
         self.quadtrees[slot].write(&self.scratch)?;
         let texels = (self.side as usize).pow(2);
-        let per_layer = texels * TEXEL_BYTES as usize;
+        let per_layer = layer_bytes(geometry) as usize;
         let staging = self.staging[slot]
             .as_mut()
             .and_then(|b| b.mapped_mut())
@@ -178,7 +189,7 @@ impl ClipmapGpu {
         }
         for (k, up) in uploads.iter().enumerate() {
             let dst = &mut staging[k * per_layer..(k + 1) * per_layer];
-            if up.shading.len() != texels * 8 {
+            if up.shading.len() != per_layer - texels * 4 {
                 return Err(Error::invalid(
                     "clipmap",
                     "shading planes of the wrong size",
@@ -204,14 +215,19 @@ impl ClipmapGpu {
         };
         let b = Barriers::new(&self.gpu);
         let texels = (self.side as u64).pow(2);
+        let shading: u64 = self.mips.iter().map(|&m| (m as u64).pow(2)).sum();
+        let per_layer = texels * 4 + shading * 8;
         for (k, &layer) in layers.iter().enumerate() {
-            let range = layer_range(layer as u32);
-            let base = k as u64 * texels * TEXEL_BYTES;
+            let base = k as u64 * per_layer;
             for (image, offset) in [
                 (&self.atlas, 0),
                 (&self.normals, texels * 4),
-                (&self.albedo, texels * 8),
+                (&self.albedo, texels * 4 + shading * 4),
             ] {
+                let range = vk::ImageSubresourceRange {
+                    level_count: image.mips,
+                    ..layer_range(layer as u32)
+                };
                 b.image(
                     cmd,
                     image.raw,
@@ -219,26 +235,35 @@ impl ClipmapGpu {
                     ImageAccess::SampledAnyShader,
                     ImageAccess::TransferDst,
                 );
-                let region = vk::BufferImageCopy::default()
-                    .buffer_offset(base + offset)
-                    .image_subresource(vk::ImageSubresourceLayers {
-                        aspect_mask: vk::ImageAspectFlags::COLOR,
-                        mip_level: 0,
-                        base_array_layer: layer as u32,
-                        layer_count: 1,
+                let mut at = base + offset;
+                let regions: Vec<vk::BufferImageCopy> = self.mips[..image.mips as usize]
+                    .iter()
+                    .enumerate()
+                    .map(|(m, &side)| {
+                        let r = vk::BufferImageCopy::default()
+                            .buffer_offset(at)
+                            .image_subresource(vk::ImageSubresourceLayers {
+                                aspect_mask: vk::ImageAspectFlags::COLOR,
+                                mip_level: m as u32,
+                                base_array_layer: layer as u32,
+                                layer_count: 1,
+                            })
+                            .image_extent(vk::Extent3D {
+                                width: side,
+                                height: side,
+                                depth: 1,
+                            });
+                        at += (side as u64).pow(2) * 4;
+                        r
                     })
-                    .image_extent(vk::Extent3D {
-                        width: self.side,
-                        height: self.side,
-                        depth: 1,
-                    });
+                    .collect();
                 unsafe {
                     self.gpu.device.cmd_copy_buffer_to_image(
                         cmd,
                         staging.raw,
                         image.raw,
                         vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                        &[region],
+                        &regions,
                     )
                 };
                 b.image(

@@ -137,9 +137,28 @@ impl Geometry {
         }
     }
 
-    /// The shading planes of a node for the atlas: `side²` RGBA8 snorm normals (central
-    /// differences inside the node, borders included; one-sided at its outer texels) followed
-    /// by `side²` RGBA8 sRGB albedo (the data set's, else the height/slope ramp).
+    /// Mip levels of the normal and albedo layers (at most 4: the 2-texel border keeps node
+    /// edges meaningful for a few halvings; the coarser levels are the clipmap's own rings).
+    pub fn shading_mips(&self) -> u32 {
+        (u32::BITS - self.side().leading_zeros()).min(4)
+    }
+
+    /// Side of mip `m` of a layer (Vulkan's `max(1, side >> m)`).
+    pub fn mip_side(&self, m: u32) -> u32 {
+        (self.side() >> m).max(1)
+    }
+
+    /// Texels of one shading plane over all its mips.
+    pub fn shading_texels(&self) -> u64 {
+        (0..self.shading_mips())
+            .map(|m| (self.mip_side(m) as u64).pow(2))
+            .sum()
+    }
+
+    /// The shading planes of a node for the atlas: RGBA8 snorm normals (central differences
+    /// inside the node, borders included; one-sided at its outer texels) with their mips,
+    /// followed by RGBA8 sRGB albedo (the data set's, else the height/slope ramp) with its
+    /// mips (2x2 box averages per channel; normals are renormalised in the shader).
     pub fn shading(&self, lod: u32, node: &NodeData) -> Vec<u8> {
         let s = self.side() as i64;
         let texels = (s * s) as usize;
@@ -147,24 +166,35 @@ impl Geometry {
             node.heights[(j.clamp(0, s - 1) * s + i.clamp(0, s - 1)) as usize] as f64
         };
         let step = self.spacing * (1u64 << lod.min(62)) as f64;
-        let mut out = Vec::with_capacity(texels * 8);
+        let mut normals = Vec::with_capacity(texels * 4);
         for j in 0..s {
             for i in 0..s {
                 let (il, ir) = ((i - 1).max(0), (i + 1).min(s - 1));
                 let (jd, ju) = ((j - 1).max(0), (j + 1).min(s - 1));
                 let dx = (h(ir, j) - h(il, j)) / ((ir - il) as f64 * step);
                 let dy = (h(i, ju) - h(i, jd)) / ((ju - jd) as f64 * step);
-                out.extend(crate::dataset::normal_snorm8(dx, dy));
+                normals.extend(crate::dataset::normal_snorm8(dx, dy));
             }
         }
-        match &node.rgba {
-            Some(rgba) => out.extend_from_slice(rgba),
+        let albedo = match &node.rgba {
+            Some(rgba) => rgba.clone(),
             None => {
                 let [lo, hi] = self.height_range;
                 let span = (hi - lo).max(1.0);
-                for t in 0..texels {
-                    let nz = out[t * 4 + 2];
-                    out.extend(crate::dataset::ramp_rgba(node.heights[t], lo, span, nz));
+                (0..texels)
+                    .flat_map(|t| {
+                        crate::dataset::ramp_rgba(node.heights[t], lo, span, normals[t * 4 + 2])
+                    })
+                    .collect()
+            }
+        };
+        let mut out = Vec::with_capacity(self.shading_texels() as usize * 8);
+        for (plane, signed) in [(normals, true), (albedo, false)] {
+            let mut level = plane;
+            for m in 0..self.shading_mips() {
+                out.extend_from_slice(&level);
+                if m + 1 < self.shading_mips() {
+                    level = halve(&level, self.mip_side(m), self.mip_side(m + 1), signed);
                 }
             }
         }
@@ -174,6 +204,30 @@ impl Geometry {
     pub fn side(&self) -> u32 {
         self.center + 2 * self.border
     }
+}
+
+/// 2x2 box average of an RGBA8 image (`from` -> `to` texels per side, `to = max(1, from / 2)`),
+/// bytes read as i8 when `signed`.
+fn halve(src: &[u8], from: u32, to: u32, signed: bool) -> Vec<u8> {
+    let (from, to) = (from as usize, to as usize);
+    let get = |x: usize, y: usize, c: usize| {
+        let b = src[(y.min(from - 1) * from + x.min(from - 1)) * 4 + c];
+        if signed { (b as i8) as i32 } else { b as i32 }
+    };
+    let mut out = Vec::with_capacity(to * to * 4);
+    for y in 0..to {
+        for x in 0..to {
+            for c in 0..4 {
+                let sum = get(2 * x, 2 * y, c)
+                    + get(2 * x + 1, 2 * y, c)
+                    + get(2 * x, 2 * y + 1, c)
+                    + get(2 * x + 1, 2 * y + 1, c);
+                let v = (sum as f32 / 4.0).round() as i32;
+                out.push(if signed { (v as i8) as u8 } else { v as u8 });
+            }
+        }
+    }
+    out
 }
 
 /// `[clipmap]` in the config.
@@ -355,9 +409,10 @@ impl Clipmap {
         self.settings.atlas_capacity as u64 * self.layer_bytes()
     }
 
-    /// Bytes of one atlas layer over its attachments: height (R32F), normal and albedo (RGBA8).
+    /// Bytes of one atlas layer over its attachments: height (R32F), normal and albedo (RGBA8,
+    /// with mips).
     pub fn layer_bytes(&self) -> u64 {
-        (self.geometry.side() as u64).pow(2) * gpu::TEXEL_BYTES
+        gpu::layer_bytes(&self.geometry)
     }
 
     /// Loads still queued or waiting for upload.
