@@ -33,6 +33,10 @@ struct Row {
     cpu_record_ms: Percentiles,
     streaming_frames: usize,
     max_streaming_over_median: f64,
+    /// Median of the frames that uploaded over the median of all frames.
+    median_streaming_over_median: f64,
+    /// The same ratio for frames that uploaded nothing: the machine's own noise.
+    max_quiet_over_median: f64,
     fallback_frames: u64,
     max_resident_nodes: usize,
     atlas_capacity: u32,
@@ -99,13 +103,15 @@ fn main() -> anyhow::Result<()> {
         gpu.info.name
     );
     println!(
-        "{:<16} {:>9} {:>8} {:>8} {:>10} {:>12} {:>9} {:>9} {:>14} {:>10} {:>8}",
+        "{:<16} {:>9} {:>8} {:>8} {:>10} {:>12} {:>12} {:>12} {:>9} {:>9} {:>14} {:>10} {:>8}",
         "variant",
         "median ms",
         "p99 ms",
         "max ms",
         "stream fr",
         "max strm/med",
+        "med strm/med",
+        "max quiet/med",
         "cpu rec",
         "fallback",
         "resident/cap",
@@ -151,6 +157,14 @@ fn main() -> anyhow::Result<()> {
             .map(|(r, _)| r.interval_ms)
             .collect();
         let max_streaming = streaming.iter().cloned().fold(0.0, f64::max);
+        let max_quiet = recs
+            .iter()
+            .zip(&uploads[warmup..])
+            .filter(|(_, u)| **u == 0)
+            .map(|(r, _)| r.interval_ms)
+            .fold(0.0, f64::max);
+        let mut streaming_sorted = streaming.clone();
+        streaming_sorted.sort_by(f64::total_cmp);
         let mut sorted: Vec<f64> = recs.iter().map(|r| r.interval_ms).collect();
         sorted.sort_by(f64::total_cmp);
         let median = nearest_rank(&sorted, 0.5);
@@ -165,6 +179,12 @@ fn main() -> anyhow::Result<()> {
             } else {
                 max_streaming / median
             },
+            median_streaming_over_median: if streaming.is_empty() {
+                0.0
+            } else {
+                nearest_rank(&streaming_sorted, 0.5) / median
+            },
+            max_quiet_over_median: max_quiet / median,
             fallback_frames: counters.map(|c| c.fallback_frames).unwrap_or(0),
             max_resident_nodes: max_resident,
             atlas_capacity: capacity,
@@ -174,13 +194,15 @@ fn main() -> anyhow::Result<()> {
             counters,
         };
         println!(
-            "{:<16} {:>9.1} {:>8.1} {:>8.1} {:>10} {:>12.2} {:>9.2} {:>9} {:>14} {:>10.2} {:>8.0}",
+            "{:<16} {:>9.1} {:>8.1} {:>8.1} {:>10} {:>12.2} {:>12.2} {:>12.2} {:>9.2} {:>9} {:>14} {:>10.2} {:>8.0}",
             row.variant,
             row.frame_ms.median,
             row.frame_ms.p99,
             row.frame_ms.max,
             row.streaming_frames,
             row.max_streaming_over_median,
+            row.median_streaming_over_median,
+            row.max_quiet_over_median,
             row.cpu_record_ms.median,
             row.fallback_frames,
             format!("{}/{}", row.max_resident_nodes, row.atlas_capacity),
