@@ -641,3 +641,61 @@ fn shading_planes_carry_normals_albedo_and_their_mips() {
         }
     }
 }
+
+/// Returns nodes of the wrong size for `bad_lods`.
+struct Truncating {
+    inner: DatasetSource,
+    bad_lods: std::ops::RangeInclusive<u32>,
+}
+
+impl NodeSource for Truncating {
+    fn load(&self, key: NodeKey) -> vkterrain::Result<NodeData> {
+        let mut n = self.inner.load(key)?;
+        if self.bad_lods.contains(&key.lod) {
+            n.heights.truncate(7);
+        }
+        Ok(n)
+    }
+}
+
+#[test]
+fn nodes_of_the_wrong_size_from_any_source_are_errors_not_panics() {
+    let ds = || DatasetSource::open(dataset()).unwrap();
+    let geometry = Geometry::of(&ds().dataset);
+    let lods = geometry.levels.len() as u32;
+    // A bad root: creation fails with one line.
+    let e = Clipmap::new(
+        geometry.clone(),
+        settings(6, 64),
+        Arc::new(Truncating {
+            inner: ds(),
+            bad_lods: 0..=lods,
+        }),
+        1,
+    )
+    .err()
+    .expect("bad root rejected")
+    .to_string();
+    assert!(e.contains("root") && !e.contains('\n'), "{e}");
+    // Bad finer nodes: counted as load errors, lookups fall back.
+    let mut cm = Clipmap::new(
+        geometry,
+        settings(6, 300),
+        Arc::new(Truncating {
+            inner: ds(),
+            bad_lods: 0..=1,
+        }),
+        1,
+    )
+    .unwrap();
+    for _ in 0..300 {
+        cm.update(&[DVec2::new(250.0, 250.0)]);
+        if cm.busy() == 0 && cm.counters.load_errors > 0 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    assert!(cm.counters.load_errors > 0, "{:?}", cm.counters);
+    assert_cells_resolve(&cm);
+    assert!(cm.sample_height(0, [250.0, 250.0]).is_finite());
+}

@@ -70,20 +70,8 @@ impl DatasetSource {
 
 impl NodeSource for DatasetSource {
     fn load(&self, key: NodeKey) -> Result<NodeData> {
+        // Sizes and finiteness are checked for every source by `Geometry::check`.
         let node = self.dataset.read_node(key.lod, key.x, key.y)?;
-        let want = (self.dataset.layout.side() as usize).pow(2);
-        if node.heights.len() != want || !(node.rgba.is_empty() || node.rgba.len() == want * 4) {
-            return Err(Error::invalid(
-                format!("node {}/{}/{}", key.lod, key.x, key.y),
-                format!("{} heights, expected {want}", node.heights.len()),
-            ));
-        }
-        if let Some(bad) = node.heights.iter().position(|h| !h.is_finite()) {
-            return Err(Error::invalid(
-                format!("node {}/{}/{}", key.lod, key.x, key.y),
-                format!("height {bad} is not finite: corrupt node"),
-            ));
-        }
         Ok(NodeData {
             heights: node.heights,
             rgba: (!node.rgba.is_empty()).then_some(node.rgba),
@@ -203,6 +191,25 @@ impl Geometry {
 
     pub fn side(&self) -> u32 {
         self.center + 2 * self.border
+    }
+
+    /// Rejects a node of the wrong size or with non-finite heights (whatever the source).
+    pub fn check(&self, key: NodeKey, node: &NodeData) -> Result<()> {
+        let want = (self.side() as usize).pow(2);
+        let what = || format!("node {}/{}/{}", key.lod, key.x, key.y);
+        if node.heights.len() != want || node.rgba.as_ref().is_some_and(|a| a.len() != want * 4) {
+            return Err(Error::invalid(
+                what(),
+                format!("{} heights, expected {want}", node.heights.len()),
+            ));
+        }
+        if let Some(bad) = node.heights.iter().position(|h| !h.is_finite()) {
+            return Err(Error::invalid(
+                what(),
+                format!("height {bad} is not finite: corrupt node"),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -380,6 +387,7 @@ impl Clipmap {
         let mut atlas = Atlas::new(settings.atlas_capacity, geometry.side());
         let node = source
             .load(root)
+            .and_then(|n| geometry.check(root, &n).map(|()| n))
             .map_err(|e| Error::invalid("clipmap root node", e.to_string()))?;
         let shading = geometry.shading(root.lod, &node);
         let layer = atlas

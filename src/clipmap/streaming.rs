@@ -55,10 +55,12 @@ impl Streamer {
                                 LoadResult::Cancelled
                             } else {
                                 match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                                    src.load(key).map(|n| {
-                                        let shading = geometry.shading(key.lod, &n);
-                                        (n, shading)
-                                    })
+                                    src.load(key)
+                                        .and_then(|n| geometry.check(key, &n).map(|()| n))
+                                        .map(|n| {
+                                            let shading = geometry.shading(key.lod, &n);
+                                            (n, shading)
+                                        })
                                 })) {
                                     Ok(Ok((n, s))) => LoadResult::Loaded(n, s),
                                     Ok(Err(e)) => LoadResult::Failed(e.to_string()),
