@@ -99,6 +99,9 @@ fn clipmap_first_level(p: vec2<f32>) -> u32 {
 // window tests, then one entry and four texel loads (two of each within the blend band near a
 // window's inner edge, where the level and the next coarser one are mixed).
 fn clipmap_height(p: vec2<f32>) -> f32 {
+    if clipmap.params.x == 0u {
+        return 0.0;
+    }
     let lods = clipmap.params.y;
     var l = clipmap_first_level(p);
     var node = vec2<i32>(0);
