@@ -2,7 +2,7 @@
 //! comparable as ratios: frame time, triangles, tiles, prepass and terrain GPU time, the
 //! screen-space geometric error against the exact surface, and the colour difference (PSNR)
 //! against brute force's image of the same frame, for tau = 0.5, 1, 2, 4 px (error field on)
-//! and tau = 1 distance-only.
+//! and tau = 1 distance-only, and tau = 1 drawn by vertex pulling instead of the indexed grid.
 //!
 //! `cargo bench --bench udlod` uses config/default.toml, config/puget.toml and
 //! config/srtm.toml (data sets that are missing are skipped with the command that makes them).
@@ -138,6 +138,15 @@ fn main() -> anyhow::Result<()> {
                 },
             ));
         }
+        variants.push((
+            "udlod tau 1 pulled".into(),
+            MethodKind::Udlod,
+            LodSettings {
+                tau_px: 1.0,
+                vertex_pulling: true,
+                ..base.clone()
+            },
+        ));
         variants.push((
             "udlod tau 1 distance-only".into(),
             MethodKind::Udlod,

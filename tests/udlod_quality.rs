@@ -421,3 +421,32 @@ fn camera_100_km_from_the_origin_is_stable_and_watertight() {
         assert_eq!(holes, 0, "holes 100 km from the origin");
     }
 }
+
+/// Vertex pulling (no index buffer) draws the same triangles as the indexed grid: identical
+/// depth buffers over 12 poses.
+#[test]
+fn vertex_pulling_draws_the_same_surface_as_the_indexed_grid() {
+    let data = terrain();
+    let requests: Vec<FrameRequest> = flight_poses(&data, 12).iter().map(|&c| c.into()).collect();
+    let indexed = render(&data, MethodKind::Udlod, lod(1.0, true, 8.0), &requests);
+    let pulled = render(
+        &data,
+        MethodKind::Udlod,
+        LodSettings {
+            vertex_pulling: true,
+            ..lod(1.0, true, 8.0)
+        },
+        &requests,
+    );
+    for (a, b) in indexed.iter().zip(&pulled) {
+        assert_eq!(a.triangles, b.triangles);
+        let (da, db) = (a.depth.as_ref().unwrap(), b.depth.as_ref().unwrap());
+        let differing = da.iter().zip(db).filter(|(x, y)| x != y).count();
+        assert!(
+            differing <= da.len() / 1000,
+            "frame {}: {differing} depth values differ",
+            a.index
+        );
+        assert!(da.iter().filter(|&&d| d > 0.0).count() > da.len() / 4);
+    }
+}

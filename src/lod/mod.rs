@@ -130,6 +130,9 @@ pub struct LodSettings {
     /// UDLOD: cap of the per-region error field (1 = distance-only selection: every region
     /// refined for the level's worst error). Larger lets smooth regions keep coarser levels.
     pub error_field_max: f64,
+    /// UDLOD: draw without an index buffer (six vertex-shader runs per quad) instead of the
+    /// shared indexed grid; kept for measurement (`benches/udlod.rs` compares the two).
+    pub vertex_pulling: bool,
 }
 
 impl Default for LodSettings {
@@ -142,6 +145,7 @@ impl Default for LodSettings {
             morph: true,
             cull: true,
             error_field_max: 8.0,
+            vertex_pulling: false,
         }
     }
 }
