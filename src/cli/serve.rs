@@ -216,6 +216,15 @@ fn bind_control(path: &Path) -> anyhow::Result<UnixDatagram> {
     Ok(sock)
 }
 
+/// Removes a file when dropped (the control socket).
+struct RemoveOnDrop(PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
 /// What `status.json` holds.
 #[derive(Serialize, Deserialize, Debug, Clone)]
 pub struct Status {
@@ -292,6 +301,9 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         keep_segment: config.ring.keep_segment,
     };
     install_signal_handlers()?;
+    // Bind first: a bad path fails before the (slow) device start-up; removed on every exit.
+    let control = control_path.as_deref().map(bind_control).transpose()?;
+    let _socket_guard = control_path.clone().map(RemoveOnDrop);
 
     let gpu = Gpu::new(
         &GpuOptions {
@@ -304,7 +316,6 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     let mut options = RenderOptions::from_config(&config);
     let mut renderer = Renderer::new(&gpu, &p.data, p.method, options.clone())?;
     let mut ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
-    let control = control_path.as_deref().map(bind_control).transpose()?;
     tracing::info!(
         ring = config.ring.name,
         device = gpu.info.name,
@@ -445,9 +456,6 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     write_status(&status(
         "stopped", &ring, &options, &ctl, &intervals, rendered,
     ));
-    if let Some(path) = &control_path {
-        let _ = std::fs::remove_file(path);
-    }
     result?;
     drop(renderer);
     check_validation(&gpu)?;
