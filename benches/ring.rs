@@ -82,10 +82,12 @@ fn main() -> anyhow::Result<()> {
             })
             .collect();
         let memcpy = Percentiles::of(memcpy);
-        for n_consumers in [0usize, 4] {
+        // 4 consumers copying every frame they can (competing for the same cores and memory
+        // bandwidth), and 4 that only verify the metadata (the protocol's own cost).
+        for (n_consumers, copy) in [(0usize, true), (4, true), (4, false)] {
             let mut p = RingProducer::create(&name, g, &ProducerOptions::default())?;
             let stop = Arc::new(AtomicBool::new(false));
-            let threads = consumers(&name, n_consumers, true, &stop);
+            let threads = consumers(&name, n_consumers, copy, &stop);
             std::thread::sleep(Duration::from_millis(100));
             let m = meta(g);
             let mut costs = Vec::new();
@@ -110,7 +112,7 @@ fn main() -> anyhow::Result<()> {
             println!(
                 "{:<10} {:>9} {:>10.3} ms {:>10.3} ms {:>10.3} ms {:>12.0} {:>12.0}",
                 format!("{w}x{h}"),
-                n_consumers,
+                format!("{n_consumers}{}", if copy { "" } else { " meta" }),
                 pc.median,
                 pc.p99,
                 memcpy.median,
@@ -118,7 +120,10 @@ fn main() -> anyhow::Result<()> {
                 read_each
             );
             json.insert(
-                format!("{w}x{h}_consumers{n_consumers}"),
+                format!(
+                    "{w}x{h}_consumers{n_consumers}{}",
+                    if copy { "" } else { "_meta" }
+                ),
                 serde_json::json!({
                     "publish_ms": pc, "memcpy_ms": memcpy, "frames_per_s": fps,
                     "reads_per_s_per_consumer": read_each,

@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::readback::{FrameSink, FrameView};
 
 /// How the segment is created.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct ProducerOptions {
     /// Group (id) allowed to read the ring: mode 0640 and this group; none: mode 0600.
     pub group: Option<u32>,
@@ -22,14 +22,6 @@ pub struct ProducerOptions {
     pub keep_segment: bool,
 }
 
-impl Default for ProducerOptions {
-    fn default() -> Self {
-        ProducerOptions {
-            group: None,
-            keep_segment: false,
-        }
-    }
-}
 
 /// Publishes frames into a shared-memory ring; see `docs/ring.md` for the protocol.
 pub struct RingProducer {
