@@ -22,7 +22,6 @@ pub struct ProducerOptions {
     pub keep_segment: bool,
 }
 
-
 /// Publishes frames into a shared-memory ring; see `docs/ring.md` for the protocol.
 pub struct RingProducer {
     name: String,
