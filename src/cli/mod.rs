@@ -1,6 +1,7 @@
 //! The `vkterrain` command line: `info`, `render`, `bench`, `preprocess`, `serve` and `status`.
 
 pub mod bench;
+pub mod eval;
 pub mod info;
 pub mod preprocess;
 pub mod render;
@@ -36,6 +37,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Frame-time benchmark: the scenario at several resolutions and frames-in-flight counts.
     Bench(bench::BenchArgs),
+    /// Evaluate methods over a scenario against the exact surface: tables, charts, images.
+    Eval(eval::EvalArgs),
     /// Build a chunked-clipmap data set (node pyramid + manifest) from DEMs or procedurally.
     Preprocess(preprocess::PreprocessArgs),
     /// Headless service: render until SIGTERM/SIGINT, publishing every frame into the
@@ -52,6 +55,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => render::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Preprocess(args) => preprocess::run(&args),
+        Command::Eval(args) => eval::run(&args),
         Command::Serve(args) => serve::run(&args),
         Command::Status(args) => serve::status(&args),
     }

@@ -31,7 +31,7 @@ pub struct RenderArgs {
     pub width: Option<u32>,
     #[arg(long)]
     pub height: Option<u32>,
-    /// LOD method (brute).
+    /// LOD method (brute, udlod).
     #[arg(long)]
     pub method: Option<String>,
     #[arg(long)]

@@ -116,13 +116,22 @@ impl GeometricError {
     }
 }
 
-/// Pixels where the reference shows terrain and the method shows sky (holes, cracks).
-pub fn holes(reference_depth: &[f32], method_depth: &[f32]) -> usize {
-    reference_depth
-        .iter()
-        .zip(method_depth)
-        .filter(|&(&r, &m)| r > 0.0 && m <= 0.0)
-        .count()
+/// Holes (cracks, gaps): pixels where the method shows sky although the reference and its 8
+/// neighbours all show terrain (inside the reference's silhouette shrunk by one pixel, so a
+/// rasterization difference along a skyline is not counted).
+pub fn holes(reference_depth: &[f32], method_depth: &[f32], width: u32, height: u32) -> usize {
+    let (w, h) = (width as usize, height as usize);
+    let mut n = 0;
+    for y in 1..h.saturating_sub(1) {
+        for x in 1..w.saturating_sub(1) {
+            let inside = (y - 1..=y + 1)
+                .all(|yy| (x - 1..=x + 1).all(|xx| reference_depth[yy * w + xx] > 0.0));
+            if inside && method_depth[y * w + x] <= 0.0 {
+                n += 1;
+            }
+        }
+    }
+    n
 }
 
 /// PSNR in dB over the RGB channels of two RGBA8 images (infinite when identical).

@@ -295,7 +295,7 @@ pub fn evaluate(
                 cpu_record_ms: f.timings.cpu_record_ms,
                 triangles: f.triangles,
                 error: GeometricError::of(&errors),
-                holes: metrics::holes(r.depth.as_ref().unwrap(), depth),
+                holes: metrics::holes(r.depth.as_ref().unwrap(), depth, w, h),
                 psnr_db: metrics::psnr(&r.rgba, &f.rgba),
                 ssim: metrics::ssim(&r.rgba, &f.rgba, w, h),
                 popping_p99_px: popping,
