@@ -2,6 +2,7 @@
 //! [`LodMethod`], so brute force and later methods are interchangeable.
 
 pub mod brute;
+pub mod pgm;
 pub mod udlod;
 
 use ash::vk;
@@ -18,11 +19,17 @@ pub enum MethodKind {
     Brute,
     /// GPU quadtree tiling in compute + vertex morphing (Kühnert's UDLOD).
     Udlod,
+    /// Persistent grid mapping: a fixed screen-space grid projected onto the ground through an
+    /// auxiliary camera (a baseline that is known to swim).
+    Pgm,
 }
 
 impl MethodKind {
-    pub const ALL: &[(&'static str, MethodKind)] =
-        &[("brute", MethodKind::Brute), ("udlod", MethodKind::Udlod)];
+    pub const ALL: &[(&'static str, MethodKind)] = &[
+        ("brute", MethodKind::Brute),
+        ("udlod", MethodKind::Udlod),
+        ("pgm", MethodKind::Pgm),
+    ];
 
     pub fn parse(name: &str) -> Result<Self> {
         Self::ALL
@@ -105,6 +112,7 @@ pub fn create(kind: MethodKind, ctx: &MethodContext<'_>) -> Result<Box<dyn LodMe
     Ok(match kind {
         MethodKind::Brute => Box::new(brute::BruteForce::new(ctx)?),
         MethodKind::Udlod => Box::new(udlod::Udlod::new(ctx)?),
+        MethodKind::Pgm => Box::new(pgm::Pgm::new(ctx)?),
     })
 }
 
@@ -124,6 +132,15 @@ pub struct LodSettings {
     pub morph: bool,
     /// UDLOD: frustum culling of tiles.
     pub cull: bool,
+    /// PGM: grid vertices `[columns, rows]`: columns run across the screen (left to right),
+    /// rows from the bottom of the auxiliary view up to the horizon.
+    pub pgm_grid: [u32; 2],
+    /// PGM: smallest field of view of the auxiliary camera in degrees (90..=170), both
+    /// horizontally and vertically; its pitch is clamped to at most `-pgm_fov_deg / 2`.
+    pub pgm_fov_deg: f64,
+    /// PGM: lowest height of the auxiliary camera above the reference plane (the terrain under
+    /// the camera), metres.
+    pub pgm_min_height_m: f64,
 }
 
 impl Default for LodSettings {
@@ -135,6 +152,9 @@ impl Default for LodSettings {
             max_tiles: 16384,
             morph: true,
             cull: true,
+            pgm_grid: [240, 1050],
+            pgm_fov_deg: 90.0,
+            pgm_min_height_m: 2.0,
         }
     }
 }
@@ -164,6 +184,32 @@ impl LodSettings {
             return bad(format!(
                 "max_tiles {} must be within 16..=4194304",
                 self.max_tiles
+            ));
+        }
+        let [cols, rows] = self.pgm_grid;
+        if !(2..=4096).contains(&cols) || !(2..=16384).contains(&rows) {
+            return bad(format!(
+                "pgm_grid [{cols}, {rows}] needs 2..=4096 columns and 2..=16384 rows"
+            ));
+        }
+        if cols as u64 * rows as u64 > 1 << 24 {
+            return bad(format!(
+                "pgm_grid [{cols}, {rows}] has more than 16777216 vertices"
+            ));
+        }
+        if !(self.pgm_fov_deg.is_finite() && (90.0..=170.0).contains(&self.pgm_fov_deg)) {
+            return bad(format!(
+                "pgm_fov_deg {} must be within 90..=170 degrees",
+                self.pgm_fov_deg
+            ));
+        }
+        if !(self.pgm_min_height_m.is_finite()
+            && self.pgm_min_height_m > 0.0
+            && self.pgm_min_height_m <= 100_000.0)
+        {
+            return bad(format!(
+                "pgm_min_height_m {} must be within (0, 100000] metres",
+                self.pgm_min_height_m
             ));
         }
         Ok(())
