@@ -204,6 +204,65 @@ pub fn height_mips(data: &Heightmap) -> Vec<Vec<f32>> {
     levels
 }
 
+/// Minimum height per block of `MIN_BLOCK`^2 samples: the reference plane is put at the lowest
+/// terrain near the camera, so nearby terrain lies above it and stays inside the grid's
+/// footprint (terrain below the plane would be projected outward, past the view's edges).
+pub struct BlockMin {
+    cols: u32,
+    rows: u32,
+    min: Vec<f32>,
+    block_m: f64,
+}
+
+/// Samples per side of a [`BlockMin`] block.
+pub const MIN_BLOCK: u32 = 8;
+/// Blocks searched at most in each direction from the camera's block.
+const MIN_SEARCH_BLOCKS: i64 = 32;
+
+impl BlockMin {
+    pub fn new(data: &Heightmap) -> Self {
+        let (cols, rows) = (
+            data.width.div_ceil(MIN_BLOCK),
+            data.height.div_ceil(MIN_BLOCK),
+        );
+        let mut min = vec![f32::INFINITY; (cols * rows) as usize];
+        for y in 0..data.height {
+            for x in 0..data.width {
+                let b = ((y / MIN_BLOCK) * cols + x / MIN_BLOCK) as usize;
+                min[b] = min[b].min(data.heights[(y * data.width + x) as usize]);
+            }
+        }
+        BlockMin {
+            cols,
+            rows,
+            min,
+            block_m: MIN_BLOCK as f64 * data.spacing,
+        }
+    }
+
+    /// Lowest height of the blocks within `radius` metres (a square) of `(x, y)`, searching at
+    /// most `MIN_SEARCH_BLOCKS` blocks each way; `None` when the square misses the data.
+    pub fn min_near(&self, x: f64, y: f64, radius: f64) -> Option<f64> {
+        let reach = ((radius / self.block_m).ceil() as i64).clamp(1, MIN_SEARCH_BLOCKS);
+        let (bx, by) = ((x / self.block_m).floor(), (y / self.block_m).floor());
+        if !(bx.is_finite() && by.is_finite()) {
+            return None;
+        }
+        let (bx, by) = (bx as i64, by as i64);
+        let x0 = (bx - reach).max(0);
+        let x1 = (bx + reach).min(self.cols as i64 - 1);
+        let y0 = (by - reach).max(0);
+        let y1 = (by + reach).min(self.rows as i64 - 1);
+        let mut lo = f32::INFINITY;
+        for j in y0..=y1 {
+            for i in x0..=x1 {
+                lo = lo.min(self.min[(j * self.cols as i64 + i) as usize]);
+            }
+        }
+        lo.is_finite().then_some(lo as f64)
+    }
+}
+
 /// Rows per instanced band so one band's vertices fit 16-bit indices.
 pub fn band_rows(cols: u32, rows: u32) -> u32 {
     ((65536 / cols).saturating_sub(1)).clamp(1, rows - 1)
@@ -260,6 +319,7 @@ pub struct Pgm {
     mips: u32,
     /// Bilinear height under the camera (the reference plane) needs the data on the CPU.
     data: Arc<Heightmap>,
+    block_min: BlockMin,
     // Last: destroyed after everything that uses it.
     _raw: Raw,
 }
@@ -445,6 +505,7 @@ impl Pgm {
             _heights: heights,
             mips: levels.len() as u32,
             data: Arc::new(ctx.data.clone()),
+            block_min: BlockMin::new(ctx.data),
             settings,
             _raw: raw,
         })
@@ -461,7 +522,13 @@ impl Pgm {
             .map(|&(x, y)| DVec3::new(x - p.x, y - p.y, 0.0).length())
             .fold(0.0, f64::max)
             + self.data.spacing;
-        let ground = self.data.height_at(p.x, p.y);
+        // Reference plane: the lowest terrain within a few camera heights (see BlockMin).
+        let under = self.data.height_at(p.x, p.y);
+        let radius = 4.0 * (p.z - under).max(0.0);
+        let ground = self
+            .block_min
+            .min_near(p.x, p.y, radius)
+            .map_or(under, |m| m.min(under));
         let aspect = view.width as f64 / view.height as f64;
         AuxCamera::new(cam, aspect, ground, far, &self.settings)
     }
