@@ -470,3 +470,10 @@ fn config_file_keys_reach_the_settings_and_bad_values_are_rejected() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn default_toml_documents_the_default_lod_settings() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/default.toml");
+    let c = vkterrain::config::Config::load(Some(&path)).unwrap();
+    assert_eq!(c.lod, LodSettings::default());
+}

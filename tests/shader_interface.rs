@@ -5,8 +5,50 @@
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
 use vkterrain::render::terrain::FrameUniforms;
 
-fn composed_shaders() -> [(&'static str, &'static str); 1] {
-    [("brute", vkterrain::driver::shaders::BRUTE_WGSL)]
+fn composed_shaders() -> [(&'static str, &'static str); 2] {
+    [
+        ("brute", vkterrain::driver::shaders::BRUTE_WGSL),
+        ("pgm", vkterrain::driver::shaders::PGM_WGSL),
+    ]
+}
+
+/// Member names and offsets of WGSL struct `name` in `source`, and its size.
+fn wgsl_struct(source: &str, name: &str) -> (Vec<(String, usize)>, usize) {
+    let module = naga::front::wgsl::parse_str(source).expect("composed shader parses");
+    let ty = module
+        .types
+        .iter()
+        .find(|(_, t)| t.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("no struct {name}"))
+        .1;
+    let naga::TypeInner::Struct { members, span } = &ty.inner else {
+        panic!("{name} is not a struct")
+    };
+    (
+        members
+            .iter()
+            .map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize))
+            .collect(),
+        *span as usize,
+    )
+}
+
+#[test]
+fn pgm_uniforms_match_the_wgsl_struct() {
+    use std::mem::{offset_of, size_of};
+    use vkterrain::lod::pgm::PgmUniforms;
+    let rust: Vec<(String, usize)> = [
+        ("dir0", offset_of!(PgmUniforms, dir0)),
+        ("dcol", offset_of!(PgmUniforms, dcol)),
+        ("drow", offset_of!(PgmUniforms, drow)),
+        ("grid", offset_of!(PgmUniforms, grid)),
+    ]
+    .into_iter()
+    .map(|(n, o)| (n.to_string(), o))
+    .collect();
+    let (wgsl, span) = wgsl_struct(vkterrain::driver::shaders::PGM_WGSL, "Pgm");
+    assert_eq!(wgsl, rust);
+    assert_eq!(span, size_of::<PgmUniforms>());
 }
 
 #[test]
