@@ -477,3 +477,48 @@ fn default_toml_documents_the_default_lod_settings() {
     let c = vkterrain::config::Config::load(Some(&path)).unwrap();
     assert_eq!(c.lod, LodSettings::default());
 }
+
+/// Views a ground-plane grid cannot serve well (looking up, rolled, from below the terrain,
+/// from far outside the data, level at ground height) render without validation messages and
+/// with finite depth: no NaN positions reach the rasterizer.
+#[test]
+fn awkward_poses_render_cleanly() {
+    let data = terrain(129, 30.0);
+    let (ex, ey) = data.extent();
+    let mid = DVec3::new(0.5 * ex, 0.5 * ey, data.height_at(0.5 * ex, 0.5 * ey));
+    let cam = |position: DVec3, yaw: f64, pitch: f64, roll: f64| Camera {
+        position,
+        yaw_deg: yaw,
+        pitch_deg: pitch,
+        roll_deg: roll,
+        near: 0.5,
+        ..Camera::default()
+    };
+    let cams = [
+        cam(mid + DVec3::Z * 100.0, 30.0, 90.0, 0.0),
+        cam(mid + DVec3::Z * 100.0, 30.0, 60.0, 0.0),
+        cam(mid + DVec3::Z * 100.0, 30.0, -30.0, 90.0),
+        cam(mid - DVec3::Z * 1000.0, 0.0, -10.0, 0.0),
+        cam(mid + DVec3::Z * 0.01, 200.0, 0.0, 0.0),
+        cam(DVec3::new(-50_000.0, -50_000.0, 3000.0), 45.0, -5.0, 0.0),
+        cam(DVec3::new(1.0e6, 2.0e6, 1.0e5), 0.0, -90.0, 0.0),
+    ];
+    let frames = render(
+        &data,
+        MethodKind::Pgm,
+        pgm_settings(64, 128),
+        (64, 48),
+        &cams,
+    );
+    for (f, c) in frames.iter().zip(&cams) {
+        let depth = f.depth.as_ref().unwrap();
+        assert!(
+            depth
+                .iter()
+                .all(|d| d.is_finite() && (0.0..=1.0).contains(d)),
+            "{c:?}"
+        );
+    }
+    // Straight up from above the terrain: nothing but sky.
+    assert!(frames[0].depth.as_ref().unwrap().iter().all(|&d| d == 0.0));
+}
