@@ -139,7 +139,10 @@ impl AuxCamera {
             height,
             tan_x,
             tan_y,
-            max_distance: data_far.min(camera.far).max(1.0),
+            // The far plane cuts at view depth `far`: its corners are farther than that.
+            max_distance: data_far
+                .min(camera.far * (1.0 + tx * tx + ty * ty).sqrt())
+                .max(1.0),
         }
     }
 
