@@ -106,7 +106,7 @@ impl Default for DatasetConfig {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MethodConfig {
-    /// LOD method: `brute` (every sample a vertex).
+    /// LOD method: `brute` (every sample a vertex), `udlod` or `pgm`.
     pub name: String,
 }
 

@@ -16,11 +16,12 @@ use crate::render::RenderOptions;
 pub struct EvalArgs {
     #[command(flatten)]
     pub render: super::render::RenderArgs,
-    /// Methods to evaluate, comma-separated (brute, udlod).
+    /// Methods to evaluate, comma-separated (brute, udlod, pgm).
     #[arg(long, default_value = "brute,udlod")]
     pub methods: String,
     /// Parameter sweep `key=v1,v2,...` (repeatable): tau, error_field_max, grid_size,
-    /// morph_range (UDLOD).
+    /// morph_range (UDLOD); pgm_scale (both grid sides times the value), pgm_cols, pgm_rows,
+    /// pgm_fov_deg (PGM).
     #[arg(long)]
     pub sweep: Vec<String>,
     /// Replace an existing output directory.

@@ -13,7 +13,7 @@ use crate::output::png::write_png;
 use crate::output::write_atomic;
 
 fn io(path: &Path, e: std::io::Error) -> Error {
-    Error::invalid(&path.display().to_string(), e.to_string())
+    Error::invalid(path.display().to_string(), e.to_string())
 }
 
 /// Heat map of the screen-space error: black (0) over red to yellow (>= `full_px`), grey sky.
@@ -33,7 +33,7 @@ fn heat(error_px: Option<f64>, full_px: f64) -> [u8; 3] {
 pub fn write(eval: &Evaluation, data: &Heightmap, dir: &Path, force: bool) -> Result<()> {
     if dir.exists() && !force {
         return Err(Error::invalid(
-            &dir.display().to_string(),
+            dir.display().to_string(),
             "exists (use --force to replace it)",
         ));
     }

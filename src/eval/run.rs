@@ -31,6 +31,7 @@ fn method_keys(method: MethodKind) -> &'static [&'static str] {
     match method {
         MethodKind::Brute => &[],
         MethodKind::Udlod => &["tau", "error_field_max", "grid_size", "morph_range"],
+        MethodKind::Pgm => &["pgm_scale", "pgm_cols", "pgm_rows", "pgm_fov_deg"],
     }
 }
 
@@ -40,6 +41,15 @@ fn apply(lod: &mut LodSettings, key: &str, value: f64) -> Result<()> {
         "error_field_max" => lod.error_field_max = value,
         "grid_size" => lod.grid_size = value as u32,
         "morph_range" => lod.morph_range = value,
+        // Both grid dimensions of the configured grid times `value` (0.5: 240x1050 -> 120x525).
+        "pgm_scale" => {
+            lod.pgm_grid = lod
+                .pgm_grid
+                .map(|n| ((n as f64 * value).round() as u32).max(2))
+        }
+        "pgm_cols" => lod.pgm_grid[0] = value as u32,
+        "pgm_rows" => lod.pgm_grid[1] = value as u32,
+        "pgm_fov_deg" => lod.pgm_fov_deg = value,
         _ => {
             return Err(Error::invalid(
                 "sweep",
@@ -114,6 +124,8 @@ pub fn variants(
             lod.validate()?;
             let label = if params.is_empty() {
                 method.name().to_string()
+            } else if method == MethodKind::Pgm && params.iter().any(|(k, _)| k == "pgm_scale") {
+                format!("pgm {}x{}", lod.pgm_grid[0], lod.pgm_grid[1])
             } else {
                 let p: Vec<String> = params.iter().map(|(k, v)| format!("{k}={v}")).collect();
                 format!("{} {}", method.name(), p.join(","))
