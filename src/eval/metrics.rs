@@ -253,23 +253,48 @@ pub struct SwimTracker {
 }
 
 impl SwimTracker {
-    /// `n` x `n` points over the data (inset by 5%), on the exact surface.
-    pub fn new(data: &Heightmap, n: u32) -> Self {
-        let (ex, ey) = data.extent();
-        let mut points = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                let x = ex * (0.05 + 0.9 * (i as f64 + 0.5) / n as f64);
-                let y = ey * (0.05 + 0.9 * (j as f64 + 0.5) / n as f64);
-                points.push(DVec3::new(x, y, data.mesh_height_at(x, y)));
+    /// No points yet: [`SwimTracker::seed`] adds them from the views.
+    pub fn new() -> Self {
+        SwimTracker {
+            points: Vec::new(),
+            observed: Vec::new(),
+            distance: Vec::new(),
+        }
+    }
+
+    /// Adds the exact-surface points seen by an `nx` x `ny` grid of pixels of a reference
+    /// frame (brute force: its depth gives points on the exact mesh), so that every method is
+    /// tracked at the same world points, ones a flight actually sees.
+    #[allow(clippy::too_many_arguments)]
+    pub fn seed(
+        &mut self,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        reference_depth: &[f32],
+        data: &Heightmap,
+        nx: u32,
+        ny: u32,
+    ) {
+        for j in 0..ny {
+            for i in 0..nx {
+                let x = ((i as f64 + 0.5) / nx as f64 * width as f64) as u32;
+                let y = ((j as f64 + 0.5) / ny as f64 * height as f64) as u32;
+                let d = reference_depth[(y * width + x) as usize];
+                if d <= 0.0 {
+                    continue;
+                }
+                let p = world_point(camera, x, y, width, height, d);
+                self.points
+                    .push(DVec3::new(p.x, p.y, data.mesh_height_at(p.x, p.y)));
+                self.observed.push(Vec::new());
+                self.distance.push(Vec::new());
             }
         }
-        let k = points.len();
-        SwimTracker {
-            points,
-            observed: vec![Vec::new(); k],
-            distance: vec![Vec::new(); k],
-        }
+    }
+
+    pub fn points(&self) -> usize {
+        self.points.len()
     }
 
     /// Records the frame: each point that projects into the image, where the depth-derived

@@ -16,6 +16,10 @@ use crate::render::stats::Percentiles;
 use crate::render::{RenderOptions, Renderer};
 use crate::scene::Scenario;
 
+/// Every this many frames, swimming starts tracking the points a 12 x 8 pixel grid of the
+/// reference frame sees.
+const SWIM_SEED_EVERY: usize = 8;
+
 /// One method with one parameter setting.
 #[derive(Clone, Debug)]
 pub struct Variant {
@@ -278,7 +282,7 @@ pub fn evaluate(
     let mut images = Vec::new();
     for v in variants {
         let (frames, records) = render_all(setup, v.method, &v.lod, progress, &v.label)?;
-        let mut swim = SwimTracker::new(setup.data, 24);
+        let mut swim = SwimTracker::new();
         let mut previous_error: Option<Vec<Option<f64>>> = None;
         let mut all_errors = Vec::new();
         let mut my_rows = Vec::new();
@@ -295,6 +299,17 @@ pub fn evaluate(
                 None => 0.0,
             };
             previous_error = Some(image);
+            if k % SWIM_SEED_EVERY == 0 {
+                swim.seed(
+                    &r.camera,
+                    w,
+                    h,
+                    r.depth.as_ref().unwrap(),
+                    setup.data,
+                    12,
+                    8,
+                );
+            }
             swim.observe(&f.camera, w, h, depth, setup.data);
             let rec = records.get(k);
             let row = FrameRow {
