@@ -245,6 +245,7 @@ pub fn popping(
 /// moves; one whose grid follows the camera (PGM) resamples the surface every frame, so the
 /// error of a fixed point wanders: the swimming of a point is the range (max - min) of its
 /// height error over the frames that see it.
+#[derive(Default)]
 pub struct SwimTracker {
     points: Vec<DVec3>,
     observed: Vec<Vec<f64>>,
@@ -255,11 +256,7 @@ pub struct SwimTracker {
 impl SwimTracker {
     /// No points yet: [`SwimTracker::seed`] adds them from the views.
     pub fn new() -> Self {
-        SwimTracker {
-            points: Vec::new(),
-            observed: Vec::new(),
-            distance: Vec::new(),
-        }
+        Self::default()
     }
 
     /// Adds the exact-surface points seen by an `nx` x `ny` grid of pixels of a reference
