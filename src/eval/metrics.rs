@@ -56,6 +56,101 @@ impl Summary {
     }
 }
 
+/// A streaming summary for very many non-negative values (every pixel of every frame of a
+/// run): exact count, mean and maximum; percentiles from log-spaced bins 1.2% wide between
+/// 1e-6 and 1e5 (values below land in the first bin, reported as 1e-6), each reported as its
+/// bin's upper edge, so a percentile is never understated by more than one bin.
+#[derive(Clone, Debug)]
+pub struct Histogram {
+    bins: Vec<u64>,
+    count: u64,
+    sum: f64,
+    max: f64,
+}
+
+const HIST_MIN: f64 = 1e-6;
+const HIST_BINS: usize = 2200;
+const HIST_STEP: f64 = 1.012;
+
+impl Default for Histogram {
+    fn default() -> Self {
+        Histogram {
+            bins: vec![0; HIST_BINS],
+            count: 0,
+            sum: 0.0,
+            max: 0.0,
+        }
+    }
+}
+
+impl Histogram {
+    pub fn add(&mut self, v: f64) {
+        let v = v.max(0.0);
+        let bin = if v <= HIST_MIN {
+            0
+        } else {
+            ((v / HIST_MIN).ln() / HIST_STEP.ln()).ceil() as usize
+        };
+        self.bins[bin.min(HIST_BINS - 1)] += 1;
+        self.count += 1;
+        self.sum += v;
+        self.max = self.max.max(v);
+    }
+
+    fn upper_edge(bin: usize) -> f64 {
+        HIST_MIN * HIST_STEP.powi(bin as i32)
+    }
+
+    fn quantile(&self, q: f64) -> f64 {
+        let rank = ((q * self.count as f64).ceil() as u64).clamp(1, self.count);
+        let mut seen = 0;
+        for (i, &n) in self.bins.iter().enumerate() {
+            seen += n;
+            if seen >= rank {
+                return Self::upper_edge(i).min(self.max);
+            }
+        }
+        self.max
+    }
+
+    pub fn summary(&self) -> Summary {
+        if self.count == 0 {
+            return Summary::default();
+        }
+        Summary {
+            count: self.count as usize,
+            mean: self.sum / self.count as f64,
+            median: self.quantile(0.5),
+            p99: self.quantile(0.99),
+            p999: self.quantile(0.999),
+            max: self.max,
+        }
+    }
+}
+
+/// [`GeometricError`] accumulated over many frames with bounded memory.
+#[derive(Clone, Debug, Default)]
+pub struct ErrorHistogram {
+    pub metres: Histogram,
+    pub pixels: Histogram,
+}
+
+impl ErrorHistogram {
+    pub fn add(&mut self, errors: &[PixelError]) {
+        for e in errors {
+            self.metres.add(e.metres.abs());
+            self.pixels.add(e.pixels);
+        }
+    }
+
+    pub fn summary(&self) -> GeometricError {
+        GeometricError {
+            metres: self.metres.summary(),
+            pixels: self.pixels.summary(),
+        }
+    }
+}
+
 /// World position of the surface seen at pixel `(x, y)` with reversed-Z `depth` (> 0).
 pub fn world_point(camera: &Camera, x: u32, y: u32, width: u32, height: u32, depth: f32) -> DVec3 {
     let ray = camera.pixel_ray(x as f64 + 0.5, y as f64 + 0.5, width, height);
@@ -370,6 +465,26 @@ mod tests {
         assert!(p > 20.0 && p < 30.0, "{p}");
         let noise: Vec<u8> = (0..w * h * 4).map(|i| ((i * 13 + 5) % 253) as u8).collect();
         assert!(ssim(&a, &noise, w, h) < 0.5);
+    }
+
+    #[test]
+    fn histogram_percentiles_are_within_one_bin() {
+        let mut h = Histogram::default();
+        let mut v: Vec<f64> = (1..=10_000).map(|i| i as f64 * 0.001).collect();
+        for &x in &v {
+            h.add(x);
+        }
+        let exact = Summary::of(&mut v);
+        let approx = h.summary();
+        assert_eq!(approx.count, exact.count);
+        assert!((approx.mean - exact.mean).abs() < 1e-9 && approx.max == exact.max);
+        for (a, e) in [
+            (approx.p99, exact.p99),
+            (approx.p999, exact.p999),
+            (approx.median, exact.median),
+        ] {
+            assert!(a >= e && a <= e * HIST_STEP * 1.0001, "{a} vs {e}");
+        }
     }
 
     #[test]
