@@ -54,6 +54,13 @@ fn tile_vertex(tile: Tile, local: vec2<u32>) -> TerrainVertex {
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
     frac = min(frac, vec2<f32>(max(last - cell, vec2<i32>(0))));
     cell = min(cell, last);
+    // One representation per position: an unmorphed odd vertex (frac = step) and the same
+    // sample as an even vertex of the neighbouring tile (frac = 0) must project through the
+    // same arithmetic, or far from the camera their f32 positions differ by an ulp and the
+    // shared edge shows pinholes.
+    let whole = floor(frac);
+    cell = cell + vec2<i32>(whole);
+    frac = frac - whole;
     let grid_pos = vec2<f32>(cell) + frac;
     var out: TerrainVertex;
     out.clip = project(cell, frac, height_at(grid_pos));

@@ -494,6 +494,7 @@ impl Pgm {
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.set_layout, raw.set_layout],
                 topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+                cull_back_faces: true,
             },
         )?;
         Ok(Pgm {

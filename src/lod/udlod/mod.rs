@@ -384,6 +384,7 @@ impl Udlod {
                 fragment_entry: c"fs_main",
                 set_layouts: &set_layouts,
                 topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+                cull_back_faces: false,
             },
         )?;
         Ok((
