@@ -8,7 +8,7 @@ RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers
 TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
 CARGO ?= cargo
 
-.PHONY: run test bench bench-udlod bench-clipmap data-srtm data-proc4k deps deps-test
+.PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap data data-srtm data-pyrenees data-franconia data-proc4k deps deps-test
 
 run: deps
 	$(CARGO) run --release --locked -- render --config config/default.toml
@@ -23,7 +23,24 @@ bench: deps
 bench-udlod: deps data-srtm
 	$(CARGO) bench --locked --bench udlod
 
+data: data-srtm data-pyrenees data-franconia
+
 data-srtm: target/data/n48w125/manifest.json
+data-pyrenees: out/datasets/pyrenees/manifest.json
+data-franconia: out/datasets/franconia/manifest.json
+
+out/datasets/pyrenees/manifest.json:
+	$(CARGO) run --release --locked -- preprocess ../shared/data/srtm/N41E001.hgt.zip ../shared/data/srtm/N42E001.hgt.zip --out out/datasets/pyrenees
+
+out/datasets/franconia/manifest.json:
+	$(CARGO) run --release --locked -- preprocess ../shared/data/srtm/N49E011.hgt.zip ../shared/data/srtm/N50E011.hgt.zip --out out/datasets/franconia
+
+# The speed/accuracy evaluation at CI size (short) or full size: see docs/eval.md.
+bench-eval: deps data
+	$(CARGO) bench --locked --bench eval
+
+bench-eval-short: deps
+	VKTERRAIN_EVAL_SHORT=1 $(CARGO) bench --locked --bench eval
 
 # The clipmap's fast flight over a 4097² procedural pyramid much larger than the atlas.
 bench-clipmap: deps data-proc4k

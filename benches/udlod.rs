@@ -2,7 +2,7 @@
 //! comparable as ratios: frame time, triangles, tiles, prepass and terrain GPU time, the
 //! screen-space geometric error against the exact surface, and the colour difference (PSNR)
 //! against brute force's image of the same frame, for tau = 0.5, 1, 2, 4 px (error field on)
-//! and tau = 1 distance-only.
+//! and tau = 1 distance-only, and tau = 1 drawn by vertex pulling instead of the indexed grid.
 //!
 //! `cargo bench --bench udlod` uses config/default.toml, config/puget.toml and
 //! config/srtm.toml (data sets that are missing are skipped with the command that makes them).
@@ -41,23 +41,6 @@ struct Row {
 }
 
 const SAMPLE_EVERY: u64 = 4;
-
-fn psnr(a: &[u8], b: &[u8]) -> f64 {
-    let (mut sum, mut n) = (0.0f64, 0usize);
-    for (pa, pb) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
-        for c in 0..3 {
-            let d = pa[c] as f64 - pb[c] as f64;
-            sum += d * d;
-        }
-        n += 3;
-    }
-    let mse = sum / n.max(1) as f64;
-    if mse == 0.0 {
-        f64::INFINITY
-    } else {
-        10.0 * (255.0f64 * 255.0 / mse).log10()
-    }
-}
 
 fn main() -> anyhow::Result<()> {
     let root = env!("CARGO_MANIFEST_DIR");
@@ -139,6 +122,15 @@ fn main() -> anyhow::Result<()> {
             ));
         }
         variants.push((
+            "udlod tau 1 pulled".into(),
+            MethodKind::Udlod,
+            LodSettings {
+                tau_px: 1.0,
+                vertex_pulling: true,
+                ..base.clone()
+            },
+        ));
+        variants.push((
             "udlod tau 1 distance-only".into(),
             MethodKind::Udlod,
             LodSettings {
@@ -186,7 +178,7 @@ fn main() -> anyhow::Result<()> {
             let psnr_values: Vec<f64> = sampled
                 .iter()
                 .zip(&brute_images)
-                .map(|(a, b)| psnr(&a.rgba, &b.rgba))
+                .map(|(a, b)| metrics::psnr(&b.rgba, &a.rgba))
                 .collect();
             let psnr_db = psnr_values.iter().sum::<f64>() / psnr_values.len().max(1) as f64;
             let quads = (lod.grid_size as f64).powi(2) * 2.0;

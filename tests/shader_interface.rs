@@ -4,22 +4,22 @@
 
 use std::mem::{offset_of, size_of};
 
-use vkterrain::driver::shaders::{BRUTE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL};
+use vkterrain::driver::shaders::{BRUTE_WGSL, PGM_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL};
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
 use vkterrain::lod::udlod::{TilingState, UdlodUniforms};
 use vkterrain::render::terrain::FrameUniforms;
 
-fn composed_shaders() -> [(&'static str, &'static str); 3] {
+fn composed_shaders() -> [(&'static str, &'static str); 4] {
     [
         ("brute", BRUTE_WGSL),
         ("udlod", UDLOD_WGSL),
         ("udlod_tiling", UDLOD_TILING_WGSL),
+        ("pgm", PGM_WGSL),
     ]
 }
 
 /// Asserts that the WGSL struct `struct_name` in each of `shaders` has exactly the member
-/// names/offsets `rust` (in order; WGSL names may differ from Rust ones only where `rust`
-/// says so) and the size `size`.
+/// names/offsets `rust` (in order) and the size `size`.
 fn assert_struct_layout(
     shaders: &[(&str, &str)],
     struct_name: &str,
@@ -47,6 +47,18 @@ fn assert_struct_layout(
         );
         assert_eq!(*span as usize, size, "{name}: {struct_name} size differs");
     }
+}
+
+#[test]
+fn pgm_uniforms_match_the_wgsl_struct() {
+    use vkterrain::lod::pgm::PgmUniforms;
+    let rust = [
+        ("dir0", offset_of!(PgmUniforms, dir0)),
+        ("dcol", offset_of!(PgmUniforms, dcol)),
+        ("drow", offset_of!(PgmUniforms, drow)),
+        ("grid", offset_of!(PgmUniforms, grid)),
+    ];
+    assert_struct_layout(&[("pgm", PGM_WGSL)], "Pgm", &rust, size_of::<PgmUniforms>());
 }
 
 #[test]
@@ -78,7 +90,7 @@ fn udlod_uniforms_match_the_wgsl_struct() {
         ("counts", offset_of!(UdlodUniforms, counts)),
     ];
     let shaders = composed_shaders();
-    assert_struct_layout(&shaders[1..], "Udlod", &rust, size_of::<UdlodUniforms>());
+    assert_struct_layout(&shaders[1..3], "Udlod", &rust, size_of::<UdlodUniforms>());
 }
 
 #[test]
@@ -118,7 +130,7 @@ fn tiling_state_matches_the_wgsl_struct() {
 #[test]
 fn tile_record_matches_the_wgsl_struct() {
     assert_struct_layout(
-        &composed_shaders()[1..],
+        &composed_shaders()[1..3],
         "Tile",
         &[("x", 0), ("y", 4), ("lod", 8), ("pad", 12)],
         vkterrain::lod::udlod::TILE_BYTES as usize,

@@ -1,9 +1,11 @@
-//! The `vkterrain` command line: `info`, `render`, `bench` and `preprocess`.
+//! The `vkterrain` command line: `info`, `render`, `bench`, `preprocess`, `serve` and `status`.
 
 pub mod bench;
+pub mod eval;
 pub mod info;
 pub mod preprocess;
 pub mod render;
+pub mod serve;
 
 use std::path::PathBuf;
 
@@ -35,8 +37,15 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Frame-time benchmark: the scenario at several resolutions and frames-in-flight counts.
     Bench(bench::BenchArgs),
+    /// Evaluate methods over a scenario against the exact surface: tables, charts, images.
+    Eval(eval::EvalArgs),
     /// Build a chunked-clipmap data set (node pyramid + manifest) from DEMs or procedurally.
     Preprocess(preprocess::PreprocessArgs),
+    /// Headless service: render until SIGTERM/SIGINT, publishing every frame into the
+    /// shared-memory ring; camera from the scenario or the control socket.
+    Serve(serve::ServeArgs),
+    /// Print the status file of a running `serve` and/or a ring's header.
+    Status(serve::StatusArgs),
 }
 
 /// Runs the parsed command line.
@@ -46,5 +55,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => render::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Preprocess(args) => preprocess::run(&args),
+        Command::Eval(args) => eval::run(&args),
+        Command::Serve(args) => serve::run(&args),
+        Command::Status(args) => serve::status(&args),
     }
 }

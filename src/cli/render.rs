@@ -31,7 +31,7 @@ pub struct RenderArgs {
     pub width: Option<u32>,
     #[arg(long)]
     pub height: Option<u32>,
-    /// LOD method (brute).
+    /// LOD method (brute, udlod).
     #[arg(long)]
     pub method: Option<String>,
     #[arg(long)]
@@ -48,6 +48,9 @@ pub struct RenderArgs {
     /// UDLOD error-field cap (overrides `lod.error_field_max`; 1 = distance-only selection).
     #[arg(long)]
     pub error_field_max: Option<f64>,
+    /// UDLOD: draw by vertex pulling (no index buffer) instead of the indexed grid.
+    #[arg(long)]
+    pub vertex_pulling: bool,
     /// Frames excluded from the timing summary (lavapipe compiles shaders lazily).
     #[arg(long, default_value_t = 5)]
     pub warmup: usize,
@@ -74,6 +77,9 @@ pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
     }
     if let Some(n) = args.frames_in_flight {
         config.render.frames_in_flight = n;
+    }
+    if args.vertex_pulling {
+        config.lod.vertex_pulling = true;
     }
     if let Some(m) = args.error_field_max {
         config.lod.error_field_max = m;

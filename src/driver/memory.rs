@@ -252,6 +252,18 @@ impl Image {
         extent: vk::Extent2D,
         data: &[u8],
     ) -> Result<Self> {
+        Self::texture_with_mips(gpu, name, format, extent, &[data])
+    }
+
+    /// Creates a sampled 2D texture with `levels.len()` mips; level `k` is
+    /// `max(1, width >> k)` x `max(1, height >> k)` tightly packed texels. Set-up time only.
+    pub fn texture_with_mips(
+        gpu: &Arc<Gpu>,
+        name: &str,
+        format: vk::Format,
+        extent: vk::Extent2D,
+        levels: &[&[u8]],
+    ) -> Result<Self> {
         let image = Image::new(
             gpu,
             &ImageDesc {
@@ -259,19 +271,42 @@ impl Image {
                 format,
                 extent,
                 layers: 1,
-                mips: 1,
+                mips: levels.len() as u32,
                 usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
                 aspect: vk::ImageAspectFlags::COLOR,
             },
         )?;
+        let total: usize = levels.iter().map(|l| l.len()).sum();
         let mut staging = Buffer::new(
             gpu,
             &format!("{name} staging"),
-            data.len() as u64,
+            total as u64,
             vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::CpuToGpu,
         )?;
-        staging.write(data)?;
+        staging.write(&levels.concat())?;
+        let mut offset = 0u64;
+        let regions: Vec<vk::BufferImageCopy> = levels
+            .iter()
+            .enumerate()
+            .map(|(k, level)| {
+                let region = vk::BufferImageCopy::default()
+                    .buffer_offset(offset)
+                    .image_subresource(vk::ImageSubresourceLayers {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        mip_level: k as u32,
+                        base_array_layer: 0,
+                        layer_count: 1,
+                    })
+                    .image_extent(vk::Extent3D {
+                        width: (extent.width >> k).max(1),
+                        height: (extent.height >> k).max(1),
+                        depth: 1,
+                    });
+                offset += level.len() as u64;
+                region
+            })
+            .collect();
         let range = super::barrier::color_range();
         gpu.one_shot(|cmd| {
             let b = super::barrier::Barriers::new(gpu);
@@ -282,25 +317,13 @@ impl Image {
                 super::barrier::ImageAccess::Undefined,
                 super::barrier::ImageAccess::TransferDst,
             );
-            let region = vk::BufferImageCopy::default()
-                .image_subresource(vk::ImageSubresourceLayers {
-                    aspect_mask: vk::ImageAspectFlags::COLOR,
-                    mip_level: 0,
-                    base_array_layer: 0,
-                    layer_count: 1,
-                })
-                .image_extent(vk::Extent3D {
-                    width: extent.width,
-                    height: extent.height,
-                    depth: 1,
-                });
             unsafe {
                 gpu.device.cmd_copy_buffer_to_image(
                     cmd,
                     staging.raw,
                     image.raw,
                     vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                    &[region],
+                    &regions,
                 )
             };
             b.image(

@@ -70,6 +70,7 @@ impl BruteForce {
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.set_layout],
                 topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+                cull_back_faces: true,
             },
         )?;
         let info = &ctx.terrain.info;

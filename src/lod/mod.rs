@@ -2,6 +2,7 @@
 //! [`LodMethod`], so brute force and later methods are interchangeable.
 
 pub mod brute;
+pub mod pgm;
 pub mod udlod;
 
 use ash::vk;
@@ -18,11 +19,17 @@ pub enum MethodKind {
     Brute,
     /// GPU quadtree tiling in compute + vertex morphing (Kühnert's UDLOD).
     Udlod,
+    /// Persistent grid mapping: a fixed screen-space grid projected onto the ground through an
+    /// auxiliary camera (a baseline that is known to swim).
+    Pgm,
 }
 
 impl MethodKind {
-    pub const ALL: &[(&'static str, MethodKind)] =
-        &[("brute", MethodKind::Brute), ("udlod", MethodKind::Udlod)];
+    pub const ALL: &[(&'static str, MethodKind)] = &[
+        ("brute", MethodKind::Brute),
+        ("udlod", MethodKind::Udlod),
+        ("pgm", MethodKind::Pgm),
+    ];
 
     pub fn parse(name: &str) -> Result<Self> {
         Self::ALL
@@ -108,6 +115,7 @@ pub fn create(kind: MethodKind, ctx: &MethodContext<'_>) -> Result<Box<dyn LodMe
     Ok(match kind {
         MethodKind::Brute => Box::new(brute::BruteForce::new(ctx)?),
         MethodKind::Udlod => Box::new(udlod::Udlod::new(ctx)?),
+        MethodKind::Pgm => Box::new(pgm::Pgm::new(ctx)?),
     })
 }
 
@@ -130,6 +138,18 @@ pub struct LodSettings {
     /// UDLOD: cap of the per-region error field (1 = distance-only selection: every region
     /// refined for the level's worst error). Larger lets smooth regions keep coarser levels.
     pub error_field_max: f64,
+    /// UDLOD: draw without an index buffer (six vertex-shader runs per quad) instead of the
+    /// shared indexed grid; kept for measurement (`benches/udlod.rs` compares the two).
+    pub vertex_pulling: bool,
+    /// PGM: grid vertices `[columns, rows]`: columns run across the screen (left to right),
+    /// rows from the bottom of the auxiliary view up to the horizon.
+    pub pgm_grid: [u32; 2],
+    /// PGM: smallest field of view of the auxiliary camera in degrees (90..=170), both
+    /// horizontally and vertically; its pitch is clamped to at most `-pgm_fov_deg / 2`.
+    pub pgm_fov_deg: f64,
+    /// PGM: lowest height of the auxiliary camera above the reference plane (the terrain under
+    /// the camera), metres.
+    pub pgm_min_height_m: f64,
 }
 
 impl Default for LodSettings {
@@ -142,6 +162,10 @@ impl Default for LodSettings {
             morph: true,
             cull: true,
             error_field_max: 8.0,
+            vertex_pulling: false,
+            pgm_grid: [240, 1050],
+            pgm_fov_deg: 90.0,
+            pgm_min_height_m: 2.0,
         }
     }
 }
@@ -177,6 +201,32 @@ impl LodSettings {
             return bad(format!(
                 "error_field_max {} must be within 1..=1024",
                 self.error_field_max
+            ));
+        }
+        let [cols, rows] = self.pgm_grid;
+        if !(2..=4096).contains(&cols) || !(2..=16384).contains(&rows) {
+            return bad(format!(
+                "pgm_grid [{cols}, {rows}] needs 2..=4096 columns and 2..=16384 rows"
+            ));
+        }
+        if cols as u64 * rows as u64 > 1 << 24 {
+            return bad(format!(
+                "pgm_grid [{cols}, {rows}] has more than 16777216 vertices"
+            ));
+        }
+        if !(self.pgm_fov_deg.is_finite() && (90.0..=170.0).contains(&self.pgm_fov_deg)) {
+            return bad(format!(
+                "pgm_fov_deg {} must be within 90..=170 degrees",
+                self.pgm_fov_deg
+            ));
+        }
+        if !(self.pgm_min_height_m.is_finite()
+            && self.pgm_min_height_m > 0.0
+            && self.pgm_min_height_m <= 100_000.0)
+        {
+            return bad(format!(
+                "pgm_min_height_m {} must be within (0, 100000] metres",
+                self.pgm_min_height_m
             ));
         }
         Ok(())

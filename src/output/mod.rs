@@ -1,6 +1,7 @@
-//! Where frames go after readback: PNG files (and, later, the shared-memory ring).
+//! Where frames go after readback: PNG files and the shared-memory ring.
 
 pub mod png;
+pub mod ring;
 
 use std::path::Path;
 

@@ -89,10 +89,13 @@ pub struct TerrainPipelineDesc<'a> {
     pub fragment_entry: &'a std::ffi::CStr,
     pub set_layouts: &'a [vk::DescriptorSetLayout],
     pub topology: vk::PrimitiveTopology,
+    /// Cull back faces. Off for meshes whose morphing makes sliver triangles that can face away
+    /// from the camera while still being part of the visible surface (UDLOD).
+    pub cull_back_faces: bool,
 }
 
 /// Builds a terrain pipeline: no vertex buffers (vertices come from indices), reversed-Z depth
-/// (GREATER), back faces culled, viewport and scissor dynamic.
+/// (GREATER), back faces culled unless the method says otherwise, viewport and scissor dynamic.
 pub fn terrain_pipeline(
     gpu: &Arc<Gpu>,
     formats: &TargetFormats,
@@ -131,7 +134,11 @@ pub fn terrain_pipeline(
         .scissor_count(1);
     let raster = vk::PipelineRasterizationStateCreateInfo::default()
         .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(vk::CullModeFlags::BACK)
+        .cull_mode(if desc.cull_back_faces {
+            vk::CullModeFlags::BACK
+        } else {
+            vk::CullModeFlags::NONE
+        })
         // WebGPU-style clip space with naga's y flip: counter-clockwise stays front-facing.
         .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
         .line_width(1.0);

@@ -376,10 +376,15 @@ impl Udlod {
             &ctx.formats,
             &TerrainPipelineDesc {
                 spv: crate::driver::shaders::UDLOD_SPV,
-                vertex_entry: c"vs_main",
+                vertex_entry: if settings.vertex_pulling {
+                    c"vs_pulled"
+                } else {
+                    c"vs_main"
+                },
                 fragment_entry: c"fs_main",
                 set_layouts: &set_layouts,
                 topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+                cull_back_faces: false,
             },
         )?;
         Ok((
@@ -556,8 +561,15 @@ impl LodMethod for Udlod {
                 &[frame_set, s.set],
                 &[],
             );
-            d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
-            d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, 20);
+            if self.settings.vertex_pulling {
+                // The indexed arguments (index_count, instance_count, first_index,
+                // vertex_offset, ...) read as non-indexed ones: 6 * quads^2 vertices per
+                // instance, first vertex 0, first instance 0.
+                d.cmd_draw_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, 16);
+            } else {
+                d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
+                d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, 20);
+            }
         }
     }
 

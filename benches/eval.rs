@@ -1,0 +1,234 @@
+//! Speed against accuracy on lavapipe (or any device): brute force, UDLOD at tau 0.5/1/2/4 and
+//! PGM at two grid sizes over scenarios, each written as a full evaluation (`report.md`,
+//! charts, CSV, images) under `target/bench/eval/<name>/` and summarised in
+//! `target/bench/eval.json`.
+//!
+//! `VKTERRAIN_EVAL_SHORT=1` is the CI version (one procedural scenario at 320x180, a few
+//! minutes at most). It asserts correctness, never absolute times: UDLOD has no holes, its
+//! 99.9th-percentile screen-space error is within 1.25 tau, brute force measures ~0 error, and
+//! PGM swims more than UDLOD; frame times are printed as ratios to brute force of the same
+//! run. Without it, the Fischer flights S1 (Franconia, flat) and S3 (Pyrenees, rough) run at
+//! 1280x720 (data: `make data`).
+
+use std::path::PathBuf;
+
+use clap::Parser;
+use vkterrain::cli::render::{RenderArgs, prepare};
+use vkterrain::driver::{Gpu, GpuOptions};
+use vkterrain::eval::report;
+use vkterrain::eval::run::{EvalSetup, Evaluation, evaluate, parse_sweep, variants};
+use vkterrain::lod::MethodKind;
+use vkterrain::render::RenderOptions;
+
+#[derive(Parser)]
+struct Wrapper {
+    #[command(flatten)]
+    args: RenderArgs,
+}
+
+struct Case {
+    name: &'static str,
+    config: &'static str,
+    scenario: Option<&'static str>,
+    frames: u32,
+    size: (u32, u32),
+}
+
+fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
+    let mut argv = vec![
+        "eval".to_string(),
+        "--config".into(),
+        format!("{root}/{}", case.config),
+        "--frames".into(),
+        case.frames.to_string(),
+        "--width".into(),
+        case.size.0.to_string(),
+        "--height".into(),
+        case.size.1.to_string(),
+    ];
+    if let Some(s) = case.scenario {
+        argv.extend(["--scenario".into(), format!("{root}/{s}")]);
+    }
+    let args = Wrapper::try_parse_from(argv)?.args;
+    let p = match prepare(&args) {
+        Ok(p) => p,
+        Err(e) => {
+            println!(
+                "skipping {}: {e:#} (make data builds the data sets)",
+                case.name
+            );
+            return Ok(None);
+        }
+    };
+    let gpu = Gpu::new(
+        &GpuOptions {
+            select: p.config.device.select.clone(),
+            validation: false,
+            force_legacy: p.config.device.force_legacy,
+        }
+        .with_env(),
+    )?;
+    let sweeps = vec![
+        parse_sweep("tau=0.5,1,2,4")?,
+        parse_sweep("pgm_scale=0.5,1")?,
+    ];
+    let variants = variants(
+        &[MethodKind::Brute, MethodKind::Udlod, MethodKind::Pgm],
+        &sweeps,
+        &p.config.lod,
+    )?;
+    let setup = EvalSetup {
+        gpu: &gpu,
+        data: &p.data,
+        scenario: &p.scenario,
+        frames: p.frames,
+        warmup: 4,
+        options: RenderOptions::from_config(&p.config),
+        image_frames: vec![p.frames as u64 / 2],
+    };
+    let evaluation = evaluate(&setup, &variants, &mut ())?;
+    let out = PathBuf::from(format!("{root}/target/bench/eval/{}", case.name));
+    report::write(&evaluation, &p.data, &out, true)?;
+    let brute = evaluation
+        .summaries
+        .iter()
+        .find(|s| s.method == "brute")
+        .map(|s| s.frame_ms.median)
+        .unwrap_or(f64::NAN);
+    println!(
+        "\n{} ({} on {}, {}x{}, {} frames, {}) -> {}/report.md",
+        case.name,
+        evaluation.scenario,
+        evaluation.dataset,
+        evaluation.width,
+        evaluation.height,
+        evaluation.frames,
+        evaluation.device,
+        out.display()
+    );
+    println!(
+        "{:<18} {:>9} {:>8} {:>10} {:>9} {:>8} {:>6} {:>9} {:>9}",
+        "variant",
+        "median ms",
+        "x brute",
+        "triangles",
+        "err p99.9",
+        "err max",
+        "holes",
+        "popping",
+        "swimming"
+    );
+    for s in &evaluation.summaries {
+        println!(
+            "{:<18} {:>9.1} {:>8.2} {:>10.0} {:>9.3} {:>8.3} {:>6} {:>9.4} {:>9.4}",
+            s.variant,
+            s.frame_ms.median,
+            s.frame_ms.median / brute,
+            s.triangles_median,
+            s.error.pixels.p999,
+            s.error.pixels.max,
+            s.holes_total,
+            s.popping_px.median,
+            s.swimming_px.mean
+        );
+    }
+    Ok(Some(evaluation))
+}
+
+/// Correctness of the short run: the assertions CI makes.
+fn check(evaluation: &Evaluation) -> anyhow::Result<()> {
+    let mut failures = Vec::new();
+    let mut udlod_swim = 0.0f64;
+    let mut pgm_swim = f64::INFINITY;
+    for s in &evaluation.summaries {
+        match s.method.as_str() {
+            "brute" if s.error.pixels.p999 > 0.01 => {
+                failures.push(format!("brute force error {} px", s.error.pixels.p999))
+            }
+            "udlod" => {
+                let tau = s
+                    .params
+                    .iter()
+                    .find(|(k, _)| k == "tau")
+                    .map_or(1.0, |p| p.1);
+                if s.holes_total > 0 {
+                    failures.push(format!("{}: {} holes", s.variant, s.holes_total));
+                }
+                if s.error.pixels.p999 > 1.25 * tau {
+                    failures.push(format!(
+                        "{}: error {} px > 1.25 tau",
+                        s.variant, s.error.pixels.p999
+                    ));
+                }
+                udlod_swim = udlod_swim.max(s.swimming_px.mean);
+            }
+            "pgm" => pgm_swim = pgm_swim.min(s.swimming_px.mean),
+            _ => {}
+        }
+    }
+    if pgm_swim <= udlod_swim {
+        failures.push(format!(
+            "PGM swims {pgm_swim} px, not more than UDLOD's {udlod_swim} px"
+        ));
+    }
+    if failures.is_empty() {
+        println!(
+            "checks passed: UDLOD watertight and within tau, PGM swims {:.1}x more than UDLOD",
+            pgm_swim / udlod_swim.max(1e-9)
+        );
+        Ok(())
+    } else {
+        anyhow::bail!("eval checks failed: {}", failures.join("; "))
+    }
+}
+
+fn main() -> anyhow::Result<()> {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let short = std::env::var("VKTERRAIN_EVAL_SHORT").is_ok_and(|v| v == "1");
+    let cases: Vec<Case> = if short {
+        vec![Case {
+            name: "ci",
+            config: "config/ci.toml",
+            scenario: None,
+            frames: 24,
+            size: (320, 180),
+        }]
+    } else {
+        vec![
+            Case {
+                name: "fischer_s1_franconia",
+                config: "config/franconia.toml",
+                scenario: Some("config/scenarios/franconia_fischer_s1_flat_close_down63.toml"),
+                frames: 48,
+                size: (1280, 720),
+            },
+            Case {
+                name: "fischer_s3_pyrenees",
+                config: "config/pyrenees.toml",
+                scenario: Some("config/scenarios/pyrenees_fischer_s3_rough_far_down45.toml"),
+                frames: 48,
+                size: (1280, 720),
+            },
+        ]
+    };
+    let mut all = Vec::new();
+    for case in &cases {
+        if let Some(e) = run_case(root, case)? {
+            if short {
+                check(&e)?;
+            }
+            all.push(serde_json::json!({
+                "case": case.name,
+                "scenario": e.scenario,
+                "dataset": e.dataset,
+                "summaries": e.summaries,
+            }));
+        }
+    }
+    std::fs::create_dir_all(format!("{root}/target/bench"))?;
+    std::fs::write(
+        format!("{root}/target/bench/eval.json"),
+        serde_json::to_string_pretty(&all)?,
+    )?;
+    Ok(())
+}

@@ -1,0 +1,82 @@
+// Persistent grid mapping: a fixed grid of `cols` x `rows` vertices in the screen space of an
+// auxiliary camera, projected onto the reference plane under the camera; every vertex takes
+// the data's height at its projected point from a mip level chosen by the longest projected
+// edge of its cells. Each vertex is a pure function of its grid index (one shared index grid,
+// instanced over bands of rows), so the mesh has no cracks; but the grid follows the camera,
+// so vertices slide over the terrain ("swimming"). See src/lod/pgm.rs and docs/pgm.md.
+
+//!include terrain_common.wgsl
+
+// Mirrors `PgmUniforms` in src/lod/pgm.rs; a test proves the layouts equal.
+struct Pgm {
+    // xyz: camera-relative world direction of grid vertex (0, 0) (bottom left);
+    // w: auxiliary camera height above the reference plane (m).
+    dir0: vec4<f32>,
+    // xyz: direction change from the first to the last column; w: largest ground distance (m).
+    dcol: vec4<f32>,
+    // xyz: direction change from the first to the last row; w: unused.
+    drow: vec4<f32>,
+    // x: columns, y: rows, z: rows per instanced band, w: mip levels of `height_mips`.
+    grid: vec4<u32>,
+}
+
+@group(1) @binding(0) var<uniform> pgm: Pgm;
+// The heights (R32F, metres) with a 2x2-box mip chain; sampled trilinearly.
+@group(1) @binding(1) var height_mips: texture_2d<f32>;
+@group(1) @binding(2) var mip_sampler: sampler;
+
+// Camera-relative ground offset (metres) where the ray of grid vertex `g` meets the reference
+// plane; rays at or above the horizon, and hits beyond it, are cut at the largest distance.
+// `g` may lie one step outside the grid (neighbours for the edge length): it extrapolates.
+fn ground_offset(g: vec2<i32>) -> vec2<f32> {
+    let t = vec2<f32>(g) / vec2<f32>(pgm.grid.xy - vec2<u32>(1u));
+    let dir = pgm.dir0.xyz + pgm.dcol.xyz * t.x + pgm.drow.xyz * t.y;
+    let flat_len = length(dir.xy);
+    if flat_len == 0.0 {
+        return vec2<f32>(0.0);
+    }
+    var d = pgm.dcol.w;
+    if dir.z < 0.0 {
+        d = min(pgm.dir0.w * flat_len / -dir.z, d);
+    }
+    return dir.xy * (d / flat_len);
+}
+
+@vertex
+fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    let cols = pgm.grid.x;
+    let g = vec2<i32>(
+        i32(vertex % cols),
+        i32(min(instance * pgm.grid.z + vertex / cols, pgm.grid.y - 1u)),
+    );
+    let p = ground_offset(g);
+    let spacing = frame.camera_offset.w;
+    // Longest projected edge of the cells around the vertex, in texels -> mip level.
+    var longest = 0.0;
+    longest = max(longest, distance(p, ground_offset(g + vec2<i32>(1, 0))));
+    longest = max(longest, distance(p, ground_offset(g - vec2<i32>(1, 0))));
+    longest = max(longest, distance(p, ground_offset(g + vec2<i32>(0, 1))));
+    longest = max(longest, distance(p, ground_offset(g - vec2<i32>(0, 1))));
+    let level = clamp(log2(max(longest / spacing, 1.0)), 0.0, f32(pgm.grid.w - 1u));
+    // Sample position as integer cell + fraction (relative to the camera cell first).
+    let t = frame.camera_offset.xy / spacing + p / spacing;
+    let fl = floor(t);
+    var cell = frame.camera_cell.xy + vec2<i32>(fl);
+    var frac = t - fl;
+    // Outside the data: clamp onto its border (triangles there collapse onto the edge).
+    let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+    frac = select(frac, vec2<f32>(0.0), (cell < vec2<i32>(0)) | (cell >= last));
+    cell = clamp(cell, vec2<i32>(0), last);
+    let grid_pos = vec2<f32>(cell) + frac;
+    let uv = (grid_pos + 0.5) / vec2<f32>(frame.data_size.xy);
+    let h = textureSampleLevel(height_mips, mip_sampler, uv, level).r;
+    var out: TerrainVertex;
+    out.clip = project(cell, frac, h);
+    out.grid_pos = grid_pos;
+    return out;
+}
+
+@fragment
+fn fs_main(v: TerrainVertex) -> @location(0) vec4<f32> {
+    return shade(v.grid_pos);
+}

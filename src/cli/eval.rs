@@ -1,0 +1,134 @@
+//! `vkterrain eval`: a scenario rendered by several methods over parameter sweeps, measured
+//! against the exact surface; writes results.json, CSV, charts, images and report.md.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::driver::{Gpu, GpuOptions};
+use crate::eval::report;
+use crate::eval::run::{EvalSetup, Progress, evaluate, parse_sweep, variants};
+use crate::lod::MethodKind;
+use crate::render::RenderOptions;
+
+#[derive(Args, Debug, Clone)]
+pub struct EvalArgs {
+    #[command(flatten)]
+    pub render: super::render::RenderArgs,
+    /// Methods to evaluate, comma-separated (brute, udlod, pgm).
+    #[arg(long, default_value = "brute,udlod")]
+    pub methods: String,
+    /// Parameter sweep `key=v1,v2,...` (repeatable): tau, error_field_max, grid_size,
+    /// morph_range (UDLOD); pgm_scale (both grid sides times the value), pgm_cols, pgm_rows,
+    /// pgm_fov_deg (PGM).
+    #[arg(long)]
+    pub sweep: Vec<String>,
+    /// Replace an existing output directory.
+    #[arg(long)]
+    pub force: bool,
+    /// Frames written as side-by-side images (reference | method | error); negative counts
+    /// from the end.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [0i64, -1])]
+    pub images: Vec<i64>,
+}
+
+struct Bars(Option<ProgressBar>);
+
+impl Progress for Bars {
+    fn start(&mut self, label: &str, frames: u64) {
+        let bar = ProgressBar::new(frames);
+        bar.set_style(
+            ProgressStyle::with_template("{msg:>32} [{bar:30}] {pos}/{len} frames {elapsed}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        bar.set_message(label.to_string());
+        self.0 = Some(bar);
+    }
+    fn advance(&mut self) {
+        if let Some(b) = &self.0 {
+            b.inc(1);
+        }
+    }
+    fn finish(&mut self) {
+        if let Some(b) = self.0.take() {
+            b.finish();
+        }
+    }
+}
+
+pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
+    let p = super::render::prepare(&args.render)?;
+    let methods = args
+        .methods
+        .split(',')
+        .map(|m| MethodKind::parse(m.trim()))
+        .collect::<crate::Result<Vec<_>>>()?;
+    if methods.is_empty() {
+        anyhow::bail!("--methods lists no method");
+    }
+    let sweeps = args
+        .sweep
+        .iter()
+        .map(|s| parse_sweep(s))
+        .collect::<crate::Result<Vec<_>>>()?;
+    let variants = variants(&methods, &sweeps, &p.config.lod)?;
+    let out = args
+        .render
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out/eval"));
+    if out.exists() && !args.force {
+        anyhow::bail!("{}: exists (use --force to replace it)", out.display());
+    }
+    let gpu = Gpu::new(
+        &GpuOptions {
+            select: p.config.device.select.clone(),
+            validation: p.config.device.validation,
+            force_legacy: p.config.device.force_legacy,
+        }
+        .with_env(),
+    )?;
+    let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
+    let setup = EvalSetup {
+        gpu: &gpu,
+        data: &p.data,
+        scenario: &p.scenario,
+        frames: p.frames,
+        warmup,
+        options: RenderOptions::from_config(&p.config),
+        image_frames: super::render::png_frames(&args.images, p.frames),
+    };
+    eprintln!(
+        "eval: {} variants + reference, {} frames of {} on {} at {}x{}, device {}",
+        variants.len(),
+        p.frames,
+        p.scenario.name,
+        p.data.name,
+        setup.options.width,
+        setup.options.height,
+        gpu.info.name
+    );
+    let evaluation = evaluate(&setup, &variants, &mut Bars(None))?;
+    super::render::check_validation(&gpu)?;
+    report::write(&evaluation, &p.data, &out, args.force)?;
+    println!(
+        "{:<28} {:>9} {:>10} {:>10} {:>10} {:>6} {:>9} {:>9}",
+        "variant", "median ms", "triangles", "err p99.9", "err max", "holes", "popping", "swimming"
+    );
+    for s in &evaluation.summaries {
+        println!(
+            "{:<28} {:>9.1} {:>10.0} {:>10.3} {:>10.3} {:>6} {:>9.4} {:>9.4}",
+            s.variant,
+            s.frame_ms.median,
+            s.triangles_median,
+            s.error.pixels.p999,
+            s.error.pixels.max,
+            s.holes_total,
+            s.popping_px.median,
+            s.swimming_px.mean
+        );
+    }
+    println!("wrote {}/report.md", out.display());
+    Ok(())
+}

@@ -1,0 +1,393 @@
+//! One evaluation: a scenario rendered by several methods and parameter values, every frame
+//! measured against the exact surface and against the brute-force reference image, plus the
+//! temporal metrics (popping, swimming). `vkterrain eval` and `benches/eval.rs` drive it.
+
+use std::sync::Arc;
+
+use serde::Serialize;
+
+use super::metrics::{self, ErrorHistogram, GeometricError, Summary, SwimTracker};
+use crate::dataset::Heightmap;
+use crate::driver::Gpu;
+use crate::error::{Error, Result};
+use crate::lod::{LodSettings, MethodKind};
+use crate::readback::{FrameView, OwnedFrame};
+use crate::render::stats::Percentiles;
+use crate::render::{RenderOptions, Renderer};
+use crate::scene::Scenario;
+
+/// Every this many frames, swimming starts tracking the points a 12 x 8 pixel grid of the
+/// reference frame sees.
+const SWIM_SEED_EVERY: usize = 8;
+
+/// One method with one parameter setting.
+#[derive(Clone, Debug)]
+pub struct Variant {
+    pub method: MethodKind,
+    /// `method` or `method key=value,...`.
+    pub label: String,
+    pub params: Vec<(String, f64)>,
+    pub lod: LodSettings,
+}
+
+/// Parameters each method takes from `--sweep key=v1,v2`.
+fn method_keys(method: MethodKind) -> &'static [&'static str] {
+    match method {
+        MethodKind::Brute => &[],
+        MethodKind::Udlod => &["tau", "error_field_max", "grid_size", "morph_range"],
+        MethodKind::Pgm => &["pgm_scale", "pgm_cols", "pgm_rows", "pgm_fov_deg"],
+    }
+}
+
+fn apply(lod: &mut LodSettings, key: &str, value: f64) -> Result<()> {
+    match key {
+        "tau" => lod.tau_px = value,
+        "error_field_max" => lod.error_field_max = value,
+        "grid_size" => lod.grid_size = value as u32,
+        "morph_range" => lod.morph_range = value,
+        // Both grid dimensions of the configured grid times `value` (0.5: 240x1050 -> 120x525).
+        "pgm_scale" => {
+            lod.pgm_grid = lod
+                .pgm_grid
+                .map(|n| ((n as f64 * value).round() as u32).max(2))
+        }
+        "pgm_cols" => lod.pgm_grid[0] = value as u32,
+        "pgm_rows" => lod.pgm_grid[1] = value as u32,
+        "pgm_fov_deg" => lod.pgm_fov_deg = value,
+        _ => {
+            return Err(Error::invalid(
+                "sweep",
+                format!("unknown parameter {key:?}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Parses `key=v1,v2,...`.
+pub fn parse_sweep(text: &str) -> Result<(String, Vec<f64>)> {
+    let bad = |m: &str| Error::invalid("sweep", format!("{text:?}: {m} (expected key=v1,v2,...)"));
+    let (key, values) = text.split_once('=').ok_or_else(|| bad("no '='"))?;
+    let values = values
+        .split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<f64>()
+                .map_err(|_| bad("a value is not a number"))
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    if values.is_empty() || values.iter().any(|v| !v.is_finite()) {
+        return Err(bad("values must be finite numbers"));
+    }
+    Ok((key.trim().to_string(), values))
+}
+
+/// The variants of `methods` under `sweeps` (the Cartesian product of the sweeps a method
+/// takes; one variant with `base` for a method no sweep applies to). Every setting is
+/// validated; an unknown key or one no listed method takes is an error.
+pub fn variants(
+    methods: &[MethodKind],
+    sweeps: &[(String, Vec<f64>)],
+    base: &LodSettings,
+) -> Result<Vec<Variant>> {
+    for (key, _) in sweeps {
+        if !methods
+            .iter()
+            .any(|m| method_keys(*m).contains(&key.as_str()))
+        {
+            return Err(Error::invalid(
+                "sweep",
+                format!("no listed method takes parameter {key:?}"),
+            ));
+        }
+    }
+    let mut out = Vec::new();
+    for &method in methods {
+        let mine: Vec<&(String, Vec<f64>)> = sweeps
+            .iter()
+            .filter(|(k, _)| method_keys(method).contains(&k.as_str()))
+            .collect();
+        let mut combos: Vec<Vec<(String, f64)>> = vec![Vec::new()];
+        for (key, values) in &mine {
+            combos = combos
+                .into_iter()
+                .flat_map(|c| {
+                    values.iter().map(move |&v| {
+                        let mut c = c.clone();
+                        c.push((key.clone(), v));
+                        c
+                    })
+                })
+                .collect();
+        }
+        for params in combos {
+            let mut lod = base.clone();
+            for (k, v) in &params {
+                apply(&mut lod, k, *v)?;
+            }
+            lod.validate()?;
+            let label = if params.is_empty() {
+                method.name().to_string()
+            } else if method == MethodKind::Pgm && params.iter().any(|(k, _)| k == "pgm_scale") {
+                format!("pgm {}x{}", lod.pgm_grid[0], lod.pgm_grid[1])
+            } else {
+                let p: Vec<String> = params.iter().map(|(k, v)| format!("{k}={v}")).collect();
+                format!("{} {}", method.name(), p.join(","))
+            };
+            out.push(Variant {
+                method,
+                label,
+                params,
+                lod,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// Per-frame measurements of one variant.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameRow {
+    pub variant: String,
+    pub method: String,
+    pub frame: u64,
+    /// Interval between this frame's delivery and the previous one (ms; 0 for the first).
+    pub frame_ms: f64,
+    pub gpu_prepass_ms: f64,
+    pub gpu_terrain_ms: f64,
+    pub cpu_record_ms: f64,
+    pub triangles: u64,
+    pub error: GeometricError,
+    pub holes: usize,
+    pub psnr_db: f64,
+    pub ssim: f64,
+    /// 99th percentile of the per-pixel change of the error image since the previous frame.
+    pub popping_p99_px: f64,
+}
+
+/// Summary of one variant over the frames after warm-up.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunSummary {
+    pub variant: String,
+    pub method: String,
+    pub params: Vec<(String, f64)>,
+    pub frames: usize,
+    pub frame_ms: Percentiles,
+    pub gpu_prepass_ms_median: f64,
+    pub gpu_terrain_ms_median: f64,
+    pub triangles_median: f64,
+    /// Over all pixels of all measured frames (percentiles to 1.2%, never understated).
+    pub error: GeometricError,
+    pub holes_total: usize,
+    pub psnr_db_mean: f64,
+    pub ssim_mean: f64,
+    /// Of the per-frame 99th percentiles.
+    pub popping_px: Summary,
+    /// Per fixed world point: range of its height error (metres) and that range in pixels.
+    pub swimming_m: Summary,
+    pub swimming_px: Summary,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Evaluation {
+    pub dataset: String,
+    pub scenario: String,
+    pub device: String,
+    pub width: u32,
+    pub height: u32,
+    pub frames: u32,
+    pub warmup: usize,
+    pub reference: String,
+    pub summaries: Vec<RunSummary>,
+    pub rows: Vec<FrameRow>,
+    /// Frames kept for images: (variant, frame index, reference, method) — not serialized.
+    #[serde(skip)]
+    pub images: Vec<(String, u64, Arc<OwnedFrame>, Arc<OwnedFrame>)>,
+}
+
+/// What the runner reports while it works (progress bars in the CLI).
+pub trait Progress {
+    fn start(&mut self, label: &str, frames: u64);
+    fn advance(&mut self);
+    fn finish(&mut self);
+}
+
+impl Progress for () {
+    fn start(&mut self, _: &str, _: u64) {}
+    fn advance(&mut self) {}
+    fn finish(&mut self) {}
+}
+
+/// Settings of one evaluation run.
+pub struct EvalSetup<'a> {
+    pub gpu: &'a Arc<Gpu>,
+    pub data: &'a Heightmap,
+    pub scenario: &'a Scenario,
+    pub frames: u32,
+    pub warmup: usize,
+    pub options: RenderOptions,
+    /// Frames to keep for side-by-side images.
+    pub image_frames: Vec<u64>,
+}
+
+fn render_all(
+    setup: &EvalSetup<'_>,
+    method: MethodKind,
+    lod: &LodSettings,
+    progress: &mut dyn Progress,
+    label: &str,
+) -> Result<(Vec<OwnedFrame>, Vec<crate::render::stats::FrameRecord>)> {
+    let mut options = setup.options.clone();
+    options.readback_depth = true;
+    options.lod = lod.clone();
+    let mut frames = Vec::with_capacity(setup.frames as usize);
+    let records;
+    {
+        let mut renderer = Renderer::new(setup.gpu, setup.data, method, options)?;
+        progress.start(label, setup.frames as u64);
+        let mut sink = |f: &FrameView<'_>| {
+            frames.push(OwnedFrame::copy_of(f));
+            Ok(())
+        };
+        for k in 0..setup.frames as u64 {
+            renderer.render(setup.scenario.camera(k), &mut sink)?;
+            progress.advance();
+        }
+        renderer.finish(&mut sink)?;
+        records = renderer.stats.frames.clone();
+        progress.finish();
+    }
+    Ok((frames, records))
+}
+
+/// Renders the reference (brute force) and every variant, and measures them.
+pub fn evaluate(
+    setup: &EvalSetup<'_>,
+    variants: &[Variant],
+    progress: &mut dyn Progress,
+) -> Result<Evaluation> {
+    let base_lod = setup.options.lod.clone();
+    let (reference, _) = render_all(
+        setup,
+        MethodKind::Brute,
+        &base_lod,
+        progress,
+        "reference (brute force)",
+    )?;
+    let reference: Vec<Arc<OwnedFrame>> = reference.into_iter().map(Arc::new).collect();
+    let (w, h) = (setup.options.width, setup.options.height);
+    let focal = setup.scenario.camera(0).focal_px(h);
+    let mut summaries = Vec::new();
+    let mut rows = Vec::new();
+    let mut images = Vec::new();
+    for v in variants {
+        let (frames, records) = render_all(setup, v.method, &v.lod, progress, &v.label)?;
+        let mut swim = SwimTracker::new();
+        let mut previous_error: Option<Vec<Option<f64>>> = None;
+        let mut all_errors = ErrorHistogram::default();
+        let mut my_rows = Vec::new();
+        for (k, f) in frames.into_iter().enumerate() {
+            let depth = f.depth.as_ref().expect("depth read back");
+            let r = &reference[k];
+            let errors = metrics::pixel_errors(&f.camera, w, h, depth, setup.data);
+            let image = metrics::error_image(&f.camera, w, h, depth, setup.data);
+            let popping = match &previous_error {
+                Some(prev) => {
+                    let mut p = metrics::popping(prev, &image, depth, w, h);
+                    Summary::of(&mut p).p99
+                }
+                None => 0.0,
+            };
+            previous_error = Some(image);
+            if k % SWIM_SEED_EVERY == 0 {
+                swim.seed(
+                    &r.camera,
+                    w,
+                    h,
+                    r.depth.as_ref().unwrap(),
+                    setup.data,
+                    12,
+                    8,
+                );
+            }
+            swim.observe(&f.camera, w, h, depth, setup.data);
+            let rec = records.get(k);
+            let row = FrameRow {
+                variant: v.label.clone(),
+                method: v.method.name().to_string(),
+                frame: f.index,
+                frame_ms: rec.map_or(0.0, |r| r.interval_ms),
+                gpu_prepass_ms: f.timings.gpu_prepass_ms,
+                gpu_terrain_ms: f.timings.gpu_terrain_ms,
+                cpu_record_ms: f.timings.cpu_record_ms,
+                triangles: f.triangles,
+                error: GeometricError::of(&errors),
+                holes: metrics::holes(r.depth.as_ref().unwrap(), depth, w, h),
+                psnr_db: metrics::psnr(&r.rgba, &f.rgba),
+                ssim: metrics::ssim(&r.rgba, &f.rgba, w, h),
+                popping_p99_px: popping,
+            };
+            if k >= setup.warmup {
+                all_errors.add(&errors);
+            }
+            if setup.image_frames.contains(&f.index) {
+                images.push((v.label.clone(), f.index, r.clone(), Arc::new(f)));
+            }
+            my_rows.push(row);
+        }
+        let measured: Vec<&FrameRow> = my_rows.iter().skip(setup.warmup).collect();
+        let pick =
+            |g: fn(&FrameRow) -> f64| Percentiles::of(measured.iter().map(|r| g(r)).collect());
+        let mut popping: Vec<f64> = measured.iter().skip(1).map(|r| r.popping_p99_px).collect();
+        let (swimming_m, swimming_px) = swim.summary(focal);
+        let finite_mean = |g: fn(&FrameRow) -> f64| {
+            let v: Vec<f64> = measured
+                .iter()
+                .map(|r| g(r))
+                .filter(|x| x.is_finite())
+                .collect();
+            if v.is_empty() {
+                f64::INFINITY
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
+        summaries.push(RunSummary {
+            variant: v.label.clone(),
+            method: v.method.name().to_string(),
+            params: v.params.clone(),
+            frames: measured.len(),
+            frame_ms: Percentiles::of(
+                measured
+                    .iter()
+                    .map(|r| r.frame_ms)
+                    .filter(|&x| x > 0.0)
+                    .collect(),
+            ),
+            gpu_prepass_ms_median: pick(|r| r.gpu_prepass_ms).median,
+            gpu_terrain_ms_median: pick(|r| r.gpu_terrain_ms).median,
+            triangles_median: pick(|r| r.triangles as f64).median,
+            error: all_errors.summary(),
+            holes_total: measured.iter().map(|r| r.holes).sum(),
+            psnr_db_mean: finite_mean(|r| r.psnr_db),
+            ssim_mean: finite_mean(|r| r.ssim),
+            popping_px: Summary::of(&mut popping),
+            swimming_m,
+            swimming_px,
+        });
+        rows.extend(my_rows);
+    }
+    Ok(Evaluation {
+        dataset: setup.data.name.clone(),
+        scenario: setup.scenario.name.clone(),
+        device: setup.gpu.info.name.clone(),
+        width: w,
+        height: h,
+        frames: setup.frames,
+        warmup: setup.warmup,
+        reference: "brute force: the full-resolution mesh (every sample a vertex); errors are measured against the same mesh evaluated exactly on the CPU".into(),
+        summaries,
+        rows,
+        images,
+    })
+}

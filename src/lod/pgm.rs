@@ -1,0 +1,588 @@
+//! Persistent grid mapping (PGM): a fixed grid of `cols` x `rows` vertices in the screen space
+//! of an **auxiliary camera** is projected onto a horizontal reference plane every frame; each
+//! vertex takes the height of the data at its projected point, read with `textureSampleLevel`
+//! from a mip chain of the heights at the level of the longest projected cell edge in texels.
+//!
+//! Cheap (constant triangle count, no preprocessing beyond the mips, no per-frame CPU work but a
+//! few vectors) and watertight by construction (one grid, every vertex a pure function of its
+//! grid index), but the vertices slide over the terrain when the camera moves: it **swims**, and
+//! it has no error bound. It is the baseline the evaluator shows failing.
+//!
+//! Auxiliary camera (Improved-PGM style, see `docs/pgm.md`): the main camera's position and
+//! heading, no roll; height above the reference plane (the terrain under the camera) clamped to
+//! at least `pgm_min_height_m`; field of view at least `pgm_fov_deg` (>= 90) both ways and
+//! widened where the main frustum needs more; pitch at most `-pgm_fov_deg / 2`, so the top row
+//! of the grid is at or below the horizon and every grid ray meets the plane (rays at the
+//! horizon are cut at `max_distance`).
+
+use std::sync::Arc;
+
+use ash::vk;
+use glam::DVec3;
+use gpu_allocator::MemoryLocation;
+
+use super::{LodMethod, LodSettings, MethodContext, ViewState};
+use crate::dataset::Heightmap;
+use crate::driver::Gpu;
+use crate::driver::memory::{Buffer, Image};
+use crate::error::{Error, Result, VkResultExt};
+use crate::render::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
+use crate::scene::Camera;
+
+/// Per-frame uniforms of set 1 (`Pgm` in `shaders/pgm.wgsl`; `tests/shader_interface.rs`
+/// proves the layouts equal).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PgmUniforms {
+    /// xyz: world direction (camera-relative, unnormalised) of grid vertex (0, 0), the bottom
+    /// left of the auxiliary view; w: auxiliary camera height above the reference plane (m).
+    pub dir0: [f32; 4],
+    /// xyz: direction change from the first to the last column; w: largest ground distance (m).
+    pub dcol: [f32; 4],
+    /// xyz: direction change from the first to the last row; w: unused.
+    pub drow: [f32; 4],
+    /// x: columns, y: rows, z: rows per instanced band, w: mip levels of the height texture.
+    pub grid: [u32; 4],
+}
+
+/// The auxiliary camera of one frame: where the grid comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AuxCamera {
+    pub yaw_deg: f64,
+    pub pitch_deg: f64,
+    /// Height above the reference plane (m), at least `pgm_min_height_m`.
+    pub height: f64,
+    /// Image-plane extents (tangents) of the view: `[left, right]`, `[bottom, top]`.
+    pub tan_x: [f64; 2],
+    pub tan_y: [f64; 2],
+    /// Ground distance at which rays at (or numerically above) the horizon are cut (m).
+    pub max_distance: f64,
+}
+
+/// Widest image-plane tangent of the auxiliary view (about 83 degrees off its axis): keeps
+/// the grid finite when the main camera looks up or sideways past what a plane can show.
+pub const PGM_MAX_TAN: f64 = 8.0;
+/// Samples per main-frustum edge used to fit the auxiliary view.
+const FIT_SAMPLES: usize = 16;
+/// Relative margin added around the fitted main frustum, so terrain rising into the view at
+/// its edges still has grid vertices under it.
+const FIT_MARGIN: f64 = 0.05;
+
+impl AuxCamera {
+    /// The auxiliary camera for `camera` (aspect = width / height) over the reference plane at
+    /// height `ground_z`; `data_far` is the farthest ground distance worth covering.
+    pub fn new(
+        camera: &Camera,
+        aspect: f64,
+        ground_z: f64,
+        data_far: f64,
+        s: &LodSettings,
+    ) -> AuxCamera {
+        let half = s.pgm_fov_deg / 2.0;
+        let pitch = camera.pitch_deg.min(-half);
+        let aux = Camera {
+            position: camera.position,
+            yaw_deg: camera.yaw_deg,
+            pitch_deg: pitch,
+            roll_deg: 0.0,
+            ..*camera
+        };
+        let (ar, au, af) = aux.basis();
+        let t = half.to_radians().tan();
+        let (mut tan_x, mut tan_y) = ([-t, t], [-t, t]);
+        // Fit the main frustum's border: directions above the horizon are flattened onto it
+        // (terrain seen there lies on the plane towards the horizon, same azimuth).
+        let (mr, mu, mf) = camera.basis();
+        let ty = (camera.vfov_deg.to_radians() / 2.0).tan();
+        let tx = ty * aspect;
+        let mut fitted: Option<([f64; 2], [f64; 2])> = None;
+        for i in 0..4 * FIT_SAMPLES {
+            let s = (i % FIT_SAMPLES) as f64 / FIT_SAMPLES as f64 * 2.0 - 1.0;
+            let (sx, sy) = match i / FIT_SAMPLES {
+                0 => (s, -1.0),
+                1 => (1.0, s),
+                2 => (-s, 1.0),
+                _ => (-1.0, -s),
+            };
+            let mut d = mf + mr * (sx * tx) + mu * (sy * ty);
+            if d.z > 0.0 {
+                d.z = 0.0;
+            }
+            let Some(d) = d.try_normalize() else { continue };
+            let z = d.dot(af);
+            if z < 1e-3 {
+                continue; // behind the auxiliary camera: not representable, see docs/pgm.md
+            }
+            let (x, y) = (d.dot(ar) / z, d.dot(au) / z);
+            let f = fitted.get_or_insert(([x, x], [y, y]));
+            f.0 = [f.0[0].min(x), f.0[1].max(x)];
+            f.1 = [f.1[0].min(y), f.1[1].max(y)];
+        }
+        if let Some((fx, fy)) = fitted {
+            let (mx, my) = (FIT_MARGIN * (fx[1] - fx[0]), FIT_MARGIN * (fy[1] - fy[0]));
+            tan_x = [tan_x[0].min(fx[0] - mx), tan_x[1].max(fx[1] + mx)];
+            tan_y = [tan_y[0].min(fy[0] - my), tan_y[1].max(fy[1] + my)];
+        }
+        // Never above the horizon (tan = tan(-pitch)), never wider than PGM_MAX_TAN.
+        let horizon = if pitch > -89.999 {
+            (-pitch).to_radians().tan()
+        } else {
+            f64::INFINITY
+        };
+        let cap = PGM_MAX_TAN;
+        tan_x = [tan_x[0].max(-cap), tan_x[1].min(cap)];
+        tan_y = [tan_y[0].max(-cap), tan_y[1].min(cap).min(horizon)];
+        let height = (camera.position.z - ground_z).max(s.pgm_min_height_m);
+        AuxCamera {
+            yaw_deg: camera.yaw_deg,
+            pitch_deg: pitch,
+            height,
+            tan_x,
+            tan_y,
+            // The far plane cuts at view depth `far`: its corners are farther than that.
+            max_distance: data_far
+                .min(camera.far * (1.0 + tx * tx + ty * ty).sqrt())
+                .max(1.0),
+        }
+    }
+
+    /// Vertical field of view in degrees (for reports and tests).
+    pub fn vfov_deg(&self) -> f64 {
+        (self.tan_y[1].atan() - self.tan_y[0].atan()).to_degrees()
+    }
+
+    /// Horizontal field of view in degrees.
+    pub fn hfov_deg(&self) -> f64 {
+        (self.tan_x[1].atan() - self.tan_x[0].atan()).to_degrees()
+    }
+
+    /// The shader's view of this camera: directions of the grid's corners and extents.
+    pub fn uniforms(&self, grid: [u32; 2], band: u32, mips: u32) -> PgmUniforms {
+        let cam = Camera {
+            yaw_deg: self.yaw_deg,
+            pitch_deg: self.pitch_deg,
+            roll_deg: 0.0,
+            ..Camera::default()
+        };
+        let (r, u, f) = cam.basis();
+        let dir0 = f + r * self.tan_x[0] + u * self.tan_y[0];
+        let dcol = r * (self.tan_x[1] - self.tan_x[0]);
+        let drow = u * (self.tan_y[1] - self.tan_y[0]);
+        let v4 = |v: DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+        PgmUniforms {
+            dir0: v4(dir0, self.height),
+            dcol: v4(dcol, self.max_distance),
+            drow: v4(drow, 0.0),
+            grid: [grid[0], grid[1], band, mips],
+        }
+    }
+}
+
+/// The height mip chain: level 0 is the data, level `k + 1` the 2x2 box average of level `k`
+/// (`max(1, size >> 1)` per side; an odd last row/column is averaged into its neighbour's
+/// texel only through the box of the texel that contains it, i.e. it is dropped, as the GPU's
+/// own mip sizes do). Returns the levels' texels (f32, row 0 = south).
+pub fn height_mips(data: &Heightmap) -> Vec<Vec<f32>> {
+    let mut levels = vec![data.heights.clone()];
+    let (mut w, mut h) = (data.width as usize, data.height as usize);
+    while w > 1 || h > 1 {
+        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+        let prev = levels.last().expect("level 0 exists");
+        let mut next = Vec::with_capacity(nw * nh);
+        for j in 0..nh {
+            for i in 0..nw {
+                let (mut sum, mut n) = (0.0f64, 0u32);
+                for y in (2 * j)..(2 * j + 2).min(h) {
+                    for x in (2 * i)..(2 * i + 2).min(w) {
+                        sum += prev[y * w + x] as f64;
+                        n += 1;
+                    }
+                }
+                next.push((sum / n as f64) as f32);
+            }
+        }
+        levels.push(next);
+        (w, h) = (nw, nh);
+    }
+    levels
+}
+
+/// Minimum height per block of `MIN_BLOCK`^2 samples: the reference plane is put at the lowest
+/// terrain near the camera, so nearby terrain lies above it and stays inside the grid's
+/// footprint (terrain below the plane would be projected outward, past the view's edges).
+pub struct BlockMin {
+    cols: u32,
+    rows: u32,
+    min: Vec<f32>,
+    block_m: f64,
+}
+
+/// Samples per side of a [`BlockMin`] block.
+pub const MIN_BLOCK: u32 = 8;
+/// Blocks searched at most in each direction from the camera's block.
+const MIN_SEARCH_BLOCKS: i64 = 32;
+
+impl BlockMin {
+    pub fn new(data: &Heightmap) -> Self {
+        let (cols, rows) = (
+            data.width.div_ceil(MIN_BLOCK),
+            data.height.div_ceil(MIN_BLOCK),
+        );
+        let mut min = vec![f32::INFINITY; (cols * rows) as usize];
+        for y in 0..data.height {
+            for x in 0..data.width {
+                let b = ((y / MIN_BLOCK) * cols + x / MIN_BLOCK) as usize;
+                min[b] = min[b].min(data.heights[(y * data.width + x) as usize]);
+            }
+        }
+        BlockMin {
+            cols,
+            rows,
+            min,
+            block_m: MIN_BLOCK as f64 * data.spacing,
+        }
+    }
+
+    /// Lowest height of the blocks within `radius` metres (a square) of `(x, y)`, searching at
+    /// most `MIN_SEARCH_BLOCKS` blocks each way; `None` when the square misses the data.
+    pub fn min_near(&self, x: f64, y: f64, radius: f64) -> Option<f64> {
+        let reach = ((radius / self.block_m).ceil() as i64).clamp(1, MIN_SEARCH_BLOCKS);
+        let (bx, by) = ((x / self.block_m).floor(), (y / self.block_m).floor());
+        if !(bx.is_finite() && by.is_finite()) {
+            return None;
+        }
+        let (bx, by) = (bx as i64, by as i64);
+        let x0 = (bx - reach).max(0);
+        let x1 = (bx + reach).min(self.cols as i64 - 1);
+        let y0 = (by - reach).max(0);
+        let y1 = (by + reach).min(self.rows as i64 - 1);
+        let mut lo = f32::INFINITY;
+        for j in y0..=y1 {
+            for i in x0..=x1 {
+                lo = lo.min(self.min[(j * self.cols as i64 + i) as usize]);
+            }
+        }
+        lo.is_finite().then_some(lo as f64)
+    }
+}
+
+/// Rows per instanced band so one band's vertices fit 16-bit indices.
+pub fn band_rows(cols: u32, rows: u32) -> u32 {
+    ((65536 / cols).saturating_sub(1)).clamp(1, rows - 1)
+}
+
+/// Counter-clockwise (seen from above) triangle list over `cols` x `band + 1` vertices.
+pub fn band_indices(cols: u32, band: u32) -> Vec<u16> {
+    let mut out = Vec::with_capacity(((cols - 1) * band * 6) as usize);
+    for r in 0..band {
+        for c in 0..cols - 1 {
+            let (a, b, cc, d) = (
+                r * cols + c,
+                r * cols + c + 1,
+                (r + 1) * cols + c,
+                (r + 1) * cols + c + 1,
+            );
+            out.extend([a, b, cc, b, d, cc].map(|i| i as u16));
+        }
+    }
+    out
+}
+
+/// Vulkan objects that need explicit destruction; destroyed in `Drop` even when `new` fails
+/// half way (null handles are valid to destroy).
+struct Raw {
+    gpu: Arc<Gpu>,
+    set_layout: vk::DescriptorSetLayout,
+    pool: vk::DescriptorPool,
+    sampler: vk::Sampler,
+}
+
+impl Drop for Raw {
+    fn drop(&mut self) {
+        let d = &self.gpu.device;
+        unsafe {
+            d.destroy_descriptor_pool(self.pool, None);
+            d.destroy_descriptor_set_layout(self.set_layout, None);
+            d.destroy_sampler(self.sampler, None);
+        }
+    }
+}
+
+pub struct Pgm {
+    gpu: Arc<Gpu>,
+    settings: LodSettings,
+    pipeline: Pipeline,
+    indices: Buffer,
+    index_count: u32,
+    instances: u32,
+    band: u32,
+    uniforms: Vec<Buffer>,
+    sets: Vec<vk::DescriptorSet>,
+    _heights: Image,
+    mips: u32,
+    /// Bilinear height under the camera (the reference plane) needs the data on the CPU.
+    data: Arc<Heightmap>,
+    block_min: BlockMin,
+    // Last: destroyed after everything that uses it.
+    _raw: Raw,
+}
+
+impl Pgm {
+    pub fn new(ctx: &MethodContext<'_>) -> Result<Self> {
+        let gpu = ctx.gpu;
+        let settings = ctx.settings.clone();
+        settings.validate()?;
+        let d = &gpu.device;
+        let format = vk::Format::R32_SFLOAT;
+        let props = unsafe {
+            gpu.instance
+                .raw
+                .get_physical_device_format_properties(gpu.physical, format)
+        };
+        if !props
+            .optimal_tiling_features
+            .contains(vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR)
+        {
+            return Err(Error::invalid(
+                "pgm",
+                "the device cannot filter R32_SFLOAT textures linearly",
+            ));
+        }
+        let mut raw = Raw {
+            gpu: gpu.clone(),
+            set_layout: vk::DescriptorSetLayout::null(),
+            pool: vk::DescriptorPool::null(),
+            sampler: vk::Sampler::null(),
+        };
+        let levels = height_mips(ctx.data);
+        let bytes: Vec<Vec<u8>> = levels
+            .iter()
+            .map(|l| l.iter().flat_map(|h| h.to_le_bytes()).collect())
+            .collect();
+        let refs: Vec<&[u8]> = bytes.iter().map(|b| b.as_slice()).collect();
+        let heights = Image::texture_with_mips(
+            gpu,
+            "pgm height mips",
+            format,
+            vk::Extent2D {
+                width: ctx.data.width,
+                height: ctx.data.height,
+            },
+            &refs,
+        )?;
+        raw.sampler = unsafe {
+            d.create_sampler(
+                &vk::SamplerCreateInfo::default()
+                    .mag_filter(vk::Filter::LINEAR)
+                    .min_filter(vk::Filter::LINEAR)
+                    .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
+                    .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .max_lod(vk::LOD_CLAMP_NONE),
+                None,
+            )
+        }
+        .vk("vkCreateSampler")?;
+        let binding = |b: u32, ty: vk::DescriptorType| {
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(b)
+                .descriptor_type(ty)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::VERTEX)
+        };
+        let bindings = [
+            binding(0, vk::DescriptorType::UNIFORM_BUFFER),
+            binding(1, vk::DescriptorType::SAMPLED_IMAGE),
+            binding(2, vk::DescriptorType::SAMPLER),
+        ];
+        raw.set_layout = unsafe {
+            d.create_descriptor_set_layout(
+                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                None,
+            )
+        }
+        .vk("vkCreateDescriptorSetLayout")?;
+        let n = ctx.slots as u32;
+        let sizes = [
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::UNIFORM_BUFFER,
+                descriptor_count: n,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::SAMPLED_IMAGE,
+                descriptor_count: n,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::SAMPLER,
+                descriptor_count: n,
+            },
+        ];
+        raw.pool = unsafe {
+            d.create_descriptor_pool(
+                &vk::DescriptorPoolCreateInfo::default()
+                    .max_sets(n)
+                    .pool_sizes(&sizes),
+                None,
+            )
+        }
+        .vk("vkCreateDescriptorPool")?;
+        let layouts = vec![raw.set_layout; ctx.slots];
+        let sets = unsafe {
+            d.allocate_descriptor_sets(
+                &vk::DescriptorSetAllocateInfo::default()
+                    .descriptor_pool(raw.pool)
+                    .set_layouts(&layouts),
+            )
+        }
+        .vk("vkAllocateDescriptorSets")?;
+        let mut uniforms = Vec::with_capacity(ctx.slots);
+        for (i, &set) in sets.iter().enumerate() {
+            let ubo = Buffer::new(
+                gpu,
+                &format!("pgm uniforms {i}"),
+                size_of::<PgmUniforms>() as u64,
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?;
+            let bi = [vk::DescriptorBufferInfo {
+                buffer: ubo.raw,
+                offset: 0,
+                range: vk::WHOLE_SIZE,
+            }];
+            let ii = [vk::DescriptorImageInfo {
+                sampler: vk::Sampler::null(),
+                image_view: heights.view,
+                image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+            }];
+            let si = [vk::DescriptorImageInfo {
+                sampler: raw.sampler,
+                ..Default::default()
+            }];
+            let write = |b: u32, ty| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(b)
+                    .descriptor_type(ty)
+            };
+            let writes = [
+                write(0, vk::DescriptorType::UNIFORM_BUFFER).buffer_info(&bi),
+                write(1, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ii),
+                write(2, vk::DescriptorType::SAMPLER).image_info(&si),
+            ];
+            unsafe { d.update_descriptor_sets(&writes, &[]) };
+            uniforms.push(ubo);
+        }
+        let [cols, rows] = settings.pgm_grid;
+        let band = band_rows(cols, rows);
+        let grid = band_indices(cols, band);
+        let index_bytes: Vec<u8> = grid.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let mut indices = Buffer::new(
+            gpu,
+            "pgm band indices",
+            index_bytes.len() as u64,
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        indices.write(&index_bytes)?;
+        let pipeline = terrain_pipeline(
+            gpu,
+            &ctx.formats,
+            &TerrainPipelineDesc {
+                spv: crate::driver::shaders::PGM_SPV,
+                vertex_entry: c"vs_main",
+                fragment_entry: c"fs_main",
+                set_layouts: &[ctx.terrain.set_layout, raw.set_layout],
+                topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+                cull_back_faces: true,
+            },
+        )?;
+        Ok(Pgm {
+            gpu: gpu.clone(),
+            pipeline,
+            index_count: grid.len() as u32,
+            indices,
+            instances: (rows - 1).div_ceil(band),
+            band,
+            uniforms,
+            sets,
+            _heights: heights,
+            mips: levels.len() as u32,
+            data: Arc::new(ctx.data.clone()),
+            block_min: BlockMin::new(ctx.data),
+            settings,
+            _raw: raw,
+        })
+    }
+
+    /// The auxiliary camera this method uses for `view`.
+    pub fn aux_for(&self, view: &ViewState) -> AuxCamera {
+        let cam = &view.camera;
+        let p = cam.position;
+        let (ex, ey) = self.data.extent();
+        // Farthest data corner from the camera, plus a sample: beyond it every vertex clamps.
+        let far = [(0.0, 0.0), (ex, 0.0), (0.0, ey), (ex, ey)]
+            .iter()
+            .map(|&(x, y)| DVec3::new(x - p.x, y - p.y, 0.0).length())
+            .fold(0.0, f64::max)
+            + self.data.spacing;
+        // Reference plane: the lowest terrain within a few camera heights (see BlockMin).
+        let under = self.data.height_at(p.x, p.y);
+        let radius = 4.0 * (p.z - under).max(0.0);
+        let ground = self
+            .block_min
+            .min_near(p.x, p.y, radius)
+            .map_or(under, |m| m.min(under));
+        let aspect = view.width as f64 / view.height as f64;
+        AuxCamera::new(cam, aspect, ground, far, &self.settings)
+    }
+}
+
+impl LodMethod for Pgm {
+    fn name(&self) -> &'static str {
+        "pgm"
+    }
+
+    fn update(&mut self, slot: usize, view: &ViewState) -> Result<()> {
+        let aux = self.aux_for(view);
+        let u = aux.uniforms(self.settings.pgm_grid, self.band, self.mips);
+        // SAFETY: plain-old-data repr(C) struct of u32/f32 without padding.
+        let bytes = unsafe {
+            std::slice::from_raw_parts(
+                &u as *const PgmUniforms as *const u8,
+                size_of::<PgmUniforms>(),
+            )
+        };
+        self.uniforms[slot].write(bytes)
+    }
+
+    fn record_draw(&mut self, cmd: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet) {
+        let d = &self.gpu.device;
+        unsafe {
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline.raw);
+            d.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                self.pipeline.layout,
+                0,
+                &[frame_set, self.sets[slot]],
+                &[],
+            );
+            d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
+            d.cmd_draw_indexed(cmd, self.index_count, self.instances, 0, 0, 0);
+        }
+    }
+
+    /// Every drawn triangle, including the zero-area ones of the last band past the last row.
+    fn triangles(&self, _slot: usize) -> u64 {
+        self.instances as u64 * self.index_count as u64 / 3
+    }
+
+    fn counters(&self, _slot: usize) -> Vec<(&'static str, u64)> {
+        let [cols, rows] = self.settings.pgm_grid;
+        vec![
+            ("grid_triangles", 2 * (cols as u64 - 1) * (rows as u64 - 1)),
+            ("mip_levels", self.mips as u64),
+        ]
+    }
+}

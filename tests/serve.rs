@@ -1,0 +1,388 @@
+//! `vkterrain serve` end to end (validation layers on): frames reach a ring consumer, a fuzzed
+//! control channel is rejected message by message while rendering goes on, a resolution change
+//! starts a new ring generation, `vkterrain status` reports, and SIGTERM shuts down cleanly.
+
+use std::os::unix::net::UnixDatagram;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use vkterrain::output::ring::layout::STATE_CLOSED;
+use vkterrain::output::ring::{Next, RingReader};
+
+fn exe() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_vkterrain"));
+    c.env("VKTERRAIN_VALIDATION", "1")
+        .env_remove("VKTERRAIN_DEVICE");
+    c
+}
+
+fn ci_config() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("config/ci.toml")
+}
+
+fn wait_exit(mut child: Child, limit: Duration) -> Output {
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            panic!("serve did not exit within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn next_frame(r: &mut RingReader) -> vkterrain::output::ring::FrameMeta {
+    let start = Instant::now();
+    loop {
+        assert!(start.elapsed() < Duration::from_secs(60), "no frame");
+        match r.wait_next(Duration::from_secs(5)).unwrap() {
+            Next::Frame(m) => return m,
+            Next::Closed => panic!("ring closed unexpectedly"),
+            _ => {}
+        }
+    }
+}
+
+fn status_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn serve_fuzzed_control_resize_status_and_sigterm() {
+    let tmp = tempfile::tempdir().unwrap();
+    let name = format!("vkt-serve-{}", std::process::id());
+    let sock_path = tmp.path().join("control.sock");
+    let status_path = tmp.path().join("status.json");
+    let child = exe()
+        .arg("serve")
+        .arg("--config")
+        .arg(ci_config())
+        .args(["--width", "64", "--height", "64", "--ring", &name])
+        .arg("--control")
+        .arg(&sock_path)
+        .arg("--status-file")
+        .arg(&status_path)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = child.id();
+    let mut r = RingReader::open_wait(&name, Duration::from_secs(60)).unwrap();
+    let m = next_frame(&mut r);
+    assert_eq!((m.width, m.height), (64, 64));
+    assert!(m.triangles > 0 && m.fx > 0.0 && m.publish_ns >= m.capture_ns);
+    let px = r.pixels();
+    assert!(
+        px.chunks(4).any(|p| p != &px[..4]),
+        "a rendered frame is not uniform"
+    );
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(Path::new("/dev/shm").join(&name))
+            .unwrap()
+            .permissions()
+            .mode();
+        assert_eq!(mode & 0o777, 0o600);
+    }
+
+    // Fuzz for a bounded time: random bytes, broken JSON, NaN/absurd values, oversized
+    // datagrams, and some valid messages in between. Counts must match exactly.
+    let sock = UnixDatagram::unbound().unwrap();
+    let (mut valid, mut invalid) = (0u64, 0u64);
+    let mut x: u64 = 0x1234_5678_9abc_def1;
+    let mut rnd = || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let fixed_bad: Vec<Vec<u8>> = [
+        "",
+        "{",
+        "null",
+        "[]",
+        "{}",
+        r#"{"fov_deg": NaN}"#,
+        r#"{"fov_deg": 1e999}"#,
+        r#"{"fov_deg": 0}"#,
+        r#"{"fov_deg": 500}"#,
+        r#"{"fov_deg": "wide"}"#,
+        r#"{"pose":{"position":[1e308,0,0],"yaw_deg":0,"pitch_deg":0}}"#,
+        r#"{"pose":{"position":[0,0,100],"yaw_deg":0,"pitch_deg":95}}"#,
+        r#"{"pose":{"position":[0,0],"yaw_deg":0,"pitch_deg":0}}"#,
+        r#"{"resolution":[0,0]}"#,
+        r#"{"resolution":[100000,2]}"#,
+        r#"{"resolution":[-1,64]}"#,
+        r#"{"shutdown":true}"#,
+        r#"{"consumer":{"name":"","received":1,"lost":0}}"#,
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .chain([vec![0xff, 0xfe, 0x00], vec![b'{'; 65536]])
+    .collect();
+    let fuzz_end = Instant::now() + Duration::from_secs(2);
+    let mut i = 0usize;
+    while Instant::now() < fuzz_end {
+        let msg: Vec<u8> = match i % 4 {
+            0 => fixed_bad[(i / 4) % fixed_bad.len()].clone(),
+            1 => (0..(rnd() % 200)).map(|_| rnd() as u8).collect(),
+            2 => {
+                // Valid JSON skeleton with a random bad token.
+                format!(
+                    r#"{{"fov_deg": {}}}"#,
+                    ["-1", "1e400", "null", "true"][(rnd() % 4) as usize]
+                )
+                .into_bytes()
+            }
+            _ => {
+                valid += 1;
+                format!(
+                    r#"{{"pose":{{"position":[{},{},3000],"yaw_deg":{},"pitch_deg":-30}},"fov_deg":55}}"#,
+                    rnd() % 10000,
+                    rnd() % 10000,
+                    rnd() % 360
+                )
+                .into_bytes()
+            }
+        };
+        if i % 4 != 3 {
+            invalid += 1;
+        }
+        sock.send_to(&msg, &sock_path).unwrap();
+        i += 1;
+        if i % 64 == 0 {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    // A report from a consumer, then a distinctive pose: rendering must go on and use it.
+    sock.send_to(
+        br#"{"consumer":{"name":"test-reader","received":7,"lost":2}}"#,
+        &sock_path,
+    )
+    .unwrap();
+    sock.send_to(
+        br#"{"pose":{"position":[1234,4321,2500],"yaw_deg":33,"pitch_deg":-25},"fov_deg":42.5}"#,
+        &sock_path,
+    )
+    .unwrap();
+    valid += 2;
+    let start = Instant::now();
+    loop {
+        let m = next_frame(&mut r);
+        if m.vfov_deg == 42.5 {
+            assert_eq!(m.position, [1234.0, 4321.0, 2500.0]);
+            assert_eq!((m.yaw_deg, m.pitch_deg), (33.0, -25.0));
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "pose never applied"
+        );
+    }
+
+    // Every message was counted: accepted == valid, rejected == invalid.
+    let start = Instant::now();
+    let s = loop {
+        let s = status_json(&status_path);
+        if s["control_accepted"].as_u64().unwrap() + s["control_rejected"].as_u64().unwrap()
+            == valid + invalid
+        {
+            break s;
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "status: {s}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert_eq!(s["control_accepted"].as_u64(), Some(valid), "{s}");
+    assert_eq!(s["control_rejected"].as_u64(), Some(invalid), "{s}");
+    assert_eq!(s["state"], "running");
+    assert_eq!(s["camera"], "control");
+    assert_eq!(s["consumers"]["test-reader"], serde_json::json!([7, 2]));
+    assert!(s["frames_rendered"].as_u64().unwrap() > 1);
+    let o = exe()
+        .args(["status", "--status-file"])
+        .arg(&status_path)
+        .args(["--ring", &name])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{out}");
+    assert!(
+        out.contains(&format!("{invalid} rejected"))
+            && out.contains("live")
+            && out.contains("test-reader"),
+        "{out}"
+    );
+
+    // Resolution change: a new ring generation at the new size.
+    let g1 = r.generation();
+    sock.send_to(br#"{"resolution":[48,32]}"#, &sock_path)
+        .unwrap();
+    let start = Instant::now();
+    loop {
+        match r.wait_next(Duration::from_secs(5)).unwrap() {
+            Next::Restarted { generation } => {
+                assert_ne!(generation, g1);
+                break;
+            }
+            Next::Closed => panic!("closed instead of restarted"),
+            _ => {}
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "no restart");
+    }
+    let m = next_frame(&mut r);
+    assert_eq!((m.width, m.height, r.pixels().len()), (48, 32, 48 * 32 * 4));
+
+    // SIGTERM: frame in flight finished, ring closed, exit 0, nothing left behind.
+    // SAFETY: signalling our own child.
+    assert_eq!(unsafe { libc::kill(pid as i32, libc::SIGTERM) }, 0);
+    let o = wait_exit(child, Duration::from_secs(60));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "stderr: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let start = Instant::now();
+    loop {
+        match r.wait_next(Duration::from_secs(5)).unwrap() {
+            Next::Closed => break,
+            Next::Frame(_) => {}
+            other => panic!("expected Closed, got {other:?}"),
+        }
+        assert!(start.elapsed() < Duration::from_secs(10));
+    }
+    assert_eq!(r.state(), STATE_CLOSED);
+    assert!(
+        !Path::new("/dev/shm").join(&name).exists(),
+        "segment left behind"
+    );
+    assert!(!sock_path.exists(), "control socket left behind");
+    assert_eq!(status_json(&status_path)["state"], "stopped");
+}
+
+#[test]
+fn serve_frame_limit_keeps_segment_when_configured() {
+    let tmp = tempfile::tempdir().unwrap();
+    let name = format!("vkt-keep-{}", std::process::id());
+    let config = tmp.path().join("keep.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[render]\nwidth = 32\nheight = 24\nreadback_depth = true\n\
+             [dataset]\nsize = 129\n\
+             [ring]\nname = \"{name}\"\nslots = 3\nkeep_segment = true\n"
+        ),
+    )
+    .unwrap();
+    let o = exe()
+        .arg("serve")
+        .arg("--config")
+        .arg(&config)
+        .args(["--frames", "6"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let seg = Path::new("/dev/shm").join(&name);
+    assert!(seg.exists(), "keep_segment = true but the segment is gone");
+    let mut r = RingReader::open(&name).unwrap();
+    let _cleanup = Unlink(seg);
+    assert_eq!(r.state(), STATE_CLOSED);
+    assert_eq!(
+        r.latest(),
+        Some(5),
+        "every frame, the in-flight ones too, is published"
+    );
+    let Next::Frame(m) = r.wait_next(Duration::from_secs(1)).unwrap() else {
+        panic!("no frame in a kept ring");
+    };
+    assert_eq!((m.frame, m.width, m.height), (5, 32, 24));
+    let depth = r.depth().expect("depth in the ring");
+    assert!(depth.iter().all(|d| (0.0..=1.0).contains(d)));
+    assert!(depth.iter().any(|&d| d > 0.0), "terrain in view");
+    assert_eq!(r.wait_next(Duration::from_secs(1)).unwrap(), Next::Closed);
+}
+
+struct Unlink(PathBuf);
+impl Drop for Unlink {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+#[test]
+fn serve_bad_input_is_one_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bad_slots = tmp.path().join("slots.toml");
+    std::fs::write(&bad_slots, "[ring]\nslots = 1\n").unwrap();
+    let bad_key = tmp.path().join("key.toml");
+    std::fs::write(&bad_key, "[service]\ncontrl = \"x\"\n").unwrap();
+    let not_socket = tmp.path().join("file");
+    std::fs::write(&not_socket, "x").unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["serve".into(), "--ring".into(), "../etc".into()],
+            "ring name",
+        ),
+        (
+            vec![
+                "serve".into(),
+                "--config".into(),
+                bad_slots.display().to_string(),
+            ],
+            "ring.slots",
+        ),
+        (
+            vec![
+                "serve".into(),
+                "--config".into(),
+                bad_key.display().to_string(),
+            ],
+            "contrl",
+        ),
+        (
+            vec![
+                "serve".into(),
+                "--config".into(),
+                ci_config().display().to_string(),
+                "--ring".into(),
+                format!("vkt-badsock-{}", std::process::id()),
+                "--control".into(),
+                not_socket.display().to_string(),
+            ],
+            "not a socket",
+        ),
+        (vec!["status".into()], "--status-file"),
+        (
+            vec![
+                "status".into(),
+                "--status-file".into(),
+                "/nonexistent/s.json".into(),
+            ],
+            "/nonexistent/s.json",
+        ),
+        (
+            vec!["status".into(), "--ring".into(), "vkt-no-such-ring".into()],
+            "vkt-no-such-ring",
+        ),
+    ];
+    for (args, word) in cases {
+        let o = exe().args(&args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {stderr}");
+        let lines: Vec<&str> = stderr.lines().collect();
+        assert_eq!(lines.len(), 1, "{args:?}: {stderr}");
+        assert!(
+            lines[0].starts_with("error: ") && lines[0].contains(word),
+            "{args:?}: {stderr}"
+        );
+    }
+    assert_eq!(
+        std::fs::read(&not_socket).unwrap(),
+        b"x",
+        "a non-socket was replaced"
+    );
+    assert!(
+        !Path::new("/dev/shm")
+            .join(format!("vkt-badsock-{}", std::process::id()))
+            .exists()
+    );
+}
