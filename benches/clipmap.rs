@@ -1,11 +1,13 @@
 //! The chunked clipmap under a fast flight (config/clipmap.toml: 300 m/s at 500 m above ground
 //! over the 4097² procedural pyramid with 64-texel nodes, UDLOD meshing) against the same
-//! flight with heights from one texture, in one process so the rows compare as ratios.
+//! flight with heights from one texture, and with a second (rear) camera drawn into the same
+//! frames through the same atlas, in one process so the rows compare as ratios.
 //!
 //! Reports frame time (median, p99, max), the largest frame time among frames that uploaded
 //! nodes divided by the median, the CPU time of record+submit (which includes the clipmap's
 //! update), the atlas and staging memory against the configured budget, the most resident
-//! nodes, frames drawn with fallback data, and the streaming counters.
+//! nodes, frames drawn with fallback data, the device memory in use, and the streaming
+//! counters.
 //!
 //! `make bench-clipmap` (= `make data-proc4k` then `cargo bench --bench clipmap`).
 //! `VKTERRAIN_CLIPMAP_FRAMES=N` (default 300) and `VKTERRAIN_CLIPMAP_CONFIG=F` override;
@@ -18,7 +20,7 @@ use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::driver::{Gpu, GpuOptions};
 use vkterrain::readback::FrameView;
 use vkterrain::render::stats::{Percentiles, nearest_rank};
-use vkterrain::render::{RenderOptions, Renderer};
+use vkterrain::render::{FrameRequest, RenderOptions, Renderer};
 
 #[derive(Parser)]
 struct Wrapper {
@@ -45,6 +47,8 @@ struct Row {
     /// Process resident memory at the end of the variant (lavapipe's "GPU" memory is host
     /// memory, so this includes the textures; the level-0 height map is held in both).
     rss_mib: f64,
+    /// Device memory in live allocations of the renderer (atlas, targets, method buffers).
+    gpu_mib: f64,
     counters: Option<vkterrain::clipmap::Counters>,
 }
 
@@ -103,7 +107,7 @@ fn main() -> anyhow::Result<()> {
         gpu.info.name
     );
     println!(
-        "{:<16} {:>9} {:>8} {:>8} {:>10} {:>12} {:>12} {:>12} {:>9} {:>9} {:>14} {:>10} {:>8}",
+        "{:<16} {:>9} {:>8} {:>8} {:>10} {:>12} {:>12} {:>12} {:>9} {:>9} {:>14} {:>10} {:>8} {:>8}",
         "variant",
         "median ms",
         "p99 ms",
@@ -116,12 +120,24 @@ fn main() -> anyhow::Result<()> {
         "fallback",
         "resident/cap",
         "atlas MiB",
-        "RSS MiB"
+        "RSS MiB",
+        "GPU MiB"
     );
     let mut rows = Vec::new();
-    for clipmap in [false, true] {
+    // The two-view variant adds a rear camera (same position, heading + 180 deg), each view
+    // half the width, both through the one atlas.
+    let rear = vkterrain::scene::ViewOffset {
+        yaw_deg: 180.0,
+        ..Default::default()
+    };
+    for (name, clipmap, extra_views) in [
+        ("one texture", false, vec![]),
+        ("clipmap", true, vec![]),
+        ("clipmap 2 views", true, vec![rear]),
+    ] {
         let mut config = p.config.clone();
         config.clipmap.enabled = clipmap;
+        config.render.extra_views = extra_views;
         let cm = vkterrain::clipmap::from_config(&config)?;
         let (capacity, atlas_bytes, layer_bytes) = cm
             .as_ref()
@@ -137,7 +153,11 @@ fn main() -> anyhow::Result<()> {
         let mut max_resident = 0;
         for frame in 0..frames as u64 {
             let before = renderer.clipmap().map(|c| c.counters.uploaded).unwrap_or(0);
-            renderer.render(p.scenario.camera(frame), &mut sink)?;
+            let views = FrameRequest::with_extra_views(
+                p.scenario.camera(frame),
+                &config.render.extra_views,
+            );
+            renderer.render_views(&views, &mut sink)?;
             if let Some(c) = renderer.clipmap() {
                 uploads.push(c.counters.uploaded - before);
                 max_resident = max_resident.max(c.atlas.resident());
@@ -147,6 +167,7 @@ fn main() -> anyhow::Result<()> {
             }
         }
         renderer.finish(&mut sink)?;
+        let gpu_bytes = gpu.allocated_bytes();
         let recs = &renderer.stats.frames[warmup..];
         let frame_ms = Percentiles::of(recs.iter().map(|r| r.interval_ms).collect());
         let cpu_record_ms = Percentiles::of(recs.iter().map(|r| r.timings.cpu_record_ms).collect());
@@ -170,7 +191,7 @@ fn main() -> anyhow::Result<()> {
         let median = nearest_rank(&sorted, 0.5);
         let counters = renderer.clipmap().map(|c| c.counters);
         let row = Row {
-            variant: if clipmap { "clipmap" } else { "one texture" }.into(),
+            variant: name.into(),
             frame_ms,
             cpu_record_ms,
             streaming_frames: streaming.len(),
@@ -191,10 +212,11 @@ fn main() -> anyhow::Result<()> {
             atlas_bytes,
             staging_bytes,
             rss_mib: rss_mib(),
+            gpu_mib: gpu_bytes as f64 / (1u64 << 20) as f64,
             counters,
         };
         println!(
-            "{:<16} {:>9.1} {:>8.1} {:>8.1} {:>10} {:>12.2} {:>12.2} {:>12.2} {:>9.2} {:>9} {:>14} {:>10.2} {:>8.0}",
+            "{:<16} {:>9.1} {:>8.1} {:>8.1} {:>10} {:>12.2} {:>12.2} {:>12.2} {:>9.2} {:>9} {:>14} {:>10.2} {:>8.0} {:>8.1}",
             row.variant,
             row.frame_ms.median,
             row.frame_ms.p99,
@@ -207,7 +229,8 @@ fn main() -> anyhow::Result<()> {
             row.fallback_frames,
             format!("{}/{}", row.max_resident_nodes, row.atlas_capacity),
             row.atlas_bytes as f64 / (1u64 << 20) as f64,
-            row.rss_mib
+            row.rss_mib,
+            row.gpu_mib
         );
         if let Some(c) = &row.counters {
             println!(

@@ -56,6 +56,9 @@ pub struct RenderConfig {
     /// Direction *towards* the sun: azimuth clockwise from north and elevation, degrees.
     pub sun_azimuth_deg: f32,
     pub sun_elevation_deg: f32,
+    /// Further cameras drawn into the same frame, side by side right of the main one (each
+    /// view gets `width / views` columns); they share the clipmap's atlas.
+    pub extra_views: Vec<crate::scene::ViewOffset>,
 }
 
 impl Default for RenderConfig {
@@ -68,6 +71,7 @@ impl Default for RenderConfig {
             sky: [0.45, 0.62, 0.85],
             sun_azimuth_deg: 135.0,
             sun_elevation_deg: 35.0,
+            extra_views: Vec::new(),
         }
     }
 }
@@ -271,6 +275,29 @@ impl Config {
                 "frames_in_flight",
                 format!("{} is outside 1..=8", r.frames_in_flight),
             ));
+        }
+        if r.extra_views.len() > crate::render::MAX_VIEWS - 1 {
+            return Err(Error::invalid(
+                "render.extra_views",
+                format!(
+                    "{} extra views; at most {} views per frame",
+                    r.extra_views.len(),
+                    crate::render::MAX_VIEWS
+                ),
+            ));
+        }
+        if (r.extra_views.len() as u32 + 1) > r.width {
+            return Err(Error::invalid(
+                "render.extra_views",
+                format!(
+                    "{} views do not fit in {} columns",
+                    r.extra_views.len() + 1,
+                    r.width
+                ),
+            ));
+        }
+        for v in &r.extra_views {
+            v.validate()?;
         }
         if r.sky
             .iter()

@@ -162,6 +162,26 @@ fn invalid_config_files() {
             "[clipmap]\nnode_count = 7\n",
             vec!["node_count 7"],
         ),
+        (
+            "views_many.toml",
+            "[render]\nextra_views = [{}, {}, {}, {}]\n",
+            vec!["extra_views", "at most 4 views"],
+        ),
+        (
+            "views_nan.toml",
+            "[[render.extra_views]]\noffset_m = [0.0, nan, 0.0]\n",
+            vec!["extra_views", "finite"],
+        ),
+        (
+            "views_pitch.toml",
+            "[[render.extra_views]]\npitch_deg = -120.0\n",
+            vec!["extra_views", "pitch -120"],
+        ),
+        (
+            "views_key.toml",
+            "[[render.extra_views]]\nyaw = 3.0\n",
+            vec!["views_key.toml", "yaw"],
+        ),
     ];
     for (name, text, expected) in cases {
         let path = write(tmp.path(), name, text);
@@ -357,4 +377,65 @@ fn render_through_the_clipmap_reports_streaming() {
     assert_eq!(c["atlas_bytes"], 40 * (36 * 36 * 4 + mips * 8));
     assert!(c["resident_nodes"].as_u64().unwrap() >= 1);
     assert!(c["resident_nodes"].as_u64().unwrap() <= 40);
+
+    // Two cameras in one frame through the same atlas: a rear view 200 m higher.
+    let two = write(
+        tmp.path(),
+        "clip2.toml",
+        &format!(
+            "{}[[render.extra_views]]\noffset_m = [0.0, 0.0, 200.0]\nyaw_deg = 180.0\n",
+            std::fs::read_to_string(&config).unwrap()
+        ),
+    );
+    let out2 = tmp.path().join("out2");
+    let o = vkterrain(&[
+        "render",
+        "--config",
+        two.to_str().unwrap(),
+        "--frames",
+        "4",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("views:           2 cameras"), "{stdout}");
+    let summary2: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out2.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary2["views"], 2);
+    assert_eq!(summary2["width"], 96);
+    // Same atlas budget for two views as for one.
+    assert_eq!(summary2["clipmap"]["atlas_bytes"], c["atlas_bytes"]);
+    assert!(summary2["clipmap"]["resident_nodes"].as_u64().unwrap() <= 40);
+    // The two halves show different cameras.
+    let png = image::open(out2.join("frame_00003.png"))
+        .unwrap()
+        .to_rgba8();
+    assert_eq!(png.dimensions(), (96, 64));
+    let half = |x0: u32| -> Vec<u8> {
+        let mut v = Vec::new();
+        for y in 0..64 {
+            for x in x0..x0 + 48 {
+                v.extend_from_slice(&png.get_pixel(x, y).0);
+            }
+        }
+        v
+    };
+    assert_ne!(half(0), half(48));
+
+    // eval compares one camera per frame: extra views are refused in one line.
+    let out3 = tmp.path().join("out3");
+    fails(
+        &[
+            "eval",
+            "--config",
+            two.to_str().unwrap(),
+            "--frames",
+            "3",
+            "--out",
+            out3.to_str().unwrap(),
+        ],
+        &out3,
+        &["extra_views"],
+    );
 }

@@ -20,7 +20,7 @@ use vkterrain::dataset::{Heightmap, tiles};
 use vkterrain::gpu_constants::CLIPMAP_LOD_SHIFT;
 use vkterrain::lod::MethodKind;
 use vkterrain::readback::{CollectSink, OwnedFrame};
-use vkterrain::render::Renderer;
+use vkterrain::render::{FrameRequest, Renderer};
 use vkterrain::scene::Camera;
 
 const SIZE: u32 = 513;
@@ -28,6 +28,9 @@ const CENTER: u32 = 32;
 /// Largest colour difference (8-bit codes) between a converged clipmap frame and the
 /// single-texture render of the same data.
 const COLOUR_TOLERANCE: u8 = 2;
+/// Relative depth difference allowed between the same camera drawn at two viewport offsets
+/// (plane-equation interpolation is set up from window coordinates, a few ulp).
+const DEPTH_REL_TOLERANCE: f32 = 1e-5;
 
 /// A 513² procedural data set with 32-texel nodes (17x17 leaf nodes, 6 levels), built once.
 fn dataset() -> &'static Path {
@@ -151,6 +154,11 @@ fn assert_cells_resolve(cm: &Clipmap) {
 /// CPU `sample_height` == GPU `clipmap_height` for the last frame's state, at integer and
 /// fractional positions all over the data (float precision: a few ulp at most).
 fn assert_cpu_equals_gpu(renderer: &Renderer, what: &str) {
+    assert_cpu_equals_gpu_in_view(renderer, 0, what)
+}
+
+/// [`assert_cpu_equals_gpu`] for view `view` of a multi-view renderer.
+fn assert_cpu_equals_gpu_in_view(renderer: &Renderer, view: usize, what: &str) {
     let mut points = Vec::new();
     for k in 0..8192u32 {
         let u = (k as f32 * 0.618_034).fract() * (SIZE - 1) as f32;
@@ -161,11 +169,11 @@ fn assert_cpu_equals_gpu(renderer: &Renderer, what: &str) {
             [u, v]
         });
     }
-    let gpu_h = renderer.probe_heights(&points).unwrap();
+    let gpu_h = renderer.probe_heights_in_view(view, &points).unwrap();
     let cm = renderer.clipmap().unwrap();
     let mut worst = 0f32;
     for (p, g) in points.iter().zip(&gpu_h) {
-        let cpu = cm.sample_height(0, *p);
+        let cpu = cm.sample_height(view, *p);
         let d = (cpu - g[0]).abs();
         worst = worst.max(d);
         assert!(
@@ -698,4 +706,137 @@ fn nodes_of_the_wrong_size_from_any_source_are_errors_not_panics() {
     assert!(cm.counters.load_errors > 0, "{:?}", cm.counters);
     assert_cells_resolve(&cm);
     assert!(cm.sample_height(0, [250.0, 250.0]).is_finite());
+}
+
+/// Renders `cameras` side by side (one view each, `view_width` columns per view) through one
+/// clipmap until every wanted node is resident; returns the last frame, the resident node
+/// count and the device memory in use while the renderer was alive.
+fn render_views_converged(
+    gpu: &Arc<vkterrain::driver::Gpu>,
+    data: &Heightmap,
+    src: &Arc<dyn NodeSource>,
+    cameras: &[Camera],
+    view_width: u32,
+) -> (OwnedFrame, usize, u64) {
+    let geometry = Geometry::of(&DatasetSource::open(dataset()).unwrap().dataset);
+    let cm = Clipmap::new(geometry, settings(6, 300), src.clone(), cameras.len()).unwrap();
+    let mut options = common::options(view_width * cameras.len() as u32, 120, 2);
+    options.views = cameras.len();
+    let mut renderer =
+        Renderer::with_clipmap(gpu, data, MethodKind::Udlod, options, Some(cm)).unwrap();
+    let requests: Vec<FrameRequest> = cameras.iter().map(|&c| c.into()).collect();
+    let mut sink = CollectSink::default();
+    for frame in 0.. {
+        renderer.render_views(&requests, &mut sink).unwrap();
+        let cm = renderer.clipmap().unwrap();
+        assert_cells_resolve(cm);
+        assert!(cm.atlas.resident() <= 300);
+        if cm.busy() == 0 && cm.views.iter().all(|v| v.fallback_cells == 0) {
+            break;
+        }
+        assert!(frame < 300, "no convergence: {:?}", cm.counters);
+    }
+    renderer.finish(&mut sink).unwrap();
+    assert!(sink.frames.iter().all(no_sky), "a frame has holes");
+    for v in 0..cameras.len() {
+        assert_cpu_equals_gpu_in_view(&renderer, v, &format!("view {v} of {}", cameras.len()));
+    }
+    let resident = renderer.clipmap().unwrap().atlas.resident();
+    let allocated = gpu.allocated_bytes();
+    (sink.frames.pop().unwrap(), resident, allocated)
+}
+
+#[test]
+fn two_cameras_render_in_one_frame_through_one_atlas() {
+    let gpu = common::gpu(false);
+    let data = heightmap();
+    let src: Arc<dyn NodeSource> = Arc::new(DatasetSource::open(dataset()).unwrap());
+    // Far apart (their level-0 windows do not overlap), looking different ways, obliquely.
+    let oblique = |fx, fy, yaw| {
+        let mut c = camera_over(&data, fx, fy);
+        c.position.z *= 0.5;
+        c.pitch_deg = -60.0;
+        c.yaw_deg = yaw;
+        c
+    };
+    let (a, b) = (oblique(0.2, 0.25, 30.0), oblique(0.8, 0.75, 200.0));
+    let w = 160;
+    let (alone_a, resident_a, _) = render_views_converged(&gpu, &data, &src, &[a], w);
+    let (alone_b, resident_b, _) = render_views_converged(&gpu, &data, &src, &[b], w);
+    let (both, resident_both, bytes_both) = render_views_converged(&gpu, &data, &src, &[a, b], w);
+    assert_eq!((both.width, both.height), (2 * w, 120));
+    // Each half of the two-view frame is that camera's own frame: the views share the atlas
+    // but not their lookups, LOD state or uniforms. Viewport offsets may move a rasterized
+    // edge by a sub-pixel snap, so compare per pixel with a small allowance.
+    for (v, alone) in [(0usize, &alone_a), (1, &alone_b)] {
+        let (mut depth_diff, mut colour_diff, mut worst_colour) = (0usize, 0usize, 0u8);
+        let mut worst_depth = 0f32;
+        let both_depth = both.depth.as_ref().unwrap();
+        let alone_depth = alone.depth.as_ref().unwrap();
+        for y in 0..120usize {
+            for x in 0..w as usize {
+                let i = y * w as usize + x;
+                let j = y * 2 * w as usize + v * w as usize + x;
+                // Interpolated depth may round differently at another pixel offset.
+                let rel = (both_depth[j] - alone_depth[i]).abs() / alone_depth[i].abs().max(1e-30);
+                worst_depth = worst_depth.max(rel);
+                if rel > DEPTH_REL_TOLERANCE {
+                    depth_diff += 1;
+                }
+                let d = (0..4)
+                    .map(|k| both.rgba[j * 4 + k].abs_diff(alone.rgba[i * 4 + k]))
+                    .max()
+                    .unwrap();
+                if d > 0 {
+                    colour_diff += 1;
+                }
+                worst_colour = worst_colour.max(d);
+            }
+        }
+        eprintln!(
+            "view {v}: {depth_diff} depth and {colour_diff} colour pixels differ from its own frame \
+             (of {}), worst relative depth {worst_depth:e}, worst colour {worst_colour} codes",
+            w * 120
+        );
+        assert!(
+            depth_diff * 200 <= (w * 120) as usize,
+            "view {v}: {depth_diff} depths differ"
+        );
+        assert!(
+            colour_diff * 200 <= (w * 120) as usize,
+            "view {v}: {colour_diff} colours differ"
+        );
+    }
+    // One atlas: the coarse nodes both views want are stored once.
+    eprintln!("resident nodes: a {resident_a}, b {resident_b}, both {resident_both}");
+    assert!(resident_both >= resident_a.max(resident_b));
+    assert!(resident_both < resident_a + resident_b);
+    // Device memory: a second view adds its lookups, uniforms and LOD buffers (UDLOD's tile
+    // lists per frame slot: 1.5 MiB here), not a second atlas (which would add >= its size).
+    let geometry = Geometry::of(&DatasetSource::open(dataset()).unwrap().dataset);
+    let one_wide = {
+        let cm = Clipmap::new(geometry.clone(), settings(6, 300), src.clone(), 1).unwrap();
+        let atlas = cm.atlas_bytes();
+        let _r = Renderer::with_clipmap(
+            &gpu,
+            &data,
+            MethodKind::Udlod,
+            common::options(2 * w, 120, 2),
+            Some(cm),
+        )
+        .unwrap();
+        (gpu.allocated_bytes(), atlas)
+    };
+    let (bytes_one, atlas_bytes) = one_wide;
+    eprintln!(
+        "device memory at {}x120: one view {bytes_one} B, two views {bytes_both} B, atlas {atlas_bytes} B",
+        2 * w
+    );
+    assert!(bytes_both >= bytes_one);
+    assert!(
+        bytes_both - bytes_one < atlas_bytes / 2,
+        "a second view added {} B (atlas {atlas_bytes} B)",
+        bytes_both - bytes_one
+    );
+    common::assert_no_validation_messages(&gpu);
 }

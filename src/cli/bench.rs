@@ -9,7 +9,7 @@ use clap::Args;
 
 use crate::driver::{Gpu, GpuOptions};
 use crate::render::stats::Summary;
-use crate::render::{RenderOptions, Renderer};
+use crate::render::{FrameRequest, RenderOptions, Renderer};
 
 #[derive(Args, Debug, Clone)]
 pub struct BenchArgs {
@@ -117,7 +117,11 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
                 Ok(())
             };
             for frame in 0..p.frames as u64 {
-                renderer.render(p.scenario.camera(frame), &mut sink)?;
+                let views = FrameRequest::with_extra_views(
+                    p.scenario.camera(frame),
+                    &p.config.render.extra_views,
+                );
+                renderer.render_views(&views, &mut sink)?;
             }
             renderer.finish(&mut sink)?;
             let s = renderer.stats.summary(warmup);

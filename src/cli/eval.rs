@@ -67,6 +67,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     if methods.is_empty() {
         anyhow::bail!("--methods lists no method");
     }
+    if !p.config.render.extra_views.is_empty() {
+        // The metrics reconstruct world positions from one camera per image.
+        anyhow::bail!(
+            "render.extra_views: eval compares one camera per frame; remove the extra views"
+        );
+    }
     let sweeps = args
         .sweep
         .iter()

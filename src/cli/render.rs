@@ -13,7 +13,7 @@ use crate::driver::{Gpu, GpuOptions};
 use crate::lod::MethodKind;
 use crate::output::png::PngSink;
 use crate::render::stats::Summary;
-use crate::render::{RenderOptions, Renderer};
+use crate::render::{FrameRequest, RenderOptions, Renderer};
 use crate::scene::Scenario;
 
 #[derive(Args, Debug, Clone, Default)]
@@ -163,7 +163,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     );
     let result = (|| -> anyhow::Result<()> {
         for frame in 0..p.frames as u64 {
-            renderer.render(p.scenario.camera(frame), &mut sink)?;
+            let views = FrameRequest::with_extra_views(
+                p.scenario.camera(frame),
+                &p.config.render.extra_views,
+            );
+            renderer.render_views(&views, &mut sink)?;
         }
         renderer.finish(&mut sink)?;
         Ok(())
@@ -193,6 +197,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         "width": renderer.options.width,
         "height": renderer.options.height,
         "frames_in_flight": renderer.options.frames_in_flight,
+        "views": renderer.options.views,
         "readback_path": renderer.readback_path,
         "summary": summary,
         "pngs": written,
@@ -270,6 +275,13 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
         );
     }
     let _ = writeln!(o, "scenario:        {}", p.scenario.name);
+    if r.options.views > 1 {
+        let _ = writeln!(
+            o,
+            "views:           {} cameras side by side in each frame (one atlas)",
+            r.options.views
+        );
+    }
     let _ = writeln!(
         o,
         "resolution:      {}x{}, {} frame(s) in flight, readback {:?}, {}",

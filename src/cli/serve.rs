@@ -22,7 +22,7 @@ use super::render::{RenderArgs, check_validation, prepare};
 use crate::driver::{Gpu, GpuOptions};
 use crate::output::ring::{Geometry, ProducerOptions, RingProducer, sys};
 use crate::render::stats::Percentiles;
-use crate::render::{RenderOptions, Renderer};
+use crate::render::{FrameRequest, RenderOptions, Renderer};
 use crate::scene::Camera;
 
 #[derive(Args, Debug, Clone, Default)]
@@ -425,7 +425,8 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             camera = ctl
                 .live
                 .unwrap_or_else(|| p.scenario.camera(rendered % scripted_frames));
-            renderer.render(camera, &mut ring)?;
+            let views = FrameRequest::with_extra_views(camera, &config.render.extra_views);
+            renderer.render_views(&views, &mut ring)?;
             rendered += 1;
             for rec in renderer.stats.frames.drain(..) {
                 if rec.interval_ms > 0.0 {

@@ -1,9 +1,11 @@
-//! The clipmap on the device: the height atlas (an R32F 2D-array texture, one layer per atlas
-//! slot), one quadtree storage buffer per frame slot and one staging buffer per frame slot.
+//! The clipmap on the device: the atlas (2D-array textures, one layer per atlas slot, shared
+//! by every view), one quadtree storage buffer per view and frame slot, and one staging buffer
+//! per frame slot.
 //!
-//! Per frame, [`ClipmapGpu::write_slot`] (host, after the slot's previous GPU work completed)
-//! fills the slot's quadtree buffer and copies the frame's new nodes into the slot's staging
-//! buffer; [`ClipmapGpu::record_uploads`] records, at the start of the frame's command buffer,
+//! Per frame (host, after the slot's previous GPU work completed),
+//! [`ClipmapGpu::write_quadtree`] fills each view's quadtree buffer and
+//! [`ClipmapGpu::stage_uploads`] copies the frame's new nodes into the slot's staging buffer;
+//! [`ClipmapGpu::record_uploads`] records, at the start of the frame's command buffer,
 //! per layer: a barrier after every earlier sampling of the layer (earlier frames in the queue),
 //! the copy, and a barrier before this frame's shaders. The host never waits for an upload.
 
@@ -36,6 +38,7 @@ pub struct ClipmapGpu {
     pub albedo: Image,
     /// Whether heights come through the clipmap (false: placeholders).
     pub enabled: bool,
+    /// One per view slot (`frame slot * views + view`).
     pub quadtrees: Vec<Buffer>,
     staging: Vec<Option<Buffer>>,
     staged: Vec<Vec<u16>>,
@@ -57,13 +60,15 @@ fn layer_range(layer: u32) -> vk::ImageSubresourceRange {
 
 impl ClipmapGpu {
     /// The device mirror; `geometry` None: a disabled placeholder (tiny atlas, header with
-    /// `enabled = 0`) so the bindings exist for the single-texture path.
+    /// `enabled = 0`) so the bindings exist for the single-texture path. `slots` frame slots,
+    /// each drawing `views` views: one atlas, `slots * views` quadtrees, `slots` staging buffers.
     pub fn new(
         gpu: &Arc<Gpu>,
         geometry: Option<&Geometry>,
         settings: &ClipmapSettings,
         node_count: u32,
         slots: usize,
+        views: usize,
     ) -> Result<Self> {
         let mips: Vec<u32> = match geometry {
             Some(g) => (0..g.shading_mips()).map(|m| g.mip_side(m)).collect(),
@@ -126,9 +131,8 @@ impl ClipmapGpu {
                 )
             }
         })?;
-        let mut quadtrees = Vec::with_capacity(slots);
-        let mut staging = Vec::with_capacity(slots);
-        for s in 0..slots {
+        let mut quadtrees = Vec::with_capacity(slots * views);
+        for s in 0..slots * views {
             let mut q = Buffer::new(
                 gpu,
                 &format!("clipmap quadtree {s}"),
@@ -140,6 +144,9 @@ impl ClipmapGpu {
                 m.fill(0);
             }
             quadtrees.push(q);
+        }
+        let mut staging = Vec::with_capacity(slots);
+        for s in 0..slots {
             staging.push(match geometry {
                 Some(_) => Some(Buffer::new(
                     gpu,
@@ -166,18 +173,27 @@ impl ClipmapGpu {
         })
     }
 
-    /// Host side of a frame in `slot` (whose previous GPU work is complete): the quadtree of
-    /// `view` into the slot's buffer and the `uploads` layers into the slot's staging buffer.
-    pub fn write_slot(
+    /// Host side of a frame: the quadtree of `view` into the buffer of view slot `view_slot`
+    /// (whose previous GPU work is complete).
+    pub fn write_quadtree(
+        &mut self,
+        view_slot: usize,
+        geometry: &Geometry,
+        view: &ViewQuadtree,
+    ) -> Result<()> {
+        view.gpu_bytes(geometry, &mut self.scratch);
+        self.quadtrees[view_slot].write(&self.scratch)
+    }
+
+    /// Host side of a frame in frame slot `slot` (whose previous GPU work is complete): the
+    /// `uploads` layers into the slot's staging buffer, recorded by [`Self::record_uploads`].
+    pub fn stage_uploads(
         &mut self,
         slot: usize,
         geometry: &Geometry,
-        view: &ViewQuadtree,
         atlas: &Atlas,
         uploads: &[Upload],
     ) -> Result<()> {
-        view.gpu_bytes(geometry, &mut self.scratch);
-        self.quadtrees[slot].write(&self.scratch)?;
         let texels = (self.side as usize).pow(2);
         let per_layer = layer_bytes(geometry) as usize;
         let staging = self.staging[slot]

@@ -93,7 +93,9 @@ pub fn from_config(config: &crate::config::Config) -> Result<Option<Clipmap>> {
         .ok_or_else(|| Error::invalid("dataset.path", "the clipmap needs a tiles data set"))?;
     let source = DatasetSource::open(&path)?;
     let geometry = Geometry::of(&source.dataset);
-    Clipmap::new(geometry, config.clipmap.clone(), Arc::new(source), 1).map(Some)
+    // One quadtree per camera of a frame; all of them share the atlas.
+    let views = 1 + config.render.extra_views.len();
+    Clipmap::new(geometry, config.clipmap.clone(), Arc::new(source), views).map(Some)
 }
 
 /// Node geometry of a pyramid: centre and border texels, node counts per level.

@@ -152,6 +152,12 @@ impl Gpu {
         self.allocator.lock().unwrap_or_else(|p| p.into_inner())
     }
 
+    /// Bytes of device memory in live allocations (buffers and images this process made
+    /// through the allocator), for memory budgets and tests.
+    pub fn allocated_bytes(&self) -> u64 {
+        self.allocator().generate_report().total_allocated_bytes
+    }
+
     /// Submits to the one queue.
     pub fn submit(&self, submits: &[vk::SubmitInfo<'_>], fence: vk::Fence) -> Result<()> {
         let queue = self.queue.lock().unwrap_or_else(|p| p.into_inner());

@@ -37,6 +37,9 @@ const FRAME_TIMEOUT: Duration = Duration::from_secs(60);
 /// Timestamps per slot: start, after prepass, after terrain pass, after readback copy.
 const TIMESTAMPS: u32 = 4;
 
+/// Most views (cameras) drawn into one frame.
+pub const MAX_VIEWS: usize = 4;
+
 /// Render-target and loop settings.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
@@ -50,6 +53,9 @@ pub struct RenderOptions {
     pub sun_dir: [f32; 3],
     /// LOD method settings.
     pub lod: crate::lod::LodSettings,
+    /// Cameras per frame (1..=[`MAX_VIEWS`]), side by side: view `v` covers columns
+    /// `v * width / views .. (v + 1) * width / views` ([`Renderer::view_columns`]).
+    pub views: usize,
 }
 
 impl RenderOptions {
@@ -67,6 +73,7 @@ impl RenderOptions {
             sky: r.sky,
             sun_dir: [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()],
             lod: config.lod.clone(),
+            views: 1 + r.extra_views.len(),
         }
     }
 }
@@ -80,6 +87,17 @@ pub struct FrameRequest {
     /// Where LOD methods measure distances from, if not the camera (tests use it to watch one
     /// method's surface change from a fixed viewpoint while its LOD viewer moves).
     pub lod_viewer: Option<glam::DVec3>,
+}
+
+impl FrameRequest {
+    /// The requests of one frame: `main` and a camera per offset (config
+    /// `render.extra_views`), in view order.
+    pub fn with_extra_views(main: Camera, extra: &[crate::scene::ViewOffset]) -> Vec<Self> {
+        std::iter::once(main)
+            .chain(extra.iter().map(|o| o.apply(&main)))
+            .map(FrameRequest::from)
+            .collect()
+    }
 }
 
 impl From<Camera> for FrameRequest {
@@ -197,6 +215,24 @@ impl Renderer {
             ));
         }
         let n = options.frames_in_flight;
+        let views = options.views;
+        if !(1..=MAX_VIEWS).contains(&views) || views as u32 > options.width {
+            return Err(Error::invalid(
+                "views",
+                format!("{views} views per frame: need 1..={MAX_VIEWS} and at most one per column"),
+            ));
+        }
+        if let Some(c) = &clipmap
+            && c.views.len() != views
+        {
+            return Err(Error::invalid(
+                "clipmap",
+                format!(
+                    "made for {} views but the renderer draws {views}",
+                    c.views.len()
+                ),
+            ));
+        }
         if let Some(c) = &clipmap
             && (c.geometry.width, c.geometry.height) != (data.width as u64, data.height as u64)
         {
@@ -215,10 +251,13 @@ impl Renderer {
                 &c.settings,
                 c.settings.node_count,
                 n,
+                views,
             )?,
-            None => ClipmapGpu::new(gpu, None, &Default::default(), 2, n)?,
+            None => ClipmapGpu::new(gpu, None, &Default::default(), 2, n, views)?,
         };
-        let terrain = TerrainGpu::new(gpu, data, n, &clipmap_gpu)?;
+        // Per-view state (uniforms, set 0, the method's buffers, the clipmap's quadtree) lives
+        // in view slots `frame slot * views + view`; targets and staging stay per frame slot.
+        let terrain = TerrainGpu::new(gpu, data, n * views, &clipmap_gpu)?;
         let render_pass = if gpu.modern {
             vk::RenderPass::null()
         } else {
@@ -237,7 +276,7 @@ impl Renderer {
                 data,
                 settings: &options.lod,
                 formats,
-                slots: n,
+                slots: n * views,
             },
         )?;
         let timestamps =
@@ -407,19 +446,35 @@ impl Renderer {
     /// rendered frame, `[clipmap_height, single-texture bilinear]` each. Call after
     /// [`Renderer::finish`]; waits for the GPU.
     pub fn probe_heights(&self, points: &[[f32; 2]]) -> Result<Vec<[f32; 2]>> {
+        self.probe_heights_in_view(0, points)
+    }
+
+    /// [`Renderer::probe_heights`] through the state view `view` had in the last frame.
+    pub fn probe_heights_in_view(&self, view: usize, points: &[[f32; 2]]) -> Result<Vec<[f32; 2]>> {
         if self.next_frame == 0 || !self.in_flight.is_empty() {
             return Err(Error::invalid(
                 "probe_heights",
                 "needs a rendered, finished frame",
             ));
         }
+        if view >= self.options.views {
+            return Err(Error::invalid(
+                "probe_heights",
+                format!("view {view} of {}", self.options.views),
+            ));
+        }
         let slot = ((self.next_frame - 1) % self.slots.len() as u64) as usize;
         crate::clipmap::gpu::probe_heights(
             &self.gpu,
             self.terrain.set_layout,
-            self.terrain.sets[slot],
+            self.terrain.sets[slot * self.options.views + view],
             points,
         )
+    }
+
+    /// Columns `(first, count)` of view `view` in the frame.
+    pub fn view_columns(&self, view: usize) -> (u32, u32) {
+        view_columns(self.options.width, self.options.views, view)
     }
 
     pub fn method_name(&self) -> &'static str {
@@ -432,51 +487,82 @@ impl Renderer {
     }
 
     /// Renders one frame; delivers to `sink` every frame that is now older than N - 1 frames.
+    /// The renderer must draw one view ([`RenderOptions::views`]); see [`Renderer::render_views`].
     pub fn render(
         &mut self,
         request: impl Into<FrameRequest>,
         sink: &mut dyn FrameSink,
     ) -> Result<()> {
-        let request = request.into();
-        request.camera.validate()?;
-        if let Some(sky) = request.sky
-            && sky.iter().any(|v| !v.is_finite())
-        {
-            return Err(Error::invalid("sky colour", "not finite"));
+        self.render_views(&[request.into()], sink)
+    }
+
+    /// Renders one frame of `requests.len() == views` cameras side by side (view `v` in
+    /// [`Renderer::view_columns`]`(v)`), every view through the same atlas; the frame's sky
+    /// is the first request's. Delivers like [`Renderer::render`]; the delivered frame carries
+    /// the first camera.
+    pub fn render_views(
+        &mut self,
+        requests: &[FrameRequest],
+        sink: &mut dyn FrameSink,
+    ) -> Result<()> {
+        let views = self.options.views;
+        if requests.len() != views {
+            return Err(Error::invalid(
+                "views",
+                format!("{} cameras for a renderer of {views} views", requests.len()),
+            ));
         }
+        for request in requests {
+            request.camera.validate()?;
+            if let Some(sky) = request.sky
+                && sky.iter().any(|v| !v.is_finite())
+            {
+                return Err(Error::invalid("sky colour", "not finite"));
+            }
+        }
+        let request = requests[0];
         let index = self.next_frame;
         let slot_index = (index % self.slots.len() as u64) as usize;
         // The slot's previous frame was delivered after the last submit (N-1 pending at most),
         // so its GPU work is complete and its buffers are free.
         debug_assert!(self.slots[slot_index].pending.is_none());
         let started = Instant::now();
-        let view = ViewState {
-            camera: request.camera,
-            lod_viewer: request.lod_viewer.unwrap_or(request.camera.position),
-            width: self.options.width,
-            height: self.options.height,
-        };
-        let aspect = self.options.width as f64 / self.options.height as f64;
-        let uniforms = FrameUniforms::new(
-            &request.camera,
-            aspect,
-            &self.terrain.info,
-            self.options.sun_dir,
-        );
-        self.terrain.uniforms[slot_index].write(uniforms.as_bytes())?;
+        let states: Vec<ViewState> = requests
+            .iter()
+            .enumerate()
+            .map(|(v, r)| ViewState {
+                camera: r.camera,
+                lod_viewer: r.lod_viewer.unwrap_or(r.camera.position),
+                width: self.view_columns(v).1,
+                height: self.options.height,
+            })
+            .collect();
         if let Some(cm) = &mut self.clipmap {
+            // One update for all views: the union of their wanted nodes, one atlas.
             let spacing = self.terrain.info.spacing;
-            let viewer = glam::DVec2::new(view.lod_viewer.x / spacing, view.lod_viewer.y / spacing);
-            let uploads = cm.update(&[viewer]);
-            self.clipmap_gpu.write_slot(
-                slot_index,
-                &cm.geometry,
-                &cm.views[0],
-                &cm.atlas,
-                &uploads,
-            )?;
+            let viewers: Vec<glam::DVec2> = states
+                .iter()
+                .map(|v| glam::DVec2::new(v.lod_viewer.x / spacing, v.lod_viewer.y / spacing))
+                .collect();
+            let uploads = cm.update(&viewers);
+            self.clipmap_gpu
+                .stage_uploads(slot_index, &cm.geometry, &cm.atlas, &uploads)?;
+            for (v, quadtree) in cm.views.iter().enumerate() {
+                self.clipmap_gpu
+                    .write_quadtree(slot_index * views + v, &cm.geometry, quadtree)?;
+            }
         }
-        self.method.update(slot_index, &view)?;
+        for (v, view) in states.iter().enumerate() {
+            let view_slot = slot_index * views + v;
+            let uniforms = FrameUniforms::new(
+                &view.camera,
+                view.width as f64 / view.height as f64,
+                &self.terrain.info,
+                self.options.sun_dir,
+            );
+            self.terrain.uniforms[view_slot].write(uniforms.as_bytes())?;
+            self.method.update(view_slot, view)?;
+        }
         let sky = request.sky.unwrap_or(self.options.sky);
         self.record(slot_index, sky)?;
 
@@ -531,7 +617,10 @@ impl Renderer {
             .take()
             .expect("in-flight slot has a frame");
         // Known only now for GPU-driven methods.
-        pending.triangles = self.method.triangles(slot_index);
+        let views = self.options.views;
+        pending.triangles = (0..views)
+            .map(|v| self.method.triangles(slot_index * views + v))
+            .sum();
         let (prepass, terrain, readback) = self.read_timestamps(slot_index)?;
         let timings = FrameTimings {
             gpu_prepass_ms: prepass,
@@ -624,8 +713,12 @@ impl Renderer {
         }
         // New atlas nodes first: after every earlier frame's sampling, before this frame's.
         self.clipmap_gpu.record_uploads(cmd, slot_index);
-        self.method
-            .record_prepass(cmd, slot_index, self.terrain.sets[slot_index]);
+        let views = o.views;
+        for v in 0..views {
+            let view_slot = slot_index * views + v;
+            self.method
+                .record_prepass(cmd, view_slot, self.terrain.sets[view_slot]);
+        }
         let slot = &self.slots[slot_index];
         unsafe {
             d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, slot.queries, 1)
@@ -698,22 +791,38 @@ impl Renderer {
                     vk::SubpassContents::INLINE,
                 );
             }
-            d.cmd_set_viewport(
-                cmd,
-                0,
-                &[vk::Viewport {
-                    x: 0.0,
-                    y: 0.0,
-                    width: o.width as f32,
-                    height: o.height as f32,
-                    min_depth: 0.0,
-                    max_depth: 1.0,
-                }],
-            );
-            d.cmd_set_scissor(cmd, 0, &[area]);
         }
-        let frame_set = self.terrain.sets[slot_index];
-        self.method.record_draw(cmd, slot_index, frame_set);
+        for v in 0..views {
+            let (x, width) = view_columns(o.width, views, v);
+            unsafe {
+                d.cmd_set_viewport(
+                    cmd,
+                    0,
+                    &[vk::Viewport {
+                        x: x as f32,
+                        y: 0.0,
+                        width: width as f32,
+                        height: o.height as f32,
+                        min_depth: 0.0,
+                        max_depth: 1.0,
+                    }],
+                );
+                d.cmd_set_scissor(
+                    cmd,
+                    0,
+                    &[vk::Rect2D {
+                        offset: vk::Offset2D { x: x as i32, y: 0 },
+                        extent: vk::Extent2D {
+                            width,
+                            height: o.height,
+                        },
+                    }],
+                );
+            }
+            let view_slot = slot_index * views + v;
+            let frame_set = self.terrain.sets[view_slot];
+            self.method.record_draw(cmd, view_slot, frame_set);
+        }
         let slot = &self.slots[slot_index];
         unsafe {
             if gpu.modern {
@@ -789,6 +898,12 @@ impl Renderer {
     }
 }
 
+/// Columns `(first, count)` of view `view` of `views` side by side in `width` columns.
+pub fn view_columns(width: u32, views: usize, view: usize) -> (u32, u32) {
+    let edge = |v: usize| (width as u64 * v as u64 / views as u64) as u32;
+    (edge(view), edge(view + 1) - edge(view))
+}
+
 impl Drop for Renderer {
     fn drop(&mut self) {
         // Outstanding frames must finish before their command buffers and images go away.
@@ -803,6 +918,27 @@ impl Drop for Renderer {
                     .device
                     .destroy_render_pass(self.formats.render_pass, None)
             };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::view_columns;
+
+    #[test]
+    fn views_tile_the_frame_without_gaps_or_overlap() {
+        for width in [1u32, 7, 96, 97, 1921] {
+            for views in 1..=super::MAX_VIEWS.min(width as usize) {
+                let mut next = 0;
+                for v in 0..views {
+                    let (x, w) = view_columns(width, views, v);
+                    assert_eq!(x, next, "{width} / {views}: view {v}");
+                    assert!(w >= width / views as u32, "{width} / {views}: view {v}");
+                    next = x + w;
+                }
+                assert_eq!(next, width, "{width} / {views}");
+            }
         }
     }
 }

@@ -135,3 +135,56 @@ impl Camera {
         (forward * f + right * sx + up * sy).normalize()
     }
 }
+
+/// A further camera drawn into the same frame as the scripted one (config
+/// `[[render.extra_views]]`): placed relative to it, so it follows the scenario.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ViewOffset {
+    /// Added to the main camera's position: east, north, up in metres.
+    pub offset_m: [f64; 3],
+    /// Added to the main camera's heading, degrees (180: a rear view).
+    pub yaw_deg: f64,
+    /// The view's own pitch in degrees; the main camera's when absent.
+    pub pitch_deg: Option<f64>,
+}
+
+impl Default for ViewOffset {
+    fn default() -> Self {
+        ViewOffset {
+            offset_m: [0.0; 3],
+            yaw_deg: 0.0,
+            pitch_deg: None,
+        }
+    }
+}
+
+impl ViewOffset {
+    /// The camera this offset makes of `main`.
+    pub fn apply(&self, main: &Camera) -> Camera {
+        let [x, y, z] = self.offset_m;
+        Camera {
+            position: main.position + DVec3::new(x, y, z),
+            yaw_deg: main.yaw_deg + self.yaw_deg,
+            pitch_deg: self.pitch_deg.unwrap_or(main.pitch_deg),
+            ..*main
+        }
+    }
+
+    /// Rejects non-finite values and pitches outside [-90, 90] with a one-line reason.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid("render.extra_views", m));
+        if self.offset_m.iter().any(|v| !v.is_finite()) || !self.yaw_deg.is_finite() {
+            return bad(format!(
+                "offset {:?} m and yaw {} deg must be finite",
+                self.offset_m, self.yaw_deg
+            ));
+        }
+        if let Some(p) = self.pitch_deg
+            && !(p.is_finite() && (-90.0..=90.0).contains(&p))
+        {
+            return bad(format!("pitch {p} deg is outside [-90, 90]"));
+        }
+        Ok(())
+    }
+}

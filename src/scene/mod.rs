@@ -3,5 +3,5 @@
 pub mod camera;
 pub mod scenario;
 
-pub use camera::Camera;
+pub use camera::{Camera, ViewOffset};
 pub use scenario::Scenario;

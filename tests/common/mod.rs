@@ -38,6 +38,7 @@ pub fn options(width: u32, height: u32, frames_in_flight: usize) -> RenderOption
         sky: [0.2, 0.4, 0.8],
         sun_dir: [0.0, 0.0, 1.0],
         lod: Default::default(),
+        views: 1,
     }
 }
 
