@@ -30,3 +30,17 @@ fn probe_main(@builtin(global_invocation_id) id: vec3<u32>) {
     probe.points[i].z = clipmap_height(p);
     probe.points[i].w = texture_height_at(p);
 }
+
+// The fragment stage's clipmap normal at each point, sampled at the finest mip (zero
+// gradients): z, w = normal.x, normal.y (the normal faces up, so z follows).
+@compute @workgroup_size(CLIPMAP_PROBE_WORKGROUP)
+fn probe_surface_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= probe.count.x {
+        return;
+    }
+    let p = probe.points[i].xy;
+    let s = clipmap_surface(p, vec2<f32>(0.0), vec2<f32>(0.0));
+    probe.points[i].z = s.normal.x;
+    probe.points[i].w = s.normal.y;
+}

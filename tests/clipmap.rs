@@ -840,3 +840,70 @@ fn two_cameras_render_in_one_frame_through_one_atlas() {
     );
     common::assert_no_validation_messages(&gpu);
 }
+
+#[test]
+fn ring_edges_blend_shading_without_steps() {
+    let gpu = common::gpu(false);
+    let data = heightmap();
+    let viewer = DVec2::new(200.3, 251.7);
+    // The same line as `ring_edges_blend_without_steps`, across the level-0 and level-1
+    // window edges, 1/256 sample apart.
+    let line: Vec<[f32; 2]> = (0..256 * 240)
+        .map(|k| [(viewer.x + k as f64 / 256.0) as f32, viewer.y as f32])
+        .collect();
+    let largest_normal_step = |blend_nodes: f64| -> f32 {
+        let geometry = Geometry::of(&DatasetSource::open(dataset()).unwrap().dataset);
+        let src: Arc<dyn NodeSource> = Arc::new(DatasetSource::open(dataset()).unwrap());
+        let s = ClipmapSettings {
+            blend_nodes,
+            ..settings(4, 300)
+        };
+        let cm = Clipmap::new(geometry, s, src, 1).unwrap();
+        let mut renderer = Renderer::with_clipmap(
+            &gpu,
+            &data,
+            MethodKind::Brute,
+            common::options(64, 48, 2),
+            Some(cm),
+        )
+        .unwrap();
+        let size = (SIZE - 1) as f64;
+        let camera = camera_over(&data, viewer.x / size, viewer.y / size);
+        let request = FrameRequest {
+            camera,
+            sky: None,
+            lod_viewer: Some(DVec3::new(
+                viewer.x * data.spacing,
+                viewer.y * data.spacing,
+                camera.position.z,
+            )),
+        };
+        let mut sink = CollectSink::default();
+        for frame in 0.. {
+            renderer.render(request, &mut sink).unwrap();
+            let cm = renderer.clipmap().unwrap();
+            if cm.busy() == 0 && cm.views[0].fallback_cells == 0 {
+                break;
+            }
+            assert!(frame < 300, "no convergence");
+        }
+        renderer.finish(&mut sink).unwrap();
+        let normals = renderer
+            .probe_in_view(0, &line, vkterrain::clipmap::gpu::ProbeKind::Normals)
+            .unwrap();
+        normals
+            .windows(2)
+            .map(|w| (w[1][0] - w[0][0]).abs().max((w[1][1] - w[0][1]).abs()))
+            .fold(0.0, f32::max)
+    };
+    let (blended, stepped) = (largest_normal_step(0.5), largest_normal_step(0.0));
+    eprintln!(
+        "largest normal change per 1/256 sample: blended {blended:.4}, unblended {stepped:.4}"
+    );
+    assert!(
+        stepped > 0.005,
+        "no shading step at the ring edges to remove"
+    );
+    assert!(blended * 10.0 < stepped, "blending leaves a shading step");
+    common::assert_no_validation_messages(&gpu);
+}

@@ -95,13 +95,14 @@ fn clipmap_first_level(p: vec2<f32>) -> u32 {
     return min(l, clipmap.params.y - 1u);
 }
 
-// Height in metres at a level-0 sample position. Constant time: at most `levels` integer
-// window tests, then one entry and four texel loads (two of each within the blend band near a
-// window's inner edge, where the level and the next coarser one are mixed).
-fn clipmap_height(p: vec2<f32>) -> f32 {
-    if clipmap.params.x == 0u {
-        return 0.0;
-    }
+// The finest level whose window holds p, and p's node in it (the coarsest level holds every
+// position).
+struct ClipmapSite {
+    lod: u32,
+    node: vec2<i32>,
+}
+
+fn clipmap_find(p: vec2<f32>) -> ClipmapSite {
     let lods = clipmap.params.y;
     var l = clipmap_first_level(p);
     var node = vec2<i32>(0);
@@ -112,10 +113,16 @@ fn clipmap_height(p: vec2<f32>) -> f32 {
         }
         l += 1u;
     }
-    let h = clipmap_level_height(p, l, node);
+    return ClipmapSite(l, node);
+}
+
+// Weight of level l at p: 1 outside the blend band, falling to 0 at the window's inner edges
+// (edges on the data's border do not blend); 1 where there is no coarser level or blending
+// is off.
+fn clipmap_blend_weight(p: vec2<f32>, l: u32) -> f32 {
     let blend_inv = bitcast<f32>(clipmap.params2.z);
-    if l + 1u >= lods || blend_inv == 0.0 {
-        return h;
+    if l + 1u >= clipmap.params.y || blend_inv == 0.0 {
+        return 1.0;
     }
     // Distance (level-l texels) to the window's edges that are not the data's edges.
     let c = i32(clipmap.params.w);
@@ -128,7 +135,20 @@ fn clipmap_height(p: vec2<f32>) -> f32 {
     let dlo = select(lo, far, lv.xy == vec2<i32>(0));
     let dhi = select(hi, far, lv.xy + w >= lv.zw);
     let d = min(min(dlo.x, dlo.y), min(dhi.x, dhi.y));
-    let weight = clamp(d * blend_inv, 0.0, 1.0);
+    return clamp(d * blend_inv, 0.0, 1.0);
+}
+
+// Height in metres at a level-0 sample position. Constant time: at most `levels` integer
+// window tests, then one entry and four texel loads (two of each within the blend band near a
+// window's inner edge, where the level and the next coarser one are mixed).
+fn clipmap_height(p: vec2<f32>) -> f32 {
+    if clipmap.params.x == 0u {
+        return 0.0;
+    }
+    let site = clipmap_find(p);
+    let l = site.lod;
+    let h = clipmap_level_height(p, l, site.node);
+    let weight = clipmap_blend_weight(p, l);
     if weight >= 1.0 {
         return h;
     }
@@ -145,21 +165,10 @@ struct ClipmapSurface {
     albedo: vec3<f32>,
 }
 
-// Fragment stage: normal and albedo at a level-0 sample position from the best resident node
-// of the finest level whose window holds it, with explicit gradients (`gx`, `gy`: the screen
-// derivatives of p, taken in uniform control flow) scaled to the node's level and layer size,
-// so filtering (and anisotropy where enabled) follows the node's own texel density.
-fn clipmap_surface(p: vec2<f32>, gx: vec2<f32>, gy: vec2<f32>) -> ClipmapSurface {
-    let lods = clipmap.params.y;
-    var l = clipmap_first_level(p);
-    var node = vec2<i32>(0);
-    loop {
-        node = clipmap_node(p, l);
-        if clipmap_in_window(node, l) || l + 1u >= lods {
-            break;
-        }
-        l += 1u;
-    }
+// Normal and albedo from the entry of quadtree level l for `node`, with explicit gradients
+// scaled to the resident node's level and layer size, so filtering (and anisotropy where
+// enabled) follows the node's own texel density.
+fn clipmap_level_surface(p: vec2<f32>, l: u32, node: vec2<i32>, gx: vec2<f32>, gy: vec2<f32>) -> ClipmapSurface {
     let n = i32(clipmap.params.z);
     let c = i32(clipmap.params.w);
     let e = clipmap.entries[(i32(l) * n + node.y % n) * n + node.x % n];
@@ -178,7 +187,29 @@ fn clipmap_surface(p: vec2<f32>, gx: vec2<f32>, gy: vec2<f32>) -> ClipmapSurface
     // Texel centres at integers in `local` -> normalized layer coordinates.
     let uv = (local + vec2<f32>(b + 0.5)) / side;
     let scale = clipmap_inv_pow2(al) / side;
-    out.normal = normalize(textureSampleGrad(atlas_normal, linear_sampler, uv, layer, gx * scale, gy * scale).xyz);
+    out.normal = textureSampleGrad(atlas_normal, linear_sampler, uv, layer, gx * scale, gy * scale).xyz;
     out.albedo = textureSampleGrad(atlas_albedo, linear_sampler, uv, layer, gx * scale, gy * scale).rgb;
+    return out;
+}
+
+// Fragment stage: normal and albedo at a level-0 sample position from the best resident node
+// of the finest level whose window holds it (`gx`, `gy`: the screen derivatives of p, taken
+// in uniform control flow; explicit gradients need no uniformity). In the blend band near a
+// window's inner edge the next coarser level is mixed in with the same weight as the heights,
+// so shading does not change resolution in a visible line at ring edges.
+fn clipmap_surface(p: vec2<f32>, gx: vec2<f32>, gy: vec2<f32>) -> ClipmapSurface {
+    let site = clipmap_find(p);
+    let l = site.lod;
+    var out = clipmap_level_surface(p, l, site.node, gx, gy);
+    let weight = clipmap_blend_weight(p, l);
+    if weight < 1.0 {
+        let node1 = clipmap_node(p, l + 1u);
+        if clipmap_in_window(node1, l + 1u) {
+            let coarse = clipmap_level_surface(p, l + 1u, node1, gx, gy);
+            out.normal = mix(coarse.normal, out.normal, weight);
+            out.albedo = mix(coarse.albedo, out.albedo, weight);
+        }
+    }
+    out.normal = normalize(out.normal);
     return out;
 }

@@ -294,14 +294,24 @@ impl ClipmapGpu {
     }
 }
 
-/// Tests and tools: evaluates `clipmap_height(p)` (x) and the single-texture bilinear
-/// `texture_height_at(p)` (y) on the GPU for each point (level-0 sample units), through
-/// descriptor set 0 `frame_set` (the state of the frame that set last rendered). Waits.
-pub fn probe_heights(
+/// What [`probe`] evaluates at each point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProbeKind {
+    /// `[clipmap_height(p), single-texture bilinear texture_height_at(p)]`.
+    Heights,
+    /// The fragment stage's `clipmap_surface(p)` normal at mip 0: `[normal.x, normal.y]`.
+    Normals,
+}
+
+/// Tests and tools: evaluates `kind` on the GPU for each point (level-0 sample units),
+/// through descriptor set 0 `frame_set` (the state of the frame that set last rendered).
+/// Waits.
+pub fn probe(
     gpu: &Arc<Gpu>,
     frame_layout: vk::DescriptorSetLayout,
     frame_set: vk::DescriptorSet,
     points: &[[f32; 2]],
+    kind: ProbeKind,
 ) -> Result<Vec<[f32; 2]>> {
     if points.is_empty() {
         return Ok(Vec::new());
@@ -377,7 +387,10 @@ pub fn probe_heights(
             let pipeline = crate::render::pipeline::compute_pipeline(
                 gpu,
                 crate::driver::shaders::CLIPMAP_PROBE_SPV,
-                c"probe_main",
+                match kind {
+                    ProbeKind::Heights => c"probe_main",
+                    ProbeKind::Normals => c"probe_surface_main",
+                },
                 &[frame_layout, layout],
             )?;
             let groups = (points.len() as u32).div_ceil(CLIPMAP_PROBE_WORKGROUP);

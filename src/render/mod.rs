@@ -446,11 +446,22 @@ impl Renderer {
     /// rendered frame, `[clipmap_height, single-texture bilinear]` each. Call after
     /// [`Renderer::finish`]; waits for the GPU.
     pub fn probe_heights(&self, points: &[[f32; 2]]) -> Result<Vec<[f32; 2]>> {
-        self.probe_heights_in_view(0, points)
+        self.probe_in_view(0, points, crate::clipmap::gpu::ProbeKind::Heights)
     }
 
     /// [`Renderer::probe_heights`] through the state view `view` had in the last frame.
     pub fn probe_heights_in_view(&self, view: usize, points: &[[f32; 2]]) -> Result<Vec<[f32; 2]>> {
+        self.probe_in_view(view, points, crate::clipmap::gpu::ProbeKind::Heights)
+    }
+
+    /// Tests and tools: what `kind` evaluates at `points` through the state view `view` had in
+    /// the last rendered frame. Call after [`Renderer::finish`]; waits for the GPU.
+    pub fn probe_in_view(
+        &self,
+        view: usize,
+        points: &[[f32; 2]],
+        kind: crate::clipmap::gpu::ProbeKind,
+    ) -> Result<Vec<[f32; 2]>> {
         if self.next_frame == 0 || !self.in_flight.is_empty() {
             return Err(Error::invalid(
                 "probe_heights",
@@ -464,11 +475,12 @@ impl Renderer {
             ));
         }
         let slot = ((self.next_frame - 1) % self.slots.len() as u64) as usize;
-        crate::clipmap::gpu::probe_heights(
+        crate::clipmap::gpu::probe(
             &self.gpu,
             self.terrain.set_layout,
             self.terrain.sets[slot * self.options.views + view],
             points,
+            kind,
         )
     }
 
