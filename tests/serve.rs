@@ -386,3 +386,69 @@ fn serve_bad_input_is_one_line() {
             .exists()
     );
 }
+
+#[test]
+fn serve_streams_through_the_clipmap_with_two_views() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("ds");
+    let o = exe()
+        .args([
+            "preprocess",
+            "--procedural",
+            "--size",
+            "257",
+            "--node-size",
+            "32",
+            "--out",
+        ])
+        .arg(&data)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let name = format!("vkt-clip-{}", std::process::id());
+    let config = tmp.path().join("clip.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[render]\nwidth = 64\nheight = 24\nreadback_depth = true\n\
+             [[render.extra_views]]\nyaw_deg = 180.0\n\
+             [dataset]\nkind = \"tiles\"\npath = {:?}\n\
+             [clipmap]\nenabled = true\natlas_capacity = 40\nnode_count = 4\n\
+             [ring]\nname = \"{name}\"\nslots = 3\nkeep_segment = true\n",
+            data.display().to_string()
+        ),
+    )
+    .unwrap();
+    let status = tmp.path().join("status.json");
+    let o = exe()
+        .arg("serve")
+        .arg("--config")
+        .arg(&config)
+        .args(["--frames", "6", "--status-file"])
+        .arg(&status)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let seg = Path::new("/dev/shm").join(&name);
+    let _cleanup = Unlink(seg);
+    let s = status_json(&status);
+    assert_eq!(s["state"], "stopped");
+    let c = &s["clipmap"];
+    assert_eq!(c["atlas_capacity"], 40, "{s}");
+    assert!(c["loaded"].as_u64().unwrap() > 0, "{s}");
+    assert!(c["resident_nodes"].as_u64().unwrap() <= 40, "{s}");
+    assert_eq!(c["load_errors"], 0, "{s}");
+    // The ring's frames hold both views side by side, terrain in each.
+    let mut r = RingReader::open(&name).unwrap();
+    let Next::Frame(m) = r.wait_next(Duration::from_secs(1)).unwrap() else {
+        panic!("no frame in a kept ring");
+    };
+    assert_eq!((m.frame, m.width, m.height), (5, 64, 24));
+    let depth = r.depth().expect("depth in the ring");
+    for half in [0..32usize, 32..64] {
+        assert!(
+            (0..24).any(|y| half.clone().any(|x| depth[y * 64 + x] > 0.0)),
+            "no terrain in columns {half:?}"
+        );
+    }
+}

@@ -245,8 +245,38 @@ pub struct Status {
     pub control_last_error: Option<String>,
     /// Consumers that reported over the control socket: frames received and skipped.
     pub consumers: BTreeMap<String, (u64, u64)>,
+    /// Streaming state when heights come through the clipmap.
+    #[serde(default)]
+    pub clipmap: Option<ClipmapStatus>,
     pub uptime_s: f64,
     pub updated_unix_ms: u64,
+}
+
+/// The clipmap's streaming counters in `status.json`: whether data is missing, failing or
+/// arriving (`docs/clipmap.md`).
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+pub struct ClipmapStatus {
+    pub atlas_capacity: u32,
+    pub resident_nodes: usize,
+    pub loaded: u64,
+    pub load_errors: u64,
+    pub deferred: u64,
+    pub evictions: u64,
+    pub fallback_frames: u64,
+}
+
+impl ClipmapStatus {
+    fn of(c: &crate::clipmap::Clipmap) -> Self {
+        ClipmapStatus {
+            atlas_capacity: c.settings.atlas_capacity,
+            resident_nodes: c.atlas.resident(),
+            loaded: c.counters.loaded,
+            load_errors: c.counters.load_errors,
+            deferred: c.counters.deferred,
+            evictions: c.counters.evictions,
+            fallback_frames: c.counters.fallback_frames,
+        }
+    }
 }
 
 fn make_ring(
@@ -314,7 +344,13 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         .with_env(),
     )?;
     let mut options = RenderOptions::from_config(&config);
-    let mut renderer = Renderer::new(&gpu, &p.data, p.method, options.clone())?;
+    let mut renderer = Renderer::with_clipmap(
+        &gpu,
+        &p.data,
+        p.method,
+        options.clone(),
+        crate::clipmap::from_config(&config)?,
+    )?;
     let mut ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
     tracing::info!(
         ring = config.ring.name,
@@ -342,7 +378,8 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                   options: &RenderOptions,
                   ctl: &Control,
                   intervals: &VecDeque<f64>,
-                  rendered: u64|
+                  rendered: u64,
+                  clipmap: Option<ClipmapStatus>|
      -> Status {
         let pc = Percentiles::of(intervals.iter().copied().collect());
         Status {
@@ -370,6 +407,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                 .iter()
                 .map(|(k, v)| (k.clone(), (v.received, v.lost)))
                 .collect(),
+            clipmap,
             uptime_s: started.elapsed().as_secs_f64(),
             updated_unix_ms: sys::realtime_ns() / 1_000_000,
         }
@@ -418,7 +456,14 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                 renderer.finish(&mut ring)?;
                 options.width = w;
                 options.height = h;
-                renderer = Renderer::new(&gpu, &p.data, p.method, options.clone())?;
+                // A fresh clipmap too: its atlas lives in the old renderer's device memory.
+                renderer = Renderer::with_clipmap(
+                    &gpu,
+                    &p.data,
+                    p.method,
+                    options.clone(),
+                    crate::clipmap::from_config(&config)?,
+                )?;
                 ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
                 tracing::info!(width = w, height = h, "resolution changed");
             }
@@ -438,7 +483,13 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             }
             if last_status.elapsed() >= status_every {
                 write_status(&status(
-                    "running", &ring, &options, &ctl, &intervals, rendered,
+                    "running",
+                    &ring,
+                    &options,
+                    &ctl,
+                    &intervals,
+                    rendered,
+                    renderer.clipmap().map(ClipmapStatus::of),
                 ));
                 last_status = Instant::now();
             }
@@ -455,7 +506,13 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     })();
     ring.close();
     write_status(&status(
-        "stopped", &ring, &options, &ctl, &intervals, rendered,
+        "stopped",
+        &ring,
+        &options,
+        &ctl,
+        &intervals,
+        rendered,
+        renderer.clipmap().map(ClipmapStatus::of),
     ));
     result?;
     drop(renderer);
@@ -513,6 +570,18 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
                 .map(|e| format!(" (last: {e})"))
                 .unwrap_or_default()
         );
+        if let Some(c) = &s.clipmap {
+            println!(
+                "clipmap:         {}/{} nodes resident; {} loaded, {} load errors, {} deferred, {} evictions, {} frames with fallback data",
+                c.resident_nodes,
+                c.atlas_capacity,
+                c.loaded,
+                c.load_errors,
+                c.deferred,
+                c.evictions,
+                c.fallback_frames
+            );
+        }
         for (name, (received, lost)) in &s.consumers {
             println!("consumer:        {name}: {received} received, {lost} skipped");
         }
