@@ -357,4 +357,21 @@ fn render_through_the_clipmap_reports_streaming() {
     assert_eq!(c["atlas_bytes"], 40 * (36 * 36 * 4 + mips * 8));
     assert!(c["resident_nodes"].as_u64().unwrap() >= 1);
     assert!(c["resident_nodes"].as_u64().unwrap() <= 40);
+    assert!(stdout.contains("peak RSS"), "{stdout}");
+    assert!(summary["peak_rss_bytes"].as_u64().unwrap() > 0);
+    // PGM needs the whole height map, which the clipmap path never loads: one line, no output.
+    let out2 = tmp.path().join("out2");
+    fails(
+        &[
+            "render",
+            "--config",
+            config.to_str().unwrap(),
+            "--method",
+            "pgm",
+            "--out",
+            out2.to_str().unwrap(),
+        ],
+        &out2,
+        &["pgm", "clipmap"],
+    );
 }

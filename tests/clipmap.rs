@@ -16,9 +16,10 @@ use vkterrain::clipmap::{
 };
 use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
 use vkterrain::dataset::procedural::ProceduralParams;
-use vkterrain::dataset::{Heightmap, tiles};
+use vkterrain::dataset::{Heightmap, Level0, PyramidReader, Terrain, tiles};
 use vkterrain::gpu_constants::CLIPMAP_LOD_SHIFT;
 use vkterrain::lod::MethodKind;
+use vkterrain::lod::udlod::select::Levels;
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::Renderer;
 use vkterrain::scene::Camera;
@@ -374,14 +375,17 @@ fn atlas_exhaustion_and_loader_errors_degrade_gracefully() {
     s.retry_frames = 1000;
     let cm = Clipmap::new(geometry, s, Arc::new(ds), 1).unwrap();
     let mut sink = CollectSink::default();
+    // Heights from the pyramid (node-by-node reader), not the height map: no level-0 array.
+    let level0 = Arc::new(PyramidReader::open(&broken).unwrap());
     let mut renderer = Renderer::with_clipmap(
         &gpu,
-        &data,
+        Terrain::Pyramid(level0.clone()),
         MethodKind::Udlod,
         common::options(192, 120, 2),
         Some(cm),
     )
     .unwrap();
+    assert!(level0.cached_bytes() <= level0.max_cached_bytes());
     for k in 0..24 {
         let f = 0.3 + 0.4 * k as f64 / 24.0;
         renderer
@@ -698,4 +702,86 @@ fn nodes_of_the_wrong_size_from_any_source_are_errors_not_panics() {
     assert!(cm.counters.load_errors > 0, "{:?}", cm.counters);
     assert_cells_resolve(&cm);
     assert!(cm.sample_height(0, [250.0, 250.0]).is_finite());
+}
+
+/// UDLOD's levels (per-tile min/max and errors, per-level errors, error field) built from the
+/// pyramid's level-0 nodes through the bounded reader equal those from the whole height map,
+/// bit for bit; the reader loads each node about once per level sweep and never holds more
+/// than its bound; bad positions and corrupt nodes are one-line errors.
+#[test]
+fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
+    let data = heightmap();
+    let reader = PyramidReader::open(dataset()).unwrap();
+    assert_eq!((reader.width(), reader.height()), (data.width, data.height));
+    assert_eq!(reader.spacing(), data.spacing);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    for (grid, field_max) in [(16, 8.0), (8, 1.0), (4, 8.0)] {
+        let a = Levels::new(&data, grid, field_max).unwrap();
+        let b = Levels::new(&reader.sweep(), grid, field_max).unwrap();
+        assert_eq!(a.tiles_per_side, b.tiles_per_side);
+        assert_eq!(a.level_offsets, b.level_offsets);
+        assert_eq!(
+            (a.width, a.height, a.root_lod),
+            (b.width, b.height, b.root_lod)
+        );
+        assert_eq!(a.spacing.to_bits(), b.spacing.to_bits());
+        let mm = |l: &Levels| l.min_max.iter().flatten().copied().collect::<Vec<_>>();
+        assert_eq!(bits(&mm(&a)), bits(&mm(&b)), "min/max, grid {grid}");
+        assert_eq!(bits(&a.tile_error), bits(&b.tile_error), "tile errors");
+        let e64 = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(e64(&a.level_error), e64(&b.level_error));
+        assert!(a.level_error.iter().any(|&e| e > 0.0));
+        assert_eq!(
+            bits(&a.field.corners),
+            bits(&b.field.corners),
+            "error field"
+        );
+        assert_eq!(e64(&a.field.sigma), e64(&b.field.sigma));
+        assert_eq!(e64(&a.field.mu), e64(&b.field.mu));
+        assert!(reader.cached_bytes() <= reader.max_cached_bytes());
+    }
+    // 17x17 level-0 nodes, cache 3 x 17 + 8 = 59: the three builds sweep 6 + 7 + 8 levels and
+    // load every node about once per level sweep (a thrashing cache would reload nodes for
+    // every tile row).
+    let nodes = 17 * 17;
+    assert_eq!(reader.capacity(), 59);
+    let loads = reader.node_loads();
+    eprintln!("node loads for 3 level builds: {loads}");
+    assert!(loads <= 21 * nodes * 5 / 4, "{loads} node loads");
+    // The reader's bilinear height equals the height map's, bit for bit.
+    let (ex, ey) = data.extent();
+    for k in 0..200 {
+        let (x, y) = (
+            ex * (k as f64 * 0.618).fract(),
+            ey * (k as f64 * 0.382).fract(),
+        );
+        assert_eq!(
+            reader.bilinear(x, y).unwrap().to_bits(),
+            data.height_at(x, y).to_bits()
+        );
+    }
+    reader.clear();
+    assert_eq!(reader.cached_bytes(), 0);
+    let e = reader.sample(SIZE, 0).unwrap_err().to_string();
+    assert!(e.contains("outside") && !e.contains('\n'), "{e}");
+
+    // A NaN in a level-0 node: an error naming the node, not data and not a panic.
+    let broken = dataset().with_file_name("broken-l0");
+    copy_dir(dataset(), &broken);
+    let record = tiles::Dataset::open(&broken).unwrap().manifest.levels[0].record_size;
+    {
+        use std::io::{Seek, SeekFrom, Write};
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .open(broken.join("L0.bin"))
+            .unwrap();
+        // Node (1, 0): a texel inside its centre (row 2 + border 2, column 2 + border 2).
+        let side = CENTER as u64 + 4;
+        f.seek(SeekFrom::Start(64 + record + 16 + 4 * (4 * side + 4)))
+            .unwrap();
+        f.write_all(&f32::NAN.to_le_bytes()).unwrap();
+    }
+    let bad = PyramidReader::open(&broken).unwrap();
+    let e = Levels::new(&bad.sweep(), 16, 8.0).unwrap_err().to_string();
+    assert!(e.contains("node 0/1/0") && !e.contains('\n'), "{e}");
 }

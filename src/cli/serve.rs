@@ -314,12 +314,18 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         .with_env(),
     )?;
     let mut options = RenderOptions::from_config(&config);
-    let mut renderer = Renderer::new(&gpu, &p.data, p.method, options.clone())?;
+    let mut renderer = Renderer::with_clipmap(
+        &gpu,
+        &p.data,
+        p.method,
+        options.clone(),
+        crate::clipmap::from_config(&config)?,
+    )?;
     let mut ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
     tracing::info!(
         ring = config.ring.name,
         device = gpu.info.name,
-        dataset = p.data.name,
+        dataset = p.data.name(),
         width = options.width,
         height = options.height,
         "serving"
@@ -351,7 +357,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             ring: ring.name().into(),
             generation: ring.generation(),
             device: gpu.info.name.clone(),
-            dataset: p.data.name.clone(),
+            dataset: p.data.name().to_string(),
             width: options.width,
             height: options.height,
             frames_rendered: rendered,
@@ -418,7 +424,13 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                 renderer.finish(&mut ring)?;
                 options.width = w;
                 options.height = h;
-                renderer = Renderer::new(&gpu, &p.data, p.method, options.clone())?;
+                renderer = Renderer::with_clipmap(
+                    &gpu,
+                    &p.data,
+                    p.method,
+                    options.clone(),
+                    crate::clipmap::from_config(&config)?,
+                )?;
                 ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
                 tracing::info!(width = w, height = h, "resolution changed");
             }
