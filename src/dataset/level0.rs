@@ -221,8 +221,7 @@ impl PyramidReader {
     #[inline]
     fn get(&self, cache: &mut NodeCache, col: u32, row: u32) -> Result<f32> {
         if let Some(i) = cache.last {
-            // Fast path, no division: the sample lies in the node read last (whose samples
-            // all lie inside the grid).
+            // Fast path, no division: the sample lies in the node read last.
             let dx = col.wrapping_sub(cache.last_origin.0);
             let dy = row.wrapping_sub(cache.last_origin.1);
             let c = self.center;
