@@ -714,10 +714,24 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
     let reader = PyramidReader::open(dataset()).unwrap();
     assert_eq!((reader.width(), reader.height()), (data.width, data.height));
     assert_eq!(reader.spacing(), data.spacing);
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    // Bit patterns (short `Debug`: the vectors hold thousands of entries).
+    let bits = |v: &[f32]| Bits(v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
     for (grid, field_max) in [(16, 8.0), (8, 1.0), (4, 8.0)] {
         let a = Levels::new(&data, grid, field_max).unwrap();
         let b = Levels::new(&reader.sweep(), grid, field_max).unwrap();
+        // Both equal the statistics as computed before `Level0` (sample by sample).
+        let (mm, te, le) = reference_statistics(&data, &a);
+        assert_eq!(
+            bits(&mm),
+            bits(&a.min_max.concat()),
+            "reference min/max, grid {grid}"
+        );
+        assert_eq!(
+            bits(&te),
+            bits(&a.tile_error),
+            "reference tile errors, grid {grid}"
+        );
+        assert_eq!(le, a.level_error, "reference level errors, grid {grid}");
         assert_eq!(a.tiles_per_side, b.tiles_per_side);
         assert_eq!(a.level_offsets, b.level_offsets);
         assert_eq!(
@@ -784,4 +798,74 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
     let bad = PyramidReader::open(&broken).unwrap();
     let e = Levels::new(&bad.sweep(), 16, 8.0).unwrap_err().to_string();
     assert!(e.contains("node 0/1/0") && !e.contains('\n'), "{e}");
+}
+
+/// UDLOD's per-tile min/max, tile errors and level errors exactly as `select.rs` computed them
+/// before `Level0` (every sample, four grid corners per sample), for `levels`' tiling.
+fn reference_statistics(data: &Heightmap, levels: &Levels) -> (Vec<f32>, Vec<f32>, Vec<f64>) {
+    let level_height = |lod: u32, c: u32, r: u32| {
+        let step = 1u32 << lod;
+        let s = |c: u32, r: u32| data.sample(c.min(data.width - 1), r.min(data.height - 1)) as f64;
+        let (c0, r0) = (c / step * step, r / step * step);
+        let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
+        let (h00, h10, h01, h11) = (
+            s(c0, r0),
+            s(c0 + step, r0),
+            s(c0, r0 + step),
+            s(c0 + step, r0 + step),
+        );
+        if fx + fy <= 1.0 {
+            h00 + (h10 - h00) * fx + (h01 - h00) * fy
+        } else {
+            h11 + (h01 - h11) * (1.0 - fx) + (h10 - h11) * (1.0 - fy)
+        }
+    };
+    let (mut mm, mut te, mut le) = (Vec::new(), Vec::new(), Vec::new());
+    for lod in 0..=levels.root_lod {
+        let span = levels.grid_size << lod;
+        let (nx, ny) = levels.tiles_per_side[lod as usize];
+        let mut worst = 0.0f64;
+        for ty in 0..ny {
+            for tx in 0..nx {
+                let (c0, r0) = (tx * span, ty * span);
+                let (c1, r1) = (
+                    (c0 + span).min(data.width - 1),
+                    (r0 + span).min(data.height - 1),
+                );
+                let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                let mut error = 0.0f64;
+                for r in r0..=r1 {
+                    for c in c0..=c1 {
+                        let h = data.sample(c, r);
+                        lo = lo.min(h);
+                        hi = hi.max(h);
+                        if lod > 0 {
+                            error = error.max((level_height(lod, c, r) - h as f64).abs());
+                        }
+                    }
+                }
+                mm.extend([lo, hi]);
+                te.push(error as f32);
+                worst = worst.max(error);
+            }
+        }
+        le.push(worst);
+    }
+    (mm, te, le)
+}
+
+/// Bit patterns whose `Debug` shows only the length and the first entries, so a failed
+/// `assert_eq!` stays readable.
+#[derive(PartialEq)]
+struct Bits(Vec<u32>);
+
+impl std::fmt::Debug for Bits {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} entries, first {:?}",
+            self.0.len(),
+            &self.0[..self.0.len().min(4)]
+        )
+    }
 }

@@ -271,24 +271,7 @@ impl PyramidReader {
         let Some((file, path)) = cache.file.as_mut() else {
             return Err(Error::invalid(self.dir.display().to_string(), "no level 0"));
         };
-        let ds = &self.dataset;
-        let node =
-            super::pyramid::read_node_from(file, path, &ds.layout, 0, ds.layers, key.0, key.1)?;
-        let (c, b, s) = (
-            self.center as usize,
-            ds.layout.border as usize,
-            ds.layout.side() as usize,
-        );
-        if node.heights.len() != s * s {
-            return Err(Error::invalid(
-                format!("{} node 0/{}/{}", path.display(), key.0, key.1),
-                format!("{} heights, expected {}", node.heights.len(), s * s),
-            ));
-        }
-        let mut heights = Vec::with_capacity(c * c);
-        for j in 0..c {
-            heights.extend_from_slice(&node.heights[(j + b) * s + b..(j + b) * s + b + c]);
-        }
+        let heights = self.read_centre(file, path, key)?;
         if let Some(bad) = heights.iter().position(|h| !h.is_finite()) {
             return Err(Error::invalid(
                 format!("{} node 0/{}/{}", path.display(), key.0, key.1),
@@ -319,6 +302,43 @@ impl PyramidReader {
         };
         cache.index.insert(key, i);
         Ok(i)
+    }
+}
+
+impl PyramidReader {
+    /// The `center²` heights of level-0 node `key`: one seek and one read of the record's
+    /// height rows that hold centre texels (their border texels come along; albedo and mask
+    /// are not read). The level file's size was checked when it was opened.
+    fn read_centre(&self, file: &mut File, path: &Path, key: (u32, u32)) -> Result<Vec<f32>> {
+        use std::io::{Read, Seek, SeekFrom};
+        let ds = &self.dataset;
+        let (nx, ny) = ds.layout.nodes(0);
+        let what = || format!("{} node 0/{}/{}", path.display(), key.0, key.1);
+        if key.0 >= nx || key.1 >= ny {
+            return Err(Error::invalid(what(), format!("outside {nx}x{ny} nodes")));
+        }
+        let (c, b, s) = (
+            self.center as usize,
+            ds.layout.border as usize,
+            ds.layout.side() as usize,
+        );
+        let start = ds.layout.record_offset(0, key.0, key.1, ds.layers)
+            + super::pyramid::NODE_HEADER
+            + (b * s * 4) as u64;
+        let mut buf = vec![0u8; c * s * 4];
+        file.seek(SeekFrom::Start(start))
+            .map_err(|e| Error::io(path, e))?;
+        file.read_exact(&mut buf)
+            .map_err(|e| Error::invalid(what(), format!("unreadable (truncated file?): {e}")))?;
+        let mut heights = Vec::with_capacity(c * c);
+        for row in buf.chunks_exact(s * 4) {
+            heights.extend(
+                row[b * 4..(b + c) * 4]
+                    .chunks_exact(4)
+                    .map(|v| f32::from_le_bytes([v[0], v[1], v[2], v[3]])),
+            );
+        }
+        Ok(heights)
     }
 }
 

@@ -170,6 +170,19 @@ fn tile_stats<D: Level0 + ?Sized>(
                 let cell = c >> lod << lod;
                 let k = match corners {
                     Some((at, k)) if at == cell => k,
+                    // The next cell along the row: its left corners are the previous cell's
+                    // right ones (the same samples: `cell` is a valid column, so unclamped).
+                    Some((at, [_, h10, _, h11])) if at + (1 << lod) == cell => {
+                        let (step, w, hh) = (1u32 << lod, data.width(), data.height());
+                        let r0 = r >> lod << lod;
+                        let right = |r: u32| {
+                            data.sample((cell + step).min(w - 1), r.min(hh - 1))
+                                .map(|v| v as f64)
+                        };
+                        let k = [h10, right(r0)?, h11, right(r0 + step)?];
+                        corners = Some((cell, k));
+                        k
+                    }
                     _ => {
                         let k = level_corners(data, lod, c, r)?;
                         corners = Some((cell, k));
