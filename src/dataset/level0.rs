@@ -23,6 +23,15 @@ pub trait Level0 {
     /// that cannot be read.
     fn sample(&self, col: u32, row: u32) -> Result<f32>;
 
+    /// Samples `col0..=col1` of `row` into `out` (replacing its contents).
+    fn row(&self, row: u32, col0: u32, col1: u32, out: &mut Vec<f32>) -> Result<()> {
+        out.clear();
+        for c in col0..=col1 {
+            out.push(self.sample(c, row)?);
+        }
+        Ok(())
+    }
+
     /// World extent in metres `(x_max, y_max)`.
     fn extent(&self) -> (f64, f64) {
         (
@@ -67,6 +76,15 @@ impl Level0 for Heightmap {
     }
     fn bilinear(&self, x: f64, y: f64) -> Result<f64> {
         Ok(self.height_at(x, y))
+    }
+    fn row(&self, row: u32, col0: u32, col1: u32, out: &mut Vec<f32>) -> Result<()> {
+        if row >= self.height || col1 >= self.width || col0 > col1 {
+            return Err(out_of_range(col1, row, self.width, self.height));
+        }
+        let start = row as usize * self.width as usize;
+        out.clear();
+        out.extend_from_slice(&self.heights[start + col0 as usize..=start + col1 as usize]);
+        Ok(())
     }
 }
 
@@ -381,6 +399,32 @@ impl Level0 for PyramidSweep<'_> {
     fn sample(&self, col: u32, row: u32) -> Result<f32> {
         let mut cache = self.cache.borrow_mut();
         self.reader.get(&mut cache, col, row)
+    }
+    /// One copy per node the row crosses.
+    fn row(&self, row: u32, col0: u32, col1: u32, out: &mut Vec<f32>) -> Result<()> {
+        let r = self.reader;
+        if row >= r.height || col1 >= r.width || col0 > col1 {
+            return Err(out_of_range(col1, row, r.width, r.height));
+        }
+        let mut cache = self.cache.borrow_mut();
+        let c = r.center;
+        out.clear();
+        let mut col = col0;
+        while col <= col1 {
+            // Makes the node holding (col, row) the last one read.
+            r.get(&mut cache, col, row)?;
+            let Some(i) = cache.last else {
+                return Err(Error::invalid("level-0 cache", "no node after a read"));
+            };
+            let (ox, oy) = cache.last_origin;
+            let end = col1.min(ox + c - 1);
+            let base = ((row - oy) * c) as usize;
+            out.extend_from_slice(
+                &cache.heights[i][base + (col - ox) as usize..=base + (end - ox) as usize],
+            );
+            col = end + 1;
+        }
+        Ok(())
     }
 }
 

@@ -71,6 +71,7 @@ impl Levels {
         let mut min_max = Vec::new();
         let mut tile_error = Vec::new();
         let mut level_error = Vec::new();
+        let mut rows = Rows::default();
         for lod in 0..=root_lod {
             let span = grid_size << lod;
             let nx = (width - 1).div_ceil(span);
@@ -80,7 +81,7 @@ impl Levels {
             let mut worst = 0.0f64;
             for ty in 0..ny {
                 for tx in 0..nx {
-                    let (mm, e) = tile_stats(data, lod, tx * span, ty * span, span)?;
+                    let (mm, e) = tile_stats(data, lod, tx * span, ty * span, span, &mut rows)?;
                     min_max.push(mm);
                     tile_error.push(e as f32);
                     worst = worst.max(e);
@@ -144,53 +145,61 @@ impl Levels {
     }
 }
 
+/// Row buffers reused across tiles: the tile's current row and the level's rows below and
+/// above it.
+#[derive(Default)]
+struct Rows {
+    row: Vec<f32>,
+    south: Vec<f32>,
+    north: Vec<f32>,
+}
+
 /// Min/max height of a tile's samples and its geometric error (level `lod` grid vs samples).
-/// The level's four corner heights are fetched once per level cell along a row (the values and
-/// the arithmetic per sample are those of [`level_height`]).
+/// Reads whole rows (`Level0::row`); per sample the values and the arithmetic are those of
+/// [`level_height`].
 fn tile_stats<D: Level0 + ?Sized>(
     data: &D,
     lod: u32,
     c0: u32,
     r0: u32,
     span: u32,
+    rows: &mut Rows,
 ) -> Result<([f32; 2], f64)> {
-    let (c1, r1) = (
-        (c0 + span).min(data.width() - 1),
-        (r0 + span).min(data.height() - 1),
-    );
+    let (w, h) = (data.width(), data.height());
+    let (c1, r1) = ((c0 + span).min(w - 1), (r0 + span).min(h - 1));
+    let step = 1u32 << lod;
+    // The level's corners of the tile's samples lie in columns c0 ..= c1 + step (clamped);
+    // c0 is a multiple of `step`.
+    let corner_end = (c1 + step).min(w - 1);
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
     let mut error = 0.0f64;
+    let mut level_row = None;
     for r in r0..=r1 {
-        let mut corners: Option<(u32, [f64; 4])> = None;
-        for c in c0..=c1 {
-            let h = data.sample(c, r)?;
-            lo = lo.min(h);
-            hi = hi.max(h);
-            if lod > 0 {
-                let cell = c >> lod << lod;
-                let k = match corners {
-                    Some((at, k)) if at == cell => k,
-                    // The next cell along the row: its left corners are the previous cell's
-                    // right ones (the same samples: `cell` is a valid column, so unclamped).
-                    Some((at, [_, h10, _, h11])) if at + (1 << lod) == cell => {
-                        let (step, w, hh) = (1u32 << lod, data.width(), data.height());
-                        let r0 = r >> lod << lod;
-                        let right = |r: u32| {
-                            data.sample((cell + step).min(w - 1), r.min(hh - 1))
-                                .map(|v| v as f64)
-                        };
-                        let k = [h10, right(r0)?, h11, right(r0 + step)?];
-                        corners = Some((cell, k));
-                        k
-                    }
-                    _ => {
-                        let k = level_corners(data, lod, c, r)?;
-                        corners = Some((cell, k));
-                        k
-                    }
-                };
-                error = error.max((level_interpolate(lod, k, c, r) - h as f64).abs());
-            }
+        data.row(r, c0, c1, &mut rows.row)?;
+        for &v in &rows.row {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        if lod == 0 {
+            continue;
+        }
+        let rl = r >> lod << lod;
+        if level_row != Some(rl) {
+            data.row(rl, c0, corner_end, &mut rows.south)?;
+            data.row((rl + step).min(h - 1), c0, corner_end, &mut rows.north)?;
+            level_row = Some(rl);
+        }
+        for (i, &v) in rows.row.iter().enumerate() {
+            let c = c0 + i as u32;
+            let cl = c >> lod << lod;
+            let (a, b) = ((cl - c0) as usize, ((cl + step).min(w - 1) - c0) as usize);
+            let k = [
+                rows.south[a] as f64,
+                rows.south[b] as f64,
+                rows.north[a] as f64,
+                rows.north[b] as f64,
+            ];
+            error = error.max((level_interpolate(lod, k, c, r) - v as f64).abs());
         }
     }
     Ok(([lo, hi], error))
