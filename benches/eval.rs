@@ -79,7 +79,7 @@ fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
     )?;
     let setup = EvalSetup {
         gpu: &gpu,
-        data: &p.data,
+        data: p.data.require_grid("eval bench")?,
         scenario: &p.scenario,
         frames: p.frames,
         warmup: 4,
@@ -88,7 +88,7 @@ fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
     };
     let evaluation = evaluate(&setup, &variants, &mut ())?;
     let out = PathBuf::from(format!("{root}/target/bench/eval/{}", case.name));
-    report::write(&evaluation, &p.data, &out, true)?;
+    report::write(&evaluation, p.data.require_grid("eval bench")?, &out, true)?;
     let brute = evaluation
         .summaries
         .iter()

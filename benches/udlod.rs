@@ -76,6 +76,7 @@ fn main() -> anyhow::Result<()> {
                 continue;
             }
         };
+        let grid = p.data.require_grid("udlod bench")?.clone();
         let gpu: Arc<Gpu> = Gpu::new(
             &GpuOptions {
                 select: p.config.device.select.clone(),
@@ -86,7 +87,7 @@ fn main() -> anyhow::Result<()> {
         )?;
         println!(
             "\n{} ({}x{}, {} frames of {}, {warmup} warm-up, device {})",
-            p.data.name,
+            p.data.name(),
             p.config.render.width,
             p.config.render.height,
             frames,
@@ -145,7 +146,7 @@ fn main() -> anyhow::Result<()> {
             options.readback_depth = true;
             options.lod = lod.clone();
             let mut renderer = Renderer::new(&gpu, &p.data, method, options)
-                .with_context(|| format!("{name} on {}", p.data.name))?;
+                .with_context(|| format!("{name} on {}", p.data.name()))?;
             let mut sampled: Vec<OwnedFrame> = Vec::new();
             let mut sink = |f: &FrameView<'_>| {
                 if f.index as usize >= warmup && f.index % SAMPLE_EVERY == 0 {
@@ -167,7 +168,7 @@ fn main() -> anyhow::Result<()> {
                         f.width,
                         f.height,
                         f.depth.as_ref().unwrap(),
-                        &p.data,
+                        &grid,
                     )
                 })
                 .collect();
@@ -201,7 +202,7 @@ fn main() -> anyhow::Result<()> {
                 psnr_db
             );
             rows.push(Row {
-                dataset: p.data.name.clone(),
+                dataset: p.data.name().to_string(),
                 variant: name,
                 frame_ms_median: s.frame_ms.median,
                 frame_ms_p99: s.frame_ms.p99,

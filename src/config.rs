@@ -387,6 +387,12 @@ impl Config {
                 "the clipmap streams every level; dataset.lod must be 0 or absent",
             ));
         }
+        if self.clipmap.enabled && self.method.name == "pgm" {
+            return Err(Error::invalid(
+                "clipmap.enabled",
+                "method pgm needs the whole height map in memory (its own height texture); use udlod or brute with the clipmap, or set clipmap.enabled = false",
+            ));
+        }
         Ok(())
     }
 }

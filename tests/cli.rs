@@ -438,4 +438,22 @@ fn render_through_the_clipmap_reports_streaming() {
         &out3,
         &["extra_views"],
     );
+    assert!(stdout.contains("peak RSS"), "{stdout}");
+    assert!(summary["peak_rss_bytes"].as_u64().unwrap() > 0);
+    assert!(summary2["peak_rss_bytes"].as_u64().unwrap() > 0);
+    // PGM needs the whole height map, which the clipmap path never loads: one line, no output.
+    let out4 = tmp.path().join("out4");
+    fails(
+        &[
+            "render",
+            "--config",
+            config.to_str().unwrap(),
+            "--method",
+            "pgm",
+            "--out",
+            out4.to_str().unwrap(),
+        ],
+        &out4,
+        &["pgm", "clipmap"],
+    );
 }

@@ -16,9 +16,10 @@ use vkterrain::clipmap::{
 };
 use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
 use vkterrain::dataset::procedural::ProceduralParams;
-use vkterrain::dataset::{Heightmap, tiles};
+use vkterrain::dataset::{Heightmap, Level0, PyramidReader, Terrain, tiles};
 use vkterrain::gpu_constants::CLIPMAP_LOD_SHIFT;
 use vkterrain::lod::MethodKind;
+use vkterrain::lod::udlod::select::Levels;
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer};
 use vkterrain::scene::Camera;
@@ -382,14 +383,17 @@ fn atlas_exhaustion_and_loader_errors_degrade_gracefully() {
     s.retry_frames = 1000;
     let cm = Clipmap::new(geometry, s, Arc::new(ds), 1).unwrap();
     let mut sink = CollectSink::default();
+    // Heights from the pyramid (node-by-node reader), not the height map: no level-0 array.
+    let level0 = Arc::new(PyramidReader::open(&broken).unwrap());
     let mut renderer = Renderer::with_clipmap(
         &gpu,
-        &data,
+        Terrain::Pyramid(level0.clone()),
         MethodKind::Udlod,
         common::options(192, 120, 2),
         Some(cm),
     )
     .unwrap();
+    assert!(level0.cached_bytes() <= level0.max_cached_bytes());
     for k in 0..24 {
         let f = 0.3 + 0.4 * k as f64 / 24.0;
         renderer
@@ -906,4 +910,170 @@ fn ring_edges_blend_shading_without_steps() {
     );
     assert!(blended * 10.0 < stepped, "blending leaves a shading step");
     common::assert_no_validation_messages(&gpu);
+}
+
+/// UDLOD's levels (per-tile min/max and errors, per-level errors, error field) built from the
+/// pyramid's level-0 nodes through the bounded reader equal those from the whole height map,
+/// bit for bit; the reader loads each node about once per level sweep and never holds more
+/// than its bound; bad positions and corrupt nodes are one-line errors.
+#[test]
+fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
+    let data = heightmap();
+    let reader = PyramidReader::open(dataset()).unwrap();
+    assert_eq!((reader.width(), reader.height()), (data.width, data.height));
+    assert_eq!(reader.spacing(), data.spacing);
+    // Bit patterns (short `Debug`: the vectors hold thousands of entries).
+    let bits = |v: &[f32]| Bits(v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+    for (grid, field_max) in [(16, 8.0), (8, 1.0), (4, 8.0)] {
+        let a = Levels::new(&data, grid, field_max).unwrap();
+        let b = Levels::new(&reader.sweep(), grid, field_max).unwrap();
+        // Both equal the statistics as computed before `Level0` (sample by sample).
+        let (mm, te, le) = reference_statistics(&data, &a);
+        assert_eq!(
+            bits(&mm),
+            bits(&a.min_max.concat()),
+            "reference min/max, grid {grid}"
+        );
+        assert_eq!(
+            bits(&te),
+            bits(&a.tile_error),
+            "reference tile errors, grid {grid}"
+        );
+        assert_eq!(le, a.level_error, "reference level errors, grid {grid}");
+        assert_eq!(a.tiles_per_side, b.tiles_per_side);
+        assert_eq!(a.level_offsets, b.level_offsets);
+        assert_eq!(
+            (a.width, a.height, a.root_lod),
+            (b.width, b.height, b.root_lod)
+        );
+        assert_eq!(a.spacing.to_bits(), b.spacing.to_bits());
+        let mm = |l: &Levels| l.min_max.iter().flatten().copied().collect::<Vec<_>>();
+        assert_eq!(bits(&mm(&a)), bits(&mm(&b)), "min/max, grid {grid}");
+        assert_eq!(bits(&a.tile_error), bits(&b.tile_error), "tile errors");
+        let e64 = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(e64(&a.level_error), e64(&b.level_error));
+        assert!(a.level_error.iter().any(|&e| e > 0.0));
+        assert_eq!(
+            bits(&a.field.corners),
+            bits(&b.field.corners),
+            "error field"
+        );
+        assert_eq!(e64(&a.field.sigma), e64(&b.field.sigma));
+        assert_eq!(e64(&a.field.mu), e64(&b.field.mu));
+        assert!(reader.cached_bytes() <= reader.max_cached_bytes());
+    }
+    // 17x17 level-0 nodes, cache 3 x 17 + 8 = 59: the three builds sweep 6 + 7 + 8 levels and
+    // load every node about once per level sweep (a thrashing cache would reload nodes for
+    // every tile row).
+    let nodes = 17 * 17;
+    assert_eq!(reader.capacity(), 59);
+    let loads = reader.node_loads();
+    eprintln!("node loads for 3 level builds: {loads}");
+    assert!(loads <= 21 * nodes * 5 / 4, "{loads} node loads");
+    // The reader's bilinear height equals the height map's, bit for bit.
+    let (ex, ey) = data.extent();
+    for k in 0..200 {
+        let (x, y) = (
+            ex * (k as f64 * 0.618).fract(),
+            ey * (k as f64 * 0.382).fract(),
+        );
+        assert_eq!(
+            reader.bilinear(x, y).unwrap().to_bits(),
+            data.height_at(x, y).to_bits()
+        );
+    }
+    reader.clear();
+    assert_eq!(reader.cached_bytes(), 0);
+    let e = reader.sample(SIZE, 0).unwrap_err().to_string();
+    assert!(e.contains("outside") && !e.contains('\n'), "{e}");
+
+    // A NaN in a level-0 node: an error naming the node, not data and not a panic.
+    let broken = dataset().with_file_name("broken-l0");
+    copy_dir(dataset(), &broken);
+    let record = tiles::Dataset::open(&broken).unwrap().manifest.levels[0].record_size;
+    {
+        use std::io::{Seek, SeekFrom, Write};
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .open(broken.join("L0.bin"))
+            .unwrap();
+        // Node (1, 0): a texel inside its centre (row 2 + border 2, column 2 + border 2).
+        let side = CENTER as u64 + 4;
+        f.seek(SeekFrom::Start(64 + record + 16 + 4 * (4 * side + 4)))
+            .unwrap();
+        f.write_all(&f32::NAN.to_le_bytes()).unwrap();
+    }
+    let bad = PyramidReader::open(&broken).unwrap();
+    let e = Levels::new(&bad.sweep(), 16, 8.0).unwrap_err().to_string();
+    assert!(e.contains("node 0/1/0") && !e.contains('\n'), "{e}");
+}
+
+/// UDLOD's per-tile min/max, tile errors and level errors exactly as `select.rs` computed them
+/// before `Level0` (every sample, four grid corners per sample), for `levels`' tiling.
+fn reference_statistics(data: &Heightmap, levels: &Levels) -> (Vec<f32>, Vec<f32>, Vec<f64>) {
+    let level_height = |lod: u32, c: u32, r: u32| {
+        let step = 1u32 << lod;
+        let s = |c: u32, r: u32| data.sample(c.min(data.width - 1), r.min(data.height - 1)) as f64;
+        let (c0, r0) = (c / step * step, r / step * step);
+        let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
+        let (h00, h10, h01, h11) = (
+            s(c0, r0),
+            s(c0 + step, r0),
+            s(c0, r0 + step),
+            s(c0 + step, r0 + step),
+        );
+        if fx + fy <= 1.0 {
+            h00 + (h10 - h00) * fx + (h01 - h00) * fy
+        } else {
+            h11 + (h01 - h11) * (1.0 - fx) + (h10 - h11) * (1.0 - fy)
+        }
+    };
+    let (mut mm, mut te, mut le) = (Vec::new(), Vec::new(), Vec::new());
+    for lod in 0..=levels.root_lod {
+        let span = levels.grid_size << lod;
+        let (nx, ny) = levels.tiles_per_side[lod as usize];
+        let mut worst = 0.0f64;
+        for ty in 0..ny {
+            for tx in 0..nx {
+                let (c0, r0) = (tx * span, ty * span);
+                let (c1, r1) = (
+                    (c0 + span).min(data.width - 1),
+                    (r0 + span).min(data.height - 1),
+                );
+                let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                let mut error = 0.0f64;
+                for r in r0..=r1 {
+                    for c in c0..=c1 {
+                        let h = data.sample(c, r);
+                        lo = lo.min(h);
+                        hi = hi.max(h);
+                        if lod > 0 {
+                            error = error.max((level_height(lod, c, r) - h as f64).abs());
+                        }
+                    }
+                }
+                mm.extend([lo, hi]);
+                te.push(error as f32);
+                worst = worst.max(error);
+            }
+        }
+        le.push(worst);
+    }
+    (mm, te, le)
+}
+
+/// Bit patterns whose `Debug` shows only the length and the first entries, so a failed
+/// `assert_eq!` stays readable.
+#[derive(PartialEq)]
+struct Bits(Vec<u32>);
+
+impl std::fmt::Debug for Bits {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} entries, first {:?}",
+            self.0.len(),
+            &self.0[..self.0.len().min(4)]
+        )
+    }
 }

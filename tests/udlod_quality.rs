@@ -174,7 +174,7 @@ fn error_field_saves_triangles() {
         "field {with_field} vs distance-only {distance_only}"
     );
     // The field's construction invariants (property 3 of ErrorField) on this data.
-    let levels = Levels::new(&data, 8, 8.0);
+    let levels = Levels::new(&data, 8, 8.0).unwrap();
     for l in 1..levels.root_lod as usize {
         assert!(levels.field.sigma[l] <= vkterrain::lod::udlod::select::FIELD_LEVEL_RATIO + 1e-6);
         assert!(levels.field.mu[l] <= 8.0);
@@ -294,7 +294,7 @@ fn effective_step(data: &Heightmap, start: DVec3, step: DVec3, frames: usize) ->
 /// `max_l 2 * S * 2^l * spacing * s * focal / (r * (1 - r) * D[l + 1]^2)` pixels.
 /// Without morphing a level switch moves the surface by a level's whole error at once.
 fn pop_bound(data: &Heightmap, settings: &LodSettings, step: f64) -> f64 {
-    let levels = Levels::new(data, settings.grid_size, settings.error_field_max);
+    let levels = Levels::new(data, settings.grid_size, settings.error_field_max).unwrap();
     let focal = Camera::default().focal_px(H);
     let split = levels.split_distances(focal, settings.tau_px, settings.morph_range);
     let mut slope = 0.0f64;
@@ -484,7 +484,13 @@ fn no_pinholes_from_back_facing_slivers_far_away() {
         tau_px: 4.0,
         ..p.config.lod.clone()
     };
-    let frames = common::render_method(&gpu, &p.data, MethodKind::Udlod, options, &requests);
+    let frames = common::render_method(
+        &gpu,
+        p.data.grid().expect("a grid data set"),
+        MethodKind::Udlod,
+        options,
+        &requests,
+    );
     for f in &frames {
         let d = f.depth.as_ref().unwrap();
         let (w, h) = (w as usize, h as usize);

@@ -80,7 +80,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         "device {} ({}); dataset {}; method {}; scenario {}; {} frames, {} warm-up excluded",
         gpu.info.name,
         gpu.info.type_name(),
-        p.data.name,
+        p.data.name(),
         p.method.name(),
         p.scenario.name,
         p.frames,
@@ -152,7 +152,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         let json = serde_json::json!({
             "device": gpu.info.name,
             "device_type": gpu.info.type_name(),
-            "dataset": p.data.name,
+            "dataset": p.data.name(),
             "method": p.method.name(),
             "scenario": p.scenario.name,
             "frames": p.frames,

@@ -96,9 +96,10 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         .with_env(),
     )?;
     let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
+    let data = p.data.require_grid("eval (exact-surface metrics)")?;
     let setup = EvalSetup {
         gpu: &gpu,
-        data: &p.data,
+        data,
         scenario: &p.scenario,
         frames: p.frames,
         warmup,
@@ -110,14 +111,14 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         variants.len(),
         p.frames,
         p.scenario.name,
-        p.data.name,
+        data.name,
         setup.options.width,
         setup.options.height,
         gpu.info.name
     );
     let evaluation = evaluate(&setup, &variants, &mut Bars(None))?;
     super::render::check_validation(&gpu)?;
-    report::write(&evaluation, &p.data, &out, args.force)?;
+    report::write(&evaluation, data, &out, args.force)?;
     println!(
         "{:<28} {:>9} {:>10} {:>10} {:>10} {:>6} {:>9} {:>9}",
         "variant", "median ms", "triangles", "err p99.9", "err max", "holes", "popping", "swimming"

@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::config::Config;
-use crate::dataset::Heightmap;
+use crate::dataset::{Level0, PyramidReader, Terrain};
 use crate::driver::{Gpu, GpuOptions};
 use crate::lod::MethodKind;
 use crate::output::png::PngSink;
@@ -59,7 +59,9 @@ pub struct RenderArgs {
 /// Everything a render run needs, checked before any output exists.
 pub struct Prepared {
     pub config: Config,
-    pub data: Heightmap,
+    /// The whole grid, or with `[clipmap] enabled` the tile pyramid read node by node (level 0
+    /// is then never held whole on the host).
+    pub data: Terrain,
     pub scenario: Scenario,
     pub frames: u32,
     pub method: MethodKind,
@@ -95,7 +97,19 @@ pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
     }
     config.validate()?;
     let method = MethodKind::parse(&config.method.name)?;
-    let data = crate::dataset::load(&config)?;
+    let data = if config.clipmap.enabled {
+        let path = config
+            .dataset
+            .path
+            .as_ref()
+            .map(|p| config.resolve(p))
+            .ok_or_else(|| {
+                crate::Error::invalid("dataset.path", "the clipmap needs a tiles data set")
+            })?;
+        Terrain::Pyramid(Arc::new(PyramidReader::open(&path)?))
+    } else {
+        Terrain::Grid(Arc::new(crate::dataset::load(&config)?))
+    };
     let scenario_path = match &args.scenario {
         Some(p) => Some(p.clone()),
         None => config.scenario.path.as_ref().map(|p| config.resolve(p)),
@@ -148,7 +162,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     )?;
     let mut renderer = Renderer::with_clipmap(
         &gpu,
-        &p.data,
+        p.data.clone(),
         p.method,
         RenderOptions::from_config(&p.config),
         crate::clipmap::from_config(&p.config)?,
@@ -191,7 +205,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let json = serde_json::json!({
         "device": gpu.info.name,
         "device_type": gpu.info.type_name(),
-        "dataset": p.data.name,
+        "dataset": p.data.name(),
         "method": renderer.method_name(),
         "scenario": p.scenario.name,
         "width": renderer.options.width,
@@ -202,6 +216,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         "summary": summary,
         "pngs": written,
         "per_frame": renderer.stats.frames,
+        "peak_rss_bytes": crate::render::stats::peak_rss_bytes(),
         "clipmap": renderer.clipmap().map(|c| serde_json::json!({
             "counters": c.counters,
             "atlas_bytes": c.atlas_bytes(),
@@ -256,7 +271,10 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
     let _ = writeln!(
         o,
         "dataset:         {} ({}x{} samples, {} m)",
-        p.data.name, p.data.width, p.data.height, p.data.spacing
+        p.data.name(),
+        p.data.width(),
+        p.data.height(),
+        p.data.spacing()
     );
     let _ = writeln!(o, "method:          {}", r.method_name());
     if let Some(c) = r.clipmap() {
@@ -325,6 +343,13 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
         "overlap:         {:.0}% of frames delivered while the next was on the GPU",
         s.overlapped_fraction * 100.0
     );
+    if let Some(b) = crate::render::stats::peak_rss_bytes() {
+        let _ = writeln!(
+            o,
+            "host memory:     peak RSS {:.0} MiB (VmHWM)",
+            b as f64 / (1u64 << 20) as f64
+        );
+    }
     for w in written {
         let _ = writeln!(o, "wrote:           {}", w.display());
     }

@@ -355,7 +355,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     tracing::info!(
         ring = config.ring.name,
         device = gpu.info.name,
-        dataset = p.data.name,
+        dataset = p.data.name(),
         width = options.width,
         height = options.height,
         "serving"
@@ -388,7 +388,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             ring: ring.name().into(),
             generation: ring.generation(),
             device: gpu.info.name.clone(),
-            dataset: p.data.name.clone(),
+            dataset: p.data.name().to_string(),
             width: options.width,
             height: options.height,
             frames_rendered: rendered,

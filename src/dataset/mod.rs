@@ -5,6 +5,7 @@
 //! images whose first row is north are flipped when loaded. Heights are metres.
 
 pub mod geotiff;
+pub mod level0;
 pub mod manifest;
 pub mod preprocess;
 pub mod procedural;
@@ -15,6 +16,7 @@ pub mod tiles;
 pub mod voids;
 
 use crate::error::{Error, Result};
+pub use level0::{Level0, PyramidReader, Terrain};
 
 /// A regular height grid in metres, with optional albedo of the same extent.
 #[derive(Clone, Debug)]

@@ -100,6 +100,12 @@ impl Dataset {
         Ok((f, path))
     }
 
+    /// Opens level `lod`'s file after checking its size and magic (for repeated
+    /// [`super::pyramid::read_node_from`] calls).
+    pub fn open_level(&self, lod: u32) -> Result<(File, PathBuf)> {
+        self.level_file(lod)
+    }
+
     /// Reads one node alone (one seek, one read of its record).
     pub fn read_node(&self, lod: u32, x: u32, y: u32) -> Result<Node> {
         let (mut f, path) = self.level_file(lod)?;

@@ -221,7 +221,8 @@ impl Progress for () {
 /// Settings of one evaluation run.
 pub struct EvalSetup<'a> {
     pub gpu: &'a Arc<Gpu>,
-    pub data: &'a Heightmap,
+    /// Shared with every renderer of the run (never copied).
+    pub data: &'a Arc<Heightmap>,
     pub scenario: &'a Scenario,
     pub frames: u32,
     pub warmup: usize,

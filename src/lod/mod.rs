@@ -61,7 +61,8 @@ impl MethodKind {
 pub struct MethodContext<'a> {
     pub gpu: &'a std::sync::Arc<crate::driver::Gpu>,
     pub terrain: &'a TerrainGpu,
-    pub data: &'a crate::dataset::Heightmap,
+    /// Level-0 heights: the grid in memory, or a tile pyramid (clipmap path).
+    pub data: &'a crate::dataset::Terrain,
     pub settings: &'a LodSettings,
     pub formats: TargetFormats,
     pub slots: usize,

@@ -354,7 +354,8 @@ impl Pgm {
             pool: vk::DescriptorPool::null(),
             sampler: vk::Sampler::null(),
         };
-        let levels = height_mips(ctx.data);
+        let data = ctx.data.require_grid("method pgm")?.clone();
+        let levels = height_mips(&data);
         let bytes: Vec<Vec<u8>> = levels
             .iter()
             .map(|l| l.iter().flat_map(|h| h.to_le_bytes()).collect())
@@ -365,8 +366,8 @@ impl Pgm {
             "pgm height mips",
             format,
             vk::Extent2D {
-                width: ctx.data.width,
-                height: ctx.data.height,
+                width: data.width,
+                height: data.height,
             },
             &refs,
         )?;
@@ -508,8 +509,8 @@ impl Pgm {
             sets,
             _heights: heights,
             mips: levels.len() as u32,
-            data: Arc::new(ctx.data.clone()),
-            block_min: BlockMin::new(ctx.data),
+            block_min: BlockMin::new(&data),
+            data,
             settings,
             _raw: raw,
         })

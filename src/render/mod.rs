@@ -18,7 +18,7 @@ use gpu_allocator::MemoryLocation;
 
 use crate::clipmap::Clipmap;
 use crate::clipmap::gpu::ClipmapGpu;
-use crate::dataset::Heightmap;
+use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, ImageAccess, MemoryAccess, color_range, depth_range};
 use crate::driver::memory::{Buffer, Image, ImageDesc};
@@ -173,24 +173,27 @@ pub struct Renderer {
 }
 
 impl Renderer {
+    /// `data`: an `Arc<Heightmap>` (or a `Terrain`) is shared; a `&Heightmap` is copied.
     pub fn new(
         gpu: &Arc<Gpu>,
-        data: &Heightmap,
+        data: impl Into<Terrain>,
         method: MethodKind,
         options: RenderOptions,
     ) -> Result<Self> {
         Self::with_clipmap(gpu, data, method, options, None)
     }
 
-    /// [`Renderer::new`] with heights sampled through `clipmap` (its level 0 must be `data`:
-    /// `data` still provides the normal map and albedo).
+    /// [`Renderer::new`] with heights, normals and albedo sampled through `clipmap` (its level
+    /// 0 must be `data`'s; with a clipmap, `data` may be a [`Terrain::Pyramid`], whose level 0
+    /// is never held whole on the host).
     pub fn with_clipmap(
         gpu: &Arc<Gpu>,
-        data: &Heightmap,
+        data: impl Into<Terrain>,
         method: MethodKind,
         options: RenderOptions,
         clipmap: Option<Clipmap>,
     ) -> Result<Self> {
+        let data: Terrain = data.into();
         let limits = &gpu.info.limits;
         if options.width == 0
             || options.height == 0
@@ -234,13 +237,16 @@ impl Renderer {
             ));
         }
         if let Some(c) = &clipmap
-            && (c.geometry.width, c.geometry.height) != (data.width as u64, data.height as u64)
+            && (c.geometry.width, c.geometry.height) != (data.width() as u64, data.height() as u64)
         {
             return Err(Error::invalid(
                 "clipmap",
                 format!(
                     "level 0 is {}x{} but the height map is {}x{} (use the data set's level 0)",
-                    c.geometry.width, c.geometry.height, data.width, data.height
+                    c.geometry.width,
+                    c.geometry.height,
+                    data.width(),
+                    data.height()
                 ),
             ));
         }
@@ -257,7 +263,7 @@ impl Renderer {
         };
         // Per-view state (uniforms, set 0, the method's buffers, the clipmap's quadtree) lives
         // in view slots `frame slot * views + view`; targets and staging stay per frame slot.
-        let terrain = TerrainGpu::new(gpu, data, n * views, &clipmap_gpu)?;
+        let terrain = TerrainGpu::new(gpu, &data, n * views, &clipmap_gpu)?;
         let render_pass = if gpu.modern {
             vk::RenderPass::null()
         } else {
@@ -273,7 +279,7 @@ impl Renderer {
             &MethodContext {
                 gpu,
                 terrain: &terrain,
-                data,
+                data: &data,
                 settings: &options.lod,
                 formats,
                 slots: n * views,

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
-use crate::dataset::Heightmap;
+use crate::dataset::{Heightmap, Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::memory::{Buffer, Image};
 use crate::error::{Error, Result, VkResultExt};
@@ -82,24 +82,10 @@ impl TerrainGpu {
     /// quadtree); a disabled placeholder keeps the single-texture path.
     pub fn new(
         gpu: &Arc<Gpu>,
-        data: &Heightmap,
+        data: &Terrain,
         slots: usize,
         clipmap: &crate::clipmap::gpu::ClipmapGpu,
     ) -> Result<Self> {
-        let max_side = gpu.info.limits.max_image_dimension2_d;
-        if data.width > max_side || data.height > max_side {
-            return Err(Error::invalid(
-                &data.name,
-                format!(
-                    "{}x{} exceeds the device's {max_side} texels per side",
-                    data.width, data.height
-                ),
-            ));
-        }
-        let extent = vk::Extent2D {
-            width: data.width,
-            height: data.height,
-        };
         let (height, normal, albedo) = if clipmap.enabled {
             // Heights, normals and albedo all come through the clipmap's atlas: 1x1
             // placeholders keep the bindings valid without the full-resolution textures.
@@ -113,35 +99,15 @@ impl TerrainGpu {
                 Image::texture_with_data(gpu, "albedo", vk::Format::R8G8B8A8_SRGB, one, &[0; 4])?,
             )
         } else {
-            let heights: Vec<u8> = data.heights.iter().flat_map(|h| h.to_le_bytes()).collect();
-            let height =
-                Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, &heights)?;
-            let normal = Image::texture_with_data(
-                gpu,
-                "normals",
-                vk::Format::R8G8B8A8_SNORM,
-                extent,
-                &data.normals_snorm8(),
-            )?;
-            let albedo_data = data.albedo_or_ramp();
-            let albedo = Image::texture_with_data(
-                gpu,
-                "albedo",
-                vk::Format::R8G8B8A8_SRGB,
-                vk::Extent2D {
-                    width: albedo_data.width,
-                    height: albedo_data.height,
-                },
-                &albedo_data.rgba,
-            )?;
-            (height, normal, albedo)
+            let data = data.require_grid("the single-texture path (clipmap off)")?;
+            Self::textures(gpu, data)?
         };
         let (min_height, max_height) = data.height_range();
         let info = TerrainInfo {
-            name: data.name.clone(),
-            width: data.width,
-            height: data.height,
-            spacing: data.spacing,
+            name: data.name().to_string(),
+            width: data.width(),
+            height: data.height(),
+            spacing: data.spacing(),
             min_height,
             max_height,
         };
@@ -305,6 +271,49 @@ impl TerrainGpu {
             sets,
             uniforms,
         })
+    }
+}
+
+impl TerrainGpu {
+    /// The full-resolution height, normal and albedo textures of the single-texture path.
+    fn textures(gpu: &Arc<Gpu>, data: &Heightmap) -> Result<(Image, Image, Image)> {
+        let max_side = gpu.info.limits.max_image_dimension2_d;
+        if data.width > max_side || data.height > max_side {
+            return Err(Error::invalid(
+                &data.name,
+                format!(
+                    "{}x{} exceeds the device's {max_side} texels per side",
+                    data.width, data.height
+                ),
+            ));
+        }
+        let extent = vk::Extent2D {
+            width: data.width,
+            height: data.height,
+        };
+        let heights: Vec<u8> = data.heights.iter().flat_map(|h| h.to_le_bytes()).collect();
+        let height =
+            Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, &heights)?;
+        drop(heights);
+        let normal = Image::texture_with_data(
+            gpu,
+            "normals",
+            vk::Format::R8G8B8A8_SNORM,
+            extent,
+            &data.normals_snorm8(),
+        )?;
+        let albedo_data = data.albedo_or_ramp();
+        let albedo = Image::texture_with_data(
+            gpu,
+            "albedo",
+            vk::Format::R8G8B8A8_SRGB,
+            vk::Extent2D {
+                width: albedo_data.width,
+                height: albedo_data.height,
+            },
+            &albedo_data.rgba,
+        )?;
+        Ok((height, normal, albedo))
     }
 }
 

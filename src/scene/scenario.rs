@@ -12,7 +12,7 @@ use glam::DVec3;
 use serde::Deserialize;
 
 use super::Camera;
-use crate::dataset::Heightmap;
+use crate::dataset::Level0;
 use crate::error::{Error, Result};
 
 #[derive(Clone, Debug, Deserialize)]
@@ -85,7 +85,7 @@ pub struct Scenario {
 
 impl Scenario {
     /// Reads and resolves a scenario file against a data set.
-    pub fn load(path: &Path, data: &Heightmap) -> Result<Self> {
+    pub fn load<D: Level0 + ?Sized>(path: &Path, data: &D) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let file: ScenarioFile =
             toml::from_str(&text).map_err(|e| crate::config::toml_error(path, &text, &e))?;
@@ -96,14 +96,16 @@ impl Scenario {
     }
 
     /// The default flight, compiled in so the binary needs no files beside it.
-    pub fn builtin_default(data: &Heightmap) -> Result<Self> {
+    pub fn builtin_default<D: Level0 + ?Sized>(data: &D) -> Result<Self> {
         const TEXT: &str = include_str!("../../config/scenarios/default.toml");
         let file: ScenarioFile =
             toml::from_str(TEXT).map_err(|e| Error::invalid("built-in scenario", e.to_string()))?;
         Self::resolve(&file, data)
     }
 
-    pub fn resolve(file: &ScenarioFile, data: &Heightmap) -> Result<Self> {
+    /// `data`: level-0 heights (exact; a tile pyramid is read node by node) for
+    /// `above_ground` keyframes.
+    pub fn resolve<D: Level0 + ?Sized>(file: &ScenarioFile, data: &D) -> Result<Self> {
         let bad = |m: String| Err(Error::invalid("scenario", m));
         if !(file.fps.is_finite() && file.fps > 0.0) {
             return bad(format!("fps {} must be positive", file.fps));
@@ -126,7 +128,7 @@ impl Scenario {
                 (None, Some([u, v])) => {
                     let (x, y) = (u * ex, v * ey);
                     let z = match (k.above_ground, k.altitude) {
-                        (Some(a), None) => data.height_at(x, y) + a,
+                        (Some(a), None) => data.bilinear(x, y)? + a,
                         (None, Some(a)) => a,
                         _ => {
                             return bad(format!(

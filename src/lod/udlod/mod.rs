@@ -15,6 +15,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use super::{LodMethod, LodSettings, MethodContext, ViewState};
+use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
 use crate::driver::memory::Buffer;
@@ -70,7 +71,9 @@ pub struct Udlod {
     gpu: Arc<Gpu>,
     settings: LodSettings,
     levels: Levels,
-    heights: Arc<crate::dataset::Heightmap>,
+    /// Level-0 heights for the reference height under the LOD viewer (shared with the
+    /// caller: the grid's `Arc`, or the pyramid reader with its bounded node cache).
+    heights: Terrain,
     /// GPU mirrors of `levels.min_max` and `levels.field.corners` (kept alive for the
     /// descriptor sets).
     _min_max: Buffer,
@@ -108,7 +111,13 @@ impl Udlod {
         let gpu = ctx.gpu;
         let settings = ctx.settings.clone();
         settings.validate()?;
-        let levels = Levels::new(ctx.data, settings.grid_size, settings.error_field_max);
+        let levels = match ctx.data {
+            Terrain::Grid(h) => Levels::new(&**h, settings.grid_size, settings.error_field_max)?,
+            // One lock for the whole sweep; the reader's cache stays bounded.
+            Terrain::Pyramid(p) => {
+                Levels::new(&p.sweep(), settings.grid_size, settings.error_field_max)?
+            }
+        };
         if levels.levels() > UDLOD_MAX_LEVELS {
             return Err(Error::invalid(
                 "udlod",
@@ -198,7 +207,7 @@ impl Udlod {
         Ok(Udlod {
             gpu: gpu.clone(),
             settings,
-            heights: Arc::new(ctx.data.clone()),
+            heights: ctx.data.clone(),
             levels,
             _min_max: min_max,
             _error_field: error_field,
@@ -406,16 +415,19 @@ impl Udlod {
 
     /// The selection inputs for a view, exactly as uploaded (tests use them for the CPU
     /// reference).
-    pub fn selection_params(&self, view: &ViewState) -> SelectionParams {
-        SelectionParams::new(
+    pub fn selection_params(&self, view: &ViewState) -> Result<SelectionParams> {
+        let z_ref = self
+            .heights
+            .bilinear(view.lod_viewer.x, view.lod_viewer.y)?;
+        Ok(SelectionParams::with_reference(
             &self.levels,
-            &self.heights,
+            z_ref,
             &self.settings,
             &view.camera,
             view.lod_viewer,
             view.width,
             view.height,
-        )
+        ))
     }
 
     fn read_counters(&self, slot: usize) -> TilingState {
@@ -441,7 +453,7 @@ impl LodMethod for Udlod {
     }
 
     fn update(&mut self, slot: usize, view: &ViewState) -> Result<()> {
-        let p = self.selection_params(view);
+        let p = self.selection_params(view)?;
         let mut u = UdlodUniforms {
             frustum: p.frustum,
             ..Default::default()

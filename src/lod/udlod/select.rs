@@ -10,7 +10,8 @@
 use glam::{DVec3, Vec3};
 
 use super::super::LodSettings;
-use crate::dataset::Heightmap;
+use crate::dataset::{Heightmap, Level0};
+use crate::error::Result;
 use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
 use crate::scene::Camera;
 
@@ -55,8 +56,12 @@ pub struct Levels {
 
 impl Levels {
     /// Builds the levels; `field_max` (>= 1) caps the error field (1: distance-only).
-    pub fn new(data: &Heightmap, grid_size: u32, field_max: f64) -> Self {
-        let quads = (data.width - 1).max(data.height - 1);
+    /// `data` is any source of level-0 samples (the grid in memory, or a tile pyramid read
+    /// node by node); the result depends only on the sample values. Errors are the source's
+    /// (a pyramid node that cannot be read).
+    pub fn new<D: Level0 + ?Sized>(data: &D, grid_size: u32, field_max: f64) -> Result<Self> {
+        let (width, height) = (data.width(), data.height());
+        let quads = (width - 1).max(height - 1);
         let mut root_lod = 0;
         while (grid_size << root_lod) < quads {
             root_lod += 1;
@@ -66,16 +71,17 @@ impl Levels {
         let mut min_max = Vec::new();
         let mut tile_error = Vec::new();
         let mut level_error = Vec::new();
+        let mut rows = Rows::default();
         for lod in 0..=root_lod {
             let span = grid_size << lod;
-            let nx = (data.width - 1).div_ceil(span);
-            let ny = (data.height - 1).div_ceil(span);
+            let nx = (width - 1).div_ceil(span);
+            let ny = (height - 1).div_ceil(span);
             tiles_per_side.push((nx, ny));
             level_offsets.push(min_max.len() as u32);
             let mut worst = 0.0f64;
             for ty in 0..ny {
                 for tx in 0..nx {
-                    let (mm, e) = tile_stats(data, lod, tx * span, ty * span, span);
+                    let (mm, e) = tile_stats(data, lod, tx * span, ty * span, span, &mut rows)?;
                     min_max.push(mm);
                     tile_error.push(e as f32);
                     worst = worst.max(e);
@@ -86,9 +92,9 @@ impl Levels {
         let mut levels = Levels {
             grid_size,
             root_lod,
-            width: data.width,
-            height: data.height,
-            spacing: data.spacing,
+            width,
+            height,
+            spacing: data.spacing(),
             tiles_per_side,
             level_offsets,
             min_max,
@@ -97,7 +103,7 @@ impl Levels {
             field: ErrorField::default(),
         };
         levels.field = ErrorField::new(&levels, field_max);
-        levels
+        Ok(levels)
     }
 
     pub fn levels(&self) -> u32 {
@@ -139,42 +145,98 @@ impl Levels {
     }
 }
 
+/// Row buffers reused across tiles: the tile's current row and the level's rows below and
+/// above it.
+#[derive(Default)]
+struct Rows {
+    row: Vec<f32>,
+    south: Vec<f32>,
+    north: Vec<f32>,
+}
+
 /// Min/max height of a tile's samples and its geometric error (level `lod` grid vs samples).
-fn tile_stats(data: &Heightmap, lod: u32, c0: u32, r0: u32, span: u32) -> ([f32; 2], f64) {
-    let (c1, r1) = (
-        (c0 + span).min(data.width - 1),
-        (r0 + span).min(data.height - 1),
-    );
+/// Reads whole rows (`Level0::row`); per sample the values and the arithmetic are those of
+/// [`level_height`].
+fn tile_stats<D: Level0 + ?Sized>(
+    data: &D,
+    lod: u32,
+    c0: u32,
+    r0: u32,
+    span: u32,
+    rows: &mut Rows,
+) -> Result<([f32; 2], f64)> {
+    let (w, h) = (data.width(), data.height());
+    let (c1, r1) = ((c0 + span).min(w - 1), (r0 + span).min(h - 1));
+    let step = 1u32 << lod;
+    // The level's corners of the tile's samples lie in columns c0 ..= c1 + step (clamped);
+    // c0 is a multiple of `step`.
+    let corner_end = (c1 + step).min(w - 1);
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
     let mut error = 0.0f64;
+    let mut level_row = None;
     for r in r0..=r1 {
-        for c in c0..=c1 {
-            let h = data.sample(c, r);
-            lo = lo.min(h);
-            hi = hi.max(h);
-            if lod > 0 {
-                error = error.max((level_height(data, lod, c, r) - h as f64).abs());
-            }
+        data.row(r, c0, c1, &mut rows.row)?;
+        for &v in &rows.row {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        if lod == 0 {
+            continue;
+        }
+        let rl = r >> lod << lod;
+        if level_row != Some(rl) {
+            data.row(rl, c0, corner_end, &mut rows.south)?;
+            data.row((rl + step).min(h - 1), c0, corner_end, &mut rows.north)?;
+            level_row = Some(rl);
+        }
+        for (i, &v) in rows.row.iter().enumerate() {
+            let c = c0 + i as u32;
+            let cl = c >> lod << lod;
+            let (a, b) = ((cl - c0) as usize, ((cl + step).min(w - 1) - c0) as usize);
+            let k = [
+                rows.south[a] as f64,
+                rows.south[b] as f64,
+                rows.north[a] as f64,
+                rows.north[b] as f64,
+            ];
+            error = error.max((level_interpolate(lod, k, c, r) - v as f64).abs());
         }
     }
-    ([lo, hi], error)
+    Ok(([lo, hi], error))
 }
 
 /// Height of the level-`lod` triangulated grid at full-resolution sample `(c, r)`. Quads are
 /// split along the diagonal from (1, 0) to (0, 1), as `grid_indices` does. The level's edges
 /// run along full-resolution edges, so the largest difference between the two meshes is at a
 /// full-resolution sample: the per-sample maximum is the exact mesh-to-mesh error.
-fn level_height(data: &Heightmap, lod: u32, c: u32, r: u32) -> f64 {
+pub fn level_height<D: Level0 + ?Sized>(data: &D, lod: u32, c: u32, r: u32) -> Result<f64> {
+    Ok(level_interpolate(
+        lod,
+        level_corners(data, lod, c, r)?,
+        c,
+        r,
+    ))
+}
+
+/// The four level-`lod` samples around `(c, r)`: `(c0, r0)`, `(c0 + step, r0)`,
+/// `(c0, r0 + step)`, `(c0 + step, r0 + step)`, clamped to the data.
+fn level_corners<D: Level0 + ?Sized>(data: &D, lod: u32, c: u32, r: u32) -> Result<[f64; 4]> {
     let step = 1u32 << lod;
-    let s = |c: u32, r: u32| data.sample(c.min(data.width - 1), r.min(data.height - 1)) as f64;
+    let (w, h) = (data.width(), data.height());
+    let s = |c: u32, r: u32| data.sample(c.min(w - 1), r.min(h - 1)).map(|v| v as f64);
+    let (c0, r0) = (c / step * step, r / step * step);
+    Ok([
+        s(c0, r0)?,
+        s(c0 + step, r0)?,
+        s(c0, r0 + step)?,
+        s(c0 + step, r0 + step)?,
+    ])
+}
+
+fn level_interpolate(lod: u32, [h00, h10, h01, h11]: [f64; 4], c: u32, r: u32) -> f64 {
+    let step = 1u32 << lod;
     let (c0, r0) = (c / step * step, r / step * step);
     let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
-    let (h00, h10, h01, h11) = (
-        s(c0, r0),
-        s(c0 + step, r0),
-        s(c0, r0 + step),
-        s(c0 + step, r0 + step),
-    );
     if fx + fy <= 1.0 {
         h00 + (h10 - h00) * fx + (h01 - h00) * fy
     } else {
@@ -447,12 +509,26 @@ impl SelectionParams {
         width: u32,
         height: u32,
     ) -> Self {
+        let z_ref = data.height_at(lod_viewer.x, lod_viewer.y);
+        Self::with_reference(levels, z_ref, settings, camera, lod_viewer, width, height)
+    }
+
+    /// [`SelectionParams::new`] with the reference height `z_ref` (terrain under the LOD
+    /// viewer, metres) given.
+    pub fn with_reference(
+        levels: &Levels,
+        z_ref: f64,
+        settings: &LodSettings,
+        camera: &Camera,
+        lod_viewer: DVec3,
+        width: u32,
+        height: u32,
+    ) -> Self {
         let s = levels.spacing;
         let (cx, cy) = (
             (camera.position.x / s).floor(),
             (camera.position.y / s).floor(),
         );
-        let z_ref = data.height_at(lod_viewer.x, lod_viewer.y);
         let split = levels.split_distances(
             camera.focal_px(height),
             settings.tau_px,

@@ -1,0 +1,196 @@
+//! Host memory with heights through the clipmap: a UDLOD render of a 2049² pyramid must not
+//! allocate anything of level-0 size on the host. A counting global allocator (this test
+//! binary only; lavapipe's own C allocations are not counted) records the peak of live Rust
+//! heap bytes and the largest single allocation while the renderer is built and flies; the
+//! peak must stay below the stated budget (atlas CPU copies + level-0 node cache bound + UDLOD
+//! statistics + slack), which is itself well below level 0. A control run loads the height map
+//! and shows the counter sees level-0-sized allocations (so the check can fail).
+
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use glam::DVec3;
+use vkterrain::clipmap::{Clipmap, ClipmapSettings, DatasetSource, Geometry};
+use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
+use vkterrain::dataset::procedural::ProceduralParams;
+use vkterrain::dataset::{Level0, PyramidReader, Terrain, tiles};
+use vkterrain::lod::MethodKind;
+use vkterrain::readback::FrameView;
+use vkterrain::render::Renderer;
+use vkterrain::scene::Camera;
+
+struct Counting;
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+static LARGEST: AtomicUsize = AtomicUsize::new(0);
+
+fn grew(n: usize) {
+    let now = LIVE.fetch_add(n, Ordering::Relaxed) + n;
+    PEAK.fetch_max(now, Ordering::Relaxed);
+    LARGEST.fetch_max(n, Ordering::Relaxed);
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            grew(layout.size());
+        }
+        p
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        let p = unsafe { System.alloc_zeroed(layout) };
+        if !p.is_null() {
+            grew(layout.size());
+        }
+        p
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) };
+        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        let p = unsafe { System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+            grew(new_size);
+        }
+        p
+    }
+}
+
+#[global_allocator]
+static ALLOC: Counting = Counting;
+
+/// Starts a measurement: returns the live bytes now; peak and largest restart from here.
+fn start() -> usize {
+    let now = LIVE.load(Ordering::Relaxed);
+    PEAK.store(now, Ordering::Relaxed);
+    LARGEST.store(0, Ordering::Relaxed);
+    now
+}
+
+const SIZE: u32 = 2049;
+const CENTER: u32 = 64;
+const MIB: f64 = (1 << 20) as f64;
+
+fn dataset() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vkterrain-hostmem-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("p2049");
+    let opts = Options {
+        input: Input::Procedural(ProceduralParams {
+            size: SIZE,
+            seed: 5,
+            ..Default::default()
+        }),
+        out: out.clone(),
+        center_size: CENTER,
+        ..Default::default()
+    };
+    preprocess::run(&opts, &mut NoProgress).unwrap();
+    out
+}
+
+#[test]
+fn clipmap_render_holds_no_level0_sized_array_on_the_host() {
+    let dir = dataset();
+    let gpu = common::gpu(false);
+    let level0_bytes = SIZE as usize * SIZE as usize * 4;
+
+    let base = start();
+    let reader = Arc::new(PyramidReader::open(&dir).unwrap());
+    let source = DatasetSource::open(&dir).unwrap();
+    let geometry = Geometry::of(&source.dataset);
+    let settings = ClipmapSettings {
+        enabled: true,
+        atlas_capacity: 96,
+        node_count: 6,
+        max_in_flight: 16,
+        max_uploads_per_frame: 8,
+        workers: 1,
+        retry_frames: 30,
+        blend_nodes: 0.5,
+    };
+    let side = geometry.side() as usize;
+    let cm = Clipmap::new(geometry, settings, Arc::new(source), 1).unwrap();
+    let mut renderer = Renderer::with_clipmap(
+        &gpu,
+        Terrain::Pyramid(reader.clone()),
+        MethodKind::Udlod,
+        common::options(160, 100, 2),
+        Some(cm),
+    )
+    .unwrap();
+    let (ex, ey) = reader.extent();
+    let mut sink = |_: &FrameView<'_>| Ok(());
+    for k in 0..24 {
+        let f = 0.2 + 0.6 * k as f64 / 24.0;
+        let (x, y) = (f * ex, (1.0 - f) * ey);
+        let ground = reader.bilinear(x, y).unwrap();
+        let cam = Camera {
+            position: DVec3::new(x, y, ground + 300.0),
+            yaw_deg: 30.0,
+            pitch_deg: -20.0,
+            ..Camera::default()
+        };
+        renderer.render(cam, &mut sink).unwrap();
+    }
+    renderer.finish(&mut sink).unwrap();
+    let peak = PEAK.load(Ordering::Relaxed) - base;
+    let largest = LARGEST.load(Ordering::Relaxed);
+    let cm = renderer.clipmap().unwrap();
+    assert!(cm.counters.uploaded > 20, "{:?}", cm.counters);
+    // The budget: CPU copy of every atlas layer's heights, the level-0 node cache's bound,
+    // loads queued or waiting for upload (heights + shading planes each), and 2 MiB for everything else on the Rust
+    // side (pipelines, UDLOD's O(tiles) statistics, descriptors, loader queues).
+    let atlas_cpu = cm.settings.atlas_capacity as usize * side * side * 4;
+    let queued = (cm.settings.max_in_flight + cm.settings.max_uploads_per_frame) as usize;
+    let shading = queued * (side * side * 4 + cm.geometry.shading_texels() as usize * 8);
+    let cache = reader.max_cached_bytes() as usize;
+    let udlod_stats = {
+        let tiles = (SIZE as usize / 16 + 1).pow(2) * 4 / 3;
+        tiles * (8 + 4 + 4)
+    };
+    let budget = atlas_cpu + shading + cache + udlod_stats + (2 << 20);
+    eprintln!(
+        "peak Rust heap {:.2} MiB (budget {:.2}: atlas {:.2} + queued loads {:.2} + cache {:.2} + udlod {:.2} + 2 slack), largest allocation {:.2} MiB, level 0 {:.2} MiB; cache now {:.2} MiB in {} loads",
+        peak as f64 / MIB,
+        budget as f64 / MIB,
+        atlas_cpu as f64 / MIB,
+        shading as f64 / MIB,
+        cache as f64 / MIB,
+        udlod_stats as f64 / MIB,
+        largest as f64 / MIB,
+        level0_bytes as f64 / MIB,
+        reader.cached_bytes() as f64 / MIB,
+        reader.node_loads()
+    );
+    assert!(
+        budget < level0_bytes / 2,
+        "the budget must be well below level 0 for the check to mean anything"
+    );
+    assert!(peak <= budget, "peak {peak} bytes > budget {budget}");
+    assert!(
+        largest < level0_bytes / 8,
+        "an allocation of {largest} bytes"
+    );
+    assert!(reader.cached_bytes() <= reader.max_cached_bytes());
+    drop(renderer);
+    common::assert_no_validation_messages(&gpu);
+
+    // Control: the whole height map is one level-0-sized allocation, and the counter sees it.
+    let base = start();
+    let map = tiles::load(&dir, Some(0), u64::MAX).unwrap();
+    assert_eq!((map.width, map.height), (SIZE, SIZE));
+    assert!(PEAK.load(Ordering::Relaxed) - base >= level0_bytes);
+    assert!(LARGEST.load(Ordering::Relaxed) >= level0_bytes);
+    drop(map);
+    let _ = std::fs::remove_dir_all(dir.parent().unwrap());
+}
