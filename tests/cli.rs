@@ -331,6 +331,23 @@ fn no_vulkan_driver_names_the_package() {
     assert!(stderr.contains("mesa-vulkan-drivers"), "{stderr}");
 }
 
+/// `render --frames 4` that must succeed: its stdout and `summary.json`.
+fn render_4_frames(config: &Path, out: &Path) -> (String, serde_json::Value) {
+    let o = vkterrain(&[
+        "render",
+        "--config",
+        config.to_str().unwrap(),
+        "--frames",
+        "4",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    (String::from_utf8_lossy(&o.stdout).into_owned(), summary)
+}
+
 #[test]
 fn render_through_the_clipmap_reports_streaming() {
     let tmp = tempfile::tempdir().unwrap();
@@ -355,21 +372,8 @@ fn render_through_the_clipmap_reports_streaming() {
             data.display().to_string()
         ),
     );
-    let out = tmp.path().join("out");
-    let o = vkterrain(&[
-        "render",
-        "--config",
-        config.to_str().unwrap(),
-        "--frames",
-        "4",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (stdout, summary) = render_4_frames(&config, &tmp.path().join("out"));
     assert!(stdout.contains("clipmap:"), "{stdout}");
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let c = &summary["clipmap"];
     // 40 layers of 36² texels: height (4 B) + normal and albedo (4 B each) with mips 36, 18,
     // 9, 4.
@@ -388,20 +392,8 @@ fn render_through_the_clipmap_reports_streaming() {
         ),
     );
     let out2 = tmp.path().join("out2");
-    let o = vkterrain(&[
-        "render",
-        "--config",
-        two.to_str().unwrap(),
-        "--frames",
-        "4",
-        "--out",
-        out2.to_str().unwrap(),
-    ]);
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(stdout.contains("views:           2 cameras"), "{stdout}");
-    let summary2: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out2.join("summary.json")).unwrap()).unwrap();
+    let (stdout2, summary2) = render_4_frames(&two, &out2);
+    assert!(stdout2.contains("views:           2 cameras"), "{stdout2}");
     assert_eq!(summary2["views"], 2);
     assert_eq!(summary2["width"], 96);
     // Same atlas budget for two views as for one.
