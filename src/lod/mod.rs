@@ -77,6 +77,10 @@ pub struct ViewState {
     pub lod_viewer: glam::DVec3,
     pub width: u32,
     pub height: u32,
+    /// Terrain height under the LOD viewer as the clipmap samples it this frame (metres), when
+    /// heights come through one: methods then need no level-0 read (possibly from disk) on the
+    /// render thread. While nodes stream it comes from the best resident ancestor.
+    pub ground_m: Option<f64>,
 }
 
 /// One LOD method. Per frame the renderer calls `update` (host side, slot free), then records

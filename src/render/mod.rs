@@ -545,7 +545,7 @@ impl Renderer {
         // so its GPU work is complete and its buffers are free.
         debug_assert!(self.slots[slot_index].pending.is_none());
         let started = Instant::now();
-        let states: Vec<ViewState> = requests
+        let mut states: Vec<ViewState> = requests
             .iter()
             .enumerate()
             .map(|(v, r)| ViewState {
@@ -553,6 +553,7 @@ impl Renderer {
                 lod_viewer: r.lod_viewer.unwrap_or(r.camera.position),
                 width: self.view_columns(v).1,
                 height: self.options.height,
+                ground_m: None,
             })
             .collect();
         if let Some(cm) = &mut self.clipmap {
@@ -563,6 +564,16 @@ impl Renderer {
                 .map(|v| glam::DVec2::new(v.lod_viewer.x / spacing, v.lod_viewer.y / spacing))
                 .collect();
             let uploads = cm.update(&viewers);
+            // The terrain under each viewer (clamped into the data: the lookup extrapolates
+            // outside it), from memory.
+            let (w, h) = (
+                cm.geometry.width as f64 - 1.0,
+                cm.geometry.height as f64 - 1.0,
+            );
+            for (v, (state, viewer)) in states.iter_mut().zip(&viewers).enumerate() {
+                let p = [viewer.x.clamp(0.0, w) as f32, viewer.y.clamp(0.0, h) as f32];
+                state.ground_m = Some(cm.sample_height(v, p) as f64);
+            }
             self.clipmap_gpu
                 .stage_uploads(slot_index, &cm.geometry, &cm.atlas, &uploads)?;
             for (v, quadtree) in cm.views.iter().enumerate() {

@@ -416,9 +416,12 @@ impl Udlod {
     /// The selection inputs for a view, exactly as uploaded (tests use them for the CPU
     /// reference).
     pub fn selection_params(&self, view: &ViewState) -> Result<SelectionParams> {
-        let z_ref = self
-            .heights
-            .bilinear(view.lod_viewer.x, view.lod_viewer.y)?;
+        let z_ref = match view.ground_m {
+            Some(z) => z,
+            None => self
+                .heights
+                .bilinear(view.lod_viewer.x, view.lod_viewer.y)?,
+        };
         Ok(SelectionParams::with_reference(
             &self.levels,
             z_ref,
