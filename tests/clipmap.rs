@@ -14,8 +14,6 @@ use vkterrain::clipmap::quadtree::NO_NODE;
 use vkterrain::clipmap::{
     Clipmap, ClipmapSettings, DatasetSource, Geometry, NodeData, NodeKey, NodeSource,
 };
-use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
-use vkterrain::dataset::procedural::ProceduralParams;
 use vkterrain::dataset::{Heightmap, Level0, PyramidReader, Terrain, tiles};
 use vkterrain::gpu_constants::CLIPMAP_LOD_SHIFT;
 use vkterrain::lod::MethodKind;
@@ -36,24 +34,7 @@ const DEPTH_REL_TOLERANCE: f32 = 1e-5;
 /// A 513² procedural data set with 32-texel nodes (17x17 leaf nodes, 6 levels), built once.
 fn dataset() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("vkterrain-clipmap-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        let out = dir.join("p513");
-        let opts = Options {
-            input: Input::Procedural(ProceduralParams {
-                size: SIZE,
-                seed: 3,
-                ..Default::default()
-            }),
-            out: out.clone(),
-            center_size: CENTER,
-            ..Default::default()
-        };
-        preprocess::run(&opts, &mut NoProgress).unwrap();
-        out
-    })
+    DIR.get_or_init(|| common::procedural_pyramid("clipmap", SIZE, 3, CENTER))
 }
 
 fn heightmap() -> Heightmap {

@@ -15,8 +15,6 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::DVec3;
 use vkterrain::clipmap::{Clipmap, ClipmapSettings, DatasetSource, Geometry};
-use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
-use vkterrain::dataset::procedural::ProceduralParams;
 use vkterrain::dataset::{Level0, PyramidReader, Terrain, tiles};
 use vkterrain::lod::MethodKind;
 use vkterrain::readback::FrameView;
@@ -80,22 +78,7 @@ const CENTER: u32 = 64;
 const MIB: f64 = (1 << 20) as f64;
 
 fn dataset() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vkterrain-hostmem-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let out = dir.join("p2049");
-    let opts = Options {
-        input: Input::Procedural(ProceduralParams {
-            size: SIZE,
-            seed: 5,
-            ..Default::default()
-        }),
-        out: out.clone(),
-        center_size: CENTER,
-        ..Default::default()
-    };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
-    out
+    common::procedural_pyramid("hostmem", SIZE, 5, CENTER)
 }
 
 #[test]

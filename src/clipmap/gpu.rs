@@ -19,8 +19,9 @@ use super::quadtree::{HEADER_BYTES, ViewQuadtree};
 use super::{ClipmapSettings, Geometry, Upload};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, ImageAccess, MemoryAccess};
+use crate::driver::descriptors::DescriptorSets;
 use crate::driver::memory::{Buffer, Image, ImageDesc};
-use crate::error::{Error, Result, VkResultExt};
+use crate::error::{Error, Result};
 use crate::gpu_constants::CLIPMAP_PROBE_WORKGROUP;
 
 /// Bytes of one layer over the three attachments: height (R32F), normal (RGBA8 snorm, mips),
@@ -334,85 +335,51 @@ pub fn probe(
         }
     }
     io.write(&bytes)?;
-    let binding = [vk::DescriptorSetLayoutBinding::default()
-        .binding(0)
-        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-        .descriptor_count(1)
-        .stage_flags(vk::ShaderStageFlags::COMPUTE)];
-    let layout = unsafe {
-        d.create_descriptor_set_layout(
-            &vk::DescriptorSetLayoutCreateInfo::default().bindings(&binding),
-            None,
+    let probe_set = DescriptorSets::new(
+        gpu,
+        &[vk::DescriptorType::STORAGE_BUFFER],
+        vk::ShaderStageFlags::COMPUTE,
+        1,
+    )?;
+    let set = probe_set.sets[0];
+    let info = [vk::DescriptorBufferInfo {
+        buffer: io.raw,
+        offset: 0,
+        range: vk::WHOLE_SIZE,
+    }];
+    unsafe {
+        d.update_descriptor_sets(
+            &[vk::WriteDescriptorSet::default()
+                .dst_set(set)
+                .dst_binding(0)
+                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .buffer_info(&info)],
+            &[],
         )
-    }
-    .vk("vkCreateDescriptorSetLayout")?;
-    let result = (|| {
-        let sizes = [vk::DescriptorPoolSize {
-            ty: vk::DescriptorType::STORAGE_BUFFER,
-            descriptor_count: 1,
-        }];
-        let pool = unsafe {
-            d.create_descriptor_pool(
-                &vk::DescriptorPoolCreateInfo::default()
-                    .max_sets(1)
-                    .pool_sizes(&sizes),
-                None,
-            )
-        }
-        .vk("vkCreateDescriptorPool")?;
-        let r = (|| {
-            let set = unsafe {
-                d.allocate_descriptor_sets(
-                    &vk::DescriptorSetAllocateInfo::default()
-                        .descriptor_pool(pool)
-                        .set_layouts(&[layout]),
-                )
-            }
-            .vk("vkAllocateDescriptorSets")?[0];
-            let info = [vk::DescriptorBufferInfo {
-                buffer: io.raw,
-                offset: 0,
-                range: vk::WHOLE_SIZE,
-            }];
-            unsafe {
-                d.update_descriptor_sets(
-                    &[vk::WriteDescriptorSet::default()
-                        .dst_set(set)
-                        .dst_binding(0)
-                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                        .buffer_info(&info)],
-                    &[],
-                )
-            };
-            let pipeline = crate::render::pipeline::compute_pipeline(
-                gpu,
-                crate::driver::shaders::CLIPMAP_PROBE_SPV,
-                match kind {
-                    ProbeKind::Heights => c"probe_main",
-                    ProbeKind::Normals => c"probe_surface_main",
-                },
-                &[frame_layout, layout],
-            )?;
-            let groups = (points.len() as u32).div_ceil(CLIPMAP_PROBE_WORKGROUP);
-            gpu.one_shot(|cmd| unsafe {
-                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
-                d.cmd_bind_descriptor_sets(
-                    cmd,
-                    vk::PipelineBindPoint::COMPUTE,
-                    pipeline.layout,
-                    0,
-                    &[frame_set, set],
-                    &[],
-                );
-                d.cmd_dispatch(cmd, groups, 1, 1);
-                Barriers::new(gpu).memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::HostRead);
-            })
-        })();
-        unsafe { d.destroy_descriptor_pool(pool, None) };
-        r
-    })();
-    unsafe { d.destroy_descriptor_set_layout(layout, None) };
-    result?;
+    };
+    let pipeline = crate::render::pipeline::compute_pipeline(
+        gpu,
+        crate::driver::shaders::CLIPMAP_PROBE_SPV,
+        match kind {
+            ProbeKind::Heights => c"probe_main",
+            ProbeKind::Normals => c"probe_surface_main",
+        },
+        &[frame_layout, probe_set.layout],
+    )?;
+    let groups = (points.len() as u32).div_ceil(CLIPMAP_PROBE_WORKGROUP);
+    gpu.one_shot(|cmd| unsafe {
+        d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
+        d.cmd_bind_descriptor_sets(
+            cmd,
+            vk::PipelineBindPoint::COMPUTE,
+            pipeline.layout,
+            0,
+            &[frame_set, set],
+            &[],
+        );
+        d.cmd_dispatch(cmd, groups, 1, 1);
+        Barriers::new(gpu).memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::HostRead);
+    })?;
     let m = io
         .mapped()
         .ok_or_else(|| Error::invalid("clipmap probe", "buffer not mapped"))?;

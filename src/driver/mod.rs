@@ -4,6 +4,7 @@
 //! [`sync`]; nothing above it creates devices or allocates memory by hand.
 
 pub mod barrier;
+pub mod descriptors;
 pub mod device;
 pub mod instance;
 pub mod memory;

@@ -68,7 +68,7 @@ impl BruteForce {
                 spv: crate::driver::shaders::BRUTE_SPV,
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
-                set_layouts: &[ctx.terrain.set_layout],
+                set_layouts: &[ctx.terrain.descriptors.layout],
                 topology: vk::PrimitiveTopology::TRIANGLE_LIST,
                 cull_back_faces: true,
             },

@@ -24,6 +24,7 @@ use gpu_allocator::MemoryLocation;
 use super::{LodMethod, LodSettings, MethodContext, ViewState};
 use crate::dataset::Heightmap;
 use crate::driver::Gpu;
+use crate::driver::descriptors::DescriptorSets;
 use crate::driver::memory::{Buffer, Image};
 use crate::error::{Error, Result, VkResultExt};
 use crate::render::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
@@ -288,23 +289,16 @@ pub fn band_indices(cols: u32, band: u32) -> Vec<u16> {
     out
 }
 
-/// Vulkan objects that need explicit destruction; destroyed in `Drop` even when `new` fails
-/// half way (null handles are valid to destroy).
+/// The sampler, destroyed in `Drop` even when `new` fails half way (a null handle is valid to
+/// destroy).
 struct Raw {
     gpu: Arc<Gpu>,
-    set_layout: vk::DescriptorSetLayout,
-    pool: vk::DescriptorPool,
     sampler: vk::Sampler,
 }
 
 impl Drop for Raw {
     fn drop(&mut self) {
-        let d = &self.gpu.device;
-        unsafe {
-            d.destroy_descriptor_pool(self.pool, None);
-            d.destroy_descriptor_set_layout(self.set_layout, None);
-            d.destroy_sampler(self.sampler, None);
-        }
+        unsafe { self.gpu.device.destroy_sampler(self.sampler, None) };
     }
 }
 
@@ -317,7 +311,7 @@ pub struct Pgm {
     instances: u32,
     band: u32,
     uniforms: Vec<Buffer>,
-    sets: Vec<vk::DescriptorSet>,
+    sets: DescriptorSets,
     _heights: Image,
     mips: u32,
     /// Bilinear height under the camera (the reference plane) needs the data on the CPU.
@@ -350,8 +344,6 @@ impl Pgm {
         }
         let mut raw = Raw {
             gpu: gpu.clone(),
-            set_layout: vk::DescriptorSetLayout::null(),
-            pool: vk::DescriptorPool::null(),
             sampler: vk::Sampler::null(),
         };
         let data = ctx.data.require_grid("method pgm")?.clone();
@@ -385,60 +377,18 @@ impl Pgm {
             )
         }
         .vk("vkCreateSampler")?;
-        let binding = |b: u32, ty: vk::DescriptorType| {
-            vk::DescriptorSetLayoutBinding::default()
-                .binding(b)
-                .descriptor_type(ty)
-                .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::VERTEX)
-        };
-        let bindings = [
-            binding(0, vk::DescriptorType::UNIFORM_BUFFER),
-            binding(1, vk::DescriptorType::SAMPLED_IMAGE),
-            binding(2, vk::DescriptorType::SAMPLER),
-        ];
-        raw.set_layout = unsafe {
-            d.create_descriptor_set_layout(
-                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
-                None,
-            )
-        }
-        .vk("vkCreateDescriptorSetLayout")?;
-        let n = ctx.slots as u32;
-        let sizes = [
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::UNIFORM_BUFFER,
-                descriptor_count: n,
-            },
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::SAMPLED_IMAGE,
-                descriptor_count: n,
-            },
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::SAMPLER,
-                descriptor_count: n,
-            },
-        ];
-        raw.pool = unsafe {
-            d.create_descriptor_pool(
-                &vk::DescriptorPoolCreateInfo::default()
-                    .max_sets(n)
-                    .pool_sizes(&sizes),
-                None,
-            )
-        }
-        .vk("vkCreateDescriptorPool")?;
-        let layouts = vec![raw.set_layout; ctx.slots];
-        let sets = unsafe {
-            d.allocate_descriptor_sets(
-                &vk::DescriptorSetAllocateInfo::default()
-                    .descriptor_pool(raw.pool)
-                    .set_layouts(&layouts),
-            )
-        }
-        .vk("vkAllocateDescriptorSets")?;
+        let sets = DescriptorSets::new(
+            gpu,
+            &[
+                vk::DescriptorType::UNIFORM_BUFFER,
+                vk::DescriptorType::SAMPLED_IMAGE,
+                vk::DescriptorType::SAMPLER,
+            ],
+            vk::ShaderStageFlags::VERTEX,
+            ctx.slots,
+        )?;
         let mut uniforms = Vec::with_capacity(ctx.slots);
-        for (i, &set) in sets.iter().enumerate() {
+        for (i, &set) in sets.sets.iter().enumerate() {
             let ubo = Buffer::new(
                 gpu,
                 &format!("pgm uniforms {i}"),
@@ -493,7 +443,7 @@ impl Pgm {
                 spv: crate::driver::shaders::PGM_SPV,
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
-                set_layouts: &[ctx.terrain.set_layout, raw.set_layout],
+                set_layouts: &[ctx.terrain.descriptors.layout, sets.layout],
                 topology: vk::PrimitiveTopology::TRIANGLE_LIST,
                 cull_back_faces: true,
             },
@@ -566,7 +516,7 @@ impl LodMethod for Pgm {
                 vk::PipelineBindPoint::GRAPHICS,
                 self.pipeline.layout,
                 0,
-                &[frame_set, self.sets[slot]],
+                &[frame_set, self.sets.sets[slot]],
                 &[],
             );
             d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);

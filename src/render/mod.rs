@@ -483,8 +483,8 @@ impl Renderer {
         let slot = ((self.next_frame - 1) % self.slots.len() as u64) as usize;
         crate::clipmap::gpu::probe(
             &self.gpu,
-            self.terrain.set_layout,
-            self.terrain.sets[slot * self.options.views + view],
+            self.terrain.descriptors.layout,
+            self.terrain.descriptors.sets[slot * self.options.views + view],
             points,
             kind,
         )
@@ -746,7 +746,7 @@ impl Renderer {
         for v in 0..views {
             let view_slot = slot_index * views + v;
             self.method
-                .record_prepass(cmd, view_slot, self.terrain.sets[view_slot]);
+                .record_prepass(cmd, view_slot, self.terrain.descriptors.sets[view_slot]);
         }
         let slot = &self.slots[slot_index];
         unsafe {
@@ -849,7 +849,7 @@ impl Renderer {
                 );
             }
             let view_slot = slot_index * views + v;
-            let frame_set = self.terrain.sets[view_slot];
+            let frame_set = self.terrain.descriptors.sets[view_slot];
             self.method.record_draw(cmd, view_slot, frame_set);
         }
         let slot = &self.slots[slot_index];

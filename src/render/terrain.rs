@@ -8,6 +8,7 @@ use gpu_allocator::MemoryLocation;
 
 use crate::dataset::{Heightmap, Level0, Terrain};
 use crate::driver::Gpu;
+use crate::driver::descriptors::DescriptorSets;
 use crate::driver::memory::{Buffer, Image};
 use crate::error::{Error, Result, VkResultExt};
 use crate::scene::Camera;
@@ -70,10 +71,8 @@ pub struct TerrainGpu {
     _normal: Image,
     _albedo: Image,
     sampler: vk::Sampler,
-    pub set_layout: vk::DescriptorSetLayout,
-    pool: vk::DescriptorPool,
-    /// One descriptor set per frame slot (they differ only in their uniform buffer).
-    pub sets: Vec<vk::DescriptorSet>,
+    /// Set 0: one per view slot (they differ in their uniform buffer and clipmap quadtree).
+    pub descriptors: DescriptorSets,
     pub uniforms: Vec<Buffer>,
 }
 
@@ -134,73 +133,28 @@ impl TerrainGpu {
             )
         }
         .vk("vkCreateSampler")?;
-        let stages = vk::ShaderStageFlags::VERTEX
-            | vk::ShaderStageFlags::FRAGMENT
-            | vk::ShaderStageFlags::COMPUTE;
-        let binding = |b: u32, ty: vk::DescriptorType| {
-            vk::DescriptorSetLayoutBinding::default()
-                .binding(b)
-                .descriptor_type(ty)
-                .descriptor_count(1)
-                .stage_flags(stages)
-        };
-        let bindings = [
-            binding(0, vk::DescriptorType::UNIFORM_BUFFER),
-            binding(1, vk::DescriptorType::SAMPLED_IMAGE),
-            binding(2, vk::DescriptorType::SAMPLED_IMAGE),
-            binding(3, vk::DescriptorType::SAMPLED_IMAGE),
-            binding(4, vk::DescriptorType::SAMPLER),
-            binding(5, vk::DescriptorType::SAMPLED_IMAGE),
-            binding(6, vk::DescriptorType::STORAGE_BUFFER),
-            binding(7, vk::DescriptorType::SAMPLED_IMAGE),
-            binding(8, vk::DescriptorType::SAMPLED_IMAGE),
-        ];
-        let set_layout = unsafe {
-            d.create_descriptor_set_layout(
-                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
-                None,
-            )
-        }
-        .vk("vkCreateDescriptorSetLayout")?;
-        let n = slots as u32;
-        let sizes = [
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::UNIFORM_BUFFER,
-                descriptor_count: n,
-            },
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::SAMPLED_IMAGE,
-                descriptor_count: 6 * n,
-            },
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::STORAGE_BUFFER,
-                descriptor_count: n,
-            },
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::SAMPLER,
-                descriptor_count: n,
-            },
-        ];
-        let pool = unsafe {
-            d.create_descriptor_pool(
-                &vk::DescriptorPoolCreateInfo::default()
-                    .max_sets(n)
-                    .pool_sizes(&sizes),
-                None,
-            )
-        }
-        .vk("vkCreateDescriptorPool")?;
-        let layouts = vec![set_layout; slots];
-        let sets = unsafe {
-            d.allocate_descriptor_sets(
-                &vk::DescriptorSetAllocateInfo::default()
-                    .descriptor_pool(pool)
-                    .set_layouts(&layouts),
-            )
-        }
-        .vk("vkAllocateDescriptorSets")?;
+        use vk::DescriptorType as T;
+        let descriptors = DescriptorSets::new(
+            gpu,
+            &[
+                T::UNIFORM_BUFFER, // 0: frame uniforms
+                T::SAMPLED_IMAGE,  // 1: heights
+                T::SAMPLED_IMAGE,  // 2: normals
+                T::SAMPLED_IMAGE,  // 3: albedo
+                T::SAMPLER,        // 4: linear sampler
+                T::SAMPLED_IMAGE,  // 5: clipmap height atlas
+                T::STORAGE_BUFFER, // 6: clipmap quadtree of the view slot
+                T::SAMPLED_IMAGE,  // 7: clipmap normal atlas
+                T::SAMPLED_IMAGE,  // 8: clipmap albedo atlas
+            ],
+            vk::ShaderStageFlags::VERTEX
+                | vk::ShaderStageFlags::FRAGMENT
+                | vk::ShaderStageFlags::COMPUTE,
+            slots,
+        )
+        .inspect_err(|_| unsafe { d.destroy_sampler(sampler, None) })?;
         let mut uniforms = Vec::with_capacity(slots);
-        for (slot, &set) in sets.iter().enumerate() {
+        for (slot, &set) in descriptors.sets.iter().enumerate() {
             let ubo = Buffer::new(
                 gpu,
                 &format!("frame uniforms {slot}"),
@@ -266,9 +220,7 @@ impl TerrainGpu {
             _normal: normal,
             _albedo: albedo,
             sampler,
-            set_layout,
-            pool,
-            sets,
+            descriptors,
             uniforms,
         })
     }
@@ -320,10 +272,7 @@ impl TerrainGpu {
 impl Drop for TerrainGpu {
     fn drop(&mut self) {
         unsafe {
-            let d = &self.gpu.device;
-            d.destroy_descriptor_pool(self.pool, None);
-            d.destroy_descriptor_set_layout(self.set_layout, None);
-            d.destroy_sampler(self.sampler, None);
+            self.gpu.device.destroy_sampler(self.sampler, None);
         }
     }
 }

@@ -83,3 +83,26 @@ pub fn srgb8(linear: f32) -> u8 {
     };
     (s * 255.0).round() as u8
 }
+
+/// Preprocesses a `size`² procedural data set with `center`-texel nodes into a fresh
+/// per-process temporary directory named after `name`; returns the pyramid's directory.
+pub fn procedural_pyramid(name: &str, size: u32, seed: u64, center: u32) -> std::path::PathBuf {
+    use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
+    use vkterrain::dataset::procedural::ProceduralParams;
+    let dir = std::env::temp_dir().join(format!("vkterrain-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join(format!("p{size}"));
+    let opts = Options {
+        input: Input::Procedural(ProceduralParams {
+            size,
+            seed,
+            ..Default::default()
+        }),
+        out: out.clone(),
+        center_size: center,
+        ..Default::default()
+    };
+    preprocess::run(&opts, &mut NoProgress).unwrap();
+    out
+}

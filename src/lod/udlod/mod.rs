@@ -18,8 +18,9 @@ use super::{LodMethod, LodSettings, MethodContext, ViewState};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
+use crate::driver::descriptors::DescriptorSets;
 use crate::driver::memory::Buffer;
-use crate::error::{Error, Result, VkResultExt};
+use crate::error::{Error, Result};
 use crate::gpu_constants::UDLOD_MAX_LEVELS;
 use crate::render::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use select::{Levels, SelectionParams};
@@ -80,25 +81,14 @@ pub struct Udlod {
     _error_field: Buffer,
     indices: Buffer,
     index_count: u32,
-    set_layout: vk::DescriptorSetLayout,
-    pool: vk::DescriptorPool,
     slots: Vec<SlotBuffers>,
+    /// Set 1 of every slot (`SlotBuffers::set`).
+    _sets: DescriptorSets,
     prepare: Pipeline,
     refine: Pipeline,
     finish: Pipeline,
     draw: Pipeline,
     temp_capacity: u32,
-}
-
-impl Drop for Udlod {
-    fn drop(&mut self) {
-        unsafe {
-            self.gpu.device.destroy_descriptor_pool(self.pool, None);
-            self.gpu
-                .device
-                .destroy_descriptor_set_layout(self.set_layout, None);
-        }
-    }
 }
 
 fn as_bytes<T: Copy>(v: &T) -> &[u8] {
@@ -127,122 +117,19 @@ impl Udlod {
                 ),
             ));
         }
-        let d = &gpu.device;
-        let storage = |b: u32| {
-            vk::DescriptorSetLayoutBinding::default()
-                .binding(b)
-                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::VERTEX)
-        };
-        let bindings = [
-            vk::DescriptorSetLayoutBinding::default()
-                .binding(0)
-                .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
-                .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::VERTEX),
-            storage(1),
-            storage(2),
-            storage(3),
-            storage(4),
-            storage(5),
-        ];
-        let set_layout = unsafe {
-            d.create_descriptor_set_layout(
-                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
-                None,
-            )
-        }
-        .vk("vkCreateDescriptorSetLayout")?;
-        let n = ctx.slots as u32;
-        let sizes = [
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::UNIFORM_BUFFER,
-                descriptor_count: n,
-            },
-            vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::STORAGE_BUFFER,
-                descriptor_count: 5 * n,
-            },
-        ];
-        let pool = unsafe {
-            d.create_descriptor_pool(
-                &vk::DescriptorPoolCreateInfo::default()
-                    .max_sets(n)
-                    .pool_sizes(&sizes),
-                None,
-            )
-        };
-        let pool = match pool {
-            Ok(p) => p,
-            Err(e) => {
-                unsafe { d.destroy_descriptor_set_layout(set_layout, None) };
-                return Err(Error::Vulkan {
-                    call: "vkCreateDescriptorPool",
-                    result: e,
-                });
-            }
-        };
-        // From here on `Drop` of a partially built value is not available; build the parts that
-        // can fail before assembling, and clean the pool/layout up on error.
-        let cleanup = |e: Error| {
-            unsafe {
-                d.destroy_descriptor_pool(pool, None);
-                d.destroy_descriptor_set_layout(set_layout, None);
-            }
-            e
-        };
-        let built = Self::build(ctx, &settings, &levels, set_layout, pool).map_err(cleanup)?;
-        let (
-            (min_max, error_field),
-            indices,
-            index_count,
-            slots,
-            prepare,
-            refine,
-            finish,
-            draw,
-            temp_capacity,
-        ) = built;
-        Ok(Udlod {
-            gpu: gpu.clone(),
-            settings,
-            heights: ctx.data.clone(),
-            levels,
-            _min_max: min_max,
-            _error_field: error_field,
-            indices,
-            index_count,
-            set_layout,
-            pool,
-            slots,
-            prepare,
-            refine,
-            finish,
-            draw,
-            temp_capacity,
-        })
-    }
-
-    #[allow(clippy::type_complexity)]
-    fn build(
-        ctx: &MethodContext<'_>,
-        settings: &LodSettings,
-        levels: &Levels,
-        set_layout: vk::DescriptorSetLayout,
-        pool: vk::DescriptorPool,
-    ) -> Result<(
-        (Buffer, Buffer),
-        Buffer,
-        u32,
-        Vec<SlotBuffers>,
-        Pipeline,
-        Pipeline,
-        Pipeline,
-        Pipeline,
-        u32,
-    )> {
-        let gpu = ctx.gpu;
+        let sets = DescriptorSets::new(
+            gpu,
+            &[
+                vk::DescriptorType::UNIFORM_BUFFER,
+                vk::DescriptorType::STORAGE_BUFFER,
+                vk::DescriptorType::STORAGE_BUFFER,
+                vk::DescriptorType::STORAGE_BUFFER,
+                vk::DescriptorType::STORAGE_BUFFER,
+                vk::DescriptorType::STORAGE_BUFFER,
+            ],
+            vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::VERTEX,
+            ctx.slots,
+        )?;
         let d = &gpu.device;
         let mm_bytes: Vec<u8> = levels
             .min_max
@@ -286,17 +173,8 @@ impl Udlod {
         // Parents and children of one pass share the temporary list: a pass has at most
         // `4/3 * final_capacity + 1` children (every split reserved 3 final entries).
         let temp_capacity = 2 * final_capacity + 8;
-        let layouts = vec![set_layout; ctx.slots];
-        let sets = unsafe {
-            d.allocate_descriptor_sets(
-                &vk::DescriptorSetAllocateInfo::default()
-                    .descriptor_pool(pool)
-                    .set_layouts(&layouts),
-            )
-        }
-        .vk("vkAllocateDescriptorSets")?;
         let mut slots = Vec::with_capacity(ctx.slots);
-        for (i, &set) in sets.iter().enumerate() {
+        for (i, &set) in sets.sets.iter().enumerate() {
             let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
             let uniforms = Buffer::new(
                 gpu,
@@ -375,7 +253,7 @@ impl Udlod {
                 set,
             });
         }
-        let set_layouts = [ctx.terrain.set_layout, set_layout];
+        let set_layouts = [ctx.terrain.descriptors.layout, sets.layout];
         let tiling = crate::driver::shaders::UDLOD_TILING_SPV;
         let prepare = compute_pipeline(gpu, tiling, c"prepare", &set_layouts)?;
         let refine = compute_pipeline(gpu, tiling, c"refine", &set_layouts)?;
@@ -396,17 +274,23 @@ impl Udlod {
                 cull_back_faces: false,
             },
         )?;
-        Ok((
-            (min_max, error_field),
+        Ok(Udlod {
+            gpu: gpu.clone(),
+            settings,
+            heights: ctx.data.clone(),
+            levels,
+            _min_max: min_max,
+            _error_field: error_field,
             indices,
-            grid.len() as u32,
+            index_count: grid.len() as u32,
             slots,
+            _sets: sets,
             prepare,
             refine,
             finish,
             draw,
             temp_capacity,
-        ))
+        })
     }
 
     pub fn levels(&self) -> &Levels {
