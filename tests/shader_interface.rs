@@ -5,9 +5,9 @@
 use std::mem::{offset_of, size_of};
 
 use vkterrain::driver::shaders::{BRUTE_WGSL, PGM_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL};
+use vkterrain::frame::FrameUniforms;
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
 use vkterrain::lod::udlod::{TilingState, UdlodUniforms};
-use vkterrain::render::terrain::FrameUniforms;
 
 fn composed_shaders() -> [(&'static str, &'static str); 4] {
     [

@@ -11,10 +11,11 @@ use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
-use vkterrain::lod::{LodSettings, MethodKind};
+use vkterrain::lod::{MethodKind, UdlodSettings};
 use vkterrain::readback::CollectSink;
 use vkterrain::render::{FrameRequest, Renderer};
 use vkterrain::scene::Camera;
+use vkterrain::slots::ViewSlot;
 
 const W: u32 = 160;
 const H: u32 = 100;
@@ -66,10 +67,10 @@ fn poses(data: &Heightmap, n: usize) -> Vec<Camera> {
         .collect()
 }
 
-fn settings() -> LodSettings {
-    LodSettings {
+fn settings() -> UdlodSettings {
+    UdlodSettings {
         grid_size: 8,
-        ..LodSettings::default()
+        ..UdlodSettings::default()
     }
 }
 
@@ -77,14 +78,13 @@ fn settings() -> LodSettings {
 fn gpu_and_cpu_tiles(
     data: &Heightmap,
     cameras: &[Camera],
-    lod: LodSettings,
+    lod: UdlodSettings,
 ) -> Vec<(Vec<Tile>, Vec<Tile>)> {
     let gpu = common::gpu(false);
-    let mut options = common::options(W, H, 1);
-    options.lod = lod.clone();
+    let options = common::options(W, H, 1);
     let mut out = Vec::new();
     {
-        let mut r = Renderer::new(&gpu, data, MethodKind::Udlod, options).unwrap();
+        let mut r = Renderer::new(&gpu, data, lod.clone(), options).unwrap();
         let levels = Levels::new(data, lod.grid_size, lod.error_field_max).unwrap();
         let mut sink = CollectSink::default();
         for cam in cameras {
@@ -92,7 +92,7 @@ fn gpu_and_cpu_tiles(
             r.finish(&mut sink).unwrap();
             let gpu_tiles: Vec<Tile> = r
                 .method()
-                .debug_tiles(0)
+                .debug_tiles(ViewSlot(0))
                 .unwrap()
                 .unwrap()
                 .into_iter()
@@ -100,7 +100,7 @@ fn gpu_and_cpu_tiles(
                 .collect();
             let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
             out.push((gpu_tiles, select::select_tiles(&levels, &p)));
-            let counters: HashMap<_, _> = r.method().counters(0).into_iter().collect();
+            let counters: HashMap<_, _> = r.method().counters(ViewSlot(0)).into_iter().collect();
             assert_eq!(counters["overflow"], 0);
         }
     }
@@ -145,7 +145,7 @@ fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
 #[test]
 fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
     let data = terrain(257, 30.0);
-    let lod = LodSettings {
+    let lod = UdlodSettings {
         cull: false,
         ..settings()
     };
@@ -213,7 +213,7 @@ fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
 #[test]
 fn pure_rotation_keeps_the_tile_set_without_culling() {
     let data = terrain(257, 30.0);
-    let lod = LodSettings {
+    let lod = UdlodSettings {
         cull: false,
         ..settings()
     };
@@ -303,14 +303,15 @@ fn watertight_over_200_poses() {
     let render = |method: MethodKind, morph: bool| {
         let gpu = common::gpu(false);
         let mut options = common::options(96, 64, 2);
-        options.lod = LodSettings {
+        let udlod = UdlodSettings {
             morph,
             ..settings()
         };
         options.readback_depth = true;
         let mut sink = CollectSink::default();
         {
-            let mut r = Renderer::new(&gpu, &data, method, options).unwrap();
+            let mut r =
+                Renderer::new(&gpu, &data, common::method_with(method, udlod), options).unwrap();
             for c in &cams {
                 r.render(
                     FrameRequest {

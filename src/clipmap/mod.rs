@@ -7,7 +7,10 @@
 
 pub mod atlas;
 pub mod gpu;
+#[cfg(feature = "test-support")]
+pub mod probe;
 pub mod quadtree;
+pub mod stage;
 pub mod streaming;
 
 use std::collections::{HashMap, HashSet, VecDeque};
@@ -77,25 +80,6 @@ impl NodeSource for DatasetSource {
             rgba: (!node.rgba.is_empty()).then_some(node.rgba),
         })
     }
-}
-
-/// The clipmap a configuration asks for (`[clipmap] enabled` with a `tiles` data set), with
-/// one view; `None` when disabled.
-pub fn from_config(config: &crate::config::Config) -> Result<Option<Clipmap>> {
-    if !config.clipmap.enabled {
-        return Ok(None);
-    }
-    let path = config
-        .dataset
-        .path
-        .as_ref()
-        .map(|p| config.resolve(p))
-        .ok_or_else(|| Error::invalid("dataset.path", "the clipmap needs a tiles data set"))?;
-    let source = DatasetSource::open(&path)?;
-    let geometry = Geometry::of(&source.dataset);
-    // One quadtree per camera of a frame; all of them share the atlas.
-    let views = 1 + config.render.extra_views.len();
-    Clipmap::new(geometry, config.clipmap.clone(), Arc::new(source), views).map(Some)
 }
 
 /// Node geometry of a pyramid: centre and border texels, node counts per level.

@@ -10,6 +10,7 @@ pub mod manifest;
 pub mod preprocess;
 pub mod procedural;
 pub mod pyramid;
+pub mod settings;
 pub mod source;
 pub mod srtm;
 pub mod tiles;
@@ -215,40 +216,6 @@ pub fn ramp_rgba(h: f32, lo: f32, span: f32, normal_z: u8) -> [u8; 4] {
     }
     let q = |v: f32| (v * 255.0).round() as u8;
     [q(c[0]), q(c[1]), q(c[2]), 255]
-}
-
-/// Loads the data set a configuration names.
-pub fn load(config: &crate::config::Config) -> Result<Heightmap> {
-    let d = &config.dataset;
-    match d.kind.as_str() {
-        "procedural" => procedural::generate(&procedural::ProceduralParams {
-            size: d.size,
-            seed: d.seed,
-            spacing: d.spacing,
-            ..Default::default()
-        }),
-        "png16" => {
-            let path = config.resolve(
-                d.path
-                    .as_deref()
-                    .ok_or_else(|| Error::invalid("dataset.path", "missing"))?,
-            );
-            let albedo = d.albedo.as_deref().map(|p| config.resolve(p));
-            load_png16(&path, d.spacing, d.vertical_scale, albedo.as_deref())
-        }
-        "tiles" => {
-            let path = config.resolve(
-                d.path
-                    .as_deref()
-                    .ok_or_else(|| Error::invalid("dataset.path", "missing"))?,
-            );
-            tiles::load(&path, d.lod, tiles::DEFAULT_MAX_SAMPLES)
-        }
-        other => Err(Error::invalid(
-            "dataset.kind",
-            format!("unknown kind {other:?}"),
-        )),
-    }
 }
 
 /// A 16-bit greyscale PNG height map (`value * vertical_scale` metres) with optional albedo

@@ -2,11 +2,13 @@
 //! (including synchronization validation) and fails on any message.
 #![allow(dead_code)]
 
+pub mod cli;
+
 use std::sync::Arc;
 
 use vkterrain::dataset::Heightmap;
 use vkterrain::driver::{Gpu, GpuOptions};
-use vkterrain::lod::MethodKind;
+use vkterrain::lod::{MethodConfig, MethodKind, UdlodSettings};
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, RenderOptions, Renderer};
 
@@ -37,7 +39,6 @@ pub fn options(width: u32, height: u32, frames_in_flight: usize) -> RenderOption
         readback_depth: true,
         sky: [0.2, 0.4, 0.8],
         sun_dir: [0.0, 0.0, 1.0],
-        lod: Default::default(),
         views: 1,
     }
 }
@@ -53,11 +54,19 @@ pub fn render(
     render_method(gpu, data, MethodKind::Brute, options, requests)
 }
 
+/// `kind` with `udlod` as its settings when it is UDLOD, else with its defaults.
+pub fn method_with(kind: MethodKind, udlod: UdlodSettings) -> MethodConfig {
+    match kind {
+        MethodKind::Udlod => udlod.into(),
+        other => other.into(),
+    }
+}
+
 /// [`render`] with any method.
 pub fn render_method(
     gpu: &Arc<Gpu>,
     data: &Heightmap,
-    method: MethodKind,
+    method: impl Into<MethodConfig>,
     options: RenderOptions,
     requests: &[FrameRequest],
 ) -> Vec<OwnedFrame> {

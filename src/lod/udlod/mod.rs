@@ -8,26 +8,30 @@
 //! the host in the render path (only 64 bytes of counters, for statistics).
 
 pub mod select;
+pub mod settings;
 
 use std::sync::Arc;
 
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
-use super::{LodMethod, LodSettings, MethodContext, ViewState};
+use super::{LodMethod, MethodContext};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
 use crate::driver::descriptors::DescriptorSets;
 use crate::driver::memory::Buffer;
+use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use crate::error::{Error, Result};
+use crate::frame::ViewState;
 use crate::gpu_constants::UDLOD_MAX_LEVELS;
-use crate::render::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
+use crate::slots::ViewSlot;
 use select::{Levels, SelectionParams};
+use settings::UdlodSettings;
 
 /// Per-frame uniforms of set 1 (`Udlod` in `shaders/include/udlod_common.wgsl`).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct UdlodUniforms {
     pub frustum: [[f32; 4]; 6],
     pub split: [[f32; 4]; UDLOD_MAX_LEVELS as usize],
@@ -40,7 +44,7 @@ pub struct UdlodUniforms {
 
 /// The tiling state the GPU keeps per slot (`TilingState` in `shaders/udlod_tiling.wgsl`).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct TilingState {
     pub dispatch: [u32; 3],
     pub pass_index: u32,
@@ -62,6 +66,7 @@ struct SlotBuffers {
     state: Buffer,
     /// Referenced by the descriptor set only.
     _temp_tiles: Buffer,
+    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
     final_tiles: Buffer,
     /// Host-readable copy of `state` (counters for statistics).
     counters: Buffer,
@@ -70,7 +75,7 @@ struct SlotBuffers {
 
 pub struct Udlod {
     gpu: Arc<Gpu>,
-    settings: LodSettings,
+    settings: UdlodSettings,
     levels: Levels,
     /// Level-0 heights for the reference height under the LOD viewer (shared with the
     /// caller: the grid's `Arc`, or the pyramid reader with its bounded node cache).
@@ -91,15 +96,10 @@ pub struct Udlod {
     temp_capacity: u32,
 }
 
-fn as_bytes<T: Copy>(v: &T) -> &[u8] {
-    // SAFETY: plain-old-data repr(C) structs of u32/f32 without padding.
-    unsafe { std::slice::from_raw_parts(v as *const T as *const u8, size_of::<T>()) }
-}
-
 impl Udlod {
-    pub fn new(ctx: &MethodContext<'_>) -> Result<Self> {
+    pub fn new(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Self> {
         let gpu = ctx.gpu;
-        let settings = ctx.settings.clone();
+        let settings = settings.clone();
         settings.validate()?;
         let levels = match ctx.data {
             Terrain::Grid(h) => Levels::new(&**h, settings.grid_size, settings.error_field_max)?,
@@ -317,20 +317,13 @@ impl Udlod {
         ))
     }
 
-    fn read_counters(&self, slot: usize) -> TilingState {
-        let mut s = TilingState::default();
-        if let Some(bytes) = self.slots[slot].counters.mapped() {
-            let n = size_of::<TilingState>().min(bytes.len());
-            // SAFETY: TilingState is repr(C) u32s; copying bytes into it is valid.
-            unsafe {
-                std::ptr::copy_nonoverlapping(
-                    bytes.as_ptr(),
-                    &mut s as *mut TilingState as *mut u8,
-                    n,
-                )
-            };
-        }
-        s
+    fn read_counters(&self, slot: ViewSlot) -> TilingState {
+        self.slots[slot.index()]
+            .counters
+            .mapped()
+            .and_then(|bytes| bytes.get(..size_of::<TilingState>()))
+            .map(bytemuck::pod_read_unaligned)
+            .unwrap_or_default()
     }
 }
 
@@ -339,7 +332,7 @@ impl LodMethod for Udlod {
         "udlod"
     }
 
-    fn update(&mut self, slot: usize, view: &ViewState) -> Result<()> {
+    fn update(&mut self, slot: ViewSlot, view: &ViewState) -> Result<()> {
         let p = self.selection_params(view)?;
         let mut u = UdlodUniforms {
             frustum: p.frustum,
@@ -371,19 +364,21 @@ impl LodMethod for Udlod {
             if self.settings.cull { 1.0 } else { 0.0 },
         ];
         u.counts = [self.index_count, 0, 0, 0];
-        self.slots[slot].uniforms.write(as_bytes(&u))
+        self.slots[slot.index()]
+            .uniforms
+            .write(bytemuck::bytes_of(&u))
     }
 
     fn record_prepass(
         &mut self,
         cmd: vk::CommandBuffer,
-        slot: usize,
+        slot: ViewSlot,
         frame_set: vk::DescriptorSet,
     ) {
         let gpu = &self.gpu;
         let d = &gpu.device;
         let b = Barriers::new(gpu);
-        let s = &self.slots[slot];
+        let s = &self.slots[slot.index()];
         let sets = [frame_set, s.set];
         unsafe {
             // The buffers were last used by this slot's previous frame (same queue).
@@ -447,9 +442,14 @@ impl LodMethod for Udlod {
         }
     }
 
-    fn record_draw(&mut self, cmd: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet) {
+    fn record_draw(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        slot: ViewSlot,
+        frame_set: vk::DescriptorSet,
+    ) {
         let d = &self.gpu.device;
-        let s = &self.slots[slot];
+        let s = &self.slots[slot.index()];
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.draw.raw);
             d.cmd_bind_descriptor_sets(
@@ -472,12 +472,12 @@ impl LodMethod for Udlod {
         }
     }
 
-    fn triangles(&self, slot: usize) -> u64 {
+    fn triangles(&self, slot: ViewSlot) -> u64 {
         let c = self.read_counters(slot);
         c.draw[1] as u64 * 2 * (self.settings.grid_size as u64).pow(2)
     }
 
-    fn counters(&self, slot: usize) -> Vec<(&'static str, u64)> {
+    fn counters(&self, slot: ViewSlot) -> Vec<(&'static str, u64)> {
         let c = self.read_counters(slot);
         vec![
             ("tiles", c.draw[1] as u64),
@@ -487,7 +487,8 @@ impl LodMethod for Udlod {
         ]
     }
 
-    fn debug_tiles(&self, slot: usize) -> Result<Option<Vec<[u32; 3]>>> {
+    #[cfg(feature = "test-support")]
+    fn debug_tiles(&self, slot: ViewSlot) -> Result<Option<Vec<[u32; 3]>>> {
         let n = self.read_counters(slot).draw[1] as u64;
         if n == 0 {
             return Ok(Some(Vec::new()));
@@ -499,7 +500,7 @@ impl LodMethod for Udlod {
             vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuToCpu,
         )?;
-        let src = self.slots[slot].final_tiles.raw;
+        let src = self.slots[slot.index()].final_tiles.raw;
         let b = Barriers::new(&self.gpu);
         self.gpu.one_shot(|cmd| unsafe {
             b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);

@@ -9,7 +9,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::super::LodSettings;
+use super::settings::UdlodSettings;
 use crate::dataset::{Heightmap, Level0};
 use crate::error::Result;
 use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
@@ -503,7 +503,7 @@ impl SelectionParams {
     pub fn new(
         levels: &Levels,
         data: &Heightmap,
-        settings: &LodSettings,
+        settings: &UdlodSettings,
         camera: &Camera,
         lod_viewer: DVec3,
         width: u32,
@@ -518,7 +518,7 @@ impl SelectionParams {
     pub fn with_reference(
         levels: &Levels,
         z_ref: f64,
-        settings: &LodSettings,
+        settings: &UdlodSettings,
         camera: &Camera,
         lod_viewer: DVec3,
         width: u32,

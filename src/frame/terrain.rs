@@ -1,56 +1,19 @@
-//! The GPU mirror of the data set and the per-frame uniforms every terrain method reads
-//! (descriptor set 0; see `shaders/include/terrain_common.wgsl`).
+//! The GPU mirror of the data set: heights, normals and albedo (or the clipmap's atlas) and
+//! one descriptor set 0 with its frame-uniform buffer per view slot
+//! (`shaders/include/terrain_common.wgsl`).
 
 use std::sync::Arc;
 
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
+use super::FrameUniforms;
 use crate::dataset::{Heightmap, Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::descriptors::DescriptorSets;
 use crate::driver::memory::{Buffer, Image};
 use crate::error::{Error, Result, VkResultExt};
-use crate::scene::Camera;
-
-/// `Frame` in `terrain_common.wgsl`, byte for byte (std140: every member 16-byte aligned).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct FrameUniforms {
-    pub view_proj: [f32; 16],
-    pub camera_cell: [i32; 4],
-    pub camera_offset: [f32; 4],
-    pub sun_dir: [f32; 4],
-    pub data_size: [u32; 4],
-}
-
-impl FrameUniforms {
-    /// Splits the camera position into an integer sample cell and a small metric offset, so the
-    /// shader works with camera-relative coordinates at full f32 precision anywhere.
-    pub fn new(camera: &Camera, aspect: f64, data: &TerrainInfo, sun_dir: [f32; 3]) -> Self {
-        let spacing = data.spacing;
-        let cell_x = (camera.position.x / spacing).floor();
-        let cell_y = (camera.position.y / spacing).floor();
-        let view_proj = camera.projection(aspect) * camera.view_rotation();
-        FrameUniforms {
-            view_proj: view_proj.to_cols_array(),
-            camera_cell: [cell_x as i32, cell_y as i32, 0, 0],
-            camera_offset: [
-                (camera.position.x - cell_x * spacing) as f32,
-                (camera.position.y - cell_y * spacing) as f32,
-                camera.position.z as f32,
-                spacing as f32,
-            ],
-            sun_dir: [sun_dir[0], sun_dir[1], sun_dir[2], 0.0],
-            data_size: [data.width, data.height, 0, 0],
-        }
-    }
-
-    pub fn as_bytes(&self) -> &[u8] {
-        // SAFETY: repr(C), plain-old-data fields, no padding (all 16-byte multiples).
-        unsafe { std::slice::from_raw_parts(self as *const Self as *const u8, size_of::<Self>()) }
-    }
-}
+use crate::slots::ViewSlot;
 
 /// The facts about the data set that methods and uniforms need.
 #[derive(Clone, Debug)]
@@ -73,12 +36,13 @@ pub struct TerrainGpu {
     sampler: vk::Sampler,
     /// Set 0: one per view slot (they differ in their uniform buffer and clipmap quadtree).
     pub descriptors: DescriptorSets,
-    pub uniforms: Vec<Buffer>,
+    uniforms: Vec<Buffer>,
 }
 
 impl TerrainGpu {
-    /// `clipmap`: the clipmap's device mirror bound at bindings 5 (atlas) and 6 (the slot's
-    /// quadtree); a disabled placeholder keeps the single-texture path.
+    /// Set 0 for `slots` view slots. `clipmap`: the clipmap's device mirror bound at bindings 5
+    /// (atlas) and 6 (the view slot's quadtree), 7 and 8 (normal and albedo atlases); a
+    /// disabled placeholder keeps the single-texture path.
     pub fn new(
         gpu: &Arc<Gpu>,
         data: &Terrain,
@@ -227,6 +191,16 @@ impl TerrainGpu {
 }
 
 impl TerrainGpu {
+    /// Descriptor set 0 of `view`.
+    pub fn set(&self, view: ViewSlot) -> vk::DescriptorSet {
+        self.descriptors.sets[view.index()]
+    }
+
+    /// Writes the frame uniforms of `view` (its previous GPU use complete).
+    pub fn write_uniforms(&mut self, view: ViewSlot, uniforms: &FrameUniforms) -> Result<()> {
+        self.uniforms[view.index()].write(bytemuck::bytes_of(uniforms))
+    }
+
     /// The full-resolution height, normal and albedo textures of the single-texture path.
     fn textures(gpu: &Arc<Gpu>, data: &Heightmap) -> Result<(Image, Image, Image)> {
         let max_side = gpu.info.limits.max_image_dimension2_d;
