@@ -521,8 +521,8 @@ pub fn run(opts: &Options, progress: &mut dyn Progress) -> Result<Summary> {
             ),
             None,
             vec![format!(
-                "procedural fBm generator (seed {}, max height {} m, feature size {} m)",
-                p.seed, p.max_height, p.feature_size
+                "procedural generator (style {:?}, seed {}, max height {} m, feature size {} m)",
+                p.style, p.seed, p.max_height, p.feature_size
             )],
             "procedural",
         ),
