@@ -12,6 +12,7 @@ pub mod procedural;
 pub mod pyramid;
 pub mod source;
 pub mod srtm;
+pub mod stats;
 pub mod tiles;
 pub mod voids;
 
