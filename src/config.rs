@@ -92,6 +92,8 @@ pub struct DatasetConfig {
     /// For `tiles` (`path` = a `vkterrain preprocess` output directory): the level to load;
     /// none: the finest level that fits.
     pub lod: Option<u32>,
+    /// For `xyz`: live Terrarium / terrain-RGB tiles streamed through the clipmap.
+    pub xyz: Option<crate::dataset::xyz::XyzSettings>,
 }
 
 impl Default for DatasetConfig {
@@ -105,6 +107,7 @@ impl Default for DatasetConfig {
             vertical_scale: 1.0,
             albedo: None,
             lod: None,
+            xyz: None,
         }
     }
 }
@@ -260,6 +263,32 @@ impl Config {
 
     /// Checks values that serde cannot (ranges, names).
     pub fn validate(&self) -> Result<()> {
+        let d = &self.dataset;
+        if d.kind == "procedural" && (d.path.is_some() || d.xyz.is_some()) {
+            // `kind` defaults to procedural: a data path without a kind must not silently
+            // render procedural terrain.
+            return Err(Error::invalid(
+                "dataset",
+                "a path (or xyz table) is given but kind is \"procedural\" (the default when kind is missing): set kind = \"tiles\" (a `vkterrain preprocess` data set), \"png16\" or \"xyz\"",
+            ));
+        }
+        if d.kind == "xyz" {
+            match &d.xyz {
+                Some(x) => x.check()?,
+                None => {
+                    return Err(Error::invalid(
+                        "dataset.xyz",
+                        "kind = \"xyz\" needs a [dataset.xyz] table (source, encoding, bbox, zoom)",
+                    ));
+                }
+            }
+            if !self.clipmap.enabled {
+                return Err(Error::invalid(
+                    "dataset.kind",
+                    "\"xyz\" tiles stream through the clipmap: set [clipmap] enabled = true",
+                ));
+            }
+        }
         let r = &self.render;
         if r.width == 0 || r.height == 0 || r.width > MAX_RESOLUTION || r.height > MAX_RESOLUTION {
             return Err(Error::invalid(

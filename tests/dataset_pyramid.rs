@@ -43,7 +43,10 @@ fn raster(w: u32, h: u32, voids: bool) -> Raster {
         spacing: [10.0, 10.0],
         heights,
         georef: None,
+        vertical_datum: "local".into(),
+        nodata: None,
         provenance: vec!["generated".into()],
+        warnings: Vec::new(),
     }
 }
 

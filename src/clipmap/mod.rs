@@ -16,6 +16,7 @@ use std::sync::Arc;
 
 use glam::DVec2;
 
+use crate::dataset::NodeStore;
 use crate::dataset::tiles::Dataset;
 use crate::error::{Error, Result};
 use crate::gpu_constants::CLIPMAP_MAX_LEVELS;
@@ -53,6 +54,26 @@ pub struct NodeData {
 /// Called on worker threads.
 pub trait NodeSource: Send + Sync {
     fn load(&self, key: NodeKey) -> Result<NodeData>;
+    /// Tile fetch counters, for sources that fetch tiles (XYZ).
+    fn tile_counts(&self) -> Option<crate::dataset::xyz::XyzCounts> {
+        None
+    }
+}
+
+/// Any node store of the dataset layer (a data set directory, live XYZ tiles) as a source.
+pub struct StoreSource(pub Arc<dyn NodeStore>);
+
+impl NodeSource for StoreSource {
+    fn load(&self, key: NodeKey) -> Result<NodeData> {
+        let node = self.0.read_node(key.lod, key.x, key.y)?;
+        Ok(NodeData {
+            heights: node.heights,
+            rgba: (!node.rgba.is_empty()).then_some(node.rgba),
+        })
+    }
+    fn tile_counts(&self) -> Option<crate::dataset::xyz::XyzCounts> {
+        self.0.tile_counts()
+    }
 }
 
 /// A `vkterrain preprocess` data set as a node source.
@@ -85,17 +106,17 @@ pub fn from_config(config: &crate::config::Config) -> Result<Option<Clipmap>> {
     if !config.clipmap.enabled {
         return Ok(None);
     }
-    let path = config
-        .dataset
-        .path
-        .as_ref()
-        .map(|p| config.resolve(p))
-        .ok_or_else(|| Error::invalid("dataset.path", "the clipmap needs a tiles data set"))?;
-    let source = DatasetSource::open(&path)?;
-    let geometry = Geometry::of(&source.dataset);
+    let store = crate::dataset::open_store(config)?;
+    let geometry = Geometry::of_store(&*store);
     // One quadtree per camera of a frame; all of them share the atlas.
     let views = 1 + config.render.extra_views.len();
-    Clipmap::new(geometry, config.clipmap.clone(), Arc::new(source), views).map(Some)
+    Clipmap::new(
+        geometry,
+        config.clipmap.clone(),
+        Arc::new(StoreSource(store)),
+        views,
+    )
+    .map(Some)
 }
 
 /// Node geometry of a pyramid: centre and border texels, node counts per level.
@@ -114,6 +135,20 @@ pub struct Geometry {
 }
 
 impl Geometry {
+    /// The geometry of any node store.
+    pub fn of_store(store: &dyn NodeStore) -> Self {
+        let l = store.layout();
+        Geometry {
+            width: l.width,
+            height: l.height,
+            center: l.center,
+            border: l.border,
+            levels: (0..l.levels()).map(|lod| l.nodes(lod)).collect(),
+            spacing: store.spacing()[1],
+            height_range: store.height_range(),
+        }
+    }
+
     pub fn of(ds: &Dataset) -> Self {
         let l = &ds.layout;
         Geometry {
@@ -356,6 +391,7 @@ pub struct Clipmap {
     failed: HashMap<NodeKey, u64>,
     pending_uploads: Vec<Upload>,
     pub counters: Counters,
+    source: Arc<dyn NodeSource>,
 }
 
 impl Clipmap {
@@ -396,7 +432,7 @@ impl Clipmap {
             .allocate(root, 0, true)
             .ok_or_else(|| Error::invalid("clipmap", "atlas has no layer for the root"))?;
         atlas.store(layer, node.heights);
-        let streamer = Streamer::new(source, settings.workers, geometry.clone());
+        let streamer = Streamer::new(source.clone(), settings.workers, geometry.clone());
         Ok(Clipmap {
             views: (0..views.max(1))
                 .map(|_| ViewQuadtree::new(&geometry, settings.node_count, settings.blend_nodes))
@@ -411,6 +447,7 @@ impl Clipmap {
             failed: HashMap::new(),
             pending_uploads: vec![Upload { layer, shading }],
             counters: Counters::default(),
+            source,
         })
     }
 
@@ -423,6 +460,11 @@ impl Clipmap {
     /// with mips).
     pub fn layer_bytes(&self) -> u64 {
         gpu::layer_bytes(&self.geometry)
+    }
+
+    /// Tile fetch counters of the source, when it fetches tiles (XYZ).
+    pub fn tile_counts(&self) -> Option<crate::dataset::xyz::XyzCounts> {
+        self.source.tile_counts()
     }
 
     /// Loads still queued or waiting for upload.

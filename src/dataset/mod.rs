@@ -4,20 +4,22 @@
 //! `x = col * spacing`, `y = row * spacing` (metres, z up); row 0 is the **south** edge, so
 //! images whose first row is north are flipped when loaded. Heights are metres.
 
-pub mod geotiff;
+pub mod crs;
+pub mod gdal_in;
 pub mod level0;
 pub mod manifest;
+pub mod output;
 pub mod preprocess;
 pub mod procedural;
 pub mod pyramid;
 pub mod source;
-pub mod srtm;
 pub mod stats;
 pub mod tiles;
 pub mod voids;
+pub mod xyz;
 
 use crate::error::{Error, Result};
-pub use level0::{Level0, PyramidReader, Terrain};
+pub use level0::{DiskStore, Level0, NodeStore, PyramidReader, Terrain, open_store};
 
 /// A regular height grid in metres, with optional albedo of the same extent.
 #[derive(Clone, Debug)]
@@ -245,6 +247,10 @@ pub fn load(config: &crate::config::Config) -> Result<Heightmap> {
             );
             tiles::load(&path, d.lod, tiles::DEFAULT_MAX_SAMPLES)
         }
+        "xyz" => Err(Error::invalid(
+            "dataset.kind",
+            "\"xyz\" tiles stream through the clipmap: set [clipmap] enabled = true (or build a data set with `vkterrain preprocess --xyz`)",
+        )),
         other => Err(Error::invalid(
             "dataset.kind",
             format!("unknown kind {other:?}"),

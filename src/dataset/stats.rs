@@ -366,9 +366,8 @@ impl TileStats {
     /// little-endian.
     pub fn to_bytes(&self) -> Vec<u8> {
         let tiles: usize = self.levels.iter().map(|l| l.error.len()).sum();
-        let mut b = Vec::with_capacity(
-            HEADER + self.levels.len() * LEVEL_ENTRY + tiles * TILE_ENTRY,
-        );
+        let mut b =
+            Vec::with_capacity(HEADER + self.levels.len() * LEVEL_ENTRY + tiles * TILE_ENTRY);
         b.extend_from_slice(STATS_MAGIC);
         for v in [STATS_VERSION, self.grid_size] {
             b.extend_from_slice(&v.to_le_bytes());

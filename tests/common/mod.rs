@@ -106,3 +106,22 @@ pub fn procedural_pyramid(name: &str, size: u32, seed: u64, center: u32) -> std:
     preprocess::run(&opts, &mut NoProgress).unwrap();
     out
 }
+
+/// The shared real data (`../shared/data`, or `$VKTERRAIN_SHARED_DATA`). Without it a test
+/// skips with a note, except in CI (`CI` set): there a missing directory fails the test.
+pub fn shared_data() -> Option<std::path::PathBuf> {
+    let d = std::env::var_os("VKTERRAIN_SHARED_DATA")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    if d.is_dir() {
+        return Some(d);
+    }
+    if std::env::var_os("CI").is_some() {
+        panic!(
+            "{} is absent and CI is set: real-data tests must not skip in CI",
+            d.display()
+        );
+    }
+    eprintln!("note: {} absent, real-data test skipped", d.display());
+    None
+}
