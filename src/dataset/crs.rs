@@ -4,6 +4,7 @@
 //! Axis order is always "traditional GIS" (x = easting or longitude, y = northing or
 //! latitude), whatever the authority says.
 
+#[cfg(feature = "gdal")]
 use gdal::spatial_ref::{AxisMappingStrategy, CoordTransform, SpatialRef};
 use serde::{Deserialize, Serialize};
 
@@ -37,12 +38,23 @@ pub struct Crs {
 /// ground metres.
 const WEB_MERCATOR: [&str; 3] = ["EPSG:3857", "EPSG:900913", "EPSG:3785"];
 
+/// The error of a build without GDAL/PROJ.
+#[cfg(not(feature = "gdal"))]
+fn no_proj(what: &str) -> Error {
+    Error::invalid(
+        what,
+        "this vkterrain was built without GDAL/PROJ (--no-default-features): no coordinate transformations",
+    )
+}
+
+#[cfg(feature = "gdal")]
 fn gdal_err(what: &str, e: gdal::errors::GdalError) -> Error {
     Error::invalid(what, e.to_string().replace('\n', " "))
 }
 
 impl Crs {
     /// From a GDAL spatial reference (an authority code is looked up when absent).
+    #[cfg(feature = "gdal")]
     pub fn from_spatial_ref(srs: &SpatialRef, what: &str) -> Result<Self> {
         let mut srs = srs.clone();
         if srs.auth_name().is_none() {
@@ -89,6 +101,13 @@ impl Crs {
     }
 
     /// From what a user types: `EPSG:32633`, a WKT or a PROJ string.
+    #[cfg(not(feature = "gdal"))]
+    pub fn parse(_definition: &str) -> Result<Self> {
+        Err(no_proj("--crs"))
+    }
+
+    /// From what a user types: `EPSG:32633`, a WKT or a PROJ string.
+    #[cfg(feature = "gdal")]
     pub fn parse(definition: &str) -> Result<Self> {
         let srs = SpatialRef::from_definition(definition).map_err(|e| {
             Error::invalid(
@@ -100,18 +119,33 @@ impl Crs {
     }
 
     /// WGS 84 geographic (longitude, latitude in degrees).
+    #[cfg(not(feature = "gdal"))]
+    pub fn wgs84() -> Result<Self> {
+        Err(no_proj("EPSG:4326"))
+    }
+
+    /// Web Mercator (EPSG:3857), the CRS of XYZ tiles.
+    #[cfg(not(feature = "gdal"))]
+    pub fn web_mercator() -> Result<Self> {
+        Err(no_proj("EPSG:3857"))
+    }
+
+    /// WGS 84 geographic (longitude, latitude in degrees).
+    #[cfg(feature = "gdal")]
     pub fn wgs84() -> Result<Self> {
         let srs = SpatialRef::from_epsg(4326).map_err(|e| gdal_err("EPSG:4326", e))?;
         Self::from_spatial_ref(&srs, "EPSG:4326")
     }
 
     /// Web Mercator (EPSG:3857), the CRS of XYZ tiles.
+    #[cfg(feature = "gdal")]
     pub fn web_mercator() -> Result<Self> {
         let srs = SpatialRef::from_epsg(3857).map_err(|e| gdal_err("EPSG:3857", e))?;
         Self::from_spatial_ref(&srs, "EPSG:3857")
     }
 
     /// The GDAL spatial reference, axis order x/east, y/north.
+    #[cfg(feature = "gdal")]
     pub fn spatial_ref(&self) -> Result<SpatialRef> {
         let mut srs = SpatialRef::from_wkt(&self.wkt).map_err(|e| gdal_err(&self.name, e))?;
         srs.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
@@ -132,6 +166,9 @@ impl Crs {
         if self.wkt == other.wkt {
             return true;
         }
+        #[cfg(not(feature = "gdal"))]
+        return false;
+        #[cfg(feature = "gdal")]
         match (self.spatial_ref(), other.spatial_ref()) {
             (Ok(a), Ok(b)) => unsafe { gdal_sys::OSRIsSame(a.to_c_hsrs(), b.to_c_hsrs()) != 0 },
             _ => false,
@@ -149,11 +186,18 @@ impl Crs {
 
 /// Transforms points between two CRSs through PROJ.
 pub struct Transform {
+    #[cfg(feature = "gdal")]
     inner: CoordTransform,
     what: String,
 }
 
 impl Transform {
+    #[cfg(not(feature = "gdal"))]
+    pub fn new(from: &Crs, to: &Crs) -> Result<Self> {
+        Err(no_proj(&format!("{} -> {}", from.label(), to.label())))
+    }
+
+    #[cfg(feature = "gdal")]
     pub fn new(from: &Crs, to: &Crs) -> Result<Self> {
         let what = format!("{} -> {}", from.label(), to.label());
         let inner = CoordTransform::new(&from.spatial_ref()?, &to.spatial_ref()?)
@@ -162,6 +206,13 @@ impl Transform {
     }
 
     /// Transforms `(x, y)` pairs in place; a point PROJ cannot transform is an error.
+    #[cfg(not(feature = "gdal"))]
+    pub fn apply(&self, _pts: &mut [[f64; 2]]) -> Result<()> {
+        Err(no_proj(&self.what))
+    }
+
+    /// Transforms `(x, y)` pairs in place; a point PROJ cannot transform is an error.
+    #[cfg(feature = "gdal")]
     pub fn apply(&self, pts: &mut [[f64; 2]]) -> Result<()> {
         let mut xs: Vec<f64> = pts.iter().map(|p| p[0]).collect();
         let mut ys: Vec<f64> = pts.iter().map(|p| p[1]).collect();

@@ -24,16 +24,11 @@ use super::crs::{Crs, CrsKind, Georef, Transform};
 use super::manifest::datum;
 use super::output::{available_memory, human_bytes};
 use super::pyramid::MAX_SIDE_SAMPLES;
-use super::source::{Raster, local_spacing};
+use super::source::{BYTES_PER_SAMPLE, Raster, local_spacing};
 use crate::error::{Error, Result};
 
-/// Bytes of working memory per level-0 sample of a raster held for void filling (heights,
-/// mask, the fill's coarser levels and the reader's chunk).
-pub const BYTES_PER_SAMPLE: u64 = 12;
 /// Rows per read.
 const CHUNK_ROWS: usize = 64;
-/// Heights outside this range draw a warning.
-pub const PLAUSIBLE_HEIGHTS: (f64, f64) = (-500.0, 9000.0);
 /// SRTM tiles: samples per side and bytes.
 const SRTM_SIDES: [u64; 2] = [1201, 3601];
 
@@ -465,25 +460,6 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<Raster> {
         raster.warnings.extend(warning);
     }
     Ok(raster)
-}
-
-/// Warns (one line) about heights outside [`PLAUSIBLE_HEIGHTS`] (after any scaling).
-pub fn plausibility_warnings(raster: &mut Raster) {
-    let (lo, hi) = PLAUSIBLE_HEIGHTS;
-    let (mut n, mut min, mut max) = (0u64, f32::INFINITY, f32::NEG_INFINITY);
-    for &v in raster.heights.iter().filter(|v| !v.is_nan()) {
-        if (v as f64) < lo || (v as f64) > hi {
-            n += 1;
-            min = min.min(v);
-            max = max.max(v);
-        }
-    }
-    if n > 0 {
-        raster.warnings.push(format!(
-            "{}: {n} heights outside {lo}..{hi} m (from {min} to {max} m): wrong units, scale or nodata?",
-            raster.name
-        ));
-    }
 }
 
 fn same_file(a: &Path, b: &Path) -> bool {

@@ -5,6 +5,10 @@
 //! images whose first row is north are flipped when loaded. Heights are metres.
 
 pub mod crs;
+#[cfg(feature = "gdal")]
+pub mod gdal_in;
+#[cfg(not(feature = "gdal"))]
+#[path = "gdal_stub.rs"]
 pub mod gdal_in;
 pub mod level0;
 pub mod manifest;

@@ -145,7 +145,7 @@ fn read_inputs_with(
             .provenance
             .push(format!("heights multiplied by --vertical-scale {vs}"));
     }
-    gdal_in::plausibility_warnings(&mut raster);
+    super::source::plausibility_warnings(&mut raster);
     Ok(raster)
 }
 
@@ -425,7 +425,7 @@ fn read_source(opts: &Options, progress: &dyn Progress) -> Result<Source> {
         Input::Xyz(req) => {
             progress.stage("fetching XYZ tiles");
             let (mut r, bytes) = xyz::read_raster(req, opts.memory_budget)?;
-            gdal_in::plausibility_warnings(&mut r);
+            super::source::plausibility_warnings(&mut r);
             source_bytes = bytes;
             Some(r)
         }

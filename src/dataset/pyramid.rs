@@ -578,6 +578,24 @@ pub fn read_node_from(
             format!("node ({x}, {y}) of level {lod} unreadable (truncated file?): {e}"),
         )
     })?;
+    parse_record(&buf, layout, layers).map_err(|e| {
+        Error::invalid(
+            path.display().to_string(),
+            format!("node ({x}, {y}) of level {lod}: {e}"),
+        )
+    })
+}
+
+/// One record's bytes as a [`Node`]: exactly `record_size` bytes; heights are returned as
+/// stored (readers check them: `Geometry::check`, the level-0 reader).
+pub fn parse_record(buf: &[u8], layout: &Layout, layers: LayerSet) -> Result<Node> {
+    let size = layout.record_size(layers) as usize;
+    if buf.len() != size {
+        return Err(Error::invalid(
+            "node record",
+            format!("{} bytes, expected {size}", buf.len()),
+        ));
+    }
     let f = |o: usize| f32::from_le_bytes(buf[o..o + 4].try_into().expect("4 bytes"));
     let t = (layout.side() as usize).pow(2);
     let h0 = NODE_HEADER as usize;

@@ -7,6 +7,12 @@
 use super::crs::{CrsKind, Georef, Transform};
 use crate::error::Result;
 
+/// Bytes of working memory per level-0 sample of a raster held for void filling (heights,
+/// mask, the fill's coarser levels and the reader's chunk).
+pub const BYTES_PER_SAMPLE: u64 = 12;
+/// Heights outside this range draw a warning.
+pub const PLAUSIBLE_HEIGHTS: (f64, f64) = (-500.0, 9000.0);
+
 #[derive(Clone, Debug)]
 pub struct Raster {
     /// Source description (file names), used in messages and the manifest.
@@ -109,4 +115,23 @@ fn edge_error_percent(g: &Georef, height: u32, lat_c: f64, to_geo: &Transform) -
         worst = worst.max((r - 1.0).abs() * 100.0);
     }
     Ok(worst)
+}
+
+/// Warns (one line) about heights outside [`PLAUSIBLE_HEIGHTS`] (after any scaling).
+pub fn plausibility_warnings(raster: &mut Raster) {
+    let (lo, hi) = PLAUSIBLE_HEIGHTS;
+    let (mut n, mut min, mut max) = (0u64, f32::INFINITY, f32::NEG_INFINITY);
+    for &v in raster.heights.iter().filter(|v| !v.is_nan()) {
+        if (v as f64) < lo || (v as f64) > hi {
+            n += 1;
+            min = min.min(v);
+            max = max.max(v);
+        }
+    }
+    if n > 0 {
+        raster.warnings.push(format!(
+            "{}: {n} heights outside {lo}..{hi} m (from {min} to {max} m): wrong units, scale or nodata?",
+            raster.name
+        ));
+    }
 }

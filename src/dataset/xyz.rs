@@ -547,10 +547,7 @@ impl XyzGrid {
         s.check()?;
         let merc = Crs::web_mercator()?;
         let to = Transform::new(&Crs::wgs84()?, &merc)?;
-        let radius = merc
-            .spatial_ref()?
-            .semi_major()
-            .map_err(|e| Error::invalid("EPSG:3857", e.to_string()))?;
+        let radius = semi_major(&merc)?;
         let [w, so, e, n] = s.bbox;
         let sw = to.point([w, so])?;
         let ne = to.point([e, n])?;
@@ -617,13 +614,26 @@ impl XyzGrid {
     }
 }
 
+/// The semi-major axis of a CRS's ellipsoid (PROJ).
+#[cfg(feature = "gdal")]
+fn semi_major(crs: &Crs) -> Result<f64> {
+    crs.spatial_ref()?
+        .semi_major()
+        .map_err(|e| Error::invalid(crs.label(), e.to_string()))
+}
+
+#[cfg(not(feature = "gdal"))]
+fn semi_major(crs: &Crs) -> Result<f64> {
+    Err(Error::invalid(crs.label(), "built without GDAL/PROJ"))
+}
+
 /// Tiles of `grid` fetched in parallel and pasted into a raster (row 0 = south).
 pub fn read_raster(s: &XyzSettings, memory_budget: Option<u64>) -> Result<(Raster, u64)> {
     let fetcher = TileFetcher::new(s)?;
     let grid = XyzGrid::cover(s, 1)?;
     let (w, h) = (grid.width(), grid.height());
     let name = format!("XYZ {} z{} {:?}", s.source, s.zoom, s.bbox);
-    let need = w * h * super::gdal_in::BYTES_PER_SAMPLE;
+    let need = w * h * super::source::BYTES_PER_SAMPLE;
     let have = memory_budget
         .or_else(super::output::available_memory)
         .unwrap_or(u64::MAX);
