@@ -60,7 +60,7 @@ fn build(dir: &Path, r: Raster, center: u32, border: u32) -> Dataset {
         force: true,
         ..Default::default()
     };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     Dataset::open(&out).unwrap()
 }
 
@@ -188,20 +188,18 @@ fn interrupted_run_leaves_no_dataset_and_rerun_starts_clean() {
         center_size: 8,
         ..Default::default()
     };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     assert!(!partial.exists());
     Dataset::open(&out).unwrap();
     // A second run refuses to overwrite without force, and leaves the data set intact.
-    let e = preprocess::run(&opts, &mut NoProgress)
-        .unwrap_err()
-        .to_string();
+    let e = preprocess::run(&opts, &NoProgress).unwrap_err().to_string();
     assert!(e.contains("already exists"), "{e}");
     Dataset::open(&out).unwrap();
     let opts = Options {
         force: true,
         ..opts
     };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     Dataset::open(&out).unwrap();
     // A truncated level file is detected.
     let f = std::fs::OpenOptions::new()
@@ -234,7 +232,7 @@ fn procedural_is_deterministic_and_matches_the_generator() {
             center_size: 64,
             ..Default::default()
         };
-        let s = preprocess::run(&opts, &mut NoProgress).unwrap();
+        let s = preprocess::run(&opts, &NoProgress).unwrap();
         assert_eq!(s.content, "procedural");
         bytes.push(std::fs::read(out.join("L0.bin")).unwrap());
     }
@@ -262,7 +260,7 @@ fn amplified_dem_is_labelled_and_stays_near_the_source() {
         amplify: Some((4, 3)),
         ..Default::default()
     };
-    let s = preprocess::run(&opts, &mut NoProgress).unwrap();
+    let s = preprocess::run(&opts, &NoProgress).unwrap();
     assert_eq!((s.width, s.height), (157, 117));
     let ds = Dataset::open(&out).unwrap();
     assert_eq!(ds.manifest.content, "amplified");

@@ -32,7 +32,7 @@ fn run(inputs: Vec<PathBuf>, out: &Path, f: impl FnOnce(&mut Options)) -> Datase
         ..Default::default()
     };
     f(&mut opts);
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     Dataset::open(out).unwrap()
 }
 

@@ -104,12 +104,15 @@ enum Fault {
     Oversize(u32),
 }
 
+/// PNGs made so far, by `(z, x, y)`.
+type Made = Mutex<HashMap<(u32, u64, u64), Arc<Vec<u8>>>>;
+
 struct Server {
     url: String,
     fault: Mutex<Fault>,
     requests: AtomicU64,
     encoding: Encoding,
-    made: Mutex<HashMap<(u32, u64, u64), Arc<Vec<u8>>>>,
+    made: Made,
 }
 
 impl Server {

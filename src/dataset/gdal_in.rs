@@ -758,7 +758,6 @@ fn to_mem(input: &Input, notes: &mut ReadNotes) -> Result<Dataset> {
     if let Some(e) = failure {
         return Err(err(e));
     }
-    drop(band);
     Ok(ds)
 }
 

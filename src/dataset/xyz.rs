@@ -707,9 +707,13 @@ pub fn read_raster(s: &XyzSettings, memory_budget: Option<u64>) -> Result<(Raste
     Ok((raster, c.bytes))
 }
 
-/// Decoded tiles shared by nodes (a node needs up to 3x3 tiles).
+/// A decoded tile (heights row-major from the north).
+type Tile = Arc<Vec<f32>>;
+
+/// Decoded tiles shared by nodes (a node needs up to 3x3 tiles): `(zoom, x, y)` -> (tile,
+/// last use).
 struct TileCache {
-    tiles: HashMap<(u32, u64, u64), (Arc<Vec<f32>>, u64)>,
+    tiles: HashMap<(u32, u64, u64), (Tile, u64)>,
     tick: u64,
 }
 
@@ -786,7 +790,7 @@ impl XyzPyramid {
         Ok(p)
     }
 
-    fn tile(&self, zoom: u32, tx: u64, ty: u64) -> Result<Arc<Vec<f32>>> {
+    fn tile(&self, zoom: u32, tx: u64, ty: u64) -> Result<Tile> {
         {
             let mut c = self.cache.lock().unwrap_or_else(|e| e.into_inner());
             c.tick += 1;
@@ -827,7 +831,7 @@ impl XyzPyramid {
         };
         let side = l.side() as i64;
         let mut out = Vec::with_capacity((side * side) as usize);
-        let mut current: Option<((u64, u64), Arc<Vec<f32>>)> = None;
+        let mut current: Option<((u64, u64), Tile)> = None;
         for j in 0..side {
             let py = py1 - 1 - idx(y, j, h);
             for i in 0..side {

@@ -103,7 +103,7 @@ pub fn procedural_pyramid(name: &str, size: u32, seed: u64, center: u32) -> std:
         center_size: center,
         ..Default::default()
     };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     out
 }
 
