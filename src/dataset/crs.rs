@@ -279,7 +279,7 @@ impl Georef {
     }
 
     /// Checks a north-up grid of `width x height` samples: finite, positive steps no smaller
-    /// than 1e-9 of the extent's magnitude, geographic coordinates on the earth.
+    /// than 1e-12 of the coordinates' magnitude, geographic coordinates on the earth.
     pub fn check(&self, what: &str, width: u64, height: u64) -> Result<()> {
         let t = &self.sample_to_crs;
         let bad = |m: String| Err(Error::invalid(what, m));
@@ -293,7 +293,7 @@ impl Georef {
         let [x0, y0] = self.origin();
         let [x1, y1] = self.at((width - 1) as f64, (height - 1) as f64);
         let size = x0.abs().max(x1.abs()).max(y0.abs()).max(y1.abs()).max(1.0);
-        if !(sx > 0.0 && sy > 0.0) || sx < 1e-9 * size || sy < 1e-9 * size {
+        if !(sx > 0.0 && sy > 0.0) || sx < 1e-12 * size || sy < 1e-12 * size {
             return bad(format!(
                 "sample step {sx} x {sy} {} is not positive or is too small for coordinates of {size:e}",
                 self.crs.units
