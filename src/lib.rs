@@ -13,6 +13,7 @@ pub mod dataset;
 pub mod driver;
 pub mod error;
 pub mod eval;
+pub mod frame;
 /// Constants shared by Rust and WGSL (generated into every shader by `build.rs`).
 pub mod gpu_constants;
 pub mod lod;
@@ -20,5 +21,6 @@ pub mod output;
 pub mod readback;
 pub mod render;
 pub mod scene;
+pub mod slots;
 
 pub use error::{Error, Result};

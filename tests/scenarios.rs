@@ -47,9 +47,8 @@ fn srtm_pair(data: &Path, south: &str, north: &str, tmp: &Path) -> Heightmap {
     tiles::load(&out, None, tiles::DEFAULT_MAX_SAMPLES).unwrap()
 }
 
-/// Data sets by file-name prefix; `None` without ../shared/data.
+/// Data sets by file-name prefix; `None` without ../shared/data (a failure in CI).
 fn real_datasets() -> Option<Vec<(&'static str, Heightmap)>> {
-    // Absent: checked on procedural terrain only (a failure in CI).
     let data = common::shared_data()?;
     // One directory per call: tests run in parallel threads of one process.
     static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);

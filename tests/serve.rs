@@ -268,7 +268,7 @@ fn serve_frame_limit_keeps_segment_when_configured() {
         &config,
         format!(
             "[render]\nwidth = 32\nheight = 24\nreadback_depth = true\n\
-             [dataset]\nsize = 129\n\
+             [dataset]\nkind = \"procedural\"\nsize = 129\n\
              [ring]\nname = \"{name}\"\nslots = 3\nkeep_segment = true\n"
         ),
     )

@@ -19,10 +19,10 @@ use clap::Args;
 use serde::{Deserialize, Serialize};
 
 use super::render::{RenderArgs, check_validation, prepare};
-use crate::driver::{Gpu, GpuOptions};
+
 use crate::output::ring::{Geometry, ProducerOptions, RingProducer, sys};
 use crate::render::stats::Percentiles;
-use crate::render::{FrameRequest, RenderOptions, Renderer};
+use crate::render::{FrameRequest, RenderOptions};
 use crate::scene::Camera;
 
 #[derive(Args, Debug, Clone, Default)]
@@ -335,22 +335,9 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     let control = control_path.as_deref().map(bind_control).transpose()?;
     let _socket_guard = control_path.clone().map(RemoveOnDrop);
 
-    let gpu = Gpu::new(
-        &GpuOptions {
-            select: config.device.select.clone(),
-            validation: config.device.validation,
-            force_legacy: config.device.force_legacy,
-        }
-        .with_env(),
-    )?;
-    let mut options = RenderOptions::from_config(&config);
-    let mut renderer = Renderer::with_clipmap(
-        &gpu,
-        &p.data,
-        p.method,
-        options.clone(),
-        crate::clipmap::from_config(&config)?,
-    )?;
+    let gpu = config.open_gpu()?;
+    let mut options = config.render_options();
+    let mut renderer = config.open_renderer(&gpu, &p.data, options.clone())?;
     let mut ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
     tracing::info!(
         ring = config.ring.name,
@@ -457,13 +444,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                 options.width = w;
                 options.height = h;
                 // A fresh clipmap too: its atlas lives in the old renderer's device memory.
-                renderer = Renderer::with_clipmap(
-                    &gpu,
-                    &p.data,
-                    p.method,
-                    options.clone(),
-                    crate::clipmap::from_config(&config)?,
-                )?;
+                renderer = config.open_renderer(&gpu, &p.data, options.clone())?;
                 ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
                 tracing::info!(width = w, height = h, "resolution changed");
             }

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use super::Heightmap;
+use super::interp::GridCell;
 use super::pyramid::{LayerSet, Layout, LevelRows, Node};
 use super::stats::TileStats;
 use super::tiles::Dataset;
@@ -46,17 +47,9 @@ pub trait Level0 {
     /// Bilinear height at a world position, clamped to the grid: the same arithmetic as
     /// [`Heightmap::height_at`] (bit for bit).
     fn bilinear(&self, x: f64, y: f64) -> Result<f64> {
-        let (w, h) = (self.width(), self.height());
-        let gx = (x / self.spacing()).clamp(0.0, (w - 1) as f64);
-        let gy = (y / self.spacing()).clamp(0.0, (h - 1) as f64);
-        let (c0, r0) = (gx.floor() as u32, gy.floor() as u32);
-        let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
-        let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
-        let (h00, h10) = (self.sample(c0, r0)? as f64, self.sample(c1, r0)? as f64);
-        let (h01, h11) = (self.sample(c0, r1)? as f64, self.sample(c1, r1)? as f64);
-        let south = h00 * (1.0 - fx) + h10 * fx;
-        let north = h01 * (1.0 - fx) + h11 * fx;
-        Ok(south * (1.0 - fy) + north * fy)
+        let (sx, sy) = (x / self.spacing(), y / self.spacing());
+        GridCell::at(sx, sy, self.width(), self.height())
+            .try_bilinear(|c, r| self.sample(c, r).map(f64::from))
     }
 }
 
@@ -683,31 +676,5 @@ impl NodeStore for XyzPyramid {
     }
     fn tile_counts(&self) -> Option<super::xyz::XyzCounts> {
         Some(self.fetcher.counters.snapshot())
-    }
-}
-
-/// The node store a configuration names (`tiles`: a data set directory, `xyz`: live tiles).
-pub fn open_store(config: &crate::config::Config) -> Result<Arc<dyn NodeStore>> {
-    let d = &config.dataset;
-    match d.kind.as_str() {
-        "xyz" => {
-            let s = d.xyz.as_ref().ok_or_else(|| {
-                Error::invalid("dataset.xyz", "kind = \"xyz\" needs a [dataset.xyz] table")
-            })?;
-            let mut s = s.clone();
-            if let Some(c) = &s.cache_dir {
-                s.cache_dir = Some(config.resolve(c));
-            }
-            if !(s.source.starts_with("http://") || s.source.starts_with("https://")) {
-                s.source = config.resolve(Path::new(&s.source)).display().to_string();
-            }
-            Ok(Arc::new(XyzPyramid::open(&s)?))
-        }
-        _ => {
-            let path = d.path.as_ref().map(|p| config.resolve(p)).ok_or_else(|| {
-                Error::invalid("dataset.path", "the clipmap needs a tiles data set")
-            })?;
-            Ok(Arc::new(DiskStore::open(&path)?))
-        }
     }
 }

@@ -115,15 +115,11 @@ pub fn root_lod(width: u32, height: u32, grid_size: u32) -> u32 {
 /// level samples around it (`[h(c0, r0), h(c0 + step, r0), h(c0, r0 + step),
 /// h(c0 + step, r0 + step)]`, `c0 = c` rounded down to a multiple of `step = 2^lod`, corners
 /// clamped to the data). Quads split along the diagonal from (1, 0) to (0, 1).
-pub fn level_interpolate(lod: u32, [h00, h10, h01, h11]: [f64; 4], c: u32, r: u32) -> f64 {
+pub fn level_interpolate(lod: u32, corners: [f64; 4], c: u32, r: u32) -> f64 {
     let step = 1u32 << lod;
     let (c0, r0) = (c / step * step, r / step * step);
     let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
-    if fx + fy <= 1.0 {
-        h00 + (h10 - h00) * fx + (h01 - h00) * fy
-    } else {
-        h11 + (h01 - h11) * (1.0 - fx) + (h10 - h11) * (1.0 - fy)
-    }
+    super::interp::triangulated(corners, fx, fy)
 }
 
 /// Partial statistics of one band of rows: per level, the tile rows it touches.

@@ -126,7 +126,7 @@ pub fn decode_tile(bytes: &[u8], encoding: Encoding, side: u32) -> Result<Vec<f3
         .collect())
 }
 
-/// Settings of an XYZ tile source (`[dataset.xyz]` in a config, `--xyz` flags of preprocess).
+/// Settings of an XYZ tile source (`[dataset] kind = "xyz"` in a config, `--xyz` flags of preprocess).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct XyzSettings {
