@@ -623,7 +623,16 @@ fn absurd_sizes_are_refused_before_reading_with_bounded_memory() {
         &["N11E010.hgt.zip", "2147483648 bytes", "not an SRTM tile"],
         &out,
     );
+}
 
+/// A header that claims more than memory holds is refused from its numbers, before any row is
+/// read (needs GDAL to write the sparse BigTIFF fixture).
+#[cfg(feature = "gdal")]
+#[test]
+fn a_raster_claiming_200000_squared_samples_is_refused_from_its_header() {
+    let dir = tmpdir("claims");
+    let out = dir.join("o");
+    let o = out.to_str().unwrap();
     // A deflated GeoTIFF claiming 200000 x 200000 int16 samples (written as one small strip
     // through a lying header is not possible with the encoder; a sparse BigTIFF through GDAL
     // is): refused by the memory check from the header's numbers, before any row is read.

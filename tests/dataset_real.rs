@@ -1,6 +1,8 @@
 //! Real DEMs from `../shared/data` (skipped with a note when that directory is absent, a
 //! failure in CI), read through GDAL and checked against independent readers of the raw
-//! bytes.
+//! bytes. Every test here reads files through GDAL: built only with the `gdal` feature (the
+//! default, and what CI builds).
+#![cfg(feature = "gdal")]
 
 mod common;
 

@@ -2,7 +2,9 @@
 //! served by a local HTTP server this test starts (with slow, erroring, corrupt and oversize
 //! variants): `preprocess --xyz` round-trips the SRTM heights within the encoding's step, the
 //! placement agrees with PROJ and with the closed-form Web Mercator inverse, and the live
-//! source streams through the clipmap under faults without stalling or panicking.
+//! source streams through the clipmap under faults without stalling or panicking. Placement
+//! needs PROJ (GDAL's OSR): without the `gdal` feature only the fetcher test is built.
+#![cfg_attr(not(feature = "gdal"), allow(unused))]
 
 mod common;
 
@@ -234,6 +236,7 @@ fn settings(source: String, enc: Encoding, cache: &Path) -> XyzSettings {
 /// (0 m here: SRTM heights are integers), the grid lies on the zoom's pixel centres, PROJ's
 /// inverse of the centres agrees with the closed form. Negative control: the neighbouring
 /// pixel's SRTM value disagrees at many samples.
+#[cfg(feature = "gdal")] // tile placement through PROJ (GDAL's OSR)
 #[test]
 fn xyz_tiles_round_trip_the_srtm_heights() {
     use gdal::spatial_ref::{AxisMappingStrategy, CoordTransform, SpatialRef};
@@ -394,6 +397,7 @@ fn tile_fetcher_counts_faults_and_bounds_its_cache() {
 /// PNGs): frames keep coming (none waits for the network), failures are counted and drawn as
 /// coarser data without holes; once the server recovers the view converges to full
 /// resolution.
+#[cfg(feature = "gdal")] // tile placement through PROJ (GDAL's OSR)
 #[test]
 fn live_xyz_source_streams_through_the_clipmap_under_faults() {
     if srtm().is_none() {
