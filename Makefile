@@ -6,11 +6,16 @@
 
 # glslang-tools: glslangValidator, the build-time compiler of the GLSL shader stages naga lacks
 # (tessellation, task/mesh; build.rs runs it).
-RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers glslang-tools
+# libgdal-dev: GDAL 3.6 (reading DEMs; the gdal crate links it, found through pkg-config),
+# libproj-dev + proj-data: PROJ 9.1 and its EPSG database (coordinate transformations).
+RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers glslang-tools libgdal-dev libproj-dev proj-data pkg-config
 TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
 CARGO ?= cargo
+# The shared real data (never committed): ../shared/data by default.
+SHARED ?= ../shared
+export VKTERRAIN_SHARED_DATA ?= $(abspath $(SHARED)/data)
 
-.PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test
+.PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap bench-preprocess bench-startup fuzz data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test
 
 # The main job: UDLOD through the chunked clipmap over the embedded procedural terrain (its tile
 # pyramid is generated once into target/data/default).
@@ -33,11 +38,12 @@ data-srtm: target/data/n48w125/manifest.json
 data-pyrenees: out/datasets/pyrenees/manifest.json
 data-franconia: out/datasets/franconia/manifest.json
 
-out/datasets/pyrenees/manifest.json:
-	$(CARGO) run --release --locked -- preprocess ../shared/data/srtm/N41E001.hgt.zip ../shared/data/srtm/N42E001.hgt.zip --out out/datasets/pyrenees
+# Data sets are rebuilt when the format (src/dataset/manifest.rs) changes.
+out/datasets/pyrenees/manifest.json: src/dataset/manifest.rs
+	$(CARGO) run --release --locked -- preprocess $(SHARED)/data/srtm/N41E001.hgt.zip $(SHARED)/data/srtm/N42E001.hgt.zip --out out/datasets/pyrenees --force
 
-out/datasets/franconia/manifest.json:
-	$(CARGO) run --release --locked -- preprocess ../shared/data/srtm/N49E011.hgt.zip ../shared/data/srtm/N50E011.hgt.zip --out out/datasets/franconia
+out/datasets/franconia/manifest.json: src/dataset/manifest.rs
+	$(CARGO) run --release --locked -- preprocess $(SHARED)/data/srtm/N49E011.hgt.zip $(SHARED)/data/srtm/N50E011.hgt.zip --out out/datasets/franconia --force
 
 # The speed/accuracy evaluation at CI size (short) or full size: see docs/eval.md.
 bench-eval: deps data
@@ -53,14 +59,28 @@ bench-clipmap: deps data-proc4k
 data-proc4k: target/data/proc4k/manifest.json
 data-default: target/data/default/manifest.json
 
-target/data/default/manifest.json:
-	$(CARGO) run --release --locked -- preprocess --procedural --style alpine --size 4097 --spacing 30 --max-height 3500 --feature-size 16000 --node-size 64 --out target/data/default
+target/data/default/manifest.json: src/dataset/manifest.rs
+	$(CARGO) run --release --locked -- preprocess --procedural --style alpine --size 4097 --spacing 30 --max-height 3500 --feature-size 16000 --node-size 64 --out target/data/default --force
 
-target/data/proc4k/manifest.json:
-	$(CARGO) run --release --locked -- preprocess --procedural --size 4097 --node-size 64 --out target/data/proc4k
+target/data/proc4k/manifest.json: src/dataset/manifest.rs
+	$(CARGO) run --release --locked -- preprocess --procedural --size 4097 --node-size 64 --out target/data/proc4k --force
 
-target/data/n48w125/manifest.json:
-	$(CARGO) run --release --locked -- preprocess ../shared/data/srtm/N48W125.hgt.zip --out target/data/n48w125
+target/data/n48w125/manifest.json: src/dataset/manifest.rs
+	$(CARGO) run --release --locked -- preprocess $(SHARED)/data/srtm/N48W125.hgt.zip --out target/data/n48w125 --force
+
+# Preprocessing throughput and peak memory: every shared data set and procedural 4097²/16385²,
+# one thread and all (docs/dataset-format.md; VKT_BENCH_* variables in benches/preprocess.rs).
+bench-preprocess: deps
+	$(CARGO) bench --locked --bench preprocess
+
+# UDLOD start-up: stored tile statistics against computing them from level 0.
+bench-startup: deps data-proc4k
+	$(CARGO) bench --locked --bench startup
+
+# 10^6 fuzz cases over the readers that remain ours (manifest, level files, statistics, tile
+# PNG decoding); not part of `make test`.
+fuzz: deps
+	$(CARGO) bench --locked --bench fuzz_readers
 
 deps:
 	@scripts/ensure-packages.sh $(RUN_PACKAGES)

@@ -146,6 +146,22 @@ fn invalid_config_files() {
             vec!["clipmap", "tiles"],
         ),
         (
+            // Live XYZ tiles are read node by node: only through the clipmap.
+            "xyz_no_clipmap.toml",
+            "[dataset]\nkind = \"xyz\"\nsource = \"tiles\"\nbbox = [1.0, 42.0, 2.0, 43.0]\nzoom = 9\n[clipmap]\nenabled = false\n",
+            vec!["xyz", "clipmap"],
+        ),
+        (
+            "xyz_bbox.toml",
+            "[dataset]\nkind = \"xyz\"\nsource = \"tiles\"\nbbox = [1.0, 89.0, 2.0, 90.0]\nzoom = 9\n",
+            vec!["bbox", "85.05"],
+        ),
+        (
+            "xyz_key.toml",
+            "[dataset]\nkind = \"xyz\"\nsource = \"tiles\"\nzom = 9\n",
+            vec!["xyz_key.toml", "zom"],
+        ),
+        (
             "clipmap_nodes.toml",
             "[clipmap]\nnode_count = 7\n",
             vec!["node_count 7"],

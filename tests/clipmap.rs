@@ -1058,3 +1058,79 @@ impl std::fmt::Debug for Bits {
         )
     }
 }
+
+/// UDLOD's statistics stored by `vkterrain preprocess` equal the ones computed from level 0,
+/// bit for bit (and the sample-by-sample definition), so start-up reads no level 0; a grid
+/// size that was not stored is computed from level 0 to the same bits. Negative controls: one
+/// stored minimum moved by one ulp (still a valid file) makes the levels differ; a NaN is a
+/// one-line error naming the file.
+#[test]
+fn stored_tile_statistics_equal_the_computed_ones() {
+    use vkterrain::dataset::stats::TileStats;
+    let data = heightmap();
+    let reader = PyramidReader::open(dataset()).unwrap();
+    let bits = |v: &[f32]| Bits(v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+    let e64 = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let same = |a: &Levels, b: &Levels| {
+        let mm = |l: &Levels| l.min_max.iter().flatten().copied().collect::<Vec<_>>();
+        a.tiles_per_side == b.tiles_per_side
+            && a.level_offsets == b.level_offsets
+            && (a.width, a.height, a.root_lod, a.grid_size)
+                == (b.width, b.height, b.root_lod, b.grid_size)
+            && a.spacing.to_bits() == b.spacing.to_bits()
+            && bits(&mm(a)) == bits(&mm(b))
+            && bits(&a.tile_error) == bits(&b.tile_error)
+            && e64(&a.level_error) == e64(&b.level_error)
+            && bits(&a.field.corners) == bits(&b.field.corners)
+            && e64(&a.field.sigma) == e64(&b.field.sigma)
+            && e64(&a.field.mu) == e64(&b.field.mu)
+    };
+    // Stored (grid 16, the default of preprocess): no level-0 node read.
+    let stored = reader
+        .store()
+        .stored_stats(16)
+        .unwrap()
+        .expect("grid 16 stored");
+    assert_eq!(reader.node_loads(), 0);
+    let from_disk = Levels::from_stats(stored.clone(), reader.spacing(), 8.0);
+    let computed = Levels::new(&data, 16, 8.0).unwrap();
+    assert!(same(&from_disk, &computed), "stored statistics differ");
+    let (mm, te, le) = reference_statistics(&data, &computed);
+    assert_eq!(bits(&mm), bits(&from_disk.min_max.concat()));
+    assert_eq!(bits(&te), bits(&from_disk.tile_error));
+    assert_eq!(le, from_disk.level_error);
+    // In parallel over the pyramid's level file: the same bits.
+    let par = TileStats::compute(&data, 16, &|_| {}).unwrap();
+    assert_eq!(par, stored);
+    // Not stored (grid 8): computed from level 0, equal to the in-memory computation.
+    assert!(reader.store().stored_stats(8).unwrap().is_none());
+    let s8 = reader.tile_stats(8).unwrap();
+    assert!(same(
+        &Levels::from_stats(s8, reader.spacing(), 1.0),
+        &Levels::new(&data, 8, 1.0).unwrap()
+    ));
+
+    // A stored minimum one ulp lower: a valid file whose levels differ.
+    let moved = dataset().with_file_name("moved-stats");
+    copy_dir(dataset(), &moved);
+    let file = moved.join("stats-g16.bin");
+    let mut bytes = std::fs::read(&file).unwrap();
+    let levels = stored.levels.len();
+    let first_tile = 40 + 16 * levels + 12 * 5; // tile 5 of level 0: (min, max, error)
+    let v = f32::from_le_bytes(bytes[first_tile..first_tile + 4].try_into().unwrap());
+    bytes[first_tile..first_tile + 4]
+        .copy_from_slice(&f32::from_bits(v.to_bits() - 1).to_le_bytes());
+    std::fs::write(&file, &bytes).unwrap();
+    let mutated = PyramidReader::open(&moved).unwrap();
+    let m = mutated.store().stored_stats(16).unwrap().unwrap();
+    assert!(!same(
+        &Levels::from_stats(m, reader.spacing(), 8.0),
+        &computed
+    ));
+    // A NaN: refused with a one-line error naming the file.
+    bytes[first_tile..first_tile + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(&file, &bytes).unwrap();
+    let e = mutated.tile_stats(16).unwrap_err().to_string();
+    assert!(e.contains("stats-g16.bin") && !e.contains('\n'), "{e}");
+    std::fs::remove_dir_all(&moved).ok();
+}

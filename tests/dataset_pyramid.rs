@@ -43,7 +43,10 @@ fn raster(w: u32, h: u32, voids: bool) -> Raster {
         spacing: [10.0, 10.0],
         heights,
         georef: None,
+        vertical_datum: "local".into(),
+        nodata: None,
         provenance: vec!["generated".into()],
+        warnings: Vec::new(),
     }
 }
 
@@ -57,7 +60,7 @@ fn build(dir: &Path, r: Raster, center: u32, border: u32) -> Dataset {
         force: true,
         ..Default::default()
     };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     Dataset::open(&out).unwrap()
 }
 
@@ -185,20 +188,18 @@ fn interrupted_run_leaves_no_dataset_and_rerun_starts_clean() {
         center_size: 8,
         ..Default::default()
     };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     assert!(!partial.exists());
     Dataset::open(&out).unwrap();
     // A second run refuses to overwrite without force, and leaves the data set intact.
-    let e = preprocess::run(&opts, &mut NoProgress)
-        .unwrap_err()
-        .to_string();
+    let e = preprocess::run(&opts, &NoProgress).unwrap_err().to_string();
     assert!(e.contains("already exists"), "{e}");
     Dataset::open(&out).unwrap();
     let opts = Options {
         force: true,
         ..opts
     };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     Dataset::open(&out).unwrap();
     // A truncated level file is detected.
     let f = std::fs::OpenOptions::new()
@@ -231,7 +232,7 @@ fn procedural_is_deterministic_and_matches_the_generator() {
             center_size: 64,
             ..Default::default()
         };
-        let s = preprocess::run(&opts, &mut NoProgress).unwrap();
+        let s = preprocess::run(&opts, &NoProgress).unwrap();
         assert_eq!(s.content, "procedural");
         bytes.push(std::fs::read(out.join("L0.bin")).unwrap());
     }
@@ -259,7 +260,7 @@ fn amplified_dem_is_labelled_and_stays_near_the_source() {
         amplify: Some((4, 3)),
         ..Default::default()
     };
-    let s = preprocess::run(&opts, &mut NoProgress).unwrap();
+    let s = preprocess::run(&opts, &NoProgress).unwrap();
     assert_eq!((s.width, s.height), (157, 117));
     let ds = Dataset::open(&out).unwrap();
     assert_eq!(ds.manifest.content, "amplified");
@@ -352,4 +353,73 @@ fn config_kind_tiles_loads_a_dataset() {
     );
     std::fs::write(dir.join("bad.toml"), "[dataset]\nkind = \"tiles\"\n").unwrap();
     assert!(vkterrain::config::Config::load(Some(&dir.join("bad.toml"))).is_err());
+}
+
+/// Every file of the data set (levels, statistics, manifest) is the same bit for bit whether
+/// one thread or several build it: a raster with voids and amplification, and a procedural
+/// terrain of several node rows. Negative control: one flipped byte makes the comparison fail.
+#[test]
+fn output_is_identical_for_one_thread_and_many() {
+    let dir = tmpdir("threads");
+    let files = |d: &Path| {
+        let mut v: Vec<(String, Vec<u8>)> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap())
+            .map(|e| {
+                (
+                    e.file_name().to_string_lossy().to_string(),
+                    std::fs::read(e.path()).unwrap(),
+                )
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    let inputs = [
+        Options {
+            input: Input::Raster(raster(300, 170, true)),
+            center_size: 16,
+            amplify: Some((3, 7)),
+            stats_grid_sizes: vec![4, 16],
+            ..Default::default()
+        },
+        Options {
+            input: Input::Procedural(vkterrain::dataset::procedural::ProceduralParams {
+                size: 700,
+                ..Default::default()
+            }),
+            center_size: 32,
+            border_size: 3,
+            ..Default::default()
+        },
+    ];
+    for (k, base) in inputs.into_iter().enumerate() {
+        let mut runs = Vec::new();
+        for threads in [1, 4] {
+            let out = dir.join(format!("ds{k}-{threads}"));
+            let opts = Options {
+                out: out.clone(),
+                ..base.clone()
+            };
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| preprocess::run(&opts, &NoProgress))
+                .unwrap();
+            runs.push(files(&out));
+        }
+        assert!(runs[0].len() >= 4);
+        assert_eq!(runs[0].len(), runs[1].len());
+        for (a, b) in runs[0].iter().zip(&runs[1]) {
+            assert_eq!(a.0, b.0);
+            assert!(a.1 == b.1, "{} differs between 1 and 4 threads", a.0);
+        }
+        let mut flipped = runs[1].clone();
+        flipped[0].1[70] ^= 1;
+        assert!(
+            flipped != runs[0],
+            "the comparison must see one flipped byte"
+        );
+    }
 }

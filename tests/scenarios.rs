@@ -41,7 +41,7 @@ fn srtm_pair(data: &Path, south: &str, north: &str, tmp: &Path) -> Heightmap {
             force: true,
             ..Default::default()
         },
-        &mut NoProgress,
+        &NoProgress,
     )
     .unwrap();
     tiles::load(&out, None, tiles::DEFAULT_MAX_SAMPLES).unwrap()

@@ -225,3 +225,47 @@ fn procedural_terrain_is_deterministic_and_seeded() {
     let (lo, hi) = a.height_range();
     assert!(hi - lo > 100.0, "terrain has relief: {lo}..{hi}");
 }
+
+/// `kind = "xyz"` takes the tile source's keys beside it (no sub-table), resolves a relative
+/// source against the config file's directory, and is valid only with the clipmap on.
+#[test]
+fn xyz_dataset_config_parses_with_its_keys_beside_kind() {
+    use vkterrain::config::Config;
+    use vkterrain::dataset::settings::DatasetConfig;
+    use vkterrain::dataset::xyz::Encoding;
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("xyz.toml");
+    std::fs::write(
+        &path,
+        "[dataset]\nkind = \"xyz\"\nsource = \"tiles/{z}/{x}/{y}.png\"\nencoding = \"mapbox\"\n\
+         bbox = [1.3, 42.3, 1.6, 42.55]\nzoom = 11\ncache_max_mb = 64\n[clipmap]\nenabled = true\n",
+    )
+    .unwrap();
+    let config = Config::load(Some(&path)).unwrap();
+    let DatasetConfig::Xyz(x) = &config.dataset else {
+        panic!("not an xyz data set: {:?}", config.dataset);
+    };
+    assert_eq!(x.encoding, Encoding::Mapbox);
+    assert_eq!(x.bbox, [1.3, 42.3, 1.6, 42.55]);
+    assert_eq!((x.zoom, x.cache_max_mb, x.tile_size), (11, 64, 256));
+    assert_eq!(config.dataset.kind_name(), "xyz");
+    assert!(config.dataset.streams_only());
+    // A whole-grid load is refused with the way out in the message.
+    let e = config
+        .dataset
+        .load(|p| p.to_path_buf())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("clipmap"), "{e}");
+    // Opening the store resolves the directory template against the config's directory:
+    // nothing is there, so the error names the resolved path.
+    let e = config
+        .open_store()
+        .err()
+        .expect("no tiles there")
+        .to_string();
+    assert!(
+        e.contains(&tmp.path().join("tiles").display().to_string()),
+        "{e}"
+    );
+}

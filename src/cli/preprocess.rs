@@ -1,17 +1,20 @@
 //! `vkterrain preprocess`: build a chunked-clipmap data set directory.
 
 use std::path::PathBuf;
+use std::sync::Mutex;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::dataset::preprocess::{self, Input, Options, Progress};
 use crate::dataset::procedural::{ProceduralParams, Style};
+use crate::dataset::xyz::{Encoding, XyzSettings};
 
 #[derive(Args, Debug)]
 pub struct PreprocessArgs {
-    /// DEM inputs: SRTM .hgt/.hgt.zip tiles (one mosaic), one GeoTIFF, or one 16-bit PNG.
-    #[arg(required_unless_present = "procedural")]
+    /// DEM inputs, any raster GDAL reads (GeoTIFF/COG, SRTM .hgt/.hgt.zip, netCDF, VRT, IMG,
+    /// JPEG2000, PNG, ...): one file, or several forming a mosaic.
+    #[arg(required_unless_present_any = ["procedural", "xyz"])]
     pub inputs: Vec<PathBuf>,
     /// Output data set directory (written atomically via `<out>.partial`).
     #[arg(long)]
@@ -19,14 +22,21 @@ pub struct PreprocessArgs {
     /// RGB(A) imagery (PNG/JPEG) covering the DEM, stored as the albedo layer.
     #[arg(long)]
     pub albedo: Option<PathBuf>,
-    /// Metres between samples (needed for PNG; overrides georeferencing otherwise).
+    /// Metres between samples (needed without georeferencing; overrides it otherwise).
     #[arg(long)]
     pub spacing: Option<f64>,
     /// Metres per stored unit (PNG; multiplies other sources too).
     #[arg(long)]
     pub vertical_scale: Option<f64>,
+    /// Target CRS when inputs are warped into one mosaic (EPSG:xxxx, WKT or PROJ string;
+    /// default: the first input's).
+    #[arg(long)]
+    pub crs: Option<String>,
+    /// Datum of the heights when the source does not say: egm96, egm2008, ellipsoid, unknown.
+    #[arg(long)]
+    pub vertical_datum: Option<String>,
     /// Generate procedural terrain instead of reading inputs.
-    #[arg(long, conflicts_with = "inputs")]
+    #[arg(long, conflicts_with_all = ["inputs", "xyz"])]
     pub procedural: bool,
     /// Procedural: samples per side.
     #[arg(long, default_value_t = 4097)]
@@ -46,48 +56,85 @@ pub struct PreprocessArgs {
     /// Amplify a real DEM by this factor with procedural detail below its resolution.
     #[arg(long)]
     pub amplify: Option<u32>,
+    /// XYZ terrain tiles: `http(s)://.../{z}/{x}/{y}.png` or a directory of z/x/y.png.
+    #[arg(long, conflicts_with = "inputs", requires_all = ["bbox", "zoom"])]
+    pub xyz: Option<String>,
+    /// XYZ: terrarium or mapbox (terrain-RGB).
+    #[arg(long, default_value = "terrarium")]
+    pub encoding: String,
+    /// XYZ: west,south,east,north in degrees.
+    #[arg(long, value_delimiter = ',', num_args = 4, allow_hyphen_values = true)]
+    pub bbox: Option<Vec<f64>>,
+    /// XYZ: zoom level.
+    #[arg(long)]
+    pub zoom: Option<u32>,
+    /// XYZ: pixels per tile side (256 or 512).
+    #[arg(long, default_value_t = 256)]
+    pub tile_size: u32,
+    /// XYZ (http): tile cache directory (default ~/.cache/vkterrain/xyz).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
     /// Centre texels per node side (even).
     #[arg(long, default_value_t = 256)]
     pub node_size: u32,
     /// Duplicated border texels per side (>= 2).
     #[arg(long, default_value_t = 2)]
     pub border: u32,
-    /// Replace an existing data set at --out.
+    /// UDLOD tile sizes (grid_size) whose statistics are stored, comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = preprocess::DEFAULT_STATS_GRID_SIZES)]
+    pub stats_grid_sizes: Vec<u32>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Replace an existing data set at --out (never anything that is not a data set).
     #[arg(long)]
     pub force: bool,
 }
 
 struct Bars {
-    bar: Option<ProgressBar>,
+    bar: Mutex<Option<ProgressBar>>,
+}
+
+impl Bars {
+    fn with(&self, f: impl FnOnce(&mut Option<ProgressBar>)) {
+        f(&mut self.bar.lock().unwrap_or_else(|e| e.into_inner()));
+    }
 }
 
 impl Progress for Bars {
-    fn stage(&mut self, what: &str) {
+    fn stage(&self, what: &str) {
         eprintln!("{what}...");
     }
-    fn level(&mut self, lod: u32, nodes: u64) {
-        let bar = ProgressBar::new(nodes);
+    fn level(&self, what: &str, total: u64) {
+        let bar = ProgressBar::new(total);
         bar.set_style(
-            ProgressStyle::with_template("level {msg:>3} [{bar:40}] {pos}/{len} nodes {eta}")
+            ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} {eta}")
                 .expect("valid template")
                 .progress_chars("=> "),
         );
-        bar.set_message(lod.to_string());
-        self.bar = Some(bar);
+        bar.set_message(what.to_string());
+        self.with(|b| *b = Some(bar));
     }
-    fn advance(&mut self, n: u64) {
-        if let Some(b) = &self.bar {
-            b.inc(n);
-        }
+    fn advance(&self, n: u64) {
+        self.with(|b| {
+            if let Some(b) = b {
+                b.inc(n);
+            }
+        });
     }
-    fn level_done(&mut self) {
-        if let Some(b) = self.bar.take() {
-            b.finish();
-        }
+    fn level_done(&self) {
+        self.with(|b| {
+            if let Some(b) = b.take() {
+                b.finish();
+            }
+        });
+    }
+    fn warning(&self, line: &str) {
+        eprintln!("warning: {line}");
     }
 }
 
-pub fn run(args: &PreprocessArgs) -> anyhow::Result<()> {
+fn options(args: &PreprocessArgs) -> anyhow::Result<Options> {
     if !(args.max_height.is_finite() && args.max_height > 0.0 && args.max_height <= 20_000.0) {
         anyhow::bail!("--max-height {} m is outside (0, 20000]", args.max_height);
     }
@@ -103,10 +150,24 @@ pub fn run(args: &PreprocessArgs) -> anyhow::Result<()> {
             feature_size: args.feature_size,
             style: args.style,
         })
+    } else if let Some(source) = &args.xyz {
+        let b = args.bbox.clone().unwrap_or_default();
+        let bbox: [f64; 4] = b
+            .try_into()
+            .map_err(|_| anyhow::anyhow!("--bbox needs west,south,east,north"))?;
+        Input::Xyz(XyzSettings {
+            source: source.clone(),
+            encoding: Encoding::parse(&args.encoding)?,
+            bbox,
+            zoom: args.zoom.unwrap_or_default(),
+            tile_size: args.tile_size,
+            cache_dir: args.cache_dir.clone(),
+            ..Default::default()
+        })
     } else {
         Input::Files(args.inputs.clone())
     };
-    let opts = Options {
+    Ok(Options {
         input,
         out: args.out.clone(),
         albedo: args.albedo.clone(),
@@ -116,8 +177,25 @@ pub fn run(args: &PreprocessArgs) -> anyhow::Result<()> {
         border_size: args.border,
         amplify: args.amplify.map(|k| (k, args.seed)),
         force: args.force,
+        crs: args.crs.clone(),
+        stats_grid_sizes: args.stats_grid_sizes.clone(),
+        vertical_datum: args.vertical_datum.clone(),
+        memory_budget: None,
+    })
+}
+
+pub fn run(args: &PreprocessArgs) -> anyhow::Result<()> {
+    let opts = options(args)?;
+    let bars = Bars {
+        bar: Mutex::new(None),
     };
-    let s = preprocess::run(&opts, &mut Bars { bar: None })?;
+    let s = match args.threads {
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build()?
+            .install(|| preprocess::run(&opts, &bars))?,
+        None => preprocess::run(&opts, &bars)?,
+    };
     println!("data set   {}", s.out.display());
     println!("source     {} [{}]", s.name, s.content);
     println!("samples    {}x{}", s.width, s.height);
@@ -133,10 +211,16 @@ pub fn run(args: &PreprocessArgs) -> anyhow::Result<()> {
         s.bytes as f64 / 1048576.0
     );
     println!("voids      {} filled", s.voids_filled);
+    println!("warnings   {}", s.warnings.len());
     println!(
-        "time       {:.2} s ({:.1} source MB/s)",
+        "time       {:.2} s ({:.1} source MB/s, {} threads)",
         s.seconds,
-        s.source_bytes as f64 / 1e6 / s.seconds.max(1e-9)
+        s.source_bytes as f64 / 1e6 / s.seconds.max(1e-9),
+        rayon::current_num_threads().min(args.threads.unwrap_or(usize::MAX))
+    );
+    println!(
+        "peak RSS   {:.1} MiB",
+        crate::render::stats::peak_rss_bytes().unwrap_or(0) as f64 / 1048576.0
     );
     Ok(())
 }

@@ -192,6 +192,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         "peak_rss_bytes": crate::render::stats::peak_rss_bytes(),
         "clipmap": renderer.clipmap().map(|c| serde_json::json!({
             "counters": c.counters,
+            "tiles": c.tile_counts(),
             "atlas_bytes": c.atlas_bytes(),
             "resident_nodes": c.atlas.resident(),
         })),
@@ -264,6 +265,20 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
             k.evictions,
             k.fallback_frames
         );
+        if let Some(t) = c.tile_counts() {
+            let _ = writeln!(
+                o,
+                "xyz tiles:       {} fetched ({:.1} MB), {} from the disk cache, {} local; {} errors, {} timeouts, {} corrupt; {} evicted from the cache",
+                t.fetched,
+                t.bytes as f64 / 1e6,
+                t.cache_hits,
+                t.local,
+                t.errors,
+                t.timeouts,
+                t.corrupt,
+                t.evicted
+            );
+        }
     }
     let _ = writeln!(o, "scenario:        {}", p.scenario.name);
     if r.options.views > 1 {

@@ -19,6 +19,7 @@ use std::sync::Arc;
 
 use glam::DVec2;
 
+use crate::dataset::NodeStore;
 use crate::dataset::interp;
 use crate::dataset::tiles::Dataset;
 use crate::error::{Error, Result};
@@ -57,6 +58,26 @@ pub struct NodeData {
 /// Called on worker threads.
 pub trait NodeSource: Send + Sync {
     fn load(&self, key: NodeKey) -> Result<NodeData>;
+    /// Tile fetch counters, for sources that fetch tiles (XYZ).
+    fn tile_counts(&self) -> Option<crate::dataset::xyz::XyzCounts> {
+        None
+    }
+}
+
+/// Any node store of the dataset layer (a data set directory, live XYZ tiles) as a source.
+pub struct StoreSource(pub Arc<dyn NodeStore>);
+
+impl NodeSource for StoreSource {
+    fn load(&self, key: NodeKey) -> Result<NodeData> {
+        let node = self.0.read_node(key.lod, key.x, key.y)?;
+        Ok(NodeData {
+            heights: node.heights,
+            rgba: (!node.rgba.is_empty()).then_some(node.rgba),
+        })
+    }
+    fn tile_counts(&self) -> Option<crate::dataset::xyz::XyzCounts> {
+        self.0.tile_counts()
+    }
 }
 
 /// A `vkterrain preprocess` data set as a node source.
@@ -99,6 +120,20 @@ pub struct Geometry {
 }
 
 impl Geometry {
+    /// The geometry of any node store.
+    pub fn of_store(store: &dyn NodeStore) -> Self {
+        let l = store.layout();
+        Geometry {
+            width: l.width,
+            height: l.height,
+            center: l.center,
+            border: l.border,
+            levels: (0..l.levels()).map(|lod| l.nodes(lod)).collect(),
+            spacing: store.spacing()[1],
+            height_range: store.height_range(),
+        }
+    }
+
     pub fn of(ds: &Dataset) -> Self {
         let l = &ds.layout;
         Geometry {
@@ -329,6 +364,7 @@ pub struct Clipmap {
     failed: HashMap<NodeKey, u64>,
     pending_uploads: Vec<Upload>,
     pub counters: Counters,
+    source: Arc<dyn NodeSource>,
 }
 
 impl Clipmap {
@@ -369,7 +405,7 @@ impl Clipmap {
             .allocate(root, 0, true)
             .ok_or_else(|| Error::invalid("clipmap", "atlas has no layer for the root"))?;
         atlas.store(layer, node.heights);
-        let streamer = Streamer::new(source, settings.workers, geometry.clone());
+        let streamer = Streamer::new(source.clone(), settings.workers, geometry.clone());
         Ok(Clipmap {
             views: (0..views.max(1))
                 .map(|_| ViewQuadtree::new(&geometry, settings.node_count, settings.blend_nodes))
@@ -384,6 +420,7 @@ impl Clipmap {
             failed: HashMap::new(),
             pending_uploads: vec![Upload { layer, shading }],
             counters: Counters::default(),
+            source,
         })
     }
 
@@ -396,6 +433,11 @@ impl Clipmap {
     /// with mips).
     pub fn layer_bytes(&self) -> u64 {
         gpu::layer_bytes(&self.geometry)
+    }
+
+    /// Tile fetch counters of the source, when it fetches tiles (XYZ).
+    pub fn tile_counts(&self) -> Option<crate::dataset::xyz::XyzCounts> {
+        self.source.tile_counts()
     }
 
     /// Loads still queued or waiting for upload.

@@ -31,7 +31,7 @@ pub struct Config {
     /// The LOD method and its settings (`name` selects it).
     pub method: MethodConfig,
     pub scenario: ScenarioConfig,
-    /// Heights through the chunked clipmap (`dataset.kind = "tiles"` only).
+    /// Heights through the chunked clipmap (`dataset.kind = "tiles"` or `"xyz"`).
     pub clipmap: ClipmapSettings,
     pub output: OutputConfig,
     pub ring: RingConfig,
@@ -198,18 +198,28 @@ impl Config {
     /// The clipmap streams a tile pyramid to methods that read heights through set 0.
     fn validate_clipmap_use(&self) -> Result<()> {
         if !self.clipmap.enabled {
+            if self.dataset.streams_only() {
+                return Err(Error::invalid(
+                    "dataset.kind",
+                    "\"xyz\" tiles stream through the clipmap: set [clipmap] enabled = true",
+                ));
+            }
             return Ok(());
         }
-        let DatasetConfig::Tiles(tiles) = &self.dataset else {
-            return Err(Error::invalid(
-                "clipmap.enabled",
-                format!(
-                    "needs dataset.kind = \"tiles\" (a vkterrain preprocess data set), not {:?}",
-                    self.dataset.kind_name()
-                ),
-            ));
+        let lod = match &self.dataset {
+            DatasetConfig::Tiles(tiles) => tiles.lod,
+            DatasetConfig::Xyz(_) => None,
+            _ => {
+                return Err(Error::invalid(
+                    "clipmap.enabled",
+                    format!(
+                        "needs dataset.kind = \"tiles\" (a vkterrain preprocess data set) or \"xyz\", not {:?}",
+                        self.dataset.kind_name()
+                    ),
+                ));
+            }
         };
-        if tiles.lod.is_some_and(|l| l != 0) {
+        if lod.is_some_and(|l| l != 0) {
             return Err(Error::invalid(
                 "clipmap.enabled",
                 "the clipmap streams every level; dataset.lod must be 0 or absent",

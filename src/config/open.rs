@@ -6,10 +6,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use super::Config;
-use crate::clipmap::{Clipmap, DatasetSource, Geometry};
-use crate::dataset::{PyramidReader, Terrain};
+use crate::clipmap::{Clipmap, Geometry, StoreSource};
+use crate::dataset::{NodeStore, PyramidReader, Terrain};
 use crate::driver::Gpu;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::render::{RenderOptions, Renderer};
 use crate::scene::Scenario;
 
@@ -23,8 +23,8 @@ impl Config {
     /// pyramid read node by node (level 0 is then never held whole on the host).
     pub fn open_terrain(&self) -> Result<Terrain> {
         if self.clipmap.enabled {
-            Ok(Terrain::Pyramid(Arc::new(PyramidReader::open(
-                &self.pyramid_dir()?,
+            Ok(Terrain::Pyramid(Arc::new(PyramidReader::from_store(
+                self.open_store()?,
             )?)))
         } else {
             Ok(Terrain::Grid(Arc::new(
@@ -39,12 +39,12 @@ impl Config {
         if !self.clipmap.enabled {
             return Ok(None);
         }
-        let source = DatasetSource::open(&self.pyramid_dir()?)?;
-        let geometry = Geometry::of(&source.dataset);
+        let store = self.open_store()?;
+        let geometry = Geometry::of_store(&*store);
         Clipmap::new(
             geometry,
             self.clipmap.clone(),
-            Arc::new(source),
+            Arc::new(StoreSource(store)),
             self.render.views(),
         )
         .map(Some)
@@ -82,10 +82,8 @@ impl Config {
         }
     }
 
-    fn pyramid_dir(&self) -> Result<std::path::PathBuf> {
-        self.dataset
-            .tiles_path()
-            .map(|p| self.resolve(p))
-            .ok_or_else(|| Error::invalid("dataset", "the clipmap needs a tiles data set"))
+    /// The data set's node store (`tiles` or `xyz`), read node by node.
+    pub fn open_store(&self) -> Result<Arc<dyn NodeStore>> {
+        self.dataset.open_store(|p| self.resolve(p))
     }
 }

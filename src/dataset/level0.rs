@@ -11,7 +11,10 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use super::Heightmap;
 use super::interp::GridCell;
+use super::pyramid::{LayerSet, Layout, LevelRows, Node};
+use super::stats::TileStats;
 use super::tiles::Dataset;
+use super::xyz::XyzPyramid;
 use crate::error::{Error, Result};
 
 /// Full-resolution (level-0) height samples, `(col, row)` at world `(col, row) * spacing`.
@@ -94,6 +97,7 @@ fn out_of_range(col: u32, row: u32, w: u32, h: u32) -> Error {
 /// row-by-row sweep over UDLOD tiles (which also reads the rows of the coarse grid above and
 /// below, at most two more node rows) loads each node about once per sweep.
 pub struct PyramidReader {
+    /// Where the nodes come from: the data set directory or the tile source.
     pub dir: PathBuf,
     pub name: String,
     width: u32,
@@ -101,7 +105,7 @@ pub struct PyramidReader {
     spacing: f64,
     /// Level-0 height range from the manifest (metres).
     pub height_range: [f32; 2],
-    dataset: Dataset,
+    store: Arc<dyn NodeStore>,
     center: u32,
     capacity: usize,
     cache: Mutex<NodeCache>,
@@ -110,7 +114,6 @@ pub struct PyramidReader {
 const RECENT: usize = 8;
 
 struct NodeCache {
-    file: Option<(File, PathBuf)>,
     keys: Vec<(u32, u32)>,
     heights: Vec<Vec<f32>>,
     used: Vec<u64>,
@@ -129,7 +132,6 @@ struct NodeCache {
 impl Default for NodeCache {
     fn default() -> Self {
         NodeCache {
-            file: None,
             keys: Vec::new(),
             heights: Vec::new(),
             used: Vec::new(),
@@ -149,13 +151,17 @@ impl PyramidReader {
     /// Opens a data set directory's level 0. The spacing must be square (the clipmap's
     /// requirement too).
     pub fn open(dir: &Path) -> Result<Self> {
-        let dataset = Dataset::open(dir)?;
-        let m = &dataset.manifest;
-        let [sx, sy] = m.spacing;
-        let what = || dir.display().to_string();
+        Self::from_store(Arc::new(DiskStore::open(dir)?))
+    }
+
+    /// Level 0 of any node store (a data set directory, live XYZ tiles).
+    pub fn from_store(store: Arc<dyn NodeStore>) -> Result<Self> {
+        let [sx, sy] = store.spacing();
+        let what = || store.describe();
         if !(sx.is_finite() && sy.is_finite() && sx > 0.0 && sy > 0.0)
             || ((sx - sy) / sy).abs() > 1e-9
         {
+            // ISSUE-14: goes away when the clipmap renders native (non-square) grids.
             return Err(Error::invalid(
                 what(),
                 format!(
@@ -163,27 +169,56 @@ impl PyramidReader {
                 ),
             ));
         }
+        let layout = store.layout();
         let limit = 1u64 << 30;
-        if m.width < 2 || m.height < 2 || m.width > limit || m.height > limit {
+        if layout.width > limit || layout.height > limit {
             return Err(Error::invalid(
                 what(),
-                format!("level 0 is {}x{} samples", m.width, m.height),
+                format!("level 0 is {}x{} samples", layout.width, layout.height),
             ));
         }
-        let (nx, _) = dataset.layout.nodes(0);
-        let center = dataset.layout.center;
+        let (nx, _) = layout.nodes(0);
         Ok(PyramidReader {
-            dir: dir.to_path_buf(),
-            name: format!("{} ({})", m.name, m.content),
-            width: m.width as u32,
-            height: m.height as u32,
+            dir: PathBuf::from(store.describe()),
+            name: store.name(),
+            width: layout.width as u32,
+            height: layout.height as u32,
             spacing: sy,
-            height_range: m.height_range,
-            center,
+            height_range: store.height_range(),
+            center: layout.center,
             capacity: 3 * nx as usize + 8,
             cache: Mutex::new(NodeCache::default()),
-            dataset,
+            store,
         })
+    }
+
+    /// The node store behind the reader.
+    pub fn store(&self) -> &Arc<dyn NodeStore> {
+        &self.store
+    }
+
+    /// UDLOD's tile statistics for `grid_size`: the data set's stored ones, or (not stored)
+    /// computed from level 0 with a progress line on stderr.
+    pub fn tile_stats(&self, grid_size: u32) -> Result<TileStats> {
+        if let Some(s) = self.store.stored_stats(grid_size)? {
+            return Ok(s);
+        }
+        let t = std::time::Instant::now();
+        eprintln!(
+            "udlod: tile statistics for grid_size {grid_size} are not stored in {}; computing them from level 0 ({}x{} samples; `vkterrain preprocess --stats-grid-sizes {grid_size}` stores them)...",
+            self.store.describe(),
+            self.width,
+            self.height
+        );
+        let stats = match self.store.level0_rows() {
+            Some(rows) => TileStats::compute(&rows?, grid_size, &|_| {})?,
+            None => TileStats::compute_serial(&self.sweep(), grid_size)?,
+        };
+        eprintln!(
+            "udlod: tile statistics computed in {:.1} s",
+            t.elapsed().as_secs_f64()
+        );
+        Ok(stats)
     }
 
     /// Most nodes the cache holds.
@@ -276,16 +311,10 @@ impl PyramidReader {
     }
 
     fn load(&self, cache: &mut NodeCache, key: (u32, u32)) -> Result<usize> {
-        if cache.file.is_none() {
-            cache.file = Some(self.dataset.open_level(0)?);
-        }
-        let Some((file, path)) = cache.file.as_mut() else {
-            return Err(Error::invalid(self.dir.display().to_string(), "no level 0"));
-        };
-        let heights = self.read_centre(file, path, key)?;
+        let heights = self.store.read_centre(key.0, key.1)?;
         if let Some(bad) = heights.iter().position(|h| !h.is_finite()) {
             return Err(Error::invalid(
-                format!("{} node 0/{}/{}", path.display(), key.0, key.1),
+                format!("{} node 0/{}/{}", self.store.describe(), key.0, key.1),
                 format!("height {bad} is not finite: corrupt node"),
             ));
         }
@@ -313,43 +342,6 @@ impl PyramidReader {
         };
         cache.index.insert(key, i);
         Ok(i)
-    }
-}
-
-impl PyramidReader {
-    /// The `center²` heights of level-0 node `key`: one seek and one read of the record's
-    /// height rows that hold centre texels (their border texels come along; albedo and mask
-    /// are not read). The level file's size was checked when it was opened.
-    fn read_centre(&self, file: &mut File, path: &Path, key: (u32, u32)) -> Result<Vec<f32>> {
-        use std::io::{Read, Seek, SeekFrom};
-        let ds = &self.dataset;
-        let (nx, ny) = ds.layout.nodes(0);
-        let what = || format!("{} node 0/{}/{}", path.display(), key.0, key.1);
-        if key.0 >= nx || key.1 >= ny {
-            return Err(Error::invalid(what(), format!("outside {nx}x{ny} nodes")));
-        }
-        let (c, b, s) = (
-            self.center as usize,
-            ds.layout.border as usize,
-            ds.layout.side() as usize,
-        );
-        let start = ds.layout.record_offset(0, key.0, key.1, ds.layers)
-            + super::pyramid::NODE_HEADER
-            + (b * s * 4) as u64;
-        let mut buf = vec![0u8; c * s * 4];
-        file.seek(SeekFrom::Start(start))
-            .map_err(|e| Error::io(path, e))?;
-        file.read_exact(&mut buf)
-            .map_err(|e| Error::invalid(what(), format!("unreadable (truncated file?): {e}")))?;
-        let mut heights = Vec::with_capacity(c * c);
-        for row in buf.chunks_exact(s * 4) {
-            heights.extend(
-                row[b * 4..(b + c) * 4]
-                    .chunks_exact(4)
-                    .map(|v| f32::from_le_bytes([v[0], v[1], v[2], v[3]])),
-            );
-        }
-        Ok(heights)
     }
 }
 
@@ -532,5 +524,157 @@ impl From<Arc<PyramidReader>> for Terrain {
 impl From<&Terrain> for Terrain {
     fn from(t: &Terrain) -> Self {
         t.clone()
+    }
+}
+
+/// A tile pyramid's nodes, wherever they live: a data set directory ([`DiskStore`]) or live
+/// XYZ tiles ([`XyzPyramid`]). Called from loader threads.
+pub trait NodeStore: Send + Sync {
+    fn layout(&self) -> Layout;
+    fn layers(&self) -> LayerSet;
+    /// Source description (shown in summaries).
+    fn name(&self) -> String;
+    /// Where it is (a directory, a URL template): for messages.
+    fn describe(&self) -> String;
+    /// Local metres between level-0 samples `[x, y]`.
+    fn spacing(&self) -> [f64; 2];
+    /// Level-0 height range (metres).
+    fn height_range(&self) -> [f32; 2];
+    /// Node `(lod, x, y)`, borders included.
+    fn read_node(&self, lod: u32, x: u32, y: u32) -> Result<Node>;
+    /// The `center²` heights of level-0 node `(x, y)`.
+    fn read_centre(&self, x: u32, y: u32) -> Result<Vec<f32>> {
+        let l = self.layout();
+        let n = self.read_node(0, x, y)?;
+        let (c, b, s) = (l.center as usize, l.border as usize, l.side() as usize);
+        Ok((0..c)
+            .flat_map(|j| n.heights[(j + b) * s + b..(j + b) * s + b + c].to_vec())
+            .collect())
+    }
+    /// UDLOD tile statistics for `grid_size`, if stored.
+    fn stored_stats(&self, _grid_size: u32) -> Result<Option<TileStats>> {
+        Ok(None)
+    }
+    /// Level-0 rows straight from storage (parallel statistics), where that is cheap.
+    fn level0_rows(&self) -> Option<Result<LevelRows>> {
+        None
+    }
+    /// Tile fetch counters, for stores that fetch tiles.
+    fn tile_counts(&self) -> Option<super::xyz::XyzCounts> {
+        None
+    }
+}
+
+/// A `vkterrain preprocess` data set directory as a node store (level 0 opened once, read
+/// with positioned reads).
+pub struct DiskStore {
+    pub dataset: Dataset,
+    level0: File,
+    level0_path: PathBuf,
+}
+
+impl DiskStore {
+    pub fn open(dir: &Path) -> Result<Self> {
+        let dataset = Dataset::open(dir)?;
+        let (level0, level0_path) = dataset.open_level(0)?;
+        Ok(DiskStore {
+            dataset,
+            level0,
+            level0_path,
+        })
+    }
+}
+
+impl NodeStore for DiskStore {
+    fn layout(&self) -> Layout {
+        self.dataset.layout
+    }
+    fn layers(&self) -> LayerSet {
+        self.dataset.layers
+    }
+    fn name(&self) -> String {
+        format!(
+            "{} ({})",
+            self.dataset.manifest.name, self.dataset.manifest.content
+        )
+    }
+    fn describe(&self) -> String {
+        self.dataset.dir.display().to_string()
+    }
+    fn spacing(&self) -> [f64; 2] {
+        self.dataset.manifest.spacing
+    }
+    fn height_range(&self) -> [f32; 2] {
+        self.dataset.manifest.height_range
+    }
+    fn read_node(&self, lod: u32, x: u32, y: u32) -> Result<Node> {
+        self.dataset.read_node(lod, x, y)
+    }
+    /// One positioned read of the record's height rows that hold centre texels (their
+    /// border texels come along; albedo and mask are not read). The level file's size was
+    /// checked when it was opened.
+    fn read_centre(&self, x: u32, y: u32) -> Result<Vec<f32>> {
+        use std::os::unix::fs::FileExt;
+        let l = &self.dataset.layout;
+        let (nx, ny) = l.nodes(0);
+        let what = || format!("{} node 0/{x}/{y}", self.level0_path.display());
+        if x >= nx || y >= ny {
+            return Err(Error::invalid(what(), format!("outside {nx}x{ny} nodes")));
+        }
+        let (c, b, s) = (l.center as usize, l.border as usize, l.side() as usize);
+        let start = l.record_offset(0, x, y, self.dataset.layers)
+            + super::pyramid::NODE_HEADER
+            + (b * s * 4) as u64;
+        let mut buf = vec![0u8; c * s * 4];
+        self.level0
+            .read_exact_at(&mut buf, start)
+            .map_err(|e| Error::invalid(what(), format!("unreadable (truncated file?): {e}")))?;
+        let mut heights = Vec::with_capacity(c * c);
+        for row in buf.chunks_exact(s * 4) {
+            heights.extend(
+                row[b * 4..(b + c) * 4]
+                    .chunks_exact(4)
+                    .map(|v| f32::from_le_bytes([v[0], v[1], v[2], v[3]])),
+            );
+        }
+        Ok(heights)
+    }
+    fn stored_stats(&self, grid_size: u32) -> Result<Option<TileStats>> {
+        self.dataset.tile_stats(grid_size)
+    }
+    fn level0_rows(&self) -> Option<Result<LevelRows>> {
+        Some(LevelRows::open(
+            &self.level0_path,
+            self.dataset.layout,
+            self.dataset.layers,
+            self.dataset.manifest.spacing[1],
+        ))
+    }
+}
+
+impl NodeStore for XyzPyramid {
+    fn layout(&self) -> Layout {
+        self.layout
+    }
+    fn layers(&self) -> LayerSet {
+        XyzPyramid::layers(self)
+    }
+    fn name(&self) -> String {
+        XyzPyramid::name(self)
+    }
+    fn describe(&self) -> String {
+        self.settings.source.clone()
+    }
+    fn spacing(&self) -> [f64; 2] {
+        [self.spacing, self.spacing]
+    }
+    fn height_range(&self) -> [f32; 2] {
+        self.height_range
+    }
+    fn read_node(&self, lod: u32, x: u32, y: u32) -> Result<Node> {
+        XyzPyramid::read_node(self, lod, x, y)
+    }
+    fn tile_counts(&self) -> Option<super::xyz::XyzCounts> {
+        Some(self.fetcher.counters.snapshot())
     }
 }

@@ -4,23 +4,30 @@
 //! `x = col * spacing`, `y = row * spacing` (metres, z up); row 0 is the **south** edge, so
 //! images whose first row is north are flipped when loaded. Heights are metres.
 
-pub mod geotiff;
+pub mod crs;
+#[cfg(feature = "gdal")]
+pub mod gdal_in;
+#[cfg(not(feature = "gdal"))]
+#[path = "gdal_stub.rs"]
+pub mod gdal_in;
 pub mod interp;
 pub mod level0;
 pub mod manifest;
+pub mod output;
 pub mod preprocess;
 pub mod procedural;
 pub mod pyramid;
 pub mod settings;
 pub mod source;
-pub mod srtm;
+pub mod stats;
 pub mod tiles;
 pub mod voids;
+pub mod xyz;
 
 use crate::error::{Error, Result};
 use interp::GridCell;
 pub use interp::normal_snorm8;
-pub use level0::{Level0, PyramidReader, Terrain};
+pub use level0::{DiskStore, Level0, NodeStore, PyramidReader, Terrain};
 
 /// A regular height grid in metres, with optional albedo of the same extent.
 #[derive(Clone, Debug)]

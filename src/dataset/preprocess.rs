@@ -1,26 +1,37 @@
-//! `vkterrain preprocess`: sources -> void filling -> node pyramid -> manifest, written
-//! atomically (everything goes to `<out>.partial/`, renamed to `<out>` once complete).
+//! `vkterrain preprocess`: sources -> void filling -> node pyramid -> tile statistics ->
+//! manifest, written atomically: everything goes to `<out>.partial/` (claimed with a lock,
+//! removed on any failure), renamed to `<out>` once complete. Levels are built in parallel
+//! (rayon), each record with bounded memory; the output is the same bit for bit for any
+//! number of threads.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::crs::Georef;
+use super::gdal_in::{self, ReadOptions};
 use super::interp::GridCell;
-use super::manifest::{self, LevelInfo, Manifest};
+use super::manifest::{self, LevelInfo, Manifest, StatsInfo, datum};
+use super::output::{self, PartialDir, human_bytes};
 use super::procedural::{self, ProceduralParams};
-use super::pyramid::{self, Block, LayerSet, Layout, LeafSource};
+use super::pyramid::{
+    self, Block, LayerSet, Layout, LeafSource, LevelInput, LevelRows, MAX_SIDE_SAMPLES,
+};
 use super::source::Raster;
-use super::{geotiff, srtm, voids};
+use super::stats::TileStats;
+use super::{voids, xyz};
 use crate::error::{Error, Result};
 
 /// What to preprocess.
 #[derive(Clone, Debug)]
 pub enum Input {
-    /// DEM files: SRTM tiles (a mosaic), one GeoTIFF or one 16-bit PNG.
+    /// DEM files GDAL reads: one raster, or several forming a mosaic.
     Files(Vec<PathBuf>),
     /// The procedural generator (`size x size` samples).
     Procedural(ProceduralParams),
     /// A raster already in memory (voids `NaN`): tests and library users.
     Raster(Raster),
+    /// XYZ terrain tiles over a bounding box at one zoom level.
+    Xyz(xyz::XyzRequest),
 }
 
 #[derive(Clone, Debug)]
@@ -28,7 +39,7 @@ pub struct Options {
     pub input: Input,
     pub out: PathBuf,
     pub albedo: Option<PathBuf>,
-    /// Metres between samples (required for PNG, overrides georeferencing otherwise).
+    /// Metres between samples (required without georeferencing, overrides it otherwise).
     pub spacing: Option<f64>,
     /// Metres per unit (PNG; scales other sources too when given).
     pub vertical_scale: Option<f64>,
@@ -36,9 +47,20 @@ pub struct Options {
     pub border_size: u32,
     /// Amplify a real DEM `k` times with procedural detail below its resolution.
     pub amplify: Option<(u32, u64)>,
-    /// Replace an existing data set at `out`.
+    /// Replace an existing data set at `out` (never anything else).
     pub force: bool,
+    /// Target CRS of a warped mosaic (`EPSG:xxxx`, WKT or PROJ string).
+    pub crs: Option<String>,
+    /// UDLOD tile sizes whose statistics are stored.
+    pub stats_grid_sizes: Vec<u32>,
+    /// Datum of the heights when the source does not say (`manifest::datum`).
+    pub vertical_datum: Option<String>,
+    /// Bytes of memory a raster source may use (default: what the system has available).
+    pub memory_budget: Option<u64>,
 }
+
+/// The tile size whose statistics are stored unless told otherwise (UDLOD's default).
+pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [16];
 
 impl Default for Options {
     fn default() -> Self {
@@ -52,16 +74,24 @@ impl Default for Options {
             border_size: 2,
             amplify: None,
             force: false,
+            crs: None,
+            stats_grid_sizes: DEFAULT_STATS_GRID_SIZES.to_vec(),
+            vertical_datum: None,
+            memory_budget: None,
         }
     }
 }
 
-/// Progress callbacks (the CLI draws bars; tests pass [`NoProgress`]).
-pub trait Progress {
-    fn stage(&mut self, _what: &str) {}
-    fn level(&mut self, _lod: u32, _nodes: u64) {}
-    fn advance(&mut self, _n: u64) {}
-    fn level_done(&mut self) {}
+/// Progress reports (the CLI draws bars; tests pass [`NoProgress`]). Called from worker
+/// threads, hence `Sync` and `&self`.
+pub trait Progress: Sync {
+    fn stage(&self, _what: &str) {}
+    /// A counted step: `total` units (nodes or rows) follow.
+    fn level(&self, _what: &str, _total: u64) {}
+    fn advance(&self, _n: u64) {}
+    fn level_done(&self) {}
+    /// Something looked wrong in the data (processing continues).
+    fn warning(&self, _line: &str) {}
 }
 
 pub struct NoProgress;
@@ -83,112 +113,32 @@ pub struct Summary {
     pub source_bytes: u64,
     pub seconds: f64,
     pub height_range: [f32; 2],
+    pub warnings: Vec<String>,
 }
 
-fn ext_of(p: &Path) -> String {
-    let s = p.to_string_lossy().to_ascii_lowercase();
-    if s.ends_with(".hgt.zip") {
-        "hgt.zip".into()
-    } else {
-        p.extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default()
-    }
-}
-
-/// Reads the DEM inputs into one raster (voids still `NaN`).
+/// Reads the DEM inputs into one raster (voids still `NaN`), `vertical_scale` applied.
 pub fn read_inputs(
     paths: &[PathBuf],
     spacing: Option<f64>,
     vertical_scale: Option<f64>,
 ) -> Result<Raster> {
-    let first = paths
-        .first()
-        .ok_or_else(|| Error::invalid("preprocess", "no input files"))?;
-    let kind = ext_of(first);
-    if let Some(p) = paths.iter().find(|p| {
-        let k = ext_of(p);
-        let srtm = |k: &str| matches!(k, "hgt" | "hgt.zip" | "zip");
-        !(k == kind || srtm(&k) && srtm(&kind))
-    }) {
-        return Err(Error::invalid(
-            p.display().to_string(),
-            format!("cannot mix {} with .{kind} inputs", ext_of(p)),
-        ));
-    }
-    if let Some(s) = spacing
-        && !(s.is_finite() && s > 0.0)
-    {
-        return Err(Error::invalid(
-            "--spacing",
-            format!("{s} m is not a positive number"),
-        ));
-    }
-    let mut raster = match kind.as_str() {
-        "hgt" | "hgt.zip" | "zip" => {
-            let mut r = srtm::mosaic(paths)?;
-            if let Some(s) = spacing {
-                r.spacing = [s, s];
-                r.provenance
-                    .push(format!("spacing overridden to {s} m by --spacing"));
-            }
-            r
-        }
-        "tif" | "tiff" => {
-            if paths.len() > 1 {
-                return Err(Error::invalid(
-                    paths[1].display().to_string(),
-                    "only one GeoTIFF per data set is supported (mosaics: SRTM tiles)",
-                ));
-            }
-            geotiff::read(first, spacing)?
-        }
-        "png" => {
-            if paths.len() > 1 {
-                return Err(Error::invalid(
-                    paths[1].display().to_string(),
-                    "only one PNG height map per data set",
-                ));
-            }
-            let s = spacing.ok_or_else(|| {
-                Error::invalid(
-                    first.display().to_string(),
-                    "a PNG height map has no georeferencing: pass --spacing",
-                )
-            })?;
-            let vs = vertical_scale.unwrap_or(1.0);
-            let m = super::load_png16(first, s, vs, None)?;
-            return Ok(Raster {
-                name: m.name,
-                width: m.width,
-                height: m.height,
-                spacing: [s, s],
-                heights: m.heights,
-                georef: None,
-                provenance: vec![format!(
-                    "16-bit PNG {} ({}x{}), {vs} m per unit, {s} m spacing (given)",
-                    first.display(),
-                    m.width,
-                    m.height
-                )],
-            });
-        }
-        other => {
-            return Err(Error::invalid(
-                first.display().to_string(),
-                format!(
-                    "unknown input type .{other} (expected .hgt, .hgt.zip, .tif, .tiff or .png)"
-                ),
-            ));
-        }
-    };
+    read_inputs_with(
+        paths,
+        &ReadOptions {
+            spacing,
+            ..Default::default()
+        },
+        vertical_scale,
+    )
+}
+
+fn read_inputs_with(
+    paths: &[PathBuf],
+    ropts: &ReadOptions,
+    vertical_scale: Option<f64>,
+) -> Result<Raster> {
+    let mut raster = gdal_in::read(paths, ropts)?;
     if let Some(vs) = vertical_scale {
-        if !(vs.is_finite() && vs > 0.0) {
-            return Err(Error::invalid(
-                "--vertical-scale",
-                format!("{vs} is not positive"),
-            ));
-        }
         for h in &mut raster.heights {
             *h = (*h as f64 * vs) as f32;
         }
@@ -196,6 +146,7 @@ pub fn read_inputs(
             .provenance
             .push(format!("heights multiplied by --vertical-scale {vs}"));
     }
+    super::source::plausibility_warnings(&mut raster);
     Ok(raster)
 }
 
@@ -211,8 +162,8 @@ pub struct AlbedoSampler {
 }
 
 impl AlbedoSampler {
-    /// Loads `path` and aligns it with `dem`: by a world file (`.pgw`, `.jgw`, `.wld`, ...)
-    /// when both are georeferenced, else by extent (the image spans the DEM exactly, so their
+    /// Loads `path` and aligns it with `dem`: by its world file (`.pgw`, `.jgw`, `.wld`, ...,
+    /// read by GDAL) when both are georeferenced, else by extent (the image spans the DEM exactly, so their
     /// aspect ratios must agree within 2 %).
     pub fn open(path: &Path, dem: &Raster) -> Result<Self> {
         let img = image::ImageReader::open(path)
@@ -234,16 +185,19 @@ impl AlbedoSampler {
         for r in (0..ah as usize).rev() {
             rgba.extend_from_slice(&raw[r * aw as usize * 4..(r + 1) * aw as usize * 4]);
         }
-        let world = ["pgw", "jgw", "pngw", "jpgw", "wld"]
-            .iter()
-            .map(|e| path.with_extension(e))
-            .find(|p| p.is_file());
+        // GDAL reads the image's world file (.pgw, .jgw, .wld, ...), if any.
+        let world = super::gdal_in::image_transform(path);
         let map = match (world, dem.bounds()) {
-            (Some(wf), Some([x0, y0, x1, y1])) => {
-                let [a, _, _, e, c, f] = geotiff::read_world_file(&wf)?;
-                // Pixel centre (col, row from north): x = a*col + c, y = f + e*row.
-                let px = |x: f64| (x - c) / a;
-                let py_south = |y: f64| (ah - 1) as f64 - (y - f) / e;
+            (Some(t), Some([x0, y0, x1, y1])) => {
+                if t[2] != 0.0 || t[4] != 0.0 || t[1] == 0.0 || t[5] == 0.0 {
+                    return Err(Error::invalid(
+                        path.display().to_string(),
+                        format!("imagery georeferencing {t:?} is rotated"),
+                    ));
+                }
+                // Pixel centre (col, row from north): x = t0 + (col + 0.5) t1, y = t3 + (row + 0.5) t5.
+                let px = |x: f64| (x - t[0]) / t[1] - 0.5;
+                let py_south = |y: f64| (ah - 1) as f64 - ((y - t[3]) / t[5] - 0.5);
                 let (c0, c1) = (px(x0), px(x1));
                 let (r0, r1) = (py_south(y0), py_south(y1));
                 let inside = |v: f64, n: u32| v >= -0.5 - 1e-6 && v <= n as f64 - 0.5 + 1e-6;
@@ -251,8 +205,7 @@ impl AlbedoSampler {
                     return Err(Error::invalid(
                         path.display().to_string(),
                         format!(
-                            "imagery (world file {}) does not cover the DEM extent {x0},{y0}..{x1},{y1}",
-                            wf.display()
+                            "imagery (georeferenced by its world file) does not cover the DEM extent {x0},{y0}..{x1},{y1}"
                         ),
                     ));
                 }
@@ -309,37 +262,40 @@ struct RasterLeaves<'a> {
     amplify: Option<(u32, u64, f64, f64, [f64; 2])>,
 }
 
+impl RasterLeaves<'_> {
+    fn texel(&self, u: u64, v: u64) -> (f32, u8) {
+        match self.amplify {
+            None => {
+                let k = v as usize * self.w as usize + u as usize;
+                (self.heights[k], self.mask[k])
+            }
+            Some((f, seed, wl, amp, sp)) => {
+                let (gx, gy) = (u as f64 / f as f64, v as f64 / f as f64);
+                let s =
+                    |x: u32, y: u32| self.heights[y as usize * self.w as usize + x as usize] as f64;
+                let base = GridCell::at(gx, gy, self.w, self.h).bilinear(s);
+                let d = procedural::detail(seed, u as f64 * sp[0], v as f64 * sp[1], wl, amp);
+                let near = gy.round() as usize * self.w as usize + gx.round() as usize;
+                ((base + d) as f32, self.mask[near])
+            }
+        }
+    }
+}
+
 impl LeafSource for RasterLeaves<'_> {
-    fn leaf(&self, x: u32, y: u32, out: &mut Block) -> Result<()> {
-        let c = self.layout.center as u64;
+    fn texels(&self, cols: &[u64], rows: &[u64], layers: LayerSet, out: &mut Block) -> Result<()> {
         let (lw, lh) = (self.layout.width, self.layout.height);
         out.heights.clear();
         out.mask.clear();
         out.rgba.clear();
-        for j in 0..c {
-            let v = (y as u64 * c + j).min(lh - 1);
-            for i in 0..c {
-                let u = (x as u64 * c + i).min(lw - 1);
-                let (h, m) = match self.amplify {
-                    None => {
-                        let k = v as usize * self.w as usize + u as usize;
-                        (self.heights[k], self.mask[k])
-                    }
-                    Some((f, seed, wl, amp, sp)) => {
-                        let (gx, gy) = (u as f64 / f as f64, v as f64 / f as f64);
-                        let s = |x: u32, y: u32| {
-                            self.heights[y as usize * self.w as usize + x as usize] as f64
-                        };
-                        let base = GridCell::at(gx, gy, self.w, self.h).bilinear(s);
-                        let d =
-                            procedural::detail(seed, u as f64 * sp[0], v as f64 * sp[1], wl, amp);
-                        let near = gy.round() as usize * self.w as usize + gx.round() as usize;
-                        ((base + d) as f32, self.mask[near])
-                    }
-                };
+        for &v in rows {
+            for &u in cols {
+                let (h, m) = self.texel(u, v);
                 out.heights.push(h);
-                out.mask.push(m);
-                if let Some(a) = self.albedo {
+                if layers.mask {
+                    out.mask.push(m);
+                }
+                if let (true, Some(a)) = (layers.albedo, self.albedo) {
                     out.rgba.extend_from_slice(
                         &a.at(u as f64 / (lw - 1) as f64, v as f64 / (lh - 1) as f64),
                     );
@@ -350,175 +306,274 @@ impl LeafSource for RasterLeaves<'_> {
     }
 }
 
-/// Leaves computed by the procedural generator, node by node (bounded memory).
+/// Leaves computed by the procedural generator texel by texel (nothing of level-0 size).
 struct ProceduralLeaves {
-    layout: Layout,
     params: ProceduralParams,
 }
 
 impl LeafSource for ProceduralLeaves {
-    fn leaf(&self, x: u32, y: u32, out: &mut Block) -> Result<()> {
-        let c = self.layout.center as u64;
-        let n = self.params.size as u64;
+    fn texels(&self, cols: &[u64], rows: &[u64], _: LayerSet, out: &mut Block) -> Result<()> {
         out.heights.clear();
         out.mask.clear();
         out.rgba.clear();
-        for j in 0..c {
-            let v = (y as u64 * c + j).min(n - 1);
-            for i in 0..c {
-                let u = (x as u64 * c + i).min(n - 1);
-                let (px, py) = (
-                    u as f64 * self.params.spacing,
-                    v as f64 * self.params.spacing,
-                );
+        let s = self.params.spacing;
+        for &v in rows {
+            for &u in cols {
                 out.heights
-                    .push(procedural::height(&self.params, px, py) as f32);
+                    .push(procedural::height(&self.params, u as f64 * s, v as f64 * s) as f32);
             }
         }
         Ok(())
     }
 }
 
-/// Prepares `<out>.partial/` (removing a stale one: reruns start clean) after checking `out`.
-fn prepare_dirs(out: &Path, force: bool) -> Result<PathBuf> {
-    if out.exists() {
-        let is_dataset = out.join(manifest::FILE_NAME).is_file();
-        let empty = out.is_dir()
-            && std::fs::read_dir(out)
-                .map_err(|e| Error::io(out, e))?
-                .next()
-                .is_none();
-        if !force && !empty {
+/// The level-0 source after stage 1.
+struct Source {
+    raster: Option<Raster>,
+    mask: Vec<u8>,
+    params: Option<ProceduralParams>,
+    source_bytes: u64,
+    voids_filled: u64,
+}
+
+fn check_options(opts: &Options) -> Result<()> {
+    if let Some(vs) = opts.vertical_scale
+        && !(vs.is_finite() && vs > 0.0)
+    {
+        return Err(Error::invalid(
+            "--vertical-scale",
+            format!("{vs} is not positive"),
+        ));
+    }
+    if let Some((k, _)) = opts.amplify
+        && !(2..=64).contains(&k)
+    {
+        return Err(Error::invalid(
+            "--amplify",
+            format!("factor {k} is outside 2..=64"),
+        ));
+    }
+    for &g in &opts.stats_grid_sizes {
+        if !(4..=64).contains(&g) || g % 2 != 0 {
             return Err(Error::invalid(
-                out.display().to_string(),
-                if is_dataset {
-                    "a data set already exists here; pass --force to replace it"
-                } else {
-                    "exists and is not an empty directory; pass --force to replace it"
-                },
+                "--stats-grid-sizes",
+                format!("{g} is not an even tile size within 4..=64 (UDLOD's grid_size)"),
             ));
         }
     }
-    let mut name = out
-        .file_name()
-        .ok_or_else(|| Error::invalid(out.display().to_string(), "not a directory name"))?
-        .to_os_string();
-    name.push(".partial");
-    let tmp = out.with_file_name(name);
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
+    if let Some(d) = &opts.vertical_datum
+        && (d.is_empty() || d.len() > 64 || !d.chars().all(|c| c.is_ascii_graphic()))
+    {
+        return Err(Error::invalid(
+            "--vertical-datum",
+            format!("{d:?} is not a datum name (e.g. egm96, egm2008, ellipsoid, unknown)"),
+        ));
     }
-    std::fs::create_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
-    Ok(tmp)
+    if let Input::Procedural(p) = &opts.input {
+        if p.size < 2 || p.size as u64 > MAX_SIDE_SAMPLES {
+            return Err(Error::invalid(
+                "--size",
+                format!(
+                    "{} is outside 2..={MAX_SIDE_SAMPLES} samples per side (the format's limit)",
+                    p.size
+                ),
+            ));
+        }
+        if !(p.spacing.is_finite() && p.spacing > 0.0) {
+            return Err(Error::invalid(
+                "--spacing",
+                format!("{} m is not positive", p.spacing),
+            ));
+        }
+        if opts.albedo.is_some() || opts.amplify.is_some() {
+            return Err(Error::invalid(
+                "--procedural",
+                "takes neither --albedo nor --amplify",
+            ));
+        }
+    }
+    Layout::new(2, 2, opts.center_size, opts.border_size).map(|_| ())
 }
 
-/// Runs the whole pipeline.
-pub fn run(opts: &Options, progress: &mut dyn Progress) -> Result<Summary> {
-    let t0 = Instant::now();
+/// Stage 1: the level-0 source (rasters read and void-filled).
+fn read_source(opts: &Options, progress: &dyn Progress) -> Result<Source> {
     let mut source_bytes = 0u64;
-    let mut voids_filled = 0u64;
-    // Stage 1: the level-0 source.
-    let mut raster = None;
-    let mut mask = Vec::new();
-    let mut params = None;
-    match &opts.input {
+    let mut raster = match &opts.input {
         Input::Files(paths) => {
-            progress.stage("reading sources");
+            progress.stage("reading sources (GDAL)");
             for p in paths {
                 source_bytes += std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
             }
-            let mut r = read_inputs(paths, opts.spacing, opts.vertical_scale)?;
-            progress.stage("filling voids");
-            let (m, n) = voids::fill(&r.name, &mut r.heights, r.width, r.height)?;
-            if n > 0 {
-                r.provenance.push(format!(
-                    "{n} void samples filled by push-pull interpolation (void_mask layer = 1)"
-                ));
-            }
-            voids_filled = n;
-            mask = m;
-            raster = Some(r);
+            let ropts = ReadOptions {
+                spacing: opts.spacing,
+                crs: opts.crs.clone(),
+                memory_budget: opts.memory_budget,
+            };
+            Some(read_inputs_with(paths, &ropts, opts.vertical_scale)?)
+        }
+        Input::Xyz(req) => {
+            progress.stage("fetching XYZ tiles");
+            let (mut r, bytes) = xyz::read_raster(req, opts.memory_budget)?;
+            super::source::plausibility_warnings(&mut r);
+            source_bytes = bytes;
+            Some(r)
         }
         Input::Raster(r) => {
             let mut r = r.clone();
             if let Some(s) = opts.spacing {
                 r.spacing = [s, s];
             }
-            let (m, n) = voids::fill(&r.name, &mut r.heights, r.width, r.height)?;
-            voids_filled = n;
-            mask = m;
-            raster = Some(r);
+            Some(r)
         }
-        Input::Procedural(p) => {
-            if p.size < 2 {
-                return Err(Error::invalid("--size", format!("{} is below 2", p.size)));
-            }
-            if opts.albedo.is_some() || opts.amplify.is_some() {
-                return Err(Error::invalid(
-                    "--procedural",
-                    "takes neither --albedo nor --amplify",
-                ));
-            }
-            params = Some(*p);
+        Input::Procedural(_) => None,
+    };
+    let (mut mask, mut voids_filled) = (Vec::new(), 0);
+    if let Some(r) = raster.as_mut() {
+        for w in &r.warnings {
+            progress.warning(w);
         }
+        progress.stage("filling voids");
+        let (m, n) = voids::fill(&r.name, &mut r.heights, r.width, r.height)?;
+        if n > 0 {
+            r.provenance.push(format!(
+                "{n} void samples filled by push-pull interpolation (void_mask layer = 1)"
+            ));
+        }
+        voids_filled = n;
+        mask = m;
     }
-    let albedo = match (&opts.albedo, &raster) {
-        (Some(a), Some(r)) => Some(AlbedoSampler::open(a, r)?),
+    let params = match &opts.input {
+        Input::Procedural(p) => Some(*p),
         _ => None,
     };
-    let (width, height, spacing, name, georef, mut provenance, content) = match (&raster, &params) {
+    Ok(Source {
+        raster,
+        mask,
+        params,
+        source_bytes,
+        voids_filled,
+    })
+}
+
+/// Describes the data set to build: its extent, grid and provenance.
+struct Plan {
+    width: u64,
+    height: u64,
+    spacing: [f64; 2],
+    name: String,
+    georef: Option<Georef>,
+    vertical_datum: String,
+    nodata: Option<f64>,
+    provenance: Vec<String>,
+    warnings: Vec<String>,
+    content: &'static str,
+}
+
+fn plan(opts: &Options, src: &Source) -> Result<Plan> {
+    Ok(match (&src.raster, &src.params) {
         (Some(r), _) => {
             let (w, h, sp, content) = match opts.amplify {
-                Some((k, _)) => {
-                    if !(2..=64).contains(&k) {
-                        return Err(Error::invalid(
-                            "--amplify",
-                            format!("factor {k} is outside 2..=64"),
-                        ));
-                    }
-                    (
-                        (r.width as u64 - 1) * k as u64 + 1,
-                        (r.height as u64 - 1) * k as u64 + 1,
-                        [r.spacing[0] / k as f64, r.spacing[1] / k as f64],
-                        "amplified",
-                    )
-                }
+                Some((k, _)) => (
+                    (r.width as u64 - 1) * k as u64 + 1,
+                    (r.height as u64 - 1) * k as u64 + 1,
+                    [r.spacing[0] / k as f64, r.spacing[1] / k as f64],
+                    "amplified",
+                ),
                 None => (r.width as u64, r.height as u64, r.spacing, "real"),
             };
-            let name = if content == "amplified" {
-                format!("{} (amplified with procedural detail)", r.name)
-            } else {
-                r.name.clone()
+            let georef = match (opts.amplify, &r.georef) {
+                (Some((k, _)), Some(g)) => {
+                    let [sx, sy] = g.step();
+                    Some(Georef::north_up(
+                        g.crs.clone(),
+                        g.origin(),
+                        [sx / k as f64, sy / k as f64],
+                    ))
+                }
+                (_, g) => g.clone(),
             };
-            (
-                w,
-                h,
-                sp,
-                name,
-                r.georef.clone(),
-                r.provenance.clone(),
+            Plan {
+                width: w,
+                height: h,
+                spacing: sp,
+                name: if content == "amplified" {
+                    format!("{} (amplified with procedural detail)", r.name)
+                } else {
+                    r.name.clone()
+                },
+                georef,
+                vertical_datum: r.vertical_datum.clone(),
+                nodata: r.nodata,
+                provenance: r.provenance.clone(),
+                warnings: r.warnings.clone(),
                 content,
-            )
+            }
         }
-        (None, Some(p)) => (
-            p.size as u64,
-            p.size as u64,
-            [p.spacing, p.spacing],
-            format!(
+        (None, Some(p)) => Plan {
+            width: p.size as u64,
+            height: p.size as u64,
+            spacing: [p.spacing, p.spacing],
+            name: format!(
                 "procedural size={} seed={} spacing={} m",
                 p.size, p.seed, p.spacing
             ),
-            None,
-            vec![format!(
+            georef: None,
+            vertical_datum: datum::LOCAL.into(),
+            nodata: None,
+            provenance: vec![format!(
                 "procedural generator (style {:?}, seed {}, max height {} m, feature size {} m)",
                 p.style, p.seed, p.max_height, p.feature_size
             )],
-            "procedural",
-        ),
+            warnings: Vec::new(),
+            content: "procedural",
+        },
         _ => unreachable!("one source"),
+    })
+}
+
+/// Bytes the data set will take: every level file plus the statistics files.
+pub fn estimate_bytes(layout: &Layout, layers: LayerSet, grid_sizes: &[u32]) -> Result<u64> {
+    let mut total = 0u64;
+    for lod in 0..layout.levels() {
+        let (nx, ny) = layout.nodes(lod);
+        total = total.saturating_add(
+            pyramid::LEVEL_HEADER
+                + (nx as u64 * ny as u64).saturating_mul(layout.record_size(layers)),
+        );
+    }
+    for &g in grid_sizes {
+        total = total.saturating_add(TileStats::stored_size(
+            layout.width.min(u32::MAX as u64) as u32,
+            layout.height.min(u32::MAX as u64) as u32,
+            g,
+        )?);
+    }
+    Ok(total)
+}
+
+/// Runs the whole pipeline.
+pub fn run(opts: &Options, progress: &dyn Progress) -> Result<Summary> {
+    let t0 = Instant::now();
+    check_options(opts)?;
+    output::check_target(&opts.out, opts.force)?;
+    let src = read_source(opts, progress)?;
+    let albedo = match (&opts.albedo, &src.raster) {
+        (Some(a), Some(r)) => Some(AlbedoSampler::open(a, r)?),
+        (Some(_), None) => {
+            return Err(Error::invalid("--albedo", "needs a DEM source"));
+        }
+        _ => None,
     };
+    let mut plan = plan(opts, &src)?;
+    if let Some(d) = &opts.vertical_datum {
+        plan.provenance.push(format!(
+            "vertical datum {d} given by --vertical-datum (the source said {})",
+            plan.vertical_datum
+        ));
+        plan.vertical_datum = d.clone();
+    }
     if let (Some(a), Some(p)) = (&opts.albedo, &albedo) {
-        provenance.push(format!(
+        plan.provenance.push(format!(
             "albedo {} ({}x{}) aligned by {}",
             a.display(),
             p.width,
@@ -530,36 +585,55 @@ pub fn run(opts: &Options, progress: &mut dyn Progress) -> Result<Summary> {
             }
         ));
     }
-    let layout = Layout::new(width, height, opts.center_size, opts.border_size)?;
+    let layout = Layout::new(plan.width, plan.height, opts.center_size, opts.border_size)?;
     let layers = LayerSet {
-        mask: raster.is_some(),
+        mask: src.raster.is_some(),
         albedo: albedo.is_some(),
     };
-    let amplify = match (opts.amplify, &raster) {
+    let amplify = match (opts.amplify, &src.raster) {
         (Some((k, seed)), Some(r)) => {
             let wl = r.spacing[0].min(r.spacing[1]);
             let amp = 0.05 * wl;
-            provenance.push(format!(
+            plan.provenance.push(format!(
                 "AMPLIFIED: bilinear upsampling x{k} plus procedural detail (seed {seed}, wavelength {wl:.2} m, amplitude {amp:.2} m) below the source resolution; not measured data"
             ));
-            Some((k, seed, wl, amp, spacing))
+            Some((k, seed, wl, amp, plan.spacing))
         }
         _ => None,
     };
-    let tmp = prepare_dirs(&opts.out, opts.force)?;
+    let need = estimate_bytes(&layout, layers, &opts.stats_grid_sizes)?;
+    let parent = opts
+        .out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if let Some(free) = output::free_bytes(parent)
+        && need > free
+    {
+        return Err(Error::invalid(
+            opts.out.display().to_string(),
+            format!(
+                "the data set needs {} on disk, {} is free there (nothing was written)",
+                human_bytes(need),
+                human_bytes(free)
+            ),
+        ));
+    }
+    let partial = PartialDir::claim(&opts.out)?;
+    let tmp = partial.path.clone();
 
     // Stage 2: levels, finest first; each coarser level reads only the previous level file.
-    let leaves: Box<dyn LeafSource + '_> = match (&raster, params) {
+    let leaves: Box<dyn LeafSource + '_> = match (&src.raster, src.params) {
         (Some(r), _) => Box::new(RasterLeaves {
             layout,
             heights: &r.heights,
-            mask: &mask,
+            mask: &src.mask,
             w: r.width,
             h: r.height,
             albedo: albedo.as_ref(),
             amplify,
         }),
-        (None, Some(p)) => Box::new(ProceduralLeaves { layout, params: p }),
+        (None, Some(p)) => Box::new(ProceduralLeaves { params: p }),
         _ => unreachable!("one source"),
     };
     let mut levels = Vec::new();
@@ -567,32 +641,17 @@ pub fn run(opts: &Options, progress: &mut dyn Progress) -> Result<Summary> {
     let mut range = [f32::INFINITY, f32::NEG_INFINITY];
     for lod in 0..layout.levels() {
         let (nx, ny) = layout.nodes(lod);
-        progress.level(lod, nx as u64 * ny as u64);
-        let file = format!("L{lod}.bin");
+        progress.level(&format!("level {lod:>2}"), nx as u64 * ny as u64);
+        let file = manifest::level_file(lod);
         let path = tmp.join(&file);
-        let stats = if lod == 0 {
-            let mut centre = |x: u32, y: u32| {
-                let mut b = Block::default();
-                leaves.leaf(x, y, &mut b)?;
-                if !layers.mask {
-                    b.mask.clear();
-                }
-                Ok(b)
-            };
-            pyramid::write_level(&path, &layout, 0, layers, &mut centre, &mut |n| {
-                progress.advance(n)
-            })?
+        let child = tmp.join(manifest::level_file(lod.saturating_sub(1)));
+        let input = if lod == 0 {
+            LevelInput::Leaves(&*leaves)
         } else {
-            let child_path = tmp.join(format!("L{}.bin", lod - 1));
-            let mut child =
-                std::fs::File::open(&child_path).map_err(|e| Error::io(&child_path, e))?;
-            let mut centre = |x: u32, y: u32| {
-                pyramid::parent_block(&mut child, &child_path, &layout, lod, layers, x, y)
-            };
-            pyramid::write_level(&path, &layout, lod, layers, &mut centre, &mut |n| {
-                progress.advance(n)
-            })?
+            LevelInput::Child(&child)
         };
+        let stats =
+            pyramid::write_level(&path, &layout, lod, layers, input, &|n| progress.advance(n))?;
         progress.level_done();
         if lod == 0 {
             range = [stats.min, stats.max];
@@ -611,18 +670,43 @@ pub fn run(opts: &Options, progress: &mut dyn Progress) -> Result<Summary> {
         nodes += stats.nodes;
         bytes += stats.bytes;
     }
+    drop(leaves);
+
+    // Stage 3: UDLOD's tile statistics from the written level 0.
+    let mut tile_stats = Vec::new();
+    let rows = LevelRows::open(
+        &tmp.join(manifest::level_file(0)),
+        layout,
+        layers,
+        plan.spacing[1],
+    )?;
+    for &g in &opts.stats_grid_sizes {
+        progress.level(&format!("stats g{g:>2}"), layout.height);
+        let stats = TileStats::compute(&rows, g, &|n| progress.advance(n))?;
+        progress.level_done();
+        let file = manifest::stats_file(g);
+        let n = stats.write(&tmp.join(&file))?;
+        bytes += n;
+        tile_stats.push(StatsInfo {
+            grid_size: g,
+            file,
+            bytes: n,
+        });
+    }
     let m = Manifest {
         format: manifest::FORMAT.into(),
         version: manifest::VERSION,
-        name: name.clone(),
-        width,
-        height,
-        spacing,
+        name: plan.name.clone(),
+        width: plan.width,
+        height: plan.height,
+        spacing: plan.spacing,
         extent: [
-            (width - 1) as f64 * spacing[0],
-            (height - 1) as f64 * spacing[1],
+            (plan.width - 1) as f64 * plan.spacing[0],
+            (plan.height - 1) as f64 * plan.spacing[1],
         ],
-        georef,
+        georef: plan.georef,
+        vertical_datum: plan.vertical_datum,
+        nodata: plan.nodata.filter(|v| v.is_finite()),
         center_size: layout.center,
         border_size: layout.border,
         levels,
@@ -632,32 +716,41 @@ pub fn run(opts: &Options, progress: &mut dyn Progress) -> Result<Summary> {
             albedo: layers.albedo.then(|| "rgba8_srgb".into()),
         },
         height_range: range,
-        voids_filled,
-        content: content.into(),
-        provenance,
+        voids_filled: src.voids_filled,
+        content: plan.content.into(),
+        provenance: plan.provenance,
+        warnings: plan.warnings.clone(),
+        tile_stats,
         created_by: format!("vkterrain {}", env!("CARGO_PKG_VERSION")),
     };
+    m.check("manifest being written")?;
     // Manifest last (temp + rename), then the directory rename publishes the data set.
     let json = serde_json::to_string_pretty(&m).expect("manifest serialises");
     let mtmp = tmp.join("manifest.json.tmp");
-    std::fs::write(&mtmp, json).map_err(|e| Error::io(&mtmp, e))?;
+    write_synced(&mtmp, json.as_bytes())?;
     std::fs::rename(&mtmp, tmp.join(manifest::FILE_NAME)).map_err(|e| Error::io(&mtmp, e))?;
-    if opts.out.exists() {
-        std::fs::remove_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
-    }
-    std::fs::rename(&tmp, &opts.out).map_err(|e| Error::io(&opts.out, e))?;
+    bytes += json.len() as u64;
+    partial.publish(opts.force)?;
     Ok(Summary {
         out: opts.out.clone(),
-        name,
-        content: content.into(),
-        width,
-        height,
+        name: plan.name,
+        content: plan.content.into(),
+        width: plan.width,
+        height: plan.height,
         levels: layout.levels(),
         nodes,
-        bytes: bytes + std::fs::metadata(opts.out.join(manifest::FILE_NAME)).map_or(0, |m| m.len()),
-        voids_filled,
-        source_bytes,
+        bytes,
+        voids_filled: src.voids_filled,
+        source_bytes: src.source_bytes,
         seconds: t0.elapsed().as_secs_f64(),
         height_range: range,
+        warnings: plan.warnings,
     })
+}
+
+fn write_synced(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let mut f = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+    f.write_all(bytes).map_err(|e| Error::io(path, e))?;
+    f.sync_all().map_err(|e| Error::io(path, e))
 }

@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use super::{Heightmap, MAX_SIDE, load_png16, procedural, tiles};
+use std::sync::Arc;
+
+use super::xyz::{XyzPyramid, XyzSettings};
+use super::{DiskStore, Heightmap, MAX_SIDE, NodeStore, load_png16, procedural, tiles};
 use crate::error::{Error, Result};
 
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -18,6 +21,9 @@ pub enum DatasetConfig {
     Png16(Png16Config),
     /// A tile pyramid made by `vkterrain preprocess` (`docs/dataset-format.md`).
     Tiles(TilesConfig),
+    /// Live Terrarium / Mapbox terrain-RGB tiles (a `z/x/y.png` directory or an HTTP
+    /// template), streamed through the clipmap (`docs/dataset-format.md` "XYZ terrain tiles").
+    Xyz(XyzSettings),
 }
 
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -95,6 +101,7 @@ impl DatasetConfig {
             DatasetConfig::Procedural(_) => "procedural",
             DatasetConfig::Png16(_) => "png16",
             DatasetConfig::Tiles(_) => "tiles",
+            DatasetConfig::Xyz(_) => "xyz",
         }
     }
 
@@ -122,6 +129,35 @@ impl DatasetConfig {
                 positive("dataset.vertical_scale", p.vertical_scale)
             }
             DatasetConfig::Tiles(_) => Ok(()),
+            DatasetConfig::Xyz(x) => x.check(),
+        }
+    }
+
+    /// Whether the data set can only be read node by node (through the clipmap).
+    pub fn streams_only(&self) -> bool {
+        matches!(self, DatasetConfig::Xyz(_))
+    }
+
+    /// The node store behind a pyramid data set (`tiles`: the directory, `xyz`: live tiles),
+    /// read node by node by the clipmap; relative paths are resolved with `resolve`.
+    pub fn open_store(&self, resolve: impl Fn(&Path) -> PathBuf) -> Result<Arc<dyn NodeStore>> {
+        match self {
+            DatasetConfig::Tiles(t) => Ok(Arc::new(DiskStore::open(&resolve(&t.path))?)),
+            DatasetConfig::Xyz(x) => {
+                let mut x = x.clone();
+                x.cache_dir = x.cache_dir.as_deref().map(&resolve);
+                if !(x.source.starts_with("http://") || x.source.starts_with("https://")) {
+                    x.source = resolve(Path::new(&x.source)).display().to_string();
+                }
+                Ok(Arc::new(XyzPyramid::open(&x)?))
+            }
+            other => Err(Error::invalid(
+                "dataset.kind",
+                format!(
+                    "{:?} is not a tile pyramid: the clipmap needs kind = \"tiles\" (a vkterrain preprocess data set) or \"xyz\"",
+                    other.kind_name()
+                ),
+            )),
         }
     }
 
@@ -143,6 +179,10 @@ impl DatasetConfig {
             DatasetConfig::Tiles(t) => {
                 tiles::load(&resolve(&t.path), t.lod, tiles::DEFAULT_MAX_SAMPLES)
             }
+            DatasetConfig::Xyz(_) => Err(Error::invalid(
+                "dataset.kind",
+                "\"xyz\" tiles stream through the clipmap: set [clipmap] enabled = true (or build a data set with `vkterrain preprocess --xyz`)",
+            )),
         }
     }
 }

@@ -4,7 +4,10 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use super::manifest::{self, Manifest};
-use super::pyramid::{LEVEL_HEADER, LEVEL_MAGIC, LayerSet, Layout, Node, read_node_from};
+use super::pyramid::{
+    LEVEL_HEADER, LEVEL_MAGIC, LayerSet, Layout, Node, level_header, read_node_from,
+};
+use super::stats::TileStats;
 use super::{Albedo, Heightmap};
 use crate::error::{Error, Result};
 
@@ -24,52 +27,66 @@ impl Dataset {
     /// Opens a data set directory; a directory without a manifest (e.g. left by an interrupted
     /// run) is refused.
     pub fn open(dir: &Path) -> Result<Self> {
+        let what = dir.display().to_string();
+        if dir.is_file() {
+            return Err(Error::invalid(
+                what,
+                format!(
+                    "is a file, not a vkterrain data set directory: build one from it with `vkterrain preprocess {} --out DIR` and point dataset.path at DIR",
+                    dir.display()
+                ),
+            ));
+        }
         let mpath = dir.join(manifest::FILE_NAME);
         let partial = dir
             .file_name()
             .is_some_and(|n| n.to_string_lossy().ends_with(".partial"));
         if partial || !mpath.is_file() {
             return Err(Error::invalid(
-                dir.display().to_string(),
+                what,
                 format!(
-                    "not a complete vkterrain data set (no {}; an interrupted preprocess leaves none)",
+                    "not a complete vkterrain data set (no {}): build one with `vkterrain preprocess INPUTS --out DIR` (a run that was interrupted leaves only DIR.partial; rerun it)",
                     manifest::FILE_NAME
                 ),
             ));
         }
+        let len = std::fs::metadata(&mpath)
+            .map_err(|e| Error::io(&mpath, e))?
+            .len();
+        if len > manifest::MAX_BYTES {
+            return Err(Error::invalid(
+                mpath.display().to_string(),
+                format!("{len} bytes is too large for a manifest"),
+            ));
+        }
         let text = std::fs::read_to_string(&mpath).map_err(|e| Error::io(&mpath, e))?;
-        let m: Manifest = serde_json::from_str(&text).map_err(|e| {
-            Error::invalid(mpath.display().to_string(), format!("bad manifest: {e}"))
-        })?;
-        if m.format != manifest::FORMAT || m.version != manifest::VERSION {
-            return Err(Error::invalid(
-                mpath.display().to_string(),
-                format!(
-                    "format {:?} version {} is not {:?} version {}",
-                    m.format,
-                    m.version,
-                    manifest::FORMAT,
-                    manifest::VERSION
-                ),
-            ));
-        }
-        let layout = Layout::new(m.width, m.height, m.center_size, m.border_size)?;
-        if layout.levels() as usize != m.levels.len() {
-            return Err(Error::invalid(
-                mpath.display().to_string(),
-                "level count disagrees with the layout",
-            ));
-        }
-        let layers = LayerSet {
-            mask: m.layers.void_mask,
-            albedo: m.layers.albedo.is_some(),
-        };
+        let m = Manifest::parse(&text, &mpath.display().to_string())?;
+        let (layout, layers) = m.layout()?;
         Ok(Dataset {
             dir: dir.to_path_buf(),
             manifest: m,
             layout,
             layers,
         })
+    }
+
+    /// The stored UDLOD tile statistics for `grid_size`, checked against level 0's size.
+    pub fn tile_stats(&self, grid_size: u32) -> Result<Option<TileStats>> {
+        let Some(info) = self
+            .manifest
+            .tile_stats
+            .iter()
+            .find(|s| s.grid_size == grid_size)
+        else {
+            return Ok(None);
+        };
+        TileStats::read(
+            &self.dir.join(&info.file),
+            self.manifest.width as u32,
+            self.manifest.height as u32,
+            grid_size,
+        )
+        .map(Some)
     }
 
     fn level_file(&self, lod: u32) -> Result<(File, PathBuf)> {
@@ -89,12 +106,18 @@ impl Dataset {
                 format!("{len} bytes, expected {want}: truncated or altered"),
             ));
         }
-        let mut magic = [0u8; 8];
-        std::io::Read::read_exact(&mut f, &mut magic).map_err(|e| Error::io(&path, e))?;
-        if &magic != LEVEL_MAGIC {
+        let mut head = [0u8; LEVEL_HEADER as usize];
+        std::io::Read::read_exact(&mut f, &mut head).map_err(|e| Error::io(&path, e))?;
+        if &head[..8] != LEVEL_MAGIC {
             return Err(Error::invalid(
                 path.display().to_string(),
                 "not a vkterrain level file",
+            ));
+        }
+        if head[..] != level_header(&self.layout, lod, self.layers)[..] {
+            return Err(Error::invalid(
+                path.display().to_string(),
+                "level header (version, level, nodes, node size, layers) disagrees with the manifest",
             ));
         }
         Ok((f, path))
@@ -183,6 +206,9 @@ pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap>
     let (w, h, heights, rgba) = ds.level_raster(lod)?;
     let scale = (1u64 << lod) as f64;
     let [sx, sy] = ds.manifest.spacing.map(|s| s * scale);
+    // ISSUE-14 removes this: today's renderer draws a flat, square-sampled grid, so a
+    // geographic (or otherwise non-square) native grid is resampled east-west to the
+    // north-south spacing here, at load time. The data set itself keeps the native grid.
     let (w2, heights) = if ((sx - sy) / sy).abs() > 1e-9 {
         let w2 = (((w - 1) as f64 * sx / sy).round() as u32 + 1).max(2);
         let mut out = Vec::with_capacity(w2 as usize * h as usize);

@@ -116,15 +116,18 @@ pub fn procedural_pyramid(name: &str, size: u32, seed: u64, center: u32) -> std:
         center_size: center,
         ..Default::default()
     };
-    preprocess::run(&opts, &mut NoProgress).unwrap();
+    preprocess::run(&opts, &NoProgress).unwrap();
     out
 }
 
-/// `../shared/data` (the real DEMs tests read, never committed), or `None` when it is absent.
-/// Absent data is a skip on a developer's machine but a failure in CI (`CI` set, as `.ci/run`
-/// and every CI system do), so no real-data test can pass there without checking anything.
+/// The shared real data (`../shared/data`, or `$VKTERRAIN_SHARED_DATA`; never committed), or
+/// `None` when it is absent. Absent data is a skip on a developer's machine but a failure in
+/// CI (`CI` set, as `.ci/run` and every CI system do), so no real-data test can pass there
+/// without checking anything.
 pub fn shared_data() -> Option<std::path::PathBuf> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    let dir = std::env::var_os("VKTERRAIN_SHARED_DATA")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
     if dir.is_dir() {
         return Some(dir);
     }

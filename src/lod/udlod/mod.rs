@@ -18,6 +18,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use super::{LodMethod, MethodContext};
+use crate::dataset::stats::TileStats;
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
@@ -123,13 +124,16 @@ impl Udlod {
         let gpu = ctx.gpu;
         let settings = settings.clone();
         settings.validate()?;
-        let levels = match ctx.data {
-            Terrain::Grid(h) => Levels::new(&**h, settings.grid_size, settings.error_field_max)?,
-            // One lock for the whole sweep; the reader's cache stays bounded.
-            Terrain::Pyramid(p) => {
-                Levels::new(&p.sweep(), settings.grid_size, settings.error_field_max)?
-            }
+        // Tile statistics: a pyramid's stored ones (start-up reads no level 0), else computed
+        // from level 0 in parallel; the same bits either way.
+        let (stats, spacing) = match ctx.data {
+            Terrain::Grid(h) => (
+                TileStats::compute(&**h, settings.grid_size, &|_| {})?,
+                h.spacing,
+            ),
+            Terrain::Pyramid(p) => (p.tile_stats(settings.grid_size)?, p.spacing()),
         };
+        let levels = Levels::from_stats(stats, spacing, settings.error_field_max);
         // The morph reads the split distance one level past the root (never morphs).
         if levels.levels() >= UDLOD_MAX_LEVELS {
             return Err(Error::invalid(

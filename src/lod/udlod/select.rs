@@ -11,7 +11,8 @@
 use glam::{DVec3, Vec3};
 
 use super::settings::UdlodSettings;
-use crate::dataset::{Heightmap, Level0, interp};
+use crate::dataset::stats::{TileStats, level_interpolate};
+use crate::dataset::{Heightmap, Level0};
 use crate::error::Result;
 use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
 use crate::scene::Camera;
@@ -59,43 +60,34 @@ impl Levels {
     /// Builds the levels; `field_max` (>= 1) caps the error field (1: distance-only).
     /// `data` is any source of level-0 samples (the grid in memory, or a tile pyramid read
     /// node by node); the result depends only on the sample values. Errors are the source's
-    /// (a pyramid node that cannot be read).
+    /// (a pyramid node that cannot be read). Computes the tile statistics on this thread; a
+    /// data set's stored statistics go through [`Levels::from_stats`].
     pub fn new<D: Level0 + ?Sized>(data: &D, grid_size: u32, field_max: f64) -> Result<Self> {
-        let (width, height) = (data.width(), data.height());
-        let quads = (width - 1).max(height - 1);
-        let mut root_lod = 0;
-        while (grid_size << root_lod) < quads {
-            root_lod += 1;
-        }
+        let stats = TileStats::compute_serial(data, grid_size)?;
+        Ok(Self::from_stats(stats, data.spacing(), field_max))
+    }
+
+    /// The levels from per-tile statistics (computed, or stored by `vkterrain preprocess`).
+    pub fn from_stats(stats: TileStats, spacing: f64, field_max: f64) -> Self {
+        let root_lod = stats.root_lod();
         let mut tiles_per_side = Vec::new();
         let mut level_offsets = Vec::new();
         let mut min_max = Vec::new();
         let mut tile_error = Vec::new();
         let mut level_error = Vec::new();
-        let mut rows = Rows::default();
-        for lod in 0..=root_lod {
-            let span = grid_size << lod;
-            let nx = (width - 1).div_ceil(span);
-            let ny = (height - 1).div_ceil(span);
-            tiles_per_side.push((nx, ny));
+        for level in stats.levels {
+            tiles_per_side.push(level.tiles);
             level_offsets.push(min_max.len() as u32);
-            let mut worst = 0.0f64;
-            for ty in 0..ny {
-                for tx in 0..nx {
-                    let (mm, e) = tile_stats(data, lod, tx * span, ty * span, span, &mut rows)?;
-                    min_max.push(mm);
-                    tile_error.push(e as f32);
-                    worst = worst.max(e);
-                }
-            }
-            level_error.push(worst);
+            min_max.extend(level.min_max);
+            tile_error.extend(level.error);
+            level_error.push(level.max_error);
         }
         let mut levels = Levels {
-            grid_size,
+            grid_size: stats.grid_size,
             root_lod,
-            width,
-            height,
-            spacing: data.spacing(),
+            width: stats.width,
+            height: stats.height,
+            spacing,
             tiles_per_side,
             level_offsets,
             min_max,
@@ -104,7 +96,7 @@ impl Levels {
             field: ErrorField::default(),
         };
         levels.field = ErrorField::new(&levels, field_max);
-        Ok(levels)
+        levels
     }
 
     pub fn levels(&self) -> u32 {
@@ -146,66 +138,6 @@ impl Levels {
     }
 }
 
-/// Row buffers reused across tiles: the tile's current row and the level's rows below and
-/// above it.
-#[derive(Default)]
-struct Rows {
-    row: Vec<f32>,
-    south: Vec<f32>,
-    north: Vec<f32>,
-}
-
-/// Min/max height of a tile's samples and its geometric error (level `lod` grid vs samples).
-/// Reads whole rows (`Level0::row`); per sample the values and the arithmetic are those of
-/// [`level_height`].
-fn tile_stats<D: Level0 + ?Sized>(
-    data: &D,
-    lod: u32,
-    c0: u32,
-    r0: u32,
-    span: u32,
-    rows: &mut Rows,
-) -> Result<([f32; 2], f64)> {
-    let (w, h) = (data.width(), data.height());
-    let (c1, r1) = ((c0 + span).min(w - 1), (r0 + span).min(h - 1));
-    let step = 1u32 << lod;
-    // The level's corners of the tile's samples lie in columns c0 ..= c1 + step (clamped);
-    // c0 is a multiple of `step`.
-    let corner_end = (c1 + step).min(w - 1);
-    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    let mut error = 0.0f64;
-    let mut level_row = None;
-    for r in r0..=r1 {
-        data.row(r, c0, c1, &mut rows.row)?;
-        for &v in &rows.row {
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-        if lod == 0 {
-            continue;
-        }
-        let rl = r >> lod << lod;
-        if level_row != Some(rl) {
-            data.row(rl, c0, corner_end, &mut rows.south)?;
-            data.row((rl + step).min(h - 1), c0, corner_end, &mut rows.north)?;
-            level_row = Some(rl);
-        }
-        for (i, &v) in rows.row.iter().enumerate() {
-            let c = c0 + i as u32;
-            let cl = c >> lod << lod;
-            let (a, b) = ((cl - c0) as usize, ((cl + step).min(w - 1) - c0) as usize);
-            let k = [
-                rows.south[a] as f64,
-                rows.south[b] as f64,
-                rows.north[a] as f64,
-                rows.north[b] as f64,
-            ];
-            error = error.max((level_interpolate(lod, k, c, r) - v as f64).abs());
-        }
-    }
-    Ok(([lo, hi], error))
-}
-
 /// Height of the level-`lod` triangulated grid at full-resolution sample `(c, r)`. Quads are
 /// split along the diagonal from (1, 0) to (0, 1), as `grid_indices` does. The level's edges
 /// run along full-resolution edges, so the largest difference between the two meshes is at a
@@ -232,13 +164,6 @@ fn level_corners<D: Level0 + ?Sized>(data: &D, lod: u32, c: u32, r: u32) -> Resu
         s(c0, r0 + step)?,
         s(c0 + step, r0 + step)?,
     ])
-}
-
-fn level_interpolate(lod: u32, corners: [f64; 4], c: u32, r: u32) -> f64 {
-    let step = 1u32 << lod;
-    let (c0, r0) = (c / step * step, r / step * step);
-    let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
-    interp::triangulated(corners, fx, fy)
 }
 
 /// The per-region error field `m_l(p) >= 1`: how much farther than the level's global error

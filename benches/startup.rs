@@ -1,0 +1,75 @@
+//! UDLOD start-up on tile pyramids (a benchmark, not a test): the tile statistics `Levels`
+//! needs, (a) read from the data set (`stats-g16.bin`, stored by `vkterrain preprocess`: what
+//! start-up does now), (b) computed from level 0 through the bounded node reader on one
+//! thread (what start-up did before), (c) computed from level 0's file in parallel (a grid size
+//! that was not stored). `cargo bench --bench startup`.
+//!
+//! `VKT_STARTUP_DATASETS`: comma-separated data set directories (default
+//! `target/data/proc4k`); `VKT_STARTUP_BEFORE=0` skips (b) (minutes on 65537²).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use vkterrain::dataset::stats::TileStats;
+use vkterrain::dataset::{Level0, PyramidReader};
+use vkterrain::lod::udlod::select::Levels;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let sets = std::env::var("VKT_STARTUP_DATASETS")
+        .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/target/data/proc4k").to_string());
+    let before = std::env::var("VKT_STARTUP_BEFORE").map_or(true, |v| v != "0");
+    let threads = rayon::current_num_threads();
+    println!(
+        "UDLOD start-up (grid_size 16, error field 8): tile statistics for Levels; {threads} threads for (c); warm page cache, medians of 3 (one run for (b))"
+    );
+    println!(
+        "| data set | samples | (a) stored s | (b) level 0, 1 thread s | (c) level 0, parallel s | stats file MiB |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for dir in sets.split(',').map(PathBuf::from) {
+        let reader = PyramidReader::open(&dir).expect("data set");
+        let stored = (0..3)
+            .map(|_| {
+                let t = Instant::now();
+                let r = PyramidReader::open(&dir).expect("data set");
+                let s = r.tile_stats(16).expect("stats");
+                let levels = Levels::from_stats(s, r.spacing(), 8.0);
+                assert_eq!(r.node_loads(), 0, "start-up read level 0");
+                std::hint::black_box(levels);
+                t.elapsed().as_secs_f64()
+            })
+            .collect::<Vec<_>>();
+        let bytes = std::fs::metadata(dir.join("stats-g16.bin")).map_or(0, |m| m.len());
+        let old = if before {
+            let t = Instant::now();
+            let l = Levels::new(&reader.sweep(), 16, 8.0).expect("levels");
+            std::hint::black_box(l);
+            format!("{:.2}", t.elapsed().as_secs_f64())
+        } else {
+            "skipped".into()
+        };
+        let par = (0..3)
+            .map(|_| {
+                let t = Instant::now();
+                let rows = reader.store().level0_rows().expect("disk").expect("rows");
+                let s = TileStats::compute(&rows, 16, &|_| {}).expect("stats");
+                std::hint::black_box(Levels::from_stats(s, reader.spacing(), 8.0));
+                t.elapsed().as_secs_f64()
+            })
+            .collect::<Vec<_>>();
+        println!(
+            "| {} | {}x{} | {:.3} | {old} | {:.2} | {:.1} |",
+            dir.display(),
+            reader.width(),
+            reader.height(),
+            median(stored),
+            median(par),
+            bytes as f64 / 1048576.0
+        );
+    }
+}

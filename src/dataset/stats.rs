@@ -1,0 +1,498 @@
+//! Per-tile statistics of the level-0 grid for a quadtree of square tiles: what UDLOD's
+//! `Levels` needs at start-up (min/max height and geometric error of every tile of every
+//! level), computed once by `vkterrain preprocess` and stored in the data set
+//! (`stats-g{grid}.bin`, see `docs/dataset-format.md`), or computed from level 0 when a grid
+//! size was not stored.
+//!
+//! Tiling for `grid_size` quads per tile side: level `l` has tiles of `span = grid_size << l`
+//! quads; tile `(tx, ty)` covers level-0 samples `tx*span ..= min((tx+1)*span, width-1)` (and
+//! the same in rows), so neighbouring tiles share their edge samples. The root level is the
+//! first whose single tile covers every quad. A tile's **error** at level `l >= 1` is the
+//! largest `|mesh_l(s) - h(s)|` over its samples `s`, where `mesh_l` is the level-`l` grid
+//! (every `2^l`-th sample, clamped to the data) triangulated along the diagonal from
+//! `(1, 0)` to `(0, 1)`, evaluated by [`level_interpolate`]; level 0 has error 0.
+//!
+//! The computation sweeps bands of rows in parallel; per sample the values and the
+//! arithmetic are those of the sample-by-sample definition, and the per-tile reductions
+//! (min, max, max) do not depend on the order, so the result is the same bit for bit for any
+//! number of threads (tested against the definition in `tests/clipmap.rs`).
+
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+
+use super::Level0;
+use crate::error::{Error, Result};
+
+/// Magic of a statistics file.
+pub const STATS_MAGIC: &[u8; 8] = b"VKTSTATS";
+/// Version of the statistics file layout.
+pub const STATS_VERSION: u32 = 1;
+const HEADER: usize = 40;
+const LEVEL_ENTRY: usize = 16;
+const TILE_ENTRY: usize = 12;
+/// Rows per band of the parallel sweep.
+const BAND_ROWS: u32 = 256;
+
+/// One level of tiles.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LevelTiles {
+    /// Tiles per side that touch the data.
+    pub tiles: (u32, u32),
+    /// `(min, max)` height of every tile's samples, row-major from the south-west tile.
+    pub min_max: Vec<[f32; 2]>,
+    /// Geometric error of every tile in metres (f32 of the exact f64 value).
+    pub error: Vec<f32>,
+    /// The largest tile error of the level, in f64 (0 at level 0).
+    pub max_error: f64,
+}
+
+/// Statistics of every level for one tile size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileStats {
+    pub grid_size: u32,
+    pub width: u32,
+    pub height: u32,
+    /// Finest (0) to root.
+    pub levels: Vec<LevelTiles>,
+}
+
+/// The level-independent shape of a tiling.
+#[derive(Clone, Debug)]
+struct Shape {
+    grid: u32,
+    width: u32,
+    height: u32,
+    /// `(nx, ny, span)` per level.
+    levels: Vec<(u32, u32, u32)>,
+}
+
+impl Shape {
+    fn new(width: u32, height: u32, grid: u32) -> Result<Self> {
+        if width < 2 || height < 2 {
+            return Err(Error::invalid(
+                "tile statistics",
+                format!("{width}x{height} samples is smaller than 2x2"),
+            ));
+        }
+        if !(2..=1 << 16).contains(&grid) {
+            return Err(Error::invalid(
+                "tile statistics",
+                format!("grid size {grid} outside 2..=65536"),
+            ));
+        }
+        let root = root_lod(width, height, grid);
+        let levels = (0..=root)
+            .map(|l| {
+                let span = grid << l;
+                (
+                    (width - 1).div_ceil(span),
+                    (height - 1).div_ceil(span),
+                    span,
+                )
+            })
+            .collect();
+        Ok(Shape {
+            grid,
+            width,
+            height,
+            levels,
+        })
+    }
+}
+
+/// The root level of a tiling: the first whose single tile covers every quad.
+pub fn root_lod(width: u32, height: u32, grid_size: u32) -> u32 {
+    let quads = (width - 1).max(height - 1) as u64;
+    let mut root = 0;
+    while ((grid_size as u64) << root) < quads {
+        root += 1;
+    }
+    root
+}
+
+/// Height of the level-`lod` triangulated grid at level-0 sample `(c, r)` from the four
+/// level samples around it (`[h(c0, r0), h(c0 + step, r0), h(c0, r0 + step),
+/// h(c0 + step, r0 + step)]`, `c0 = c` rounded down to a multiple of `step = 2^lod`, corners
+/// clamped to the data). Quads split along the diagonal from (1, 0) to (0, 1).
+pub fn level_interpolate(lod: u32, corners: [f64; 4], c: u32, r: u32) -> f64 {
+    let step = 1u32 << lod;
+    let (c0, r0) = (c / step * step, r / step * step);
+    let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
+    super::interp::triangulated(corners, fx, fy)
+}
+
+/// Partial statistics of one band of rows: per level, the tile rows it touches.
+struct Partial {
+    /// Per level: first tile row, then `rows x nx` entries of (min, max, error).
+    levels: Vec<(u32, Vec<[f32; 2]>, Vec<f64>)>,
+}
+
+/// Full rows of level 0 held while a band is swept: the band's current row and, per level,
+/// the two level rows around it.
+struct RowCache {
+    rows: Vec<(u32, Vec<f32>)>,
+}
+
+impl RowCache {
+    /// Makes every row of `needed` resident (reading what is missing) and returns their slots.
+    fn ensure<D: Level0 + ?Sized>(&mut self, data: &D, needed: &[u32]) -> Result<()> {
+        let w = data.width();
+        let mut free: Vec<usize> = (0..self.rows.len())
+            .filter(|&i| !needed.contains(&self.rows[i].0))
+            .collect();
+        for &r in needed {
+            if self.rows.iter().any(|(k, _)| *k == r) {
+                continue;
+            }
+            let slot = match free.pop() {
+                Some(s) => s,
+                None => {
+                    self.rows.push((u32::MAX, Vec::with_capacity(w as usize)));
+                    self.rows.len() - 1
+                }
+            };
+            data.row(r, 0, w - 1, &mut self.rows[slot].1)?;
+            self.rows[slot].0 = r;
+        }
+        Ok(())
+    }
+
+    fn get(&self, r: u32) -> &[f32] {
+        &self
+            .rows
+            .iter()
+            .find(|(k, _)| *k == r)
+            .expect("row made resident")
+            .1
+    }
+}
+
+/// Sweeps rows `r0..=r1`.
+fn band<D: Level0 + ?Sized>(data: &D, shape: &Shape, r0: u32, r1: u32) -> Result<Partial> {
+    let (w, h) = (shape.width, shape.height);
+    let mut levels: Vec<(u32, Vec<[f32; 2]>, Vec<f64>)> = shape
+        .levels
+        .iter()
+        .map(|&(nx, ny, span)| {
+            let first = (r0 / span).saturating_sub((r0 % span == 0 && r0 > 0) as u32);
+            let last = (r1 / span).min(ny - 1);
+            let rows = (last + 1 - first) as usize;
+            (
+                first,
+                vec![[f32::INFINITY, f32::NEG_INFINITY]; rows * nx as usize],
+                vec![0.0f64; rows * nx as usize],
+            )
+        })
+        .collect();
+    let mut cache = RowCache { rows: Vec::new() };
+    let (nx0, _, _) = shape.levels[0];
+    let mut seg = vec![[f32::INFINITY, f32::NEG_INFINITY]; nx0 as usize];
+    let mut seg_err: Vec<f64> = Vec::new();
+    let mut needed = Vec::with_capacity(2 * shape.levels.len() + 1);
+    for r in r0..=r1 {
+        needed.clear();
+        needed.push(r);
+        for lod in 1..shape.levels.len() as u32 {
+            let step = 1u32 << lod;
+            let rl = r >> lod << lod;
+            for k in [rl, (rl + step).min(h - 1)] {
+                if !needed.contains(&k) {
+                    needed.push(k);
+                }
+            }
+        }
+        cache.ensure(data, &needed)?;
+        let row = cache.get(r);
+        // Level-0 segments (shared edge samples in both neighbours).
+        for (tx, s) in seg.iter_mut().enumerate() {
+            let c0 = tx as u32 * shape.grid;
+            let c1 = (c0 + shape.grid).min(w - 1);
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for &v in &row[c0 as usize..=c1 as usize] {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+            *s = [lo, hi];
+        }
+        for (lod, &(nx, ny, span)) in shape.levels.iter().enumerate() {
+            let lod = lod as u32;
+            let step = 1u32 << lod;
+            seg_err.clear();
+            seg_err.resize(nx as usize, 0.0);
+            if lod > 0 {
+                let rl = r >> lod << lod;
+                let south = cache.get(rl);
+                let north = cache.get((rl + step).min(h - 1));
+                for (tx, e) in seg_err.iter_mut().enumerate() {
+                    let c0 = tx as u32 * span;
+                    let c1 = (c0 + span).min(w - 1);
+                    let mut worst = 0.0f64;
+                    for c in c0..=c1 {
+                        let cl = c >> lod << lod;
+                        let cr = (cl + step).min(w - 1);
+                        let k = [
+                            south[cl as usize] as f64,
+                            south[cr as usize] as f64,
+                            north[cl as usize] as f64,
+                            north[cr as usize] as f64,
+                        ];
+                        let v = row[c as usize] as f64;
+                        worst = worst.max((level_interpolate(lod, k, c, r) - v).abs());
+                    }
+                    *e = worst;
+                }
+            }
+            let (first, mm, err) = &mut levels[lod as usize];
+            // The tile row holding row r, and the one below when r is their shared edge.
+            let ty = r / span;
+            let below = (r % span == 0 && ty > 0).then(|| ty - 1);
+            for t in [Some(ty).filter(|&t| t < ny), below].into_iter().flatten() {
+                let base = ((t - *first) * nx) as usize;
+                let per = 1usize << lod;
+                for tx in 0..nx as usize {
+                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                    for s in &seg[tx * per..((tx + 1) * per).min(nx0 as usize)] {
+                        lo = lo.min(s[0]);
+                        hi = hi.max(s[1]);
+                    }
+                    let m = &mut mm[base + tx];
+                    m[0] = m[0].min(lo);
+                    m[1] = m[1].max(hi);
+                    err[base + tx] = err[base + tx].max(seg_err[tx]);
+                }
+            }
+        }
+    }
+    Ok(Partial { levels })
+}
+
+impl TileStats {
+    fn empty(shape: &Shape) -> Self {
+        TileStats {
+            grid_size: shape.grid,
+            width: shape.width,
+            height: shape.height,
+            levels: shape
+                .levels
+                .iter()
+                .map(|&(nx, ny, _)| LevelTiles {
+                    tiles: (nx, ny),
+                    min_max: vec![[f32::INFINITY, f32::NEG_INFINITY]; (nx * ny) as usize],
+                    error: vec![0.0; (nx * ny) as usize],
+                    max_error: 0.0,
+                })
+                .collect(),
+        }
+    }
+
+    /// Folds a band's partial statistics in (min, max and max: any order gives the same bits).
+    fn merge(&mut self, p: Partial) {
+        for (level, (first, mm, err)) in self.levels.iter_mut().zip(p.levels) {
+            let nx = level.tiles.0 as usize;
+            let base = first as usize * nx;
+            for (i, (m, e)) in mm.iter().zip(&err).enumerate() {
+                let t = &mut level.min_max[base + i];
+                t[0] = t[0].min(m[0]);
+                t[1] = t[1].max(m[1]);
+                // f32 rounding is monotonic: the f32 of the max is the max of the f32s.
+                level.error[base + i] = level.error[base + i].max(*e as f32);
+                level.max_error = level.max_error.max(*e);
+            }
+        }
+    }
+
+    fn bands(shape: &Shape) -> Vec<(u32, u32)> {
+        (0..shape.height.div_ceil(BAND_ROWS))
+            .map(|b| {
+                let r0 = b * BAND_ROWS;
+                (r0, (r0 + BAND_ROWS - 1).min(shape.height - 1))
+            })
+            .collect()
+    }
+
+    /// Statistics of `data` for tiles of `grid_size` quads, bands of rows swept in parallel
+    /// (rayon's pool); `progress(rows)` is called as bands finish.
+    pub fn compute<D: Level0 + Sync + ?Sized>(
+        data: &D,
+        grid_size: u32,
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> Result<Self> {
+        let shape = Shape::new(data.width(), data.height(), grid_size)?;
+        let out = Mutex::new(Self::empty(&shape));
+        Self::bands(&shape)
+            .into_par_iter()
+            .try_for_each(|(r0, r1)| -> Result<()> {
+                let p = band(data, &shape, r0, r1)?;
+                out.lock().unwrap_or_else(|e| e.into_inner()).merge(p);
+                progress((r1 + 1 - r0) as u64);
+                Ok(())
+            })?;
+        Ok(out.into_inner().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// [`TileStats::compute`] on the calling thread (for sources that are not `Sync`).
+    pub fn compute_serial<D: Level0 + ?Sized>(data: &D, grid_size: u32) -> Result<Self> {
+        let shape = Shape::new(data.width(), data.height(), grid_size)?;
+        let mut out = Self::empty(&shape);
+        for (r0, r1) in Self::bands(&shape) {
+            out.merge(band(data, &shape, r0, r1)?);
+        }
+        Ok(out)
+    }
+
+    pub fn root_lod(&self) -> u32 {
+        self.levels.len() as u32 - 1
+    }
+
+    /// Bytes of the stored form for a `width x height` grid.
+    pub fn stored_size(width: u32, height: u32, grid_size: u32) -> Result<u64> {
+        let shape = Shape::new(width, height, grid_size)?;
+        let tiles: u64 = shape
+            .levels
+            .iter()
+            .map(|&(nx, ny, _)| nx as u64 * ny as u64)
+            .sum();
+        Ok(HEADER as u64
+            + shape.levels.len() as u64 * LEVEL_ENTRY as u64
+            + tiles * TILE_ENTRY as u64)
+    }
+
+    /// The stored form: header, per level `(nx, ny, max_error)`, per tile `(min, max, error)`,
+    /// little-endian.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let tiles: usize = self.levels.iter().map(|l| l.error.len()).sum();
+        let mut b =
+            Vec::with_capacity(HEADER + self.levels.len() * LEVEL_ENTRY + tiles * TILE_ENTRY);
+        b.extend_from_slice(STATS_MAGIC);
+        for v in [STATS_VERSION, self.grid_size] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in [self.width as u64, self.height as u64] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&(self.levels.len() as u32).to_le_bytes());
+        b.extend_from_slice(&0u32.to_le_bytes());
+        for l in &self.levels {
+            b.extend_from_slice(&l.tiles.0.to_le_bytes());
+            b.extend_from_slice(&l.tiles.1.to_le_bytes());
+            b.extend_from_slice(&l.max_error.to_le_bytes());
+        }
+        for l in &self.levels {
+            for (m, e) in l.min_max.iter().zip(&l.error) {
+                b.extend_from_slice(&m[0].to_le_bytes());
+                b.extend_from_slice(&m[1].to_le_bytes());
+                b.extend_from_slice(&e.to_le_bytes());
+            }
+        }
+        b
+    }
+
+    /// Parses and checks the stored form against the grid it must describe: sizes, tile
+    /// counts, finite values, `min <= max`, errors `>= 0` and each level's maximum equal to
+    /// its largest tile error. `what` names the file in errors.
+    pub fn from_bytes(
+        bytes: &[u8],
+        what: &str,
+        width: u32,
+        height: u32,
+        grid_size: u32,
+    ) -> Result<Self> {
+        let bad = |m: String| Error::invalid(what, m);
+        let shape = Shape::new(width, height, grid_size)?;
+        let want = Self::stored_size(width, height, grid_size)?;
+        if bytes.len() as u64 != want {
+            return Err(bad(format!(
+                "{} bytes, expected {want} for {width}x{height} samples and grid size {grid_size}: truncated or altered",
+                bytes.len()
+            )));
+        }
+        if &bytes[..8] != STATS_MAGIC {
+            return Err(bad("not a vkterrain statistics file".into()));
+        }
+        let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes"));
+        let u64_at = |o: usize| u64::from_le_bytes(bytes[o..o + 8].try_into().expect("8 bytes"));
+        let f32_at = |o: usize| f32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes"));
+        let header = (
+            u32_at(8),
+            u32_at(12),
+            u64_at(16),
+            u64_at(24),
+            u32_at(32) as usize,
+        );
+        let expected = (
+            STATS_VERSION,
+            grid_size,
+            width as u64,
+            height as u64,
+            shape.levels.len(),
+        );
+        if header != expected {
+            return Err(bad(format!(
+                "header (version, grid, width, height, levels) {header:?} disagrees with {expected:?}"
+            )));
+        }
+        let mut out = Self::empty(&shape);
+        let mut o = HEADER + shape.levels.len() * LEVEL_ENTRY;
+        for (lod, level) in out.levels.iter_mut().enumerate() {
+            let e = HEADER + lod * LEVEL_ENTRY;
+            let tiles = (u32_at(e), u32_at(e + 4));
+            if tiles != level.tiles {
+                return Err(bad(format!(
+                    "level {lod} has {tiles:?} tiles, expected {:?}",
+                    level.tiles
+                )));
+            }
+            level.max_error = f64::from_le_bytes(bytes[e + 8..e + 16].try_into().expect("8"));
+            let mut largest = 0.0f32;
+            for (m, err) in level.min_max.iter_mut().zip(level.error.iter_mut()) {
+                let (lo, hi, er) = (f32_at(o), f32_at(o + 4), f32_at(o + 8));
+                o += TILE_ENTRY;
+                if !(lo.is_finite() && hi.is_finite() && lo <= hi && er.is_finite() && er >= 0.0)
+                    || (lod == 0 && er != 0.0)
+                {
+                    return Err(bad(format!(
+                        "level {lod}: tile (min {lo}, max {hi}, error {er}) is not valid"
+                    )));
+                }
+                *m = [lo, hi];
+                *err = er;
+                largest = largest.max(er);
+            }
+            if !(level.max_error.is_finite() && level.max_error as f32 == largest) {
+                return Err(bad(format!(
+                    "level {lod}: maximum error {} disagrees with its tiles' {largest}",
+                    level.max_error
+                )));
+            }
+        }
+        Ok(out)
+    }
+
+    /// Writes the stored form to `path`, fsynced.
+    pub fn write(&self, path: &std::path::Path) -> Result<u64> {
+        use std::io::Write;
+        let bytes = self.to_bytes();
+        let mut f = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+        f.write_all(&bytes).map_err(|e| Error::io(path, e))?;
+        f.sync_all().map_err(|e| Error::io(path, e))?;
+        Ok(bytes.len() as u64)
+    }
+
+    /// Reads and checks a stored file (its size is checked before it is read).
+    pub fn read(path: &std::path::Path, width: u32, height: u32, grid_size: u32) -> Result<Self> {
+        let what = path.display().to_string();
+        let want = Self::stored_size(width, height, grid_size)?;
+        let len = std::fs::metadata(path)
+            .map_err(|e| Error::io(path, e))?
+            .len();
+        if len != want {
+            return Err(Error::invalid(
+                what,
+                format!("{len} bytes, expected {want}: truncated or altered"),
+            ));
+        }
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Self::from_bytes(&bytes, &what, width, height, grid_size)
+    }
+}
