@@ -8,7 +8,7 @@ RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers
 TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
 CARGO ?= cargo
 
-.PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap data data-srtm data-pyrenees data-franconia data-proc4k deps deps-test
+.PHONY: run test bench bench-ring bench-ring-fuzz bench-udlod bench-eval bench-eval-short bench-clipmap data data-srtm data-pyrenees data-franconia data-proc4k deps deps-test
 
 run: deps
 	$(CARGO) run --release --locked -- render --config config/default.toml
@@ -22,6 +22,14 @@ bench: deps
 # UDLOD vs brute force on the procedural, Puget Sound and SRTM data (../shared/data).
 bench-udlod: deps data-srtm
 	$(CARGO) bench --locked --bench udlod
+
+# The ring: copy vs zero-copy publishing, consumers, wake-up latency (docs/ring.md).
+bench-ring: deps
+	$(CARGO) bench --locked --bench ring
+
+# 10^6 hostile segments against the Rust ring reader (CI runs 3000 in tests/ring.rs).
+bench-ring-fuzz: deps
+	$(CARGO) bench --locked --bench ring_fuzz
 
 data: data-srtm data-pyrenees data-franconia
 
@@ -59,3 +67,4 @@ deps:
 
 deps-test:
 	@scripts/ensure-packages.sh $(TEST_PACKAGES)
+	@scripts/ensure-python.sh

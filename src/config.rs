@@ -27,6 +27,8 @@ pub struct Config {
     pub output: OutputConfig,
     pub ring: RingConfig,
     pub service: ServiceConfig,
+    /// Frames, control and status over Zenoh (`serve`).
+    pub zenoh: crate::service::ZenohSettings,
     /// Directory relative paths are resolved against (the config file's directory).
     #[serde(skip)]
     pub base_dir: PathBuf,
@@ -154,8 +156,14 @@ impl Default for OutputConfig {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RingConfig {
-    /// Segment name: `/dev/shm/<name>`, 1..=200 characters from `[A-Za-z0-9._-]`.
+    /// Ring name: the segment is `<dir>/<name>`, 1..=200 characters from `[A-Za-z0-9._-]`.
     pub name: String,
+    /// Directory of the rings, writable by the service only (default `$VKTERRAIN_RING_DIR`, else
+    /// `/run/vkterrain`; docs/ring.md "Threat model").
+    pub dir: Option<PathBuf>,
+    /// Let the GPU write frames straight into the ring slots where the device can
+    /// (`VK_EXT_external_memory_host`); else every frame is copied.
+    pub zero_copy: bool,
     /// Slots in the ring (2..=64): how far a consumer may fall behind before it skips frames.
     pub slots: u32,
     /// Group allowed to read the ring (mode 0640); none: owner only (mode 0600).
@@ -168,6 +176,8 @@ impl Default for RingConfig {
     fn default() -> Self {
         RingConfig {
             name: "vkterrain".into(),
+            dir: None,
+            zero_copy: true,
             slots: 4,
             group: None,
             keep_segment: false,
@@ -212,6 +222,7 @@ impl Default for Config {
             output: Default::default(),
             ring: Default::default(),
             service: Default::default(),
+            zenoh: Default::default(),
             // No config file: relative paths are relative to the working directory.
             base_dir: PathBuf::new(),
         }
@@ -358,6 +369,7 @@ impl Config {
                 format!("{} is outside 2..=64", self.ring.slots),
             ));
         }
+        self.zenoh.validate()?;
         let s = &self.service;
         if !(s.status_interval_s.is_finite() && (0.05..=3600.0).contains(&s.status_interval_s)) {
             return Err(Error::invalid(

@@ -20,5 +20,7 @@ pub mod output;
 pub mod readback;
 pub mod render;
 pub mod scene;
+/// `serve`'s control channel and Zenoh side.
+pub mod service;
 
 pub use error::{Error, Result};

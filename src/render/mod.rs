@@ -25,7 +25,7 @@ use crate::driver::memory::{Buffer, Image, ImageDesc};
 use crate::driver::sync::Timeline;
 use crate::error::{Error, Result, VkResultExt};
 use crate::lod::{LodMethod, MethodContext, MethodKind, ViewState};
-use crate::readback::{FrameSink, FrameTimings, FrameView};
+use crate::readback::{DirectTarget, FrameSink, FrameTimings, FrameView};
 use crate::scene::Camera;
 use pipeline::{COLOR_FORMAT, DEPTH_FORMAT, TargetFormats};
 use stats::RunStats;
@@ -115,6 +115,8 @@ struct Pending {
     camera: Camera,
     cpu_record_ms: f64,
     triangles: u64,
+    /// Where the colour went when the sink asked for zero-copy ([`FrameSink::direct_target`]).
+    direct: Option<DirectTarget>,
 }
 
 struct Slot {
@@ -593,7 +595,11 @@ impl Renderer {
             self.method.update(view_slot, view)?;
         }
         let sky = request.sky.unwrap_or(self.options.sky);
-        self.record(slot_index, sky)?;
+        let color_bytes = self.options.width as u64 * self.options.height as u64 * 4;
+        let direct = sink
+            .direct_target(index, color_bytes)
+            .filter(|d| d.host_bytes().len() as u64 >= color_bytes);
+        self.record(slot_index, sky, direct.map(|d| d.buffer))?;
 
         let cmds = [self.slots[slot_index].cmd];
         let signal = [self.timeline.raw];
@@ -610,6 +616,7 @@ impl Renderer {
             camera: request.camera,
             cpu_record_ms: started.elapsed().as_secs_f64() * 1e3,
             triangles: 0,
+            direct,
         });
         self.in_flight.push_back(slot_index);
         self.next_frame += 1;
@@ -659,10 +666,14 @@ impl Renderer {
             cpu_wait_ms,
         };
         let slot = &self.slots[slot_index];
-        let rgba = slot
-            .readback_color
-            .mapped()
-            .ok_or_else(|| Error::invalid("readback", "buffer not mapped"))?;
+        let color_bytes = self.options.width as usize * self.options.height as usize * 4;
+        let rgba = match &pending.direct {
+            Some(d) => &d.host_bytes()[..color_bytes],
+            None => slot
+                .readback_color
+                .mapped()
+                .ok_or_else(|| Error::invalid("readback", "buffer not mapped"))?,
+        };
         let depth = match &slot.readback_depth {
             Some(b) => {
                 let bytes = b
@@ -717,7 +728,14 @@ impl Renderer {
         Ok((ms(ts[0], ts[1]), ms(ts[1], ts[2]), ms(ts[2], ts[3])))
     }
 
-    fn record(&mut self, slot_index: usize, sky: [f32; 3]) -> Result<()> {
+    /// Records frame work for `slot_index`; the colour is copied into `color_dst` (a sink's
+    /// zero-copy target) or else the slot's readback buffer.
+    fn record(
+        &mut self,
+        slot_index: usize,
+        sky: [f32; 3],
+        color_dst: Option<vk::Buffer>,
+    ) -> Result<()> {
         let gpu = self.gpu.clone();
         let d = &gpu.device;
         let b = Barriers::new(&gpu);
@@ -887,7 +905,7 @@ impl Renderer {
                 cmd,
                 slot.color.raw,
                 vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                slot.readback_color.raw,
+                color_dst.unwrap_or(slot.readback_color.raw),
                 &[copy(vk::ImageAspectFlags::COLOR)],
             );
         }
