@@ -50,8 +50,17 @@ impl HostBuffer {
         let handle_type = vk::ExternalMemoryHandleTypeFlags::HOST_ALLOCATION_EXT;
         let mut host_props = vk::MemoryHostPointerPropertiesEXT::default();
         // SAFETY: `ptr` is a valid host pointer (caller's contract).
-        unsafe { ext.get_memory_host_pointer_properties(handle_type, ptr.cast(), &mut host_props) }
-            .vk("vkGetMemoryHostPointerPropertiesEXT")?;
+        // The function pointer was loaded for this device, which has the extension enabled.
+        unsafe {
+            (ext.fp().get_memory_host_pointer_properties_ext)(
+                ext.device(),
+                handle_type,
+                ptr.cast(),
+                &mut host_props,
+            )
+        }
+        .result()
+        .vk("vkGetMemoryHostPointerPropertiesEXT")?;
         let mut external = vk::ExternalMemoryBufferCreateInfo::default().handle_types(handle_type);
         let raw = unsafe {
             d.create_buffer(
