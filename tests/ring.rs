@@ -896,6 +896,7 @@ fn rust_reader_survives_hostile_headers() {
         })
         .unwrap();
     // The mutations must leave some segments openable, or the slot checks go untested.
+    eprintln!("Rust fuzz: 3000 cases, {} opened", opened.get());
     assert!(opened.get() > 0, "no mutated segment opened");
 }
 
@@ -938,6 +939,7 @@ fn c_and_python_readers_survive_hostile_headers() {
         .filter_map(|kv| kv.split_once('='))
         .filter_map(|(k, v)| Some((k.to_string(), v.parse().ok()?)))
         .collect();
+    eprintln!("C fuzz (ASan): {out}");
     assert_eq!(k["cases"], 4000, "{out}");
     assert!(
         k["opened"] > 0 && k["frames"] > 0 && k["rejected"] > 0,
@@ -946,6 +948,7 @@ fn c_and_python_readers_survive_hostile_headers() {
     assert_eq!(k["violations"], 0, "{out}");
     // Negative control: a reader that trusts the header (as the old one did) is caught.
     let o = run(true);
+    eprintln!("C fuzz, trusting reader: {:?}", o.status);
     assert!(
         !o.status.success(),
         "the fuzzer cannot catch a trusting reader"
@@ -967,6 +970,7 @@ fn c_and_python_readers_survive_hostile_headers() {
         };
         let o = run(false);
         let out = String::from_utf8_lossy(&o.stdout);
+        eprintln!("Python fuzz: {out}");
         assert!(
             o.status.success(),
             "Python reader failed: {out}\n{}",
@@ -982,6 +986,7 @@ fn c_and_python_readers_survive_hostile_headers() {
         );
         let o = run(true);
         let out = String::from_utf8_lossy(&o.stdout);
+        eprintln!("Python fuzz, trusting reader: exit {:?} {out}", o.status);
         assert!(
             !o.status.success() || !out.contains("violations=0"),
             "the fuzzer cannot catch a trusting Python reader: {out}"

@@ -328,6 +328,7 @@ static inline uint64_t vkt__now_ms(void) {
 static inline int vkt_ring_wait_next(vkt_ring *r, int timeout_ms, vkt_frame_meta *meta,
                                      void *pixels, size_t cap) {
     uint64_t deadline = vkt__now_ms() + (uint64_t)(timeout_ms < 0 ? 0 : timeout_ms);
+    uint64_t torn = 0;
     for (;;) {
         const vkt_ring_header *h = vkt_header(r);
         uint32_t wake = atomic_load_explicit(&h->wake, memory_order_acquire);
@@ -340,7 +341,14 @@ static inline int vkt_ring_wait_next(vkt_ring *r, int timeout_ms, vkt_frame_meta
                 r->received++;
                 return VKT_FRAME;
             }
-            if (ok == 0) { r->torn_retries++; continue; }
+            if (ok == 0) {
+                /* Being written or overwritten: retry, never past the deadline (a slot a
+                 * crashed or hostile producer left odd stays odd). */
+                r->torn_retries++;
+                if (vkt__now_ms() >= deadline) return VKT_TIMEOUT;
+                if (++torn % 64 == 0) usleep(100);
+                continue;
+            }
             if (ok == 2) { r->bad_slots++; r->last = latest; }
         }
         uint32_t state = atomic_load_explicit(&h->state, memory_order_acquire);

@@ -325,13 +325,21 @@ class RingReader:
         seconds. Returns (event, meta, pixels); event is "frame", "timeout", "closed" or
         "restarted". Skipped frames are added to `self.lost`."""
         deadline = time.monotonic() + timeout
+        torn = 0
         while True:
             wake = self._u32(H_WAKE)
             latest = self.latest()
             if latest is not None and (self.last is None or latest > self.last):
                 r = self._read_slot(latest)
                 if r == "torn":
+                    # Retry, never past the deadline (a slot a crashed or hostile producer
+                    # left odd stays odd).
                     self.torn_retries += 1
+                    torn += 1
+                    if time.monotonic() >= deadline:
+                        return "timeout", None, None
+                    if torn % 64 == 0:
+                        time.sleep(0.0001)
                     continue
                 if r == "bad":
                     self.bad_slots += 1

@@ -331,6 +331,7 @@ impl RingReader {
     /// frame; the frames in between are counted in [`ReaderStats::lost`].
     pub fn wait_next(&mut self, timeout: Duration) -> Result<Next> {
         let deadline = Instant::now() + timeout;
+        let mut torn = 0u64;
         loop {
             // Load the wake word before checking for frames: a publish after the check changes
             // it, so the futex wait below returns at once instead of missing the wake-up.
@@ -349,7 +350,16 @@ impl RingReader {
                         return Ok(Next::Frame(meta));
                     }
                     Read::Torn => {
+                        // Being written or overwritten: retry, but never past the deadline
+                        // (a slot a crashed or hostile producer left odd stays odd).
                         self.stats.torn_retries += 1;
+                        torn += 1;
+                        if Instant::now() >= deadline {
+                            return Ok(Next::Timeout);
+                        }
+                        if torn % 64 == 0 {
+                            std::thread::sleep(Duration::from_micros(100));
+                        }
                         continue;
                     }
                     Read::Bad => {
