@@ -186,13 +186,9 @@ impl ClipmapStatus {
     }
 }
 
-fn make_ring(
-    location: &RingLocation,
-    opts: &RenderOptions,
-    slots: u32,
-    popts: &ProducerOptions,
-) -> anyhow::Result<RingProducer> {
-    // Page-aligned slots, or what the device needs to import them (zero-copy).
+/// The ring's geometry for the renderer's frames: page-aligned slots, or what the device needs
+/// to import them (zero-copy).
+fn ring_geometry(opts: &RenderOptions, slots: u32, popts: &ProducerOptions) -> Geometry {
     let device_align = popts
         .zero_copy
         .as_ref()
@@ -200,12 +196,21 @@ fn make_ring(
     let align = (crate::output::ring::layout::SLOT_ALIGN as u64)
         .max(device_align.next_power_of_two())
         .min(crate::output::ring::layout::MAX_ALIGN as u64) as u32;
+    Geometry {
+        align,
+        ..Geometry::new(opts.width, opts.height, slots, opts.readback_depth)
+    }
+}
+
+fn make_ring(
+    location: &RingLocation,
+    opts: &RenderOptions,
+    slots: u32,
+    popts: &ProducerOptions,
+) -> anyhow::Result<RingProducer> {
     Ok(RingProducer::create(
         location,
-        Geometry {
-            align,
-            ..Geometry::new(opts.width, opts.height, slots, opts.readback_depth)
-        },
+        ring_geometry(opts, slots, popts),
         popts,
     )?)
 }
@@ -472,7 +477,8 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                     options.clone(),
                     crate::clipmap::from_config(&config)?,
                 )?;
-                ring = make_ring(&location, &options, config.ring.slots, &popts)?;
+                let geometry = ring_geometry(&options, config.ring.slots, &popts);
+                ring.replace(geometry, &popts)?;
                 tracing::info!(width = w, height = h, "resolution changed");
             }
             camera = ctl

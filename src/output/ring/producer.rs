@@ -56,7 +56,8 @@ pub struct RingProducer {
     closed: bool,
     generation: u64,
     /// The ring name, ours while we live (removed last, after the segment).
-    _name_lock: PathLock,
+    /// Taken over by the producer that [`RingProducer::replace`]s this one.
+    name_lock: Option<PathLock>,
 }
 
 fn io_err(what: &str, path: &std::path::Path, e: std::io::Error) -> Error {
@@ -104,6 +105,31 @@ impl RingProducer {
         let location = RingLocation::new(dir, &location.name)?;
         let name_lock =
             PathLock::acquire(&location.lock_path(), &format!("ring {:?}", location.name))?;
+        Self::build(location, geometry, options, name_lock)
+    }
+
+    /// A new generation of this ring with another geometry (a resolution change): the name
+    /// stays ours throughout; this segment is marked replaced, so its readers re-open the name.
+    /// Deliver every frame in flight first.
+    pub fn replace(&mut self, geometry: Geometry, options: &ProducerOptions) -> Result<()> {
+        geometry.validate()?;
+        let lock = self
+            .name_lock
+            .take()
+            .ok_or_else(|| Error::invalid("ring", "lost its name"))?;
+        let fresh = Self::build(self.location.clone(), geometry, options, lock)?;
+        // The old segment (already marked replaced) closes without touching the name.
+        drop(std::mem::replace(self, fresh));
+        Ok(())
+    }
+
+    /// Creates the segment of a ring whose name we hold.
+    fn build(
+        location: RingLocation,
+        geometry: Geometry,
+        options: &ProducerOptions,
+        name_lock: PathLock,
+    ) -> Result<Self> {
         let path = location.segment_path();
         let old = previous_segment(&path)?;
         let old_generation = old.as_ref().map(|o| o.1).unwrap_or(0);
@@ -177,7 +203,7 @@ impl RingProducer {
             next: 0,
             closed: false,
             generation,
-            _name_lock: name_lock,
+            name_lock: Some(name_lock),
         })
     }
 
