@@ -162,7 +162,15 @@ impl ZenohBridge {
             std::thread::Builder::new()
                 .name("zenoh-frames".into())
                 .spawn(move || {
-                    for out in rx {
+                    for mut out in rx {
+                        // publish_ns: when the frame leaves for Zenoh (subscribers measure their
+                        // latency from it).
+                        let now = sys::monotonic_ns().to_le_bytes();
+                        let off = std::mem::offset_of!(FrameMeta, publish_ns);
+                        match &mut out {
+                            Outgoing::Shm(b) => b.as_mut()[off..off + 8].copy_from_slice(&now),
+                            Outgoing::Heap(v) => v[off..off + 8].copy_from_slice(&now),
+                        }
                         let payload = match out {
                             Outgoing::Shm(b) => ZBytes::from(b),
                             Outgoing::Heap(v) => ZBytes::from(v),
