@@ -8,9 +8,11 @@ RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers
 TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
 CARGO ?= cargo
 
-.PHONY: run test bench bench-ring bench-ring-fuzz bench-udlod bench-eval bench-eval-short bench-clipmap data data-srtm data-pyrenees data-franconia data-proc4k deps deps-test
+.PHONY: run test bench bench-ring bench-ring-fuzz bench-udlod bench-eval bench-eval-short bench-clipmap data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test
 
-run: deps
+# The main job: UDLOD through the chunked clipmap over the embedded procedural terrain (its tile
+# pyramid is generated once into target/data/default).
+run: deps data-default
 	$(CARGO) run --release --locked -- render --config config/default.toml
 
 test: deps-test
@@ -55,6 +57,10 @@ bench-clipmap: deps data-proc4k
 	$(CARGO) bench --locked --bench clipmap
 
 data-proc4k: target/data/proc4k/manifest.json
+data-default: target/data/default/manifest.json
+
+target/data/default/manifest.json:
+	$(CARGO) run --release --locked -- preprocess --procedural --style alpine --size 4097 --spacing 30 --max-height 3500 --feature-size 16000 --node-size 64 --out target/data/default
 
 target/data/proc4k/manifest.json:
 	$(CARGO) run --release --locked -- preprocess --procedural --size 4097 --node-size 64 --out target/data/proc4k

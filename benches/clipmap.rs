@@ -18,10 +18,10 @@ use std::sync::Arc;
 use clap::Parser;
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::dataset::Terrain;
-use vkterrain::driver::{Gpu, GpuOptions};
+use vkterrain::driver::Gpu;
 use vkterrain::readback::FrameView;
 use vkterrain::render::stats::{Percentiles, nearest_rank};
-use vkterrain::render::{FrameRequest, RenderOptions, Renderer};
+use vkterrain::render::{FrameRequest, Renderer};
 
 #[derive(Parser)]
 struct Wrapper {
@@ -89,14 +89,7 @@ fn main() -> anyhow::Result<()> {
             return Ok(());
         }
     };
-    let gpu: Arc<Gpu> = Gpu::new(
-        &GpuOptions {
-            select: p.config.device.select.clone(),
-            validation: false,
-            force_legacy: p.config.device.force_legacy,
-        }
-        .with_env(),
-    )?;
+    let gpu: Arc<Gpu> = p.config.open_gpu()?;
     println!(
         "{} ({}x{}, {} frames of {}, {warmup} warm-up, method {}, device {})",
         p.data.name(),
@@ -104,7 +97,7 @@ fn main() -> anyhow::Result<()> {
         p.config.render.height,
         frames,
         p.scenario.name,
-        p.method.name(),
+        p.config.method.kind().name(),
         gpu.info.name
     );
     println!(
@@ -140,23 +133,23 @@ fn main() -> anyhow::Result<()> {
         let mut config = p.config.clone();
         config.clipmap.enabled = clipmap;
         config.render.extra_views = extra_views;
-        let cm = vkterrain::clipmap::from_config(&config)?;
+        let cm = config.open_clipmap()?;
         // With the clipmap, level 0 is read node by node (`p.data`); one texture needs the
         // whole height map.
         let data: Terrain = if clipmap {
             p.data.clone()
         } else {
-            Terrain::Grid(Arc::new(vkterrain::dataset::load(&config)?))
+            config.open_terrain()?
         };
         let (capacity, atlas_bytes, layer_bytes) = cm
             .as_ref()
             .map(|c| (c.settings.atlas_capacity, c.atlas_bytes(), c.layer_bytes()))
             .unwrap_or((0, 0, 0));
-        let options = RenderOptions::from_config(&config);
+        let options = config.render_options();
         let staging_bytes = layer_bytes
             * config.clipmap.max_uploads_per_frame as u64
             * options.frames_in_flight as u64;
-        let mut renderer = Renderer::with_clipmap(&gpu, data, p.method, options, cm)?;
+        let mut renderer = Renderer::with_clipmap(&gpu, data, config.method.clone(), options, cm)?;
         let mut sink = |_: &FrameView<'_>| Ok(());
         let mut uploads = Vec::with_capacity(frames as usize);
         let mut max_resident = 0;

@@ -14,11 +14,9 @@ use std::path::PathBuf;
 
 use clap::Parser;
 use vkterrain::cli::render::{RenderArgs, prepare};
-use vkterrain::driver::{Gpu, GpuOptions};
-use vkterrain::eval::report;
-use vkterrain::eval::run::{EvalSetup, Evaluation, evaluate, parse_sweep, variants};
-use vkterrain::lod::MethodKind;
-use vkterrain::render::RenderOptions;
+use vkterrain::eval::run::{EvalSetup, Evaluation, evaluate, variants};
+use vkterrain::eval::{report, table};
+use vkterrain::lod::{MethodKind, sweep};
 
 #[derive(Parser)]
 struct Wrapper {
@@ -60,22 +58,15 @@ fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
             return Ok(None);
         }
     };
-    let gpu = Gpu::new(
-        &GpuOptions {
-            select: p.config.device.select.clone(),
-            validation: false,
-            force_legacy: p.config.device.force_legacy,
-        }
-        .with_env(),
-    )?;
+    let gpu = p.config.open_gpu()?;
     let sweeps = vec![
-        parse_sweep("tau=0.5,1,2,4")?,
-        parse_sweep("pgm_scale=0.5,1")?,
+        sweep::parse("tau_px=0.5,1,2,4")?,
+        sweep::parse("grid_scale=0.5,1")?,
     ];
     let variants = variants(
         &[MethodKind::Brute, MethodKind::Udlod, MethodKind::Pgm],
         &sweeps,
-        &p.config.lod,
+        &p.config.method,
     )?;
     let setup = EvalSetup {
         gpu: &gpu,
@@ -83,7 +74,7 @@ fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
         scenario: &p.scenario,
         frames: p.frames,
         warmup: 4,
-        options: RenderOptions::from_config(&p.config),
+        options: p.config.render_options(),
         image_frames: vec![p.frames as u64 / 2],
     };
     let evaluation = evaluate(&setup, &variants, &mut ())?;
@@ -106,32 +97,18 @@ fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
         evaluation.device,
         out.display()
     );
-    println!(
-        "{:<18} {:>9} {:>8} {:>10} {:>9} {:>8} {:>6} {:>9} {:>9}",
-        "variant",
-        "median ms",
-        "x brute",
-        "triangles",
-        "err p99.9",
-        "err max",
-        "holes",
-        "popping",
-        "swimming"
+    print!(
+        "{}",
+        table::text(table::SUMMARY_COLUMNS, &evaluation.summaries)
     );
-    for s in &evaluation.summaries {
-        println!(
-            "{:<18} {:>9.1} {:>8.2} {:>10.0} {:>9.3} {:>8.3} {:>6} {:>9.4} {:>9.4}",
-            s.variant,
-            s.frame_ms.median,
-            s.frame_ms.median / brute,
-            s.triangles_median,
-            s.error.pixels.p999,
-            s.error.pixels.max,
-            s.holes_total,
-            s.popping_px.median,
-            s.swimming_px.mean
-        );
-    }
+    // Frame times as ratios to brute force of the same run (the machines are noisy; absolute
+    // times drift between runs).
+    let ratios: Vec<String> = evaluation
+        .summaries
+        .iter()
+        .map(|s| format!("{} {:.2}", s.variant, s.frame_ms.median / brute))
+        .collect();
+    println!("median frame time / brute force's: {}", ratios.join(", "));
     Ok(Some(evaluation))
 }
 
@@ -149,7 +126,7 @@ fn check(evaluation: &Evaluation) -> anyhow::Result<()> {
                 let tau = s
                     .params
                     .iter()
-                    .find(|(k, _)| k == "tau")
+                    .find(|(k, _)| k == "tau_px")
                     .map_or(1.0, |p| p.1);
                 if s.holes_total > 0 {
                     failures.push(format!("{}: {} holes", s.variant, s.holes_total));

@@ -245,9 +245,11 @@ fn render_part(
                     height: h,
                     frames_in_flight: 2,
                     readback_depth: false,
-                    sky: [0.2, 0.4, 0.8],
-                    sun_dir: [0.0, 0.0, 1.0],
-                    lod: Default::default(),
+                    light: vkterrain::frame::Lighting {
+                        sun_dir: [0.0, 0.0, 1.0],
+                        sky: [0.2, 0.4, 0.8],
+                        haze_distance_m: 0.0,
+                    },
                     views: 1,
                 };
                 let mut renderer = Renderer::new(&gpu, &data, MethodKind::Brute, options)?;

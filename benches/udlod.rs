@@ -14,11 +14,11 @@ use std::sync::Arc;
 use anyhow::Context as _;
 use clap::Parser;
 use vkterrain::cli::render::{RenderArgs, prepare};
-use vkterrain::driver::{Gpu, GpuOptions};
+use vkterrain::driver::Gpu;
 use vkterrain::eval::metrics::{self, GeometricError, PixelError};
-use vkterrain::lod::{LodSettings, MethodKind};
+use vkterrain::lod::{MethodConfig, MethodKind, UdlodSettings};
 use vkterrain::readback::{FrameView, OwnedFrame};
-use vkterrain::render::{RenderOptions, Renderer};
+use vkterrain::render::Renderer;
 
 #[derive(Parser)]
 struct Wrapper {
@@ -77,14 +77,7 @@ fn main() -> anyhow::Result<()> {
             }
         };
         let grid = p.data.require_grid("udlod bench")?.clone();
-        let gpu: Arc<Gpu> = Gpu::new(
-            &GpuOptions {
-                select: p.config.device.select.clone(),
-                validation: false,
-                force_legacy: p.config.device.force_legacy,
-            }
-            .with_env(),
-        )?;
+        let gpu: Arc<Gpu> = p.config.open_gpu()?;
         println!(
             "\n{} ({}x{}, {} frames of {}, {warmup} warm-up, device {})",
             p.data.name(),
@@ -107,45 +100,45 @@ fn main() -> anyhow::Result<()> {
             "err max",
             "PSNR dB"
         );
-        let base = LodSettings {
-            ..p.config.lod.clone()
+        let base = match &p.config.method {
+            MethodConfig::Udlod(s) => s.clone(),
+            _ => UdlodSettings::default(),
         };
-        let mut variants: Vec<(String, MethodKind, LodSettings)> =
-            vec![("brute".into(), MethodKind::Brute, base.clone())];
+        let mut variants: Vec<(String, MethodConfig)> =
+            vec![("brute".into(), MethodConfig::Brute {})];
         for tau in [0.5, 1.0, 2.0, 4.0] {
             variants.push((
                 format!("udlod tau {tau}"),
-                MethodKind::Udlod,
-                LodSettings {
+                UdlodSettings {
                     tau_px: tau,
                     ..base.clone()
-                },
+                }
+                .into(),
             ));
         }
         variants.push((
             "udlod tau 1 pulled".into(),
-            MethodKind::Udlod,
-            LodSettings {
+            UdlodSettings {
                 tau_px: 1.0,
                 vertex_pulling: true,
                 ..base.clone()
-            },
+            }
+            .into(),
         ));
         variants.push((
             "udlod tau 1 distance-only".into(),
-            MethodKind::Udlod,
-            LodSettings {
+            UdlodSettings {
                 tau_px: 1.0,
                 error_field_max: 1.0,
                 ..base.clone()
-            },
+            }
+            .into(),
         ));
         let mut brute_images: Vec<OwnedFrame> = Vec::new();
-        for (name, method, lod) in variants {
-            let mut options = RenderOptions::from_config(&p.config);
+        for (name, method) in variants {
+            let mut options = p.config.render_options();
             options.readback_depth = true;
-            options.lod = lod.clone();
-            let mut renderer = Renderer::new(&gpu, &p.data, method, options)
+            let mut renderer = Renderer::new(&gpu, &p.data, method.clone(), options)
                 .with_context(|| format!("{name} on {}", p.data.name()))?;
             let mut sampled: Vec<OwnedFrame> = Vec::new();
             let mut sink = |f: &FrameView<'_>| {
@@ -173,7 +166,7 @@ fn main() -> anyhow::Result<()> {
                 })
                 .collect();
             let error = GeometricError::of(&errors);
-            if method == MethodKind::Brute {
+            if method.kind() == MethodKind::Brute {
                 brute_images = sampled.clone();
             }
             let psnr_values: Vec<f64> = sampled
@@ -182,11 +175,9 @@ fn main() -> anyhow::Result<()> {
                 .map(|(a, b)| metrics::psnr(&b.rgba, &a.rgba))
                 .collect();
             let psnr_db = psnr_values.iter().sum::<f64>() / psnr_values.len().max(1) as f64;
-            let quads = (lod.grid_size as f64).powi(2) * 2.0;
-            let tiles = if method == MethodKind::Udlod {
-                s.triangles.median / quads
-            } else {
-                0.0
+            let tiles = match &method {
+                MethodConfig::Udlod(u) => s.triangles.median / ((u.grid_size as f64).powi(2) * 2.0),
+                _ => 0.0,
             };
             println!(
                 "{:<24} {:>9.1} {:>9.1} {:>10.0} {:>7.0} {:>9.2} {:>9.1} {:>9.3} {:>9.3} {:>8.1}",

@@ -60,6 +60,21 @@ impl Error {
             source,
         }
     }
+
+    /// A TOML error in file `path` (whose text is `text`) as `path:line: message`.
+    pub fn toml(path: &std::path::Path, text: &str, e: &toml::de::Error) -> Self {
+        let line = e
+            .span()
+            .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+        let path = match line {
+            Some(l) => PathBuf::from(format!("{}:{l}", path.display())),
+            None => path.to_path_buf(),
+        };
+        Error::Config {
+            path,
+            message: e.message().trim().replace('\n', " "),
+        }
+    }
 }
 
 /// Turns a raw `vk::Result` into [`Error::Vulkan`] naming the call.

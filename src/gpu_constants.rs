@@ -55,4 +55,6 @@ shared_constants! {
     CLIPMAP_LOD_SHIFT: u32 = 16;
     /// Threads per workgroup of the height probe (tests: GPU heights read back).
     CLIPMAP_PROBE_WORKGROUP: u32 = 64;
+    /// Threads per workgroup of the UDLOD morph probe (tests: morphed vertices read back).
+    UDLOD_PROBE_WORKGROUP: u32 = 64;
 }

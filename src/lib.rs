@@ -13,6 +13,7 @@ pub mod dataset;
 pub mod driver;
 pub mod error;
 pub mod eval;
+pub mod frame;
 /// Constants shared by Rust and WGSL (generated into every shader by `build.rs`).
 pub mod gpu_constants;
 pub mod lod;
@@ -22,5 +23,6 @@ pub mod render;
 pub mod scene;
 /// `serve`'s control channel and Zenoh side.
 pub mod service;
+pub mod slots;
 
 pub use error::{Error, Result};

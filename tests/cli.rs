@@ -2,50 +2,17 @@
 //! naming the problem, exit status 1, no panic, and no output directory left behind.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn vkterrain(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
-        .args(args)
-        .env("VKTERRAIN_VALIDATION", "1")
-        .env_remove("VKTERRAIN_DEVICE")
-        .output()
-        .expect("run vkterrain")
-}
+mod common;
 
-fn ci_config() -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("config/ci.toml")
-        .display()
-        .to_string()
-}
+use common::cli::{ci_config, run as vkterrain};
 
 /// Runs a command that must fail; returns its one error line.
 fn fails(args: &[&str], out: &Path, expected: &[&str]) -> String {
-    let o = vkterrain(args);
-    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(
-        o.status.code(),
-        Some(1),
-        "{args:?} should fail with status 1; stderr: {stderr}"
-    );
-    let lines: Vec<&str> = stderr.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "{args:?}: expected one error line, got: {stderr}"
-    );
-    assert!(lines[0].starts_with("error: "), "{args:?}: {stderr}");
-    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
-    for word in expected {
-        assert!(
-            lines[0].contains(word),
-            "{args:?}: {:?} does not mention {word:?}",
-            lines[0]
-        );
-    }
+    let line = common::cli::assert_one_line_error(&vkterrain(args), expected);
     assert!(!out.exists(), "{args:?} left {} behind", out.display());
-    lines[0].to_string()
+    line
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -152,6 +119,27 @@ fn invalid_config_files() {
             vec!["zero.toml", "resolution"],
         ),
         ("method.toml", "[method]\nname = \"magic\"\n", vec!["magic"]),
+        (
+            // A data set path without its kind must not render procedural terrain instead.
+            "no_kind.toml",
+            "[dataset]\npath = \"heights.png\"\n",
+            vec!["no_kind.toml", "kind"],
+        ),
+        (
+            "kind_key.toml",
+            "[dataset]\nkind = \"procedural\"\npath = \"heights.png\"\n",
+            vec!["kind_key.toml", "path"],
+        ),
+        (
+            "method_key.toml",
+            "[method]\nname = \"brute\"\ntau_px = 2.0\n",
+            vec!["method_key.toml", "tau_px"],
+        ),
+        (
+            "old_lod.toml",
+            "[lod]\ntau_px = 2.0\n",
+            vec!["old_lod.toml", "lod"],
+        ),
         (
             "clipmap_kind.toml",
             "[clipmap]\nenabled = true\n",

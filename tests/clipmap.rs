@@ -874,7 +874,7 @@ fn ring_edges_blend_shading_without_steps() {
         }
         renderer.finish(&mut sink).unwrap();
         let normals = renderer
-            .probe_in_view(0, &line, vkterrain::clipmap::gpu::ProbeKind::Normals)
+            .probe_in_view(0, &line, vkterrain::clipmap::probe::ProbeKind::Normals)
             .unwrap();
         normals
             .windows(2)

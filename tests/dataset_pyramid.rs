@@ -344,7 +344,7 @@ fn config_kind_tiles_loads_a_dataset() {
     )
     .unwrap();
     let cfg = vkterrain::config::Config::load(Some(&dir.join("c.toml"))).unwrap();
-    let map = vkterrain::dataset::load(&cfg).unwrap();
+    let map = cfg.dataset.load(|p| cfg.resolve(p)).unwrap();
     assert_eq!((map.width, map.height, map.spacing), (25, 20, 20.0));
     assert_eq!(
         map.sample(3, 4),

@@ -3,34 +3,12 @@
 //! directory that appears complete; bad sweeps and an existing directory are one-line errors
 //! that leave nothing behind.
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod common;
 
-fn vkterrain(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
-        .args(args)
-        .env("VKTERRAIN_VALIDATION", "1")
-        .env_remove("VKTERRAIN_DEVICE")
-        .output()
-        .expect("run vkterrain")
-}
+use common::cli::{ci_config, run as vkterrain};
 
-fn ci_config() -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("config/ci.toml")
-        .display()
-        .to_string()
-}
-
-fn one_line_error(o: &Output, expected: &str) {
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "stderr: {stderr}");
-    let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "one error line expected: {stderr}");
-    assert!(
-        lines[0].starts_with("error: ") && lines[0].contains(expected),
-        "{stderr}"
-    );
+fn one_line_error(o: &std::process::Output, expected: &str) {
+    common::cli::assert_one_line_error(o, &[expected]);
 }
 
 #[test]
@@ -46,9 +24,9 @@ fn eval_writes_results_charts_images_and_report() {
         "--methods",
         "brute,udlod,pgm",
         "--sweep",
-        "tau=1,4",
+        "tau_px=1,4",
         "--sweep",
-        "pgm_scale=0.25",
+        "grid_scale=0.25",
         "--frames",
         "8",
         "--warmup",
@@ -72,7 +50,7 @@ fn eval_writes_results_charts_images_and_report() {
         "triangles_vs_error.png",
         "error_over_time.svg",
         "error_over_time.png",
-        "images/udlod_tau_1_f0000.png",
+        "images/udlod_tau_px_1_f0000.png",
         "images/pgm_60x263_f0007.png",
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
@@ -85,14 +63,17 @@ fn eval_writes_results_charts_images_and_report() {
         .iter()
         .map(|s| s["variant"].as_str().unwrap())
         .collect();
-    assert_eq!(names, ["brute", "udlod tau=1", "udlod tau=4", "pgm 60x263"]);
+    assert_eq!(
+        names,
+        ["brute", "udlod tau_px=1", "udlod tau_px=4", "pgm 60x263"]
+    );
     assert_eq!(results["rows"].as_array().unwrap().len(), 4 * 8);
     let brute = &summaries[0];
     assert!(brute["error"]["pixels"]["p999"].as_f64().unwrap() < 0.01);
     let frames_csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
     assert_eq!(frames_csv.lines().count(), 1 + 4 * 8);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
-    assert!(report.contains("| udlod tau=4 |") && report.contains("Pareto front"));
+    assert!(report.contains("| udlod tau_px=4 |") && report.contains("Pareto front"));
 
     // The same directory again without --force: refused, untouched.
     let before = std::fs::read(out.join("results.json")).unwrap();
@@ -108,12 +89,13 @@ fn bad_sweeps_and_methods_are_one_line_errors() {
     let out_s = out.to_str().unwrap();
     let config = ci_config();
     for (args, expected) in [
-        (vec!["--sweep", "tau"], "no '='"),
-        (vec!["--sweep", "tau=1,x"], "not a number"),
+        (vec!["--sweep", "tau_px"], "no '='"),
+        (vec!["--sweep", "tau_px=1,x"], "not a number"),
         (vec!["--sweep", "speed=1"], "speed"),
-        (vec!["--methods", "brute", "--sweep", "tau=1"], "tau"),
-        (vec!["--sweep", "tau=-1"], "tau_px"),
+        (vec!["--methods", "brute", "--sweep", "tau_px=1"], "tau_px"),
+        (vec!["--sweep", "tau_px=-1"], "tau_px"),
         (vec!["--methods", "magic"], "magic"),
+        (vec!["--methods", "pgm", "--sweep", "grid_cols=1"], "grid"),
     ] {
         let mut a = vec!["eval", "--config", &config, "--frames", "2", "--out", out_s];
         a.extend(args);

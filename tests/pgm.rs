@@ -9,7 +9,7 @@ use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::lod::pgm::{self, AuxCamera};
-use vkterrain::lod::{LodSettings, MethodKind};
+use vkterrain::lod::{MethodConfig, MethodKind, PgmSettings};
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer};
 use vkterrain::scene::Camera;
@@ -25,24 +25,23 @@ fn terrain(size: u32, spacing: f64) -> Heightmap {
     .unwrap()
 }
 
-fn pgm_settings(cols: u32, rows: u32) -> LodSettings {
-    LodSettings {
-        pgm_grid: [cols, rows],
-        ..LodSettings::default()
+fn pgm_settings(cols: u32, rows: u32) -> PgmSettings {
+    PgmSettings {
+        grid_cols: cols,
+        grid_rows: rows,
+        ..PgmSettings::default()
     }
 }
 
 /// Renders `cams` with `method` (sentinel clear colour, depth read back), validation on.
 fn render(
     data: &Heightmap,
-    method: MethodKind,
-    lod: LodSettings,
+    method: impl Into<MethodConfig>,
     (w, h): (u32, u32),
     cams: &[Camera],
 ) -> Vec<OwnedFrame> {
     let gpu = common::gpu(false);
-    let mut options = common::options(w, h, 2);
-    options.lod = lod;
+    let options = common::options(w, h, 2);
     let mut sink = CollectSink::default();
     {
         let mut r = Renderer::new(&gpu, data, method, options).unwrap();
@@ -115,7 +114,7 @@ fn renders_terrain_without_validation_messages() {
     let data = terrain(257, 30.0);
     let cams = down_poses(&data, 6);
     let lod = pgm_settings(40, 90);
-    let frames = render(&data, MethodKind::Pgm, lod, (96, 64), &cams);
+    let frames = render(&data, lod, (96, 64), &cams);
     assert_eq!(frames.len(), cams.len());
     let sentinel = [
         common::srgb8(SENTINEL[0]),
@@ -144,13 +143,7 @@ fn triangles_count_every_band_of_a_large_grid() {
     assert!(240 * (band + 1) <= 65536);
     let data = terrain(65, 30.0);
     let cam = down_poses(&data, 1)[0];
-    let frames = render(
-        &data,
-        MethodKind::Pgm,
-        LodSettings::default(),
-        (32, 24),
-        &[cam],
-    );
+    let frames = render(&data, PgmSettings::default(), (32, 24), &[cam]);
     let bands = 1049u64.div_ceil(band as u64);
     assert_eq!(frames[0].triangles, bands * band as u64 * 2 * 239);
     assert!(frames[0].triangles >= 2 * 239 * 1049);
@@ -175,14 +168,8 @@ fn watertight_looking_down_and_at_moderate_pitch() {
         })
         .collect();
     let size = (96, 64);
-    let brute = render(
-        &data,
-        MethodKind::Brute,
-        LodSettings::default(),
-        size,
-        &cams,
-    );
-    let pgm = render(&data, MethodKind::Pgm, pgm_settings(48, 160), size, &cams);
+    let brute = render(&data, MethodKind::Brute, size, &cams);
+    let pgm = render(&data, pgm_settings(48, 160), size, &cams);
     let mut inside_px = 0;
     for (i, (b, p)) in brute.iter().zip(&pgm).enumerate() {
         let (h, inside) = holes(b, p);
@@ -244,14 +231,8 @@ fn grazing_views_lose_only_a_thin_band_under_the_skyline() {
         })
         .collect();
     let size = (96, 64);
-    let brute = render(
-        &data,
-        MethodKind::Brute,
-        LodSettings::default(),
-        size,
-        &cams,
-    );
-    let pgm = render(&data, MethodKind::Pgm, LodSettings::default(), size, &cams);
+    let brute = render(&data, MethodKind::Brute, size, &cams);
+    let pgm = render(&data, PgmSettings::default(), size, &cams);
     let (mut holes_total, mut inside_total, mut farthest) = (0, 0, 0);
     for (b, p) in brute.iter().zip(&pgm) {
         let (h, inside) = holes(b, p);
@@ -280,25 +261,6 @@ fn grazing_views_lose_only_a_thin_band_under_the_skyline() {
     );
 }
 
-/// Height of brute force's mesh at world `(x, y)`: the two triangles of each quad split along
-/// the diagonal from (c+1, r) to (c, r+1), exactly as `brute::grid_indices` draws them.
-fn mesh_height(data: &Heightmap, x: f64, y: f64) -> f64 {
-    let gx = (x / data.spacing).clamp(0.0, (data.width - 1) as f64);
-    let gy = (y / data.spacing).clamp(0.0, (data.height - 1) as f64);
-    let (c, r) = (
-        (gx.floor() as u32).min(data.width - 2),
-        (gy.floor() as u32).min(data.height - 2),
-    );
-    let (fx, fy) = (gx - c as f64, gy - r as f64);
-    let h = |c: u32, r: u32| data.heights[(r * data.width + c) as usize] as f64;
-    let (a, b, cc, d) = (h(c, r), h(c + 1, r), h(c, r + 1), h(c + 1, r + 1));
-    if fx + fy <= 1.0 {
-        a + (b - a) * fx + (cc - a) * fy
-    } else {
-        d + (cc - d) * (1.0 - fx) + (b - d) * (1.0 - fy)
-    }
-}
-
 /// Rendered height error per world cell (`cell_m` metres): each terrain pixel's depth is turned
 /// back into a world point; its height minus the exact mesh height there, averaged per cell.
 fn error_per_cell(
@@ -317,7 +279,7 @@ fn error_per_cell(
             }
             let ray = cam.pixel_ray(x as f64 + 0.5, y as f64 + 0.5, f.width, f.height);
             let p = cam.position + ray * (cam.linear_depth(depth) / ray.dot(forward));
-            let e = p.z - mesh_height(data, p.x, p.y);
+            let e = p.z - data.mesh_height_at(p.x, p.y);
             let key = ((p.x / cell_m).floor() as i64, (p.y / cell_m).floor() as i64);
             let entry = cells.entry(key).or_insert((0.0, 0));
             entry.0 += e;
@@ -376,29 +338,11 @@ fn pgm_swims_when_the_camera_translates_and_brute_force_does_not() {
     };
     let size = (200, 120);
     let cell_m = data.spacing;
-    let brute = render(
-        &data,
-        MethodKind::Brute,
-        LodSettings::default(),
-        size,
-        &[base, moved],
-    );
-    let pgm = render(
-        &data,
-        MethodKind::Pgm,
-        pgm_settings(32, 80),
-        size,
-        &[base, moved],
-    );
+    let brute = render(&data, MethodKind::Brute, size, &[base, moved]);
+    let pgm = render(&data, pgm_settings(32, 80), size, &[base, moved]);
     let (brute_swim, brute_cells) = swimming(&data, &brute[0], &brute[1], cell_m);
     let (pgm_swim, pgm_cells) = swimming(&data, &pgm[0], &pgm[1], cell_m);
-    let full = render(
-        &data,
-        MethodKind::Pgm,
-        LodSettings::default(),
-        size,
-        &[base, moved],
-    );
+    let full = render(&data, PgmSettings::default(), size, &[base, moved]);
     let (full_swim, _) = swimming(&data, &full[0], &full[1], cell_m);
     println!("swimming with the default 240 x 1050 grid: {full_swim:.4} m");
     println!(
@@ -418,7 +362,7 @@ fn pgm_swims_when_the_camera_translates_and_brute_force_does_not() {
 
 #[test]
 fn aux_camera_has_wide_fov_clamped_pitch_and_height_and_covers_the_view() {
-    let s = LodSettings::default();
+    let s = PgmSettings::default();
     for pitch in [-90.0, -63.0, -45.0, -20.0, -5.0, 0.0, 30.0] {
         for yaw in [0.0, 77.0, 200.0] {
             let cam = Camera {
@@ -428,10 +372,10 @@ fn aux_camera_has_wide_fov_clamped_pitch_and_height_and_covers_the_view() {
                 ..Camera::default()
             };
             let aux = AuxCamera::new(&cam, 16.0 / 9.0, 49.5, 10_000.0, &s);
-            assert!(aux.pitch_deg <= -s.pgm_fov_deg / 2.0, "{aux:?}");
+            assert!(aux.pitch_deg <= -s.fov_deg / 2.0, "{aux:?}");
             assert!(aux.pitch_deg <= pitch);
             assert!(aux.vfov_deg() >= 90.0 - 1e-9 && aux.hfov_deg() >= 90.0 - 1e-9);
-            assert_eq!(aux.height, s.pgm_min_height_m, "clamped above the plane");
+            assert_eq!(aux.height, s.min_height_m, "clamped above the plane");
             // Never above the horizon: the top edge's elevation is <= 0.
             let top = aux.pitch_deg + aux.tan_y[1].atan().to_degrees();
             assert!(top <= 1e-9, "top edge at {top} deg");
@@ -499,42 +443,42 @@ fn band_indices_are_counter_clockwise_from_above() {
 
 #[test]
 fn settings_are_validated_with_one_line_errors() {
-    assert!(LodSettings::default().validate().is_ok());
-    assert_eq!(LodSettings::default().pgm_grid, [240, 1050]);
+    assert!(PgmSettings::default().validate().is_ok());
+    assert_eq!(PgmSettings::default().grid(), [240, 1050]);
     assert_eq!(MethodKind::parse("pgm").unwrap(), MethodKind::Pgm);
     assert_eq!(MethodKind::Pgm.name(), "pgm");
     let bad = [
-        (pgm_settings(1, 100), "pgm_grid"),
-        (pgm_settings(100, 1), "pgm_grid"),
-        (pgm_settings(5000, 100), "pgm_grid"),
-        (pgm_settings(4096, 16384), "pgm_grid"),
+        (pgm_settings(1, 100), "grid"),
+        (pgm_settings(100, 1), "grid"),
+        (pgm_settings(5000, 100), "grid"),
+        (pgm_settings(4096, 16384), "grid"),
         (
-            LodSettings {
-                pgm_fov_deg: 60.0,
-                ..LodSettings::default()
+            PgmSettings {
+                fov_deg: 60.0,
+                ..PgmSettings::default()
             },
-            "pgm_fov_deg",
+            "fov_deg",
         ),
         (
-            LodSettings {
-                pgm_fov_deg: f64::NAN,
-                ..LodSettings::default()
+            PgmSettings {
+                fov_deg: f64::NAN,
+                ..PgmSettings::default()
             },
-            "pgm_fov_deg",
+            "fov_deg",
         ),
         (
-            LodSettings {
-                pgm_min_height_m: 0.0,
-                ..LodSettings::default()
+            PgmSettings {
+                min_height_m: 0.0,
+                ..PgmSettings::default()
             },
-            "pgm_min_height_m",
+            "min_height_m",
         ),
         (
-            LodSettings {
-                pgm_min_height_m: f64::INFINITY,
-                ..LodSettings::default()
+            PgmSettings {
+                min_height_m: f64::INFINITY,
+                ..PgmSettings::default()
             },
-            "pgm_min_height_m",
+            "min_height_m",
         ),
     ];
     for (s, key) in bad {
@@ -555,19 +499,33 @@ fn config_file_keys_reach_the_settings_and_bad_values_are_rejected() {
     };
     let good = write(
         "good.toml",
-        "[method]\nname = \"pgm\"\n[lod]\npgm_grid = [120, 500]\npgm_fov_deg = 100.0\npgm_min_height_m = 5.0\n",
+        "[method]\nname = \"pgm\"\ngrid_cols = 120\ngrid_rows = 500\nfov_deg = 100.0\nmin_height_m = 5.0\n",
     );
     let c = vkterrain::config::Config::load(Some(&good)).unwrap();
-    assert_eq!(c.lod.pgm_grid, [120, 500]);
-    assert_eq!(c.lod.pgm_fov_deg, 100.0);
-    assert_eq!(c.lod.pgm_min_height_m, 5.0);
+    let MethodConfig::Pgm(s) = &c.method else {
+        panic!("{:?}", c.method)
+    };
+    assert_eq!(s.grid(), [120, 500]);
+    assert_eq!(s.fov_deg, 100.0);
+    assert_eq!(s.min_height_m, 5.0);
+    let pgm = "[method]\nname = \"pgm\"\n";
     for (name, text, needle) in [
-        ("fov.toml", "[lod]\npgm_fov_deg = 45.0\n", "pgm_fov_deg"),
-        ("grid.toml", "[lod]\npgm_grid = [0, 10]\n", "pgm_grid"),
-        ("shape.toml", "[lod]\npgm_grid = [10]\n", "shape.toml:2"),
-        ("typo.toml", "[lod]\npgm_gird = [10, 10]\n", "pgm_gird"),
+        ("fov.toml", format!("{pgm}fov_deg = 45.0\n"), "fov_deg"),
+        ("grid.toml", format!("{pgm}grid_cols = 0\n"), "grid"),
+        (
+            "shape.toml",
+            format!("{pgm}grid_cols = [10]\n"),
+            "shape.toml:",
+        ),
+        ("typo.toml", format!("{pgm}grid_clos = 10\n"), "grid_clos"),
+        ("udlod_key.toml", format!("{pgm}tau_px = 1.0\n"), "tau_px"),
+        (
+            "no_name.toml",
+            "[method]\ngrid_cols = 10\n".to_string(),
+            "name",
+        ),
     ] {
-        let p = write(name, text);
+        let p = write(name, &text);
         let e = vkterrain::config::Config::load(Some(&p))
             .unwrap_err()
             .to_string();
@@ -581,10 +539,10 @@ fn config_file_keys_reach_the_settings_and_bad_values_are_rejected() {
 }
 
 #[test]
-fn default_toml_documents_the_default_lod_settings() {
+fn default_toml_documents_the_default_method_settings() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/default.toml");
     let c = vkterrain::config::Config::load(Some(&path)).unwrap();
-    assert_eq!(c.lod, LodSettings::default());
+    assert_eq!(c.method, MethodConfig::default());
 }
 
 /// Views a ground-plane grid cannot serve well (looking up, rolled, from below the terrain,
@@ -612,13 +570,7 @@ fn awkward_poses_render_cleanly() {
         cam(DVec3::new(-50_000.0, -50_000.0, 3000.0), 45.0, -5.0, 0.0),
         cam(DVec3::new(1.0e6, 2.0e6, 1.0e5), 0.0, -90.0, 0.0),
     ];
-    let frames = render(
-        &data,
-        MethodKind::Pgm,
-        pgm_settings(64, 128),
-        (64, 48),
-        &cams,
-    );
+    let frames = render(&data, pgm_settings(64, 128), (64, 48), &cams);
     for (f, c) in frames.iter().zip(&cams) {
         let depth = f.depth.as_ref().unwrap();
         assert!(

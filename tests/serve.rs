@@ -295,7 +295,7 @@ fn serve_frame_limit_keeps_segment_when_configured() {
         &config,
         format!(
             "[render]\nwidth = 32\nheight = 24\nreadback_depth = true\n\
-             [dataset]\nsize = 129\n\
+             [dataset]\nkind = \"procedural\"\nsize = 129\n\
              [ring]\nname = \"{name}\"\nslots = 3\nkeep_segment = true\ndir = \"rings\"\n"
         ),
     )
@@ -702,7 +702,7 @@ fn serve_publishes_zero_copy_where_the_device_can() {
     let config = tmp.path().join("zc.toml");
     std::fs::write(
         &config,
-        "[render]\nwidth = 48\nheight = 32\nframes_in_flight = 2\n[dataset]\nsize = 129\n\
+        "[render]\nwidth = 48\nheight = 32\nframes_in_flight = 2\n[dataset]\nkind = \"procedural\"\nsize = 129\n\
          [ring]\nname = \"zc\"\nslots = 3\nkeep_segment = true\n",
     )
     .unwrap();
@@ -733,7 +733,7 @@ fn serve_publishes_zero_copy_where_the_device_can() {
     // frames are copied instead.
     std::fs::write(
         &config,
-        "[render]\nwidth = 48\nheight = 32\nframes_in_flight = 2\n[dataset]\nsize = 129\n\
+        "[render]\nwidth = 48\nheight = 32\nframes_in_flight = 2\n[dataset]\nkind = \"procedural\"\nsize = 129\n\
          [ring]\nname = \"zc2\"\nslots = 2\n",
     )
     .unwrap();

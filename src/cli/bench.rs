@@ -7,9 +7,8 @@ use std::fmt::Write;
 
 use clap::Args;
 
-use crate::driver::{Gpu, GpuOptions};
+use crate::render::FrameRequest;
 use crate::render::stats::Summary;
-use crate::render::{FrameRequest, RenderOptions, Renderer};
 
 #[derive(Args, Debug, Clone)]
 pub struct BenchArgs {
@@ -60,18 +59,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         c.validate()?;
     }
     for &n in &args.compare_frames_in_flight {
-        if !(1..=8).contains(&n) {
-            anyhow::bail!("frames in flight {n} is outside 1..=8");
-        }
+        crate::render::check_frames_in_flight(n as usize)?;
     }
-    let gpu = Gpu::new(
-        &GpuOptions {
-            select: p.config.device.select.clone(),
-            validation: p.config.device.validation,
-            force_legacy: p.config.device.force_legacy,
-        }
-        .with_env(),
-    )?;
+    let gpu = p.config.open_gpu()?;
     let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
     let mut rows = Vec::new();
     let mut out = String::new();
@@ -81,7 +71,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         gpu.info.name,
         gpu.info.type_name(),
         p.data.name(),
-        p.method.name(),
+        p.config.method.kind().name(),
         p.scenario.name,
         p.frames,
         warmup
@@ -94,17 +84,11 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     print!("{out}");
     for &(w, h) in &resolutions {
         for &n in &args.compare_frames_in_flight {
-            let mut options = RenderOptions::from_config(&p.config);
+            let mut options = p.config.render_options();
             options.width = w;
             options.height = h;
             options.frames_in_flight = n as usize;
-            let mut renderer = Renderer::with_clipmap(
-                &gpu,
-                &p.data,
-                p.method,
-                options,
-                crate::clipmap::from_config(&p.config)?,
-            )?;
+            let mut renderer = p.config.open_renderer(&gpu, &p.data, options)?;
             // The sink touches every row so the host really reads the frame (as a consumer would).
             let mut checksum = 0u64;
             let mut sink = |f: &crate::readback::FrameView<'_>| {
@@ -153,7 +137,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             "device": gpu.info.name,
             "device_type": gpu.info.type_name(),
             "dataset": p.data.name(),
-            "method": p.method.name(),
+            "method": p.config.method.kind().name(),
             "scenario": p.scenario.name,
             "frames": p.frames,
             "warmup": warmup,

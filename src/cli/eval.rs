@@ -6,23 +6,18 @@ use std::path::PathBuf;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::driver::{Gpu, GpuOptions};
 use crate::eval::report;
-use crate::eval::run::{EvalSetup, Progress, evaluate, parse_sweep, variants};
+use crate::eval::run::{EvalSetup, Progress, evaluate, variants};
 use crate::lod::MethodKind;
-use crate::render::RenderOptions;
 
 #[derive(Args, Debug, Clone)]
 pub struct EvalArgs {
     #[command(flatten)]
     pub render: super::render::RenderArgs,
-    /// Methods to evaluate, comma-separated (brute, udlod, pgm).
-    #[arg(long, default_value = "brute,udlod")]
-    pub methods: String,
-    /// Parameter sweep `key=v1,v2,...` (repeatable): tau, error_field_max, grid_size,
-    /// morph_range (UDLOD); pgm_scale (both grid sides times the value), pgm_cols, pgm_rows,
-    /// pgm_fov_deg (PGM).
-    #[arg(long)]
+    /// Methods to evaluate, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "brute,udlod")]
+    pub methods: Vec<MethodKind>,
+    #[arg(long, help = crate::lod::sweep_help())]
     pub sweep: Vec<String>,
     /// Replace an existing output directory.
     #[arg(long)]
@@ -59,11 +54,7 @@ impl Progress for Bars {
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     let p = super::render::prepare(&args.render)?;
-    let methods = args
-        .methods
-        .split(',')
-        .map(|m| MethodKind::parse(m.trim()))
-        .collect::<crate::Result<Vec<_>>>()?;
+    let methods = &args.methods;
     if methods.is_empty() {
         anyhow::bail!("--methods lists no method");
     }
@@ -76,9 +67,9 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     let sweeps = args
         .sweep
         .iter()
-        .map(|s| parse_sweep(s))
+        .map(|s| crate::lod::sweep::parse(s))
         .collect::<crate::Result<Vec<_>>>()?;
-    let variants = variants(&methods, &sweeps, &p.config.lod)?;
+    let variants = variants(methods, &sweeps, &p.config.method)?;
     let out = args
         .render
         .out
@@ -87,14 +78,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     if out.exists() && !args.force {
         anyhow::bail!("{}: exists (use --force to replace it)", out.display());
     }
-    let gpu = Gpu::new(
-        &GpuOptions {
-            select: p.config.device.select.clone(),
-            validation: p.config.device.validation,
-            force_legacy: p.config.device.force_legacy,
-        }
-        .with_env(),
-    )?;
+    let gpu = p.config.open_gpu()?;
     let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
     let data = p.data.require_grid("eval (exact-surface metrics)")?;
     let setup = EvalSetup {
@@ -103,7 +87,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         scenario: &p.scenario,
         frames: p.frames,
         warmup,
-        options: RenderOptions::from_config(&p.config),
+        options: p.config.render_options(),
         image_frames: super::render::png_frames(&args.images, p.frames),
     };
     eprintln!(
@@ -119,23 +103,10 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     let evaluation = evaluate(&setup, &variants, &mut Bars(None))?;
     super::render::check_validation(&gpu)?;
     report::write(&evaluation, data, &out, args.force)?;
-    println!(
-        "{:<28} {:>9} {:>10} {:>10} {:>10} {:>6} {:>9} {:>9}",
-        "variant", "median ms", "triangles", "err p99.9", "err max", "holes", "popping", "swimming"
+    print!(
+        "{}",
+        crate::eval::table::text(crate::eval::table::SUMMARY_COLUMNS, &evaluation.summaries)
     );
-    for s in &evaluation.summaries {
-        println!(
-            "{:<28} {:>9.1} {:>10.0} {:>10.3} {:>10.3} {:>6} {:>9.4} {:>9.4}",
-            s.variant,
-            s.frame_ms.median,
-            s.triangles_median,
-            s.error.pixels.p999,
-            s.error.pixels.max,
-            s.holes_total,
-            s.popping_px.median,
-            s.swimming_px.mean
-        );
-    }
     println!("wrote {}/report.md", out.display());
     Ok(())
 }

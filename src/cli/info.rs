@@ -3,19 +3,14 @@
 use std::path::Path;
 
 use crate::config::Config;
-use crate::driver::{Gpu, GpuOptions};
+use crate::driver::Gpu;
 
 pub fn run(config: Option<&Path>, device: Option<String>) -> anyhow::Result<()> {
-    let config = Config::load(config)?;
-    let mut options = GpuOptions {
-        select: config.device.select.clone(),
-        validation: config.device.validation,
-        force_legacy: config.device.force_legacy,
-    };
+    let mut config = Config::load(config)?;
     if device.is_some() {
-        options.select = device;
+        config.device.select = device;
     }
-    let gpu = Gpu::new(&options.with_env())?;
+    let gpu = config.open_gpu()?;
     print!("{}", describe(&gpu));
     Ok(())
 }

@@ -8,12 +8,12 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::config::Config;
-use crate::dataset::{Level0, PyramidReader, Terrain};
-use crate::driver::{Gpu, GpuOptions};
+use crate::dataset::{Level0, Terrain};
+use crate::driver::Gpu;
 use crate::lod::MethodKind;
 use crate::output::png::PngSink;
 use crate::render::stats::Summary;
-use crate::render::{FrameRequest, RenderOptions, Renderer};
+use crate::render::{FrameRequest, Renderer};
 use crate::scene::Scenario;
 
 #[derive(Args, Debug, Clone, Default)]
@@ -31,9 +31,9 @@ pub struct RenderArgs {
     pub width: Option<u32>,
     #[arg(long)]
     pub height: Option<u32>,
-    /// LOD method (brute, udlod).
-    #[arg(long)]
-    pub method: Option<String>,
+    /// LOD method (the config's `[method] name` otherwise).
+    #[arg(long, value_enum)]
+    pub method: Option<MethodKind>,
     #[arg(long)]
     pub frames_in_flight: Option<u32>,
     /// Scenario file (default: the config's `scenario.path`).
@@ -42,10 +42,10 @@ pub struct RenderArgs {
     /// Device override: index or name substring.
     #[arg(long)]
     pub device: Option<String>,
-    /// UDLOD screen-space error target in pixels (overrides `lod.tau_px`).
+    /// UDLOD screen-space error target in pixels (overrides `[method] tau_px`).
     #[arg(long)]
-    pub tau: Option<f64>,
-    /// UDLOD error-field cap (overrides `lod.error_field_max`; 1 = distance-only selection).
+    pub tau_px: Option<f64>,
+    /// UDLOD error-field cap (overrides `[method] error_field_max`; 1 = distance-only).
     #[arg(long)]
     pub error_field_max: Option<f64>,
     /// UDLOD: draw by vertex pulling (no index buffer) instead of the indexed grid.
@@ -64,60 +64,45 @@ pub struct Prepared {
     pub data: Terrain,
     pub scenario: Scenario,
     pub frames: u32,
-    pub method: MethodKind,
     pub out_dir: PathBuf,
+}
+
+impl RenderArgs {
+    /// The config file with this command line's overrides applied and checked.
+    pub fn config(&self) -> anyhow::Result<Config> {
+        let mut config = Config::load(self.config.as_deref())?;
+        let r = &mut config.render;
+        r.width = self.width.unwrap_or(r.width);
+        r.height = self.height.unwrap_or(r.height);
+        r.frames_in_flight = self.frames_in_flight.unwrap_or(r.frames_in_flight);
+        if let Some(m) = self.method {
+            config.method = config.method.with_kind(m);
+        }
+        if self.vertex_pulling {
+            config.method.udlod_mut("--vertex-pulling")?.vertex_pulling = true;
+        }
+        if let Some(m) = self.error_field_max {
+            config
+                .method
+                .udlod_mut("--error-field-max")?
+                .error_field_max = m;
+        }
+        if let Some(t) = self.tau_px {
+            config.method.udlod_mut("--tau-px")?.tau_px = t;
+        }
+        if let Some(d) = &self.device {
+            config.device.select = Some(d.clone());
+        }
+        config.validate()?;
+        Ok(config)
+    }
 }
 
 /// Loads and checks config, data set and scenario; creates nothing.
 pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
-    let mut config = Config::load(args.config.as_deref())?;
-    if let Some(w) = args.width {
-        config.render.width = w;
-    }
-    if let Some(h) = args.height {
-        config.render.height = h;
-    }
-    if let Some(n) = args.frames_in_flight {
-        config.render.frames_in_flight = n;
-    }
-    if args.vertex_pulling {
-        config.lod.vertex_pulling = true;
-    }
-    if let Some(m) = args.error_field_max {
-        config.lod.error_field_max = m;
-    }
-    if let Some(t) = args.tau {
-        config.lod.tau_px = t;
-    }
-    if let Some(m) = &args.method {
-        config.method.name = m.clone();
-    }
-    if let Some(d) = &args.device {
-        config.device.select = Some(d.clone());
-    }
-    config.validate()?;
-    let method = MethodKind::parse(&config.method.name)?;
-    let data = if config.clipmap.enabled {
-        let path = config
-            .dataset
-            .path
-            .as_ref()
-            .map(|p| config.resolve(p))
-            .ok_or_else(|| {
-                crate::Error::invalid("dataset.path", "the clipmap needs a tiles data set")
-            })?;
-        Terrain::Pyramid(Arc::new(PyramidReader::open(&path)?))
-    } else {
-        Terrain::Grid(Arc::new(crate::dataset::load(&config)?))
-    };
-    let scenario_path = match &args.scenario {
-        Some(p) => Some(p.clone()),
-        None => config.scenario.path.as_ref().map(|p| config.resolve(p)),
-    };
-    let scenario = match scenario_path {
-        Some(path) => Scenario::load(&path, &data)?,
-        None => Scenario::builtin_default(&data)?,
-    };
+    let config = args.config()?;
+    let data = config.open_terrain()?;
+    let scenario = config.open_scenario(args.scenario.as_deref(), &data)?;
     let frames = args.frames.unwrap_or(scenario.frames);
     if frames == 0 {
         anyhow::bail!("--frames must be at least 1");
@@ -131,7 +116,6 @@ pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
         data,
         scenario,
         frames,
-        method,
         out_dir,
     })
 }
@@ -152,21 +136,10 @@ pub fn png_frames(selection: &[i64], frames: u32) -> Vec<u64> {
 
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let p = prepare(args)?;
-    let gpu = Gpu::new(
-        &GpuOptions {
-            select: p.config.device.select.clone(),
-            validation: p.config.device.validation,
-            force_legacy: p.config.device.force_legacy,
-        }
-        .with_env(),
-    )?;
-    let mut renderer = Renderer::with_clipmap(
-        &gpu,
-        p.data.clone(),
-        p.method,
-        RenderOptions::from_config(&p.config),
-        crate::clipmap::from_config(&p.config)?,
-    )?;
+    let gpu = p.config.open_gpu()?;
+    let mut renderer = p
+        .config
+        .open_renderer(&gpu, &p.data, p.config.render_options())?;
 
     let created_dir = !p.out_dir.exists();
     std::fs::create_dir_all(&p.out_dir)
@@ -320,11 +293,20 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
         s.warmup
     );
     let _ = writeln!(o, "triangles/frame: {:.0} (median)", s.triangles.median);
-    let _ = writeln!(
-        o,
-        "frame time:      median {:.2} ms, p99 {:.2} ms, max {:.2} ms",
-        s.frame_ms.median, s.frame_ms.p99, s.frame_ms.max
-    );
+    if s.frame_intervals >= crate::render::stats::MIN_FRAME_INTERVALS {
+        let _ = writeln!(
+            o,
+            "frame time:      median {:.2} ms, p99 {:.2} ms, max {:.2} ms ({} intervals)",
+            s.frame_ms.median, s.frame_ms.p99, s.frame_ms.max, s.frame_intervals
+        );
+    } else {
+        let _ = writeln!(
+            o,
+            "frame time:      not measured: {} steady-state intervals after warm-up, {} needed (render more frames)",
+            s.frame_intervals,
+            crate::render::stats::MIN_FRAME_INTERVALS
+        );
+    }
     let _ = writeln!(
         o,
         "GPU per pass:    prepass {:.2} ms, terrain {:.2} ms, readback {:.2} ms (medians), total p99 {:.2} ms",

@@ -12,14 +12,13 @@ use clap::Args;
 use serde::{Deserialize, Serialize};
 
 use super::render::{RenderArgs, check_validation, prepare};
-use crate::driver::{Gpu, GpuOptions};
 use crate::output::lock::{PathLock, lock_path_for};
 use crate::output::ring::{
     Geometry, ProducerOptions, RingLocation, RingProducer, ZeroCopyRequest, sys,
 };
 use crate::readback::{DirectTarget, FrameSink, FrameView};
 use crate::render::stats::Percentiles;
-use crate::render::{FrameRequest, RenderOptions, Renderer};
+use crate::render::{FrameRequest, RenderOptions};
 use crate::service::control::{Control, ControlSocket};
 
 #[derive(Args, Debug, Clone, Default)]
@@ -327,15 +326,8 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         .map(ControlSocket::bind)
         .transpose()?;
 
-    let gpu = Gpu::new(
-        &GpuOptions {
-            select: config.device.select.clone(),
-            validation: config.device.validation,
-            force_legacy: config.device.force_legacy,
-        }
-        .with_env(),
-    )?;
-    let mut options = RenderOptions::from_config(&config);
+    let gpu = config.open_gpu()?;
+    let mut options = config.render_options();
     let popts = ProducerOptions {
         group,
         keep_segment: config.ring.keep_segment,
@@ -344,13 +336,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             frames_in_flight: options.frames_in_flight,
         }),
     };
-    let mut renderer = Renderer::with_clipmap(
-        &gpu,
-        &p.data,
-        p.method,
-        options.clone(),
-        crate::clipmap::from_config(&config)?,
-    )?;
+    let mut renderer = config.open_renderer(&gpu, &p.data, options.clone())?;
     let mut ring = make_ring(&location, &options, config.ring.slots, &popts)?;
     #[allow(unused_mut, clippy::let_unit_value)]
     let mut zenoh = start_zenoh(&config, &config.ring.name)?;
@@ -470,13 +456,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                 options.width = w;
                 options.height = h;
                 // A fresh clipmap too: its atlas lives in the old renderer's device memory.
-                renderer = Renderer::with_clipmap(
-                    &gpu,
-                    &p.data,
-                    p.method,
-                    options.clone(),
-                    crate::clipmap::from_config(&config)?,
-                )?;
+                renderer = config.open_renderer(&gpu, &p.data, options.clone())?;
                 let geometry = ring_geometry(&options, config.ring.slots, &popts);
                 ring.replace(geometry, &popts)?;
                 tracing::info!(width = w, height = h, "resolution changed");

@@ -18,11 +18,10 @@ use super::atlas::Atlas;
 use super::quadtree::{HEADER_BYTES, ViewQuadtree};
 use super::{ClipmapSettings, Geometry, Upload};
 use crate::driver::Gpu;
-use crate::driver::barrier::{Barriers, ImageAccess, MemoryAccess};
-use crate::driver::descriptors::DescriptorSets;
+use crate::driver::barrier::{Barriers, ImageAccess};
 use crate::driver::memory::{Buffer, Image, ImageDesc};
 use crate::error::{Error, Result};
-use crate::gpu_constants::CLIPMAP_PROBE_WORKGROUP;
+use crate::slots::{FrameSlot, SlotLayout, ViewSlot};
 
 /// Bytes of one layer over the three attachments: height (R32F), normal (RGBA8 snorm, mips),
 /// albedo (RGBA8 sRGB, mips); a staging slot holds them in that order.
@@ -39,7 +38,7 @@ pub struct ClipmapGpu {
     pub albedo: Image,
     /// Whether heights come through the clipmap (false: placeholders).
     pub enabled: bool,
-    /// One per view slot (`frame slot * views + view`).
+    /// One per view slot.
     pub quadtrees: Vec<Buffer>,
     staging: Vec<Option<Buffer>>,
     staged: Vec<Vec<u16>>,
@@ -61,16 +60,16 @@ fn layer_range(layer: u32) -> vk::ImageSubresourceRange {
 
 impl ClipmapGpu {
     /// The device mirror; `geometry` None: a disabled placeholder (tiny atlas, header with
-    /// `enabled = 0`) so the bindings exist for the single-texture path. `slots` frame slots,
-    /// each drawing `views` views: one atlas, `slots * views` quadtrees, `slots` staging buffers.
+    /// `enabled = 0`) so the bindings exist for the single-texture path. One atlas, a quadtree
+    /// per view slot of `layout`, a staging buffer per frame slot.
     pub fn new(
         gpu: &Arc<Gpu>,
         geometry: Option<&Geometry>,
         settings: &ClipmapSettings,
         node_count: u32,
-        slots: usize,
-        views: usize,
+        layout: SlotLayout,
     ) -> Result<Self> {
+        let (slots, views) = (layout.frames_in_flight, layout.views);
         let mips: Vec<u32> = match geometry {
             Some(g) => (0..g.shading_mips()).map(|m| g.mip_side(m)).collect(),
             None => vec![1],
@@ -178,26 +177,26 @@ impl ClipmapGpu {
     /// (whose previous GPU work is complete).
     pub fn write_quadtree(
         &mut self,
-        view_slot: usize,
+        view_slot: ViewSlot,
         geometry: &Geometry,
         view: &ViewQuadtree,
     ) -> Result<()> {
         view.gpu_bytes(geometry, &mut self.scratch);
-        self.quadtrees[view_slot].write(&self.scratch)
+        self.quadtrees[view_slot.index()].write(&self.scratch)
     }
 
     /// Host side of a frame in frame slot `slot` (whose previous GPU work is complete): the
     /// `uploads` layers into the slot's staging buffer, recorded by [`Self::record_uploads`].
     pub fn stage_uploads(
         &mut self,
-        slot: usize,
+        slot: FrameSlot,
         geometry: &Geometry,
         atlas: &Atlas,
         uploads: &[Upload],
     ) -> Result<()> {
         let texels = (self.side as usize).pow(2);
         let per_layer = layer_bytes(geometry) as usize;
-        let staging = self.staging[slot]
+        let staging = self.staging[slot.index()]
             .as_mut()
             .and_then(|b| b.mapped_mut())
             .ok_or_else(|| Error::invalid("clipmap", "staging buffer not mapped"))?;
@@ -220,14 +219,14 @@ impl ClipmapGpu {
             }
             dst[texels * 4..].copy_from_slice(&up.shading);
         }
-        self.staged[slot] = uploads.iter().map(|u| u.layer).collect();
+        self.staged[slot.index()] = uploads.iter().map(|u| u.layer).collect();
         Ok(())
     }
 
     /// Records the slot's staged uploads (before anything of the frame samples the atlas).
-    pub fn record_uploads(&mut self, cmd: vk::CommandBuffer, slot: usize) {
-        let layers = std::mem::take(&mut self.staged[slot]);
-        let Some(staging) = self.staging[slot].as_ref() else {
+    pub fn record_uploads(&mut self, cmd: vk::CommandBuffer, slot: FrameSlot) {
+        let layers = std::mem::take(&mut self.staged[slot.index()]);
+        let Some(staging) = self.staging[slot.index()].as_ref() else {
             return;
         };
         let b = Barriers::new(&self.gpu);
@@ -293,98 +292,4 @@ impl ClipmapGpu {
             }
         }
     }
-}
-
-/// What [`probe`] evaluates at each point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ProbeKind {
-    /// `[clipmap_height(p), single-texture bilinear texture_height_at(p)]`.
-    Heights,
-    /// The fragment stage's `clipmap_surface(p)` normal at mip 0: `[normal.x, normal.y]`.
-    Normals,
-}
-
-/// Tests and tools: evaluates `kind` on the GPU for each point (level-0 sample units),
-/// through descriptor set 0 `frame_set` (the state of the frame that set last rendered).
-/// Waits.
-pub fn probe(
-    gpu: &Arc<Gpu>,
-    frame_layout: vk::DescriptorSetLayout,
-    frame_set: vk::DescriptorSet,
-    points: &[[f32; 2]],
-    kind: ProbeKind,
-) -> Result<Vec<[f32; 2]>> {
-    if points.is_empty() {
-        return Ok(Vec::new());
-    }
-    let d = &gpu.device;
-    let mut io = Buffer::new(
-        gpu,
-        "clipmap probe",
-        16 + points.len() as u64 * 16,
-        vk::BufferUsageFlags::STORAGE_BUFFER,
-        MemoryLocation::GpuToCpu,
-    )?;
-    let mut bytes = Vec::with_capacity(16 + points.len() * 16);
-    for v in [points.len() as u32, 0, 0, 0] {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    for p in points {
-        for v in [p[0], p[1], 0.0, 0.0] {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-    io.write(&bytes)?;
-    let probe_set = DescriptorSets::new(
-        gpu,
-        &[vk::DescriptorType::STORAGE_BUFFER],
-        vk::ShaderStageFlags::COMPUTE,
-        1,
-    )?;
-    let set = probe_set.sets[0];
-    let info = [vk::DescriptorBufferInfo {
-        buffer: io.raw,
-        offset: 0,
-        range: vk::WHOLE_SIZE,
-    }];
-    unsafe {
-        d.update_descriptor_sets(
-            &[vk::WriteDescriptorSet::default()
-                .dst_set(set)
-                .dst_binding(0)
-                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                .buffer_info(&info)],
-            &[],
-        )
-    };
-    let pipeline = crate::render::pipeline::compute_pipeline(
-        gpu,
-        crate::driver::shaders::CLIPMAP_PROBE_SPV,
-        match kind {
-            ProbeKind::Heights => c"probe_main",
-            ProbeKind::Normals => c"probe_surface_main",
-        },
-        &[frame_layout, probe_set.layout],
-    )?;
-    let groups = (points.len() as u32).div_ceil(CLIPMAP_PROBE_WORKGROUP);
-    gpu.one_shot(|cmd| unsafe {
-        d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
-        d.cmd_bind_descriptor_sets(
-            cmd,
-            vk::PipelineBindPoint::COMPUTE,
-            pipeline.layout,
-            0,
-            &[frame_set, set],
-            &[],
-        );
-        d.cmd_dispatch(cmd, groups, 1, 1);
-        Barriers::new(gpu).memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::HostRead);
-    })?;
-    let m = io
-        .mapped()
-        .ok_or_else(|| Error::invalid("clipmap probe", "buffer not mapped"))?;
-    let f = |o: usize| f32::from_le_bytes([m[o], m[o + 1], m[o + 2], m[o + 3]]);
-    Ok((0..points.len())
-        .map(|i| [f(16 + i * 16 + 8), f(16 + i * 16 + 12)])
-        .collect())
 }

@@ -9,6 +9,9 @@ pub mod device;
 pub mod host_memory;
 pub mod instance;
 pub mod memory;
+pub mod pipeline;
+#[cfg(feature = "test-support")]
+pub mod probe;
 pub mod shaders;
 pub mod sync;
 
@@ -25,8 +28,9 @@ use crate::error::{Error, Result, VkResultExt};
 /// Environment variable that turns the validation layers on (`1`/`true`) for any command.
 pub const VALIDATION_ENV: &str = "VKTERRAIN_VALIDATION";
 
-/// How to create the GPU context.
-#[derive(Clone, Debug, Default)]
+/// How to create the GPU context (config `[device]`).
+#[derive(Clone, Debug, Default, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct GpuOptions {
     /// Device override: index or case-insensitive name substring. `VKTERRAIN_DEVICE` wins.
     pub select: Option<String>,

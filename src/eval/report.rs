@@ -234,31 +234,10 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
         "{}x{}, {} frames ({} warm-up excluded from summaries), device {}.\nReference: {}.\nDefinitions of every metric: `docs/metrics.md`.\n",
         eval.width, eval.height, eval.frames, eval.warmup, eval.device, eval.reference
     );
-    let _ = writeln!(
-        md,
-        "| variant | frame ms (median / p99) | triangles | error px (mean / p99.9 / max) | error m (p99.9) | holes | PSNR dB | SSIM | popping px (median / max) | swimming px (mean / p99) |\n|---|---|---|---|---|---|---|---|---|---|"
-    );
-    for s in &eval.summaries {
-        let _ = writeln!(
-            md,
-            "| {} | {:.1} / {:.1} | {:.0} | {:.3} / {:.3} / {:.3} | {:.3} | {} | {:.1} | {:.4} | {:.4} / {:.4} | {:.4} / {:.4} |",
-            s.variant,
-            s.frame_ms.median,
-            s.frame_ms.p99,
-            s.triangles_median,
-            s.error.pixels.mean,
-            s.error.pixels.p999,
-            s.error.pixels.max,
-            s.error.metres.p999,
-            s.holes_total,
-            s.psnr_db_mean,
-            s.ssim_mean,
-            s.popping_px.median,
-            s.popping_px.max,
-            s.swimming_px.mean,
-            s.swimming_px.p99
-        );
-    }
+    md.push_str(&super::table::markdown(
+        super::table::SUMMARY_COLUMNS,
+        &eval.summaries,
+    ));
     let pareto: Vec<&str> = front
         .iter()
         .map(|&i| eval.summaries[i].variant.as_str())

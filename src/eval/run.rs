@@ -10,7 +10,7 @@ use super::metrics::{self, ErrorHistogram, GeometricError, Summary, SwimTracker}
 use crate::dataset::Heightmap;
 use crate::driver::Gpu;
 use crate::error::{Error, Result};
-use crate::lod::{LodSettings, MethodKind};
+use crate::lod::{MethodConfig, MethodKind};
 use crate::readback::{FrameView, OwnedFrame};
 use crate::render::stats::Percentiles;
 use crate::render::{RenderOptions, Renderer};
@@ -23,78 +23,35 @@ const SWIM_SEED_EVERY: usize = 8;
 /// One method with one parameter setting.
 #[derive(Clone, Debug)]
 pub struct Variant {
-    pub method: MethodKind,
+    /// The method with this variant's settings.
+    pub method: MethodConfig,
     /// `method` or `method key=value,...`.
     pub label: String,
     pub params: Vec<(String, f64)>,
-    pub lod: LodSettings,
 }
 
-/// Parameters each method takes from `--sweep key=v1,v2`.
-fn method_keys(method: MethodKind) -> &'static [&'static str] {
-    match method {
-        MethodKind::Brute => &[],
-        MethodKind::Udlod => &["tau", "error_field_max", "grid_size", "morph_range"],
-        MethodKind::Pgm => &["pgm_scale", "pgm_cols", "pgm_rows", "pgm_fov_deg"],
+impl Variant {
+    pub fn kind(&self) -> MethodKind {
+        self.method.kind()
     }
-}
-
-fn apply(lod: &mut LodSettings, key: &str, value: f64) -> Result<()> {
-    match key {
-        "tau" => lod.tau_px = value,
-        "error_field_max" => lod.error_field_max = value,
-        "grid_size" => lod.grid_size = value as u32,
-        "morph_range" => lod.morph_range = value,
-        // Both grid dimensions of the configured grid times `value` (0.5: 240x1050 -> 120x525).
-        "pgm_scale" => {
-            lod.pgm_grid = lod
-                .pgm_grid
-                .map(|n| ((n as f64 * value).round() as u32).max(2))
-        }
-        "pgm_cols" => lod.pgm_grid[0] = value as u32,
-        "pgm_rows" => lod.pgm_grid[1] = value as u32,
-        "pgm_fov_deg" => lod.pgm_fov_deg = value,
-        _ => {
-            return Err(Error::invalid(
-                "sweep",
-                format!("unknown parameter {key:?}"),
-            ));
-        }
-    }
-    Ok(())
-}
-
-/// Parses `key=v1,v2,...`.
-pub fn parse_sweep(text: &str) -> Result<(String, Vec<f64>)> {
-    let bad = |m: &str| Error::invalid("sweep", format!("{text:?}: {m} (expected key=v1,v2,...)"));
-    let (key, values) = text.split_once('=').ok_or_else(|| bad("no '='"))?;
-    let values = values
-        .split(',')
-        .map(|v| {
-            v.trim()
-                .parse::<f64>()
-                .map_err(|_| bad("a value is not a number"))
-        })
-        .collect::<Result<Vec<f64>>>()?;
-    if values.is_empty() || values.iter().any(|v| !v.is_finite()) {
-        return Err(bad("values must be finite numbers"));
-    }
-    Ok((key.trim().to_string(), values))
 }
 
 /// The variants of `methods` under `sweeps` (the Cartesian product of the sweeps a method
-/// takes; one variant with `base` for a method no sweep applies to). Every setting is
-/// validated; an unknown key or one no listed method takes is an error.
+/// takes; one variant for a method no sweep applies to). A method starts from `base`'s settings
+/// when `base` is that method, else from its defaults. Every setting is validated; an unknown
+/// key or one no listed method takes is an error.
 pub fn variants(
     methods: &[MethodKind],
     sweeps: &[(String, Vec<f64>)],
-    base: &LodSettings,
+    base: &MethodConfig,
 ) -> Result<Vec<Variant>> {
-    for (key, _) in sweeps {
-        if !methods
+    let takes = |kind: MethodKind, key: &str| {
+        MethodConfig::sweep_keys(kind)
             .iter()
-            .any(|m| method_keys(*m).contains(&key.as_str()))
-        {
+            .any(|(k, _)| *k == key)
+    };
+    for (key, _) in sweeps {
+        if !methods.iter().any(|&m| takes(m, key)) {
             return Err(Error::invalid(
                 "sweep",
                 format!("no listed method takes parameter {key:?}"),
@@ -102,13 +59,9 @@ pub fn variants(
         }
     }
     let mut out = Vec::new();
-    for &method in methods {
-        let mine: Vec<&(String, Vec<f64>)> = sweeps
-            .iter()
-            .filter(|(k, _)| method_keys(method).contains(&k.as_str()))
-            .collect();
+    for &kind in methods {
         let mut combos: Vec<Vec<(String, f64)>> = vec![Vec::new()];
-        for (key, values) in &mine {
+        for (key, values) in sweeps.iter().filter(|(k, _)| takes(kind, k)) {
             combos = combos
                 .into_iter()
                 .flat_map(|c| {
@@ -121,28 +74,34 @@ pub fn variants(
                 .collect();
         }
         for params in combos {
-            let mut lod = base.clone();
+            let mut method = base.clone().with_kind(kind);
             for (k, v) in &params {
-                apply(&mut lod, k, *v)?;
+                method.apply_sweep(k, *v)?;
             }
-            lod.validate()?;
-            let label = if params.is_empty() {
-                method.name().to_string()
-            } else if method == MethodKind::Pgm && params.iter().any(|(k, _)| k == "pgm_scale") {
-                format!("pgm {}x{}", lod.pgm_grid[0], lod.pgm_grid[1])
-            } else {
-                let p: Vec<String> = params.iter().map(|(k, v)| format!("{k}={v}")).collect();
-                format!("{} {}", method.name(), p.join(","))
-            };
+            method.validate()?;
             out.push(Variant {
+                label: variant_label(&method, &params),
                 method,
-                label,
                 params,
-                lod,
             });
         }
     }
     Ok(out)
+}
+
+/// `method` alone, `pgm COLSxROWS` for a PGM grid scale, else `method key=value,...`.
+fn variant_label(method: &MethodConfig, params: &[(String, f64)]) -> String {
+    let name = method.kind().name();
+    if params.is_empty() {
+        return name.to_string();
+    }
+    if let MethodConfig::Pgm(s) = method
+        && params.iter().any(|(k, _)| k == "grid_scale")
+    {
+        return format!("pgm {}x{}", s.grid_cols, s.grid_rows);
+    }
+    let p: Vec<String> = params.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    format!("{name} {}", p.join(","))
 }
 
 /// Per-frame measurements of one variant.
@@ -233,18 +192,16 @@ pub struct EvalSetup<'a> {
 
 fn render_all(
     setup: &EvalSetup<'_>,
-    method: MethodKind,
-    lod: &LodSettings,
+    method: &MethodConfig,
     progress: &mut dyn Progress,
     label: &str,
 ) -> Result<(Vec<OwnedFrame>, Vec<crate::render::stats::FrameRecord>)> {
     let mut options = setup.options.clone();
     options.readback_depth = true;
-    options.lod = lod.clone();
     let mut frames = Vec::with_capacity(setup.frames as usize);
     let records;
     {
-        let mut renderer = Renderer::new(setup.gpu, setup.data, method, options)?;
+        let mut renderer = Renderer::new(setup.gpu, setup.data, method.clone(), options)?;
         progress.start(label, setup.frames as u64);
         let mut sink = |f: &FrameView<'_>| {
             frames.push(OwnedFrame::copy_of(f));
@@ -267,11 +224,9 @@ pub fn evaluate(
     variants: &[Variant],
     progress: &mut dyn Progress,
 ) -> Result<Evaluation> {
-    let base_lod = setup.options.lod.clone();
     let (reference, _) = render_all(
         setup,
-        MethodKind::Brute,
-        &base_lod,
+        &MethodConfig::Brute {},
         progress,
         "reference (brute force)",
     )?;
@@ -282,7 +237,7 @@ pub fn evaluate(
     let mut rows = Vec::new();
     let mut images = Vec::new();
     for v in variants {
-        let (frames, records) = render_all(setup, v.method, &v.lod, progress, &v.label)?;
+        let (frames, records) = render_all(setup, &v.method, progress, &v.label)?;
         let mut swim = SwimTracker::new();
         let mut previous_error: Option<Vec<Option<f64>>> = None;
         let mut all_errors = ErrorHistogram::default();
@@ -315,7 +270,7 @@ pub fn evaluate(
             let rec = records.get(k);
             let row = FrameRow {
                 variant: v.label.clone(),
-                method: v.method.name().to_string(),
+                method: v.kind().name().to_string(),
                 frame: f.index,
                 frame_ms: rec.map_or(0.0, |r| r.interval_ms),
                 gpu_prepass_ms: f.timings.gpu_prepass_ms,
@@ -355,7 +310,7 @@ pub fn evaluate(
         };
         summaries.push(RunSummary {
             variant: v.label.clone(),
-            method: v.method.name().to_string(),
+            method: v.kind().name().to_string(),
             params: v.params.clone(),
             frames: measured.len(),
             frame_ms: Percentiles::of(

@@ -10,12 +10,14 @@ use std::sync::Arc;
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
-use super::{LodMethod, MethodContext, ViewState};
+use super::{LodMethod, MethodContext};
 use crate::driver::Gpu;
 use crate::driver::memory::Buffer;
+use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
 use crate::error::Result;
+use crate::frame::ViewState;
 use crate::gpu_constants::BRUTE_CHUNK_QUADS;
-use crate::render::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
+use crate::slots::ViewSlot;
 
 pub struct BruteForce {
     gpu: Arc<Gpu>,
@@ -52,7 +54,7 @@ impl BruteForce {
     pub fn new(ctx: &MethodContext<'_>) -> Result<Self> {
         let gpu = ctx.gpu;
         let indices_data = grid_indices(BRUTE_CHUNK_QUADS);
-        let bytes: Vec<u8> = indices_data.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let bytes: &[u8] = bytemuck::cast_slice(&indices_data);
         let mut indices = Buffer::new(
             gpu,
             "brute grid indices",
@@ -60,7 +62,7 @@ impl BruteForce {
             vk::BufferUsageFlags::INDEX_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        indices.write(&bytes)?;
+        indices.write(bytes)?;
         let pipeline = terrain_pipeline(
             gpu,
             &ctx.formats,
@@ -91,11 +93,16 @@ impl LodMethod for BruteForce {
         "brute"
     }
 
-    fn update(&mut self, _slot: usize, _view: &ViewState) -> Result<()> {
+    fn update(&mut self, _slot: ViewSlot, _view: &ViewState) -> Result<()> {
         Ok(())
     }
 
-    fn record_draw(&mut self, cmd: vk::CommandBuffer, _slot: usize, frame_set: vk::DescriptorSet) {
+    fn record_draw(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        _slot: ViewSlot,
+        frame_set: vk::DescriptorSet,
+    ) {
         let d = &self.gpu.device;
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline.raw);
@@ -112,7 +119,7 @@ impl LodMethod for BruteForce {
         }
     }
 
-    fn triangles(&self, _slot: usize) -> u64 {
+    fn triangles(&self, _slot: ViewSlot) -> u64 {
         self.triangles
     }
 }

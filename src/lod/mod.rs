@@ -3,17 +3,25 @@
 
 pub mod brute;
 pub mod pgm;
+pub mod sweep;
 pub mod udlod;
+
+pub use pgm::settings::PgmSettings;
+pub use udlod::settings::UdlodSettings;
 
 use ash::vk;
 
+use crate::driver::pipeline::TargetFormats;
 use crate::error::{Error, Result};
-use crate::render::pipeline::TargetFormats;
-use crate::render::terrain::TerrainGpu;
-use crate::scene::Camera;
+use crate::frame::{TerrainGpu, ViewState};
+use crate::slots::ViewSlot;
+use sweep::Sweep;
 
-/// The methods vkterrain knows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// The methods vkterrain knows (the `name` of `[method]`, `--method`, `--methods`).
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Deserialize, serde::Serialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum MethodKind {
     /// Every height sample is a vertex: the exact reference.
     Brute,
@@ -25,36 +33,147 @@ pub enum MethodKind {
 }
 
 impl MethodKind {
-    pub const ALL: &[(&'static str, MethodKind)] = &[
-        ("brute", MethodKind::Brute),
-        ("udlod", MethodKind::Udlod),
-        ("pgm", MethodKind::Pgm),
-    ];
+    pub const ALL: &[MethodKind] = &[MethodKind::Brute, MethodKind::Udlod, MethodKind::Pgm];
 
     pub fn parse(name: &str) -> Result<Self> {
-        Self::ALL
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, k)| *k)
-            .ok_or_else(|| {
-                let names: Vec<_> = Self::ALL.iter().map(|(n, _)| *n).collect();
-                Error::invalid(
-                    "method",
-                    format!(
-                        "unknown method {name:?} (expected one of {})",
-                        names.join(", ")
-                    ),
-                )
-            })
+        <Self as clap::ValueEnum>::from_str(name, false).map_err(|_| {
+            let names: Vec<_> = Self::ALL.iter().map(|k| k.name()).collect();
+            Error::invalid(
+                "method",
+                format!(
+                    "unknown method {name:?} (expected one of {})",
+                    names.join(", ")
+                ),
+            )
+        })
     }
 
     pub fn name(self) -> &'static str {
-        Self::ALL
-            .iter()
-            .find(|(_, k)| *k == self)
-            .map(|(n, _)| *n)
-            .unwrap_or("?")
+        match self {
+            MethodKind::Brute => "brute",
+            MethodKind::Udlod => "udlod",
+            MethodKind::Pgm => "pgm",
+        }
     }
+}
+
+/// A method with its settings: config `[method]`, where `name` selects the method and the
+/// other keys are that method's settings.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(tag = "name", rename_all = "lowercase", deny_unknown_fields)]
+pub enum MethodConfig {
+    /// No settings (a struct variant, so that a stray key is an error, not ignored).
+    Brute {},
+    Udlod(UdlodSettings),
+    Pgm(PgmSettings),
+}
+
+impl Default for MethodConfig {
+    fn default() -> Self {
+        MethodConfig::Udlod(UdlodSettings::default())
+    }
+}
+
+impl From<MethodKind> for MethodConfig {
+    fn from(kind: MethodKind) -> Self {
+        MethodConfig::default_for(kind)
+    }
+}
+
+impl From<UdlodSettings> for MethodConfig {
+    fn from(s: UdlodSettings) -> Self {
+        MethodConfig::Udlod(s)
+    }
+}
+
+impl From<PgmSettings> for MethodConfig {
+    fn from(s: PgmSettings) -> Self {
+        MethodConfig::Pgm(s)
+    }
+}
+
+impl MethodConfig {
+    pub fn kind(&self) -> MethodKind {
+        match self {
+            MethodConfig::Brute {} => MethodKind::Brute,
+            MethodConfig::Udlod(_) => MethodKind::Udlod,
+            MethodConfig::Pgm(_) => MethodKind::Pgm,
+        }
+    }
+
+    /// `kind` with its default settings.
+    pub fn default_for(kind: MethodKind) -> Self {
+        match kind {
+            MethodKind::Brute => MethodConfig::Brute {},
+            MethodKind::Udlod => MethodConfig::Udlod(UdlodSettings::default()),
+            MethodKind::Pgm => MethodConfig::Pgm(PgmSettings::default()),
+        }
+    }
+
+    /// This configuration if it is of `kind`, else `kind` with its default settings.
+    pub fn with_kind(self, kind: MethodKind) -> Self {
+        if self.kind() == kind {
+            self
+        } else {
+            Self::default_for(kind)
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        match self {
+            MethodConfig::Brute {} => Ok(()),
+            MethodConfig::Udlod(s) => s.validate(),
+            MethodConfig::Pgm(s) => s.validate(),
+        }
+    }
+
+    /// UDLOD's settings, or an error naming `what` needs them.
+    pub fn udlod_mut(&mut self, what: &str) -> Result<&mut UdlodSettings> {
+        match self {
+            MethodConfig::Udlod(s) => Ok(s),
+            other => Err(Error::invalid(
+                what,
+                format!(
+                    "is a UDLOD setting, but the method is {}",
+                    other.kind().name()
+                ),
+            )),
+        }
+    }
+
+    /// The keys `--sweep` can vary for this method, with their help.
+    pub fn sweep_keys(kind: MethodKind) -> Vec<(&'static str, &'static str)> {
+        fn keys<S>(t: &[Sweep<S>]) -> Vec<(&'static str, &'static str)> {
+            t.iter().map(|s| (s.key, s.help)).collect()
+        }
+        match kind {
+            MethodKind::Brute => Vec::new(),
+            MethodKind::Udlod => keys(UdlodSettings::SWEEP),
+            MethodKind::Pgm => keys(PgmSettings::SWEEP),
+        }
+    }
+
+    /// Sets sweep parameter `key` to `value` (validate afterwards).
+    pub fn apply_sweep(&mut self, key: &str, value: f64) -> Result<()> {
+        match self {
+            MethodConfig::Brute {} => sweep::apply::<()>(&[], &mut (), key, value),
+            MethodConfig::Udlod(s) => sweep::apply(UdlodSettings::SWEEP, s, key, value),
+            MethodConfig::Pgm(s) => sweep::apply(PgmSettings::SWEEP, s, key, value),
+        }
+    }
+}
+
+/// One line per method: the keys `--sweep` takes (for `--help`).
+pub fn sweep_help() -> String {
+    let mut out = String::from("Parameter sweep KEY=v1,v2,... (repeatable); keys by method:");
+    for &kind in MethodKind::ALL {
+        let keys = MethodConfig::sweep_keys(kind);
+        if !keys.is_empty() {
+            let k: Vec<String> = keys.iter().map(|(k, h)| format!("{k} ({h})")).collect();
+            out.push_str(&format!(" {}: {};", kind.name(), k.join(", ")));
+        }
+    }
+    out
 }
 
 /// What a method gets to build its GPU state.
@@ -63,24 +182,8 @@ pub struct MethodContext<'a> {
     pub terrain: &'a TerrainGpu,
     /// Level-0 heights: the grid in memory, or a tile pyramid (clipmap path).
     pub data: &'a crate::dataset::Terrain,
-    pub settings: &'a LodSettings,
     pub formats: TargetFormats,
     pub slots: usize,
-}
-
-/// The view a frame is rendered for.
-#[derive(Clone, Copy, Debug)]
-pub struct ViewState {
-    pub camera: Camera,
-    /// Where LOD distances are measured from (the camera's position unless a test separates
-    /// them).
-    pub lod_viewer: glam::DVec3,
-    pub width: u32,
-    pub height: u32,
-    /// Terrain height under the LOD viewer as the clipmap samples it this frame (metres), when
-    /// heights come through one: methods then need no level-0 read (possibly from disk) on the
-    /// render thread. While nodes stream it comes from the best resident ancestor.
-    pub ground_m: Option<f64>,
 }
 
 /// One LOD method. Per frame the renderer calls `update` (host side, slot free), then records
@@ -90,150 +193,50 @@ pub trait LodMethod {
     fn name(&self) -> &'static str;
     /// Host-side per-frame work for `slot` (uniforms, CPU selection). The slot's previous GPU
     /// work is complete when this is called.
-    fn update(&mut self, slot: usize, view: &ViewState) -> Result<()>;
+    fn update(&mut self, slot: ViewSlot, view: &ViewState) -> Result<()>;
     /// Compute work before the render pass (tiling, culling); none by default. `frame_set` is
     /// descriptor set 0 of this slot.
     fn record_prepass(
         &mut self,
         _cmd: vk::CommandBuffer,
-        _slot: usize,
+        _slot: ViewSlot,
         _frame_set: vk::DescriptorSet,
     ) {
     }
     /// Draws inside the terrain pass; `frame_set` is descriptor set 0 of this slot.
-    fn record_draw(&mut self, cmd: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet);
+    fn record_draw(&mut self, cmd: vk::CommandBuffer, slot: ViewSlot, frame_set: vk::DescriptorSet);
     /// Triangles the last frame of `slot` drew (including zero-area ones). Called once that
     /// frame's GPU work is complete, so GPU-driven methods can report what the GPU chose.
-    fn triangles(&self, slot: usize) -> u64;
+    fn triangles(&self, slot: ViewSlot) -> u64;
     /// Method-specific counters of the last completed frame of `slot` (e.g. tiles, overflow).
-    fn counters(&self, _slot: usize) -> Vec<(&'static str, u64)> {
+    fn counters(&self, _slot: ViewSlot) -> Vec<(&'static str, u64)> {
         Vec::new()
     }
+    #[cfg(feature = "test-support")]
     /// Tests only: the tiles the GPU selected in the last completed frame of `slot`.
-    fn debug_tiles(&self, _slot: usize) -> Result<Option<Vec<[u32; 3]>>> {
+    fn debug_tiles(&self, _slot: ViewSlot) -> Result<Option<Vec<[u32; 3]>>> {
+        Ok(None)
+    }
+    #[cfg(feature = "test-support")]
+    /// Tests only: the method's vertex morph evaluated on the GPU for `(tile, local vertex)`
+    /// pairs through set 0 `frame` (layout, set) and the method's own set of `slot`, as the last
+    /// completed frame left them (`None`: the method has no morph).
+    fn probe_vertices(
+        &self,
+        _slot: ViewSlot,
+        _frame: (vk::DescriptorSetLayout, vk::DescriptorSet),
+        _inputs: &[(udlod::select::Tile, [u32; 2])],
+    ) -> Result<Option<Vec<udlod::probe::ProbedVertex>>> {
         Ok(None)
     }
 }
 
-/// Creates a method by kind.
-pub fn create(kind: MethodKind, ctx: &MethodContext<'_>) -> Result<Box<dyn LodMethod>> {
-    Ok(match kind {
-        MethodKind::Brute => Box::new(brute::BruteForce::new(ctx)?),
-        MethodKind::Udlod => Box::new(udlod::Udlod::new(ctx)?),
-        MethodKind::Pgm => Box::new(pgm::Pgm::new(ctx)?),
+/// Creates the method `config` names, with its settings.
+pub fn create(config: &MethodConfig, ctx: &MethodContext<'_>) -> Result<Box<dyn LodMethod>> {
+    config.validate()?;
+    Ok(match config {
+        MethodConfig::Brute {} => Box::new(brute::BruteForce::new(ctx)?),
+        MethodConfig::Udlod(s) => Box::new(udlod::Udlod::new(ctx, s)?),
+        MethodConfig::Pgm(s) => Box::new(pgm::Pgm::new(ctx, s)?),
     })
-}
-
-/// Settings of the LOD methods (config `[lod]`).
-#[derive(Clone, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct LodSettings {
-    /// UDLOD: quads per tile side (even, 4..=64).
-    pub grid_size: u32,
-    /// UDLOD: screen-space geometric error target in pixels.
-    pub tau_px: f64,
-    /// UDLOD: fraction of each level's range over which vertices morph (0.05..=0.45).
-    pub morph_range: f64,
-    /// UDLOD: capacity of the final tile list (tiles per frame).
-    pub max_tiles: u32,
-    /// UDLOD: vertex morphing (off only to demonstrate popping and cracks in tests).
-    pub morph: bool,
-    /// UDLOD: frustum culling of tiles.
-    pub cull: bool,
-    /// UDLOD: cap of the per-region error field (1 = distance-only selection: every region
-    /// refined for the level's worst error). Larger lets smooth regions keep coarser levels.
-    pub error_field_max: f64,
-    /// UDLOD: draw without an index buffer (six vertex-shader runs per quad) instead of the
-    /// shared indexed grid; kept for measurement (`benches/udlod.rs` compares the two).
-    pub vertex_pulling: bool,
-    /// PGM: grid vertices `[columns, rows]`: columns run across the screen (left to right),
-    /// rows from the bottom of the auxiliary view up to the horizon.
-    pub pgm_grid: [u32; 2],
-    /// PGM: smallest field of view of the auxiliary camera in degrees (90..=170), both
-    /// horizontally and vertically; its pitch is clamped to at most `-pgm_fov_deg / 2`.
-    pub pgm_fov_deg: f64,
-    /// PGM: lowest height of the auxiliary camera above the reference plane (the terrain under
-    /// the camera), metres.
-    pub pgm_min_height_m: f64,
-}
-
-impl Default for LodSettings {
-    fn default() -> Self {
-        LodSettings {
-            grid_size: 16,
-            tau_px: 1.0,
-            morph_range: 0.2,
-            max_tiles: 16384,
-            morph: true,
-            cull: true,
-            error_field_max: 8.0,
-            vertex_pulling: false,
-            pgm_grid: [240, 1050],
-            pgm_fov_deg: 90.0,
-            pgm_min_height_m: 2.0,
-        }
-    }
-}
-
-impl LodSettings {
-    pub fn validate(&self) -> Result<()> {
-        let bad = |m: String| Err(Error::invalid("lod settings", m));
-        if !(4..=64).contains(&self.grid_size) || self.grid_size % 2 != 0 {
-            return bad(format!(
-                "grid_size {} must be even and within 4..=64",
-                self.grid_size
-            ));
-        }
-        if !(self.tau_px.is_finite() && self.tau_px >= 0.05 && self.tau_px <= 1000.0) {
-            return bad(format!(
-                "tau_px {} must be within 0.05..=1000 pixels",
-                self.tau_px
-            ));
-        }
-        if !(self.morph_range.is_finite() && (0.05..=0.45).contains(&self.morph_range)) {
-            return bad(format!(
-                "morph_range {} must be within 0.05..=0.45",
-                self.morph_range
-            ));
-        }
-        if !(16..=1 << 22).contains(&self.max_tiles) {
-            return bad(format!(
-                "max_tiles {} must be within 16..=4194304",
-                self.max_tiles
-            ));
-        }
-        if !(self.error_field_max.is_finite() && (1.0..=1024.0).contains(&self.error_field_max)) {
-            return bad(format!(
-                "error_field_max {} must be within 1..=1024",
-                self.error_field_max
-            ));
-        }
-        let [cols, rows] = self.pgm_grid;
-        if !(2..=4096).contains(&cols) || !(2..=16384).contains(&rows) {
-            return bad(format!(
-                "pgm_grid [{cols}, {rows}] needs 2..=4096 columns and 2..=16384 rows"
-            ));
-        }
-        if cols as u64 * rows as u64 > 1 << 24 {
-            return bad(format!(
-                "pgm_grid [{cols}, {rows}] has more than 16777216 vertices"
-            ));
-        }
-        if !(self.pgm_fov_deg.is_finite() && (90.0..=170.0).contains(&self.pgm_fov_deg)) {
-            return bad(format!(
-                "pgm_fov_deg {} must be within 90..=170 degrees",
-                self.pgm_fov_deg
-            ));
-        }
-        if !(self.pgm_min_height_m.is_finite()
-            && self.pgm_min_height_m > 0.0
-            && self.pgm_min_height_m <= 100_000.0)
-        {
-            return bad(format!(
-                "pgm_min_height_m {} must be within (0, 100000] metres",
-                self.pgm_min_height_m
-            ));
-        }
-        Ok(())
-    }
 }

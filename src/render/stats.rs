@@ -18,8 +18,11 @@ pub struct FrameRecord {
     pub timings: FrameTimings,
     pub triangles: u64,
     /// Host time between this frame's delivery and the previous one's: the frame time as a
-    /// consumer sees it (0 for the first frame).
+    /// consumer sees it. 0 where there is no steady-state interval: the first frame, and frames
+    /// drained by `Renderer::finish` (delivered back to back, without new frames behind them).
     pub interval_ms: f64,
+    /// Delivered by `Renderer::finish` rather than in the render loop.
+    pub drained: bool,
     /// Host time spent in the frame sink (e.g. copying into a ring).
     pub sink_ms: f64,
     /// The next frame was still executing on the GPU while this one was delivered.
@@ -33,17 +36,19 @@ impl RunStats {
         triangles: u64,
         overlapped: bool,
         sink_ms: f64,
+        drained: bool,
     ) {
         let now = Instant::now();
-        let interval_ms = self
-            .last_delivery
-            .map(|t| (now - t).as_secs_f64() * 1e3)
-            .unwrap_or(0.0);
+        let interval_ms = match self.last_delivery {
+            Some(t) if !drained => (now - t).as_secs_f64() * 1e3,
+            _ => 0.0,
+        };
         self.last_delivery = Some(now);
         self.frames.push(FrameRecord {
             timings: *timings,
             triangles,
             interval_ms,
+            drained,
             sink_ms,
             overlapped,
         });
@@ -57,7 +62,7 @@ impl RunStats {
         } else {
             &self.frames[..]
         };
-        // The first delivered frame has no interval.
+        // The first delivered frame and drained ones have no steady-state interval.
         let intervals: Vec<f64> = frames
             .iter()
             .map(|f| f.interval_ms)
@@ -67,6 +72,7 @@ impl RunStats {
         Summary {
             frames: frames.len(),
             warmup: self.frames.len() - frames.len(),
+            frame_intervals: intervals.len(),
             frame_ms: Percentiles::of(intervals),
             gpu_total_ms: pick(|f| f.timings.gpu_total_ms()),
             gpu_prepass_ms: pick(|f| f.timings.gpu_prepass_ms),
@@ -116,6 +122,8 @@ impl Percentiles {
 pub struct Summary {
     pub frames: usize,
     pub warmup: usize,
+    /// Steady-state delivery intervals behind `frame_ms` (see [`FrameRecord::interval_ms`]).
+    pub frame_intervals: usize,
     /// Interval between frame deliveries (what a consumer of the frames sees).
     pub frame_ms: Percentiles,
     pub gpu_total_ms: Percentiles,
@@ -129,6 +137,9 @@ pub struct Summary {
     /// Fraction of frames delivered while the next frame was still on the GPU.
     pub overlapped_fraction: f64,
 }
+
+/// Fewer steady-state intervals than this make no frame time worth printing.
+pub const MIN_FRAME_INTERVALS: usize = 10;
 
 /// Nearest-rank percentile `q` (0..=1) of ascending `sorted` values (not empty).
 pub fn nearest_rank(sorted: &[f64], q: f64) -> f64 {

@@ -87,8 +87,7 @@ impl Scenario {
     /// Reads and resolves a scenario file against a data set.
     pub fn load<D: Level0 + ?Sized>(path: &Path, data: &D) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let file: ScenarioFile =
-            toml::from_str(&text).map_err(|e| crate::config::toml_error(path, &text, &e))?;
+        let file: ScenarioFile = toml::from_str(&text).map_err(|e| Error::toml(path, &text, &e))?;
         Self::resolve(&file, data).map_err(|e| Error::Config {
             path: path.to_path_buf(),
             message: e.to_string(),

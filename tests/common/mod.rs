@@ -2,11 +2,13 @@
 //! (including synchronization validation) and fails on any message.
 #![allow(dead_code)]
 
+pub mod cli;
+
 use std::sync::Arc;
 
 use vkterrain::dataset::Heightmap;
 use vkterrain::driver::{Gpu, GpuOptions};
-use vkterrain::lod::MethodKind;
+use vkterrain::lod::{MethodConfig, MethodKind, UdlodSettings};
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, RenderOptions, Renderer};
 
@@ -35,9 +37,11 @@ pub fn options(width: u32, height: u32, frames_in_flight: usize) -> RenderOption
         height,
         frames_in_flight,
         readback_depth: true,
-        sky: [0.2, 0.4, 0.8],
-        sun_dir: [0.0, 0.0, 1.0],
-        lod: Default::default(),
+        light: vkterrain::frame::Lighting {
+            sun_dir: [0.0, 0.0, 1.0],
+            sky: [0.2, 0.4, 0.8],
+            haze_distance_m: 0.0,
+        },
         views: 1,
     }
 }
@@ -53,11 +57,19 @@ pub fn render(
     render_method(gpu, data, MethodKind::Brute, options, requests)
 }
 
+/// `kind` with `udlod` as its settings when it is UDLOD, else with its defaults.
+pub fn method_with(kind: MethodKind, udlod: UdlodSettings) -> MethodConfig {
+    match kind {
+        MethodKind::Udlod => udlod.into(),
+        other => other.into(),
+    }
+}
+
 /// [`render`] with any method.
 pub fn render_method(
     gpu: &Arc<Gpu>,
     data: &Heightmap,
-    method: MethodKind,
+    method: impl Into<MethodConfig>,
     options: RenderOptions,
     requests: &[FrameRequest],
 ) -> Vec<OwnedFrame> {
@@ -105,4 +117,22 @@ pub fn procedural_pyramid(name: &str, size: u32, seed: u64, center: u32) -> std:
     };
     preprocess::run(&opts, &mut NoProgress).unwrap();
     out
+}
+
+/// `../shared/data` (the real DEMs tests read, never committed), or `None` when it is absent.
+/// Absent data is a skip on a developer's machine but a failure in CI (`CI` set, as `.ci/run`
+/// and every CI system do), so no real-data test can pass there without checking anything.
+pub fn shared_data() -> Option<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    if dir.is_dir() {
+        return Some(dir);
+    }
+    if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) {
+        panic!(
+            "{} is absent but CI is set: the real-data tests must run in CI",
+            dir.display()
+        );
+    }
+    eprintln!("note: {} absent, real-data checks skipped", dir.display());
+    None
 }

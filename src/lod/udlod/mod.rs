@@ -7,27 +7,33 @@
 //! distances from the pixel error target, frustum planes); the tile lists never come back to
 //! the host in the render path (only 64 bytes of counters, for statistics).
 
+#[cfg(feature = "test-support")]
+pub mod probe;
 pub mod select;
+pub mod settings;
 
 use std::sync::Arc;
 
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
-use super::{LodMethod, LodSettings, MethodContext, ViewState};
+use super::{LodMethod, MethodContext};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
-use crate::driver::descriptors::DescriptorSets;
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::Buffer;
+use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use crate::error::{Error, Result};
+use crate::frame::ViewState;
 use crate::gpu_constants::UDLOD_MAX_LEVELS;
-use crate::render::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
+use crate::slots::ViewSlot;
 use select::{Levels, SelectionParams};
+use settings::UdlodSettings;
 
 /// Per-frame uniforms of set 1 (`Udlod` in `shaders/include/udlod_common.wgsl`).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct UdlodUniforms {
     pub frustum: [[f32; 4]; 6],
     pub split: [[f32; 4]; UDLOD_MAX_LEVELS as usize],
@@ -40,7 +46,7 @@ pub struct UdlodUniforms {
 
 /// The tiling state the GPU keeps per slot (`TilingState` in `shaders/udlod_tiling.wgsl`).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct TilingState {
     pub dispatch: [u32; 3],
     pub pass_index: u32,
@@ -54,7 +60,26 @@ pub struct TilingState {
     pub passes_started: u32,
 }
 
-const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
+/// Descriptor set 1 (`shaders/include/udlod_common.wgsl`, `shaders/udlod_tiling.wgsl`,
+/// `shaders/udlod.wgsl`): the tiling passes and the vertex shaders (and the morph probe).
+pub const UDLOD_SET: &[Binding] = {
+    use vk::DescriptorType as T;
+    const CV: vk::ShaderStageFlags =
+        stages(vk::ShaderStageFlags::COMPUTE, vk::ShaderStageFlags::VERTEX);
+    &[
+        Binding::new(0, T::UNIFORM_BUFFER, CV, "udlod"),
+        Binding::new(1, T::STORAGE_BUFFER, CV, "state"),
+        Binding::new(2, T::STORAGE_BUFFER, CV, "temp_tiles"),
+        Binding::new(3, T::STORAGE_BUFFER, CV, "final_tiles"),
+        Binding::new(4, T::STORAGE_BUFFER, CV, "min_max"),
+        Binding::new(5, T::STORAGE_BUFFER, CV, "error_field"),
+    ]
+};
+
+/// Where `TilingState::draw` starts: the `vkCmdDrawIndexedIndirect` arguments.
+pub const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
+/// Bytes between consecutive indexed indirect draws (one is drawn; Vulkan wants the stride).
+pub const DRAW_STRIDE: u32 = size_of::<[u32; 5]>() as u32;
 pub const TILE_BYTES: u64 = 16;
 
 struct SlotBuffers {
@@ -62,6 +87,7 @@ struct SlotBuffers {
     state: Buffer,
     /// Referenced by the descriptor set only.
     _temp_tiles: Buffer,
+    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
     final_tiles: Buffer,
     /// Host-readable copy of `state` (counters for statistics).
     counters: Buffer,
@@ -70,7 +96,7 @@ struct SlotBuffers {
 
 pub struct Udlod {
     gpu: Arc<Gpu>,
-    settings: LodSettings,
+    settings: UdlodSettings,
     levels: Levels,
     /// Level-0 heights for the reference height under the LOD viewer (shared with the
     /// caller: the grid's `Arc`, or the pyramid reader with its bounded node cache).
@@ -83,7 +109,8 @@ pub struct Udlod {
     index_count: u32,
     slots: Vec<SlotBuffers>,
     /// Set 1 of every slot (`SlotBuffers::set`).
-    _sets: DescriptorSets,
+    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
+    sets: DescriptorSets,
     prepare: Pipeline,
     refine: Pipeline,
     finish: Pipeline,
@@ -91,15 +118,10 @@ pub struct Udlod {
     temp_capacity: u32,
 }
 
-fn as_bytes<T: Copy>(v: &T) -> &[u8] {
-    // SAFETY: plain-old-data repr(C) structs of u32/f32 without padding.
-    unsafe { std::slice::from_raw_parts(v as *const T as *const u8, size_of::<T>()) }
-}
-
 impl Udlod {
-    pub fn new(ctx: &MethodContext<'_>) -> Result<Self> {
+    pub fn new(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Self> {
         let gpu = ctx.gpu;
-        let settings = ctx.settings.clone();
+        let settings = settings.clone();
         settings.validate()?;
         let levels = match ctx.data {
             Terrain::Grid(h) => Levels::new(&**h, settings.grid_size, settings.error_field_max)?,
@@ -108,34 +130,19 @@ impl Udlod {
                 Levels::new(&p.sweep(), settings.grid_size, settings.error_field_max)?
             }
         };
-        if levels.levels() > UDLOD_MAX_LEVELS {
+        // The morph reads the split distance one level past the root (never morphs).
+        if levels.levels() >= UDLOD_MAX_LEVELS {
             return Err(Error::invalid(
                 "udlod",
                 format!(
-                    "{} levels exceed the maximum of {UDLOD_MAX_LEVELS}; raise grid_size",
-                    levels.levels()
+                    "{} levels exceed the maximum of {}; raise grid_size",
+                    levels.levels(),
+                    UDLOD_MAX_LEVELS - 1
                 ),
             ));
         }
-        let sets = DescriptorSets::new(
-            gpu,
-            &[
-                vk::DescriptorType::UNIFORM_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-            ],
-            vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::VERTEX,
-            ctx.slots,
-        )?;
-        let d = &gpu.device;
-        let mm_bytes: Vec<u8> = levels
-            .min_max
-            .iter()
-            .flat_map(|m| m.iter().flat_map(|v| v.to_le_bytes()))
-            .collect();
+        let sets = DescriptorSets::new(gpu, UDLOD_SET, ctx.slots)?;
+        let mm_bytes: &[u8] = bytemuck::cast_slice(&levels.min_max);
         let mut min_max = Buffer::new(
             gpu,
             "udlod min/max",
@@ -143,13 +150,8 @@ impl Udlod {
             vk::BufferUsageFlags::STORAGE_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        min_max.write(&mm_bytes)?;
-        let field_bytes: Vec<u8> = levels
-            .field
-            .corners
-            .iter()
-            .flat_map(|v| v.to_le_bytes())
-            .collect();
+        min_max.write(mm_bytes)?;
+        let field_bytes: &[u8] = bytemuck::cast_slice(&levels.field.corners);
         let mut error_field = Buffer::new(
             gpu,
             "udlod error field",
@@ -157,9 +159,9 @@ impl Udlod {
             vk::BufferUsageFlags::STORAGE_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        error_field.write(&field_bytes)?;
+        error_field.write(field_bytes)?;
         let grid = super::brute::grid_indices(settings.grid_size);
-        let index_bytes: Vec<u8> = grid.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
         let mut indices = Buffer::new(
             gpu,
             "udlod grid indices",
@@ -167,7 +169,7 @@ impl Udlod {
             vk::BufferUsageFlags::INDEX_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        indices.write(&index_bytes)?;
+        indices.write(index_bytes)?;
 
         let final_capacity = settings.max_tiles;
         // Parents and children of one pass share the temporary list: a pass has at most
@@ -214,36 +216,17 @@ impl Udlod {
                 vk::BufferUsageFlags::TRANSFER_DST,
                 MemoryLocation::GpuToCpu,
             )?;
-            let infos = [
-                (0, vk::DescriptorType::UNIFORM_BUFFER, uniforms.raw),
-                (1, vk::DescriptorType::STORAGE_BUFFER, state.raw),
-                (2, vk::DescriptorType::STORAGE_BUFFER, temp_tiles.raw),
-                (3, vk::DescriptorType::STORAGE_BUFFER, final_tiles.raw),
-                (4, vk::DescriptorType::STORAGE_BUFFER, min_max.raw),
-                (5, vk::DescriptorType::STORAGE_BUFFER, error_field.raw),
-            ];
-            let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = infos
-                .iter()
-                .map(|&(_, _, b)| {
-                    [vk::DescriptorBufferInfo {
-                        buffer: b,
-                        offset: 0,
-                        range: vk::WHOLE_SIZE,
-                    }]
-                })
-                .collect();
-            let writes: Vec<vk::WriteDescriptorSet> = infos
-                .iter()
-                .zip(&buffer_infos)
-                .map(|(&(binding, ty, _), info)| {
-                    vk::WriteDescriptorSet::default()
-                        .dst_set(set)
-                        .dst_binding(binding)
-                        .descriptor_type(ty)
-                        .buffer_info(info)
-                })
-                .collect();
-            unsafe { d.update_descriptor_sets(&writes, &[]) };
+            sets.write(
+                i,
+                &[
+                    ("udlod", Resource::Buffer(uniforms.raw)),
+                    ("state", Resource::Buffer(state.raw)),
+                    ("temp_tiles", Resource::Buffer(temp_tiles.raw)),
+                    ("final_tiles", Resource::Buffer(final_tiles.raw)),
+                    ("min_max", Resource::Buffer(min_max.raw)),
+                    ("error_field", Resource::Buffer(error_field.raw)),
+                ],
+            )?;
             slots.push(SlotBuffers {
                 uniforms,
                 state,
@@ -284,7 +267,7 @@ impl Udlod {
             indices,
             index_count: grid.len() as u32,
             slots,
-            _sets: sets,
+            sets,
             prepare,
             refine,
             finish,
@@ -317,20 +300,13 @@ impl Udlod {
         ))
     }
 
-    fn read_counters(&self, slot: usize) -> TilingState {
-        let mut s = TilingState::default();
-        if let Some(bytes) = self.slots[slot].counters.mapped() {
-            let n = size_of::<TilingState>().min(bytes.len());
-            // SAFETY: TilingState is repr(C) u32s; copying bytes into it is valid.
-            unsafe {
-                std::ptr::copy_nonoverlapping(
-                    bytes.as_ptr(),
-                    &mut s as *mut TilingState as *mut u8,
-                    n,
-                )
-            };
-        }
-        s
+    fn read_counters(&self, slot: ViewSlot) -> TilingState {
+        self.slots[slot.index()]
+            .counters
+            .mapped()
+            .and_then(|bytes| bytes.get(..size_of::<TilingState>()))
+            .map(bytemuck::pod_read_unaligned)
+            .unwrap_or_default()
     }
 }
 
@@ -339,7 +315,7 @@ impl LodMethod for Udlod {
         "udlod"
     }
 
-    fn update(&mut self, slot: usize, view: &ViewState) -> Result<()> {
+    fn update(&mut self, slot: ViewSlot, view: &ViewState) -> Result<()> {
         let p = self.selection_params(view)?;
         let mut u = UdlodUniforms {
             frustum: p.frustum,
@@ -366,24 +342,26 @@ impl LodMethod for Udlod {
         u.viewer = [p.viewer[0], p.viewer[1], p.viewer[2], 0.0];
         u.params = [
             0.0,
-            self.settings.morph_range as f32,
-            if self.settings.morph { 1.0 } else { 0.0 },
-            if self.settings.cull { 1.0 } else { 0.0 },
+            p.morph_range,
+            if p.morph { 1.0 } else { 0.0 },
+            if p.cull { 1.0 } else { 0.0 },
         ];
         u.counts = [self.index_count, 0, 0, 0];
-        self.slots[slot].uniforms.write(as_bytes(&u))
+        self.slots[slot.index()]
+            .uniforms
+            .write(bytemuck::bytes_of(&u))
     }
 
     fn record_prepass(
         &mut self,
         cmd: vk::CommandBuffer,
-        slot: usize,
+        slot: ViewSlot,
         frame_set: vk::DescriptorSet,
     ) {
         let gpu = &self.gpu;
         let d = &gpu.device;
         let b = Barriers::new(gpu);
-        let s = &self.slots[slot];
+        let s = &self.slots[slot.index()];
         let sets = [frame_set, s.set];
         unsafe {
             // The buffers were last used by this slot's previous frame (same queue).
@@ -447,9 +425,14 @@ impl LodMethod for Udlod {
         }
     }
 
-    fn record_draw(&mut self, cmd: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet) {
+    fn record_draw(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        slot: ViewSlot,
+        frame_set: vk::DescriptorSet,
+    ) {
         let d = &self.gpu.device;
-        let s = &self.slots[slot];
+        let s = &self.slots[slot.index()];
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.draw.raw);
             d.cmd_bind_descriptor_sets(
@@ -464,20 +447,21 @@ impl LodMethod for Udlod {
                 // The indexed arguments (index_count, instance_count, first_index,
                 // vertex_offset, ...) read as non-indexed ones: 6 * quads^2 vertices per
                 // instance, first vertex 0, first instance 0.
-                d.cmd_draw_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, 16);
+                let stride = size_of::<vk::DrawIndirectCommand>() as u32;
+                d.cmd_draw_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, stride);
             } else {
                 d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
-                d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, 20);
+                d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, DRAW_STRIDE);
             }
         }
     }
 
-    fn triangles(&self, slot: usize) -> u64 {
+    fn triangles(&self, slot: ViewSlot) -> u64 {
         let c = self.read_counters(slot);
         c.draw[1] as u64 * 2 * (self.settings.grid_size as u64).pow(2)
     }
 
-    fn counters(&self, slot: usize) -> Vec<(&'static str, u64)> {
+    fn counters(&self, slot: ViewSlot) -> Vec<(&'static str, u64)> {
         let c = self.read_counters(slot);
         vec![
             ("tiles", c.draw[1] as u64),
@@ -487,7 +471,8 @@ impl LodMethod for Udlod {
         ]
     }
 
-    fn debug_tiles(&self, slot: usize) -> Result<Option<Vec<[u32; 3]>>> {
+    #[cfg(feature = "test-support")]
+    fn debug_tiles(&self, slot: ViewSlot) -> Result<Option<Vec<[u32; 3]>>> {
         let n = self.read_counters(slot).draw[1] as u64;
         if n == 0 {
             return Ok(Some(Vec::new()));
@@ -499,7 +484,7 @@ impl LodMethod for Udlod {
             vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuToCpu,
         )?;
-        let src = self.slots[slot].final_tiles.raw;
+        let src = self.slots[slot.index()].final_tiles.raw;
         let b = Barriers::new(&self.gpu);
         self.gpu.one_shot(|cmd| unsafe {
             b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
@@ -517,13 +502,20 @@ impl LodMethod for Udlod {
         })?;
         let bytes = host
             .mapped()
+            .and_then(|b| b.get(..(n * TILE_BYTES) as usize))
             .ok_or_else(|| Error::invalid("udlod", "debug buffer not mapped"))?;
-        let words: Vec<u32> = bytes
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
-        Ok(Some(
-            words.chunks_exact(4).map(|t| [t[0], t[1], t[2]]).collect(),
-        ))
+        let tiles: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(bytes);
+        Ok(Some(tiles.iter().map(|t| [t[0], t[1], t[2]]).collect()))
+    }
+
+    #[cfg(feature = "test-support")]
+    fn probe_vertices(
+        &self,
+        slot: ViewSlot,
+        frame: (vk::DescriptorSetLayout, vk::DescriptorSet),
+        inputs: &[(select::Tile, [u32; 2])],
+    ) -> Result<Option<Vec<probe::ProbedVertex>>> {
+        let udlod = (self.sets.layout, self.slots[slot.index()].set);
+        probe::probe(&self.gpu, frame, udlod, inputs).map(Some)
     }
 }

@@ -12,6 +12,7 @@ pub mod layout;
 pub mod location;
 pub mod producer;
 pub mod reader;
+pub mod settings;
 pub mod sys;
 pub mod zero_copy;
 
@@ -19,4 +20,5 @@ pub use layout::{FrameMeta, Geometry, Layout, validate_name};
 pub use location::RingLocation;
 pub use producer::{ProducerOptions, RingProducer};
 pub use reader::{FrameRef, Next, ReaderStats, RingReader};
+pub use settings::RingConfig;
 pub use zero_copy::ZeroCopyRequest;

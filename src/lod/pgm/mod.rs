@@ -10,10 +10,12 @@
 //!
 //! Auxiliary camera (Improved-PGM style, see `docs/pgm.md`): the main camera's position and
 //! heading, no roll; height above the reference plane (the terrain under the camera) clamped to
-//! at least `pgm_min_height_m`; field of view at least `pgm_fov_deg` (>= 90) both ways and
-//! widened where the main frustum needs more; pitch at most `-pgm_fov_deg / 2`, so the top row
+//! at least `min_height_m`; field of view at least `fov_deg` (>= 90) both ways and
+//! widened where the main frustum needs more; pitch at most `-fov_deg / 2`, so the top row
 //! of the grid is at or below the horizon and every grid ray meets the plane (rays at the
 //! horizon are cut at `max_distance`).
+
+pub mod settings;
 
 use std::sync::Arc;
 
@@ -21,19 +23,22 @@ use ash::vk;
 use glam::DVec3;
 use gpu_allocator::MemoryLocation;
 
-use super::{LodMethod, LodSettings, MethodContext, ViewState};
+use super::{LodMethod, MethodContext};
 use crate::dataset::Heightmap;
 use crate::driver::Gpu;
-use crate::driver::descriptors::DescriptorSets;
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource};
 use crate::driver::memory::{Buffer, Image};
+use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
 use crate::error::{Error, Result, VkResultExt};
-use crate::render::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
+use crate::frame::ViewState;
 use crate::scene::Camera;
+use crate::slots::ViewSlot;
+use settings::PgmSettings;
 
 /// Per-frame uniforms of set 1 (`Pgm` in `shaders/pgm.wgsl`; `tests/shader_interface.rs`
 /// proves the layouts equal).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct PgmUniforms {
     /// xyz: world direction (camera-relative, unnormalised) of grid vertex (0, 0), the bottom
     /// left of the auxiliary view; w: auxiliary camera height above the reference plane (m).
@@ -51,7 +56,7 @@ pub struct PgmUniforms {
 pub struct AuxCamera {
     pub yaw_deg: f64,
     pub pitch_deg: f64,
-    /// Height above the reference plane (m), at least `pgm_min_height_m`.
+    /// Height above the reference plane (m), at least `min_height_m`.
     pub height: f64,
     /// Image-plane extents (tangents) of the view: `[left, right]`, `[bottom, top]`.
     pub tan_x: [f64; 2],
@@ -77,9 +82,9 @@ impl AuxCamera {
         aspect: f64,
         ground_z: f64,
         data_far: f64,
-        s: &LodSettings,
+        s: &PgmSettings,
     ) -> AuxCamera {
-        let half = s.pgm_fov_deg / 2.0;
+        let half = s.fov_deg / 2.0;
         let pitch = camera.pitch_deg.min(-half);
         let aux = Camera {
             position: camera.position,
@@ -133,7 +138,7 @@ impl AuxCamera {
         let cap = PGM_MAX_TAN;
         tan_x = [tan_x[0].max(-cap), tan_x[1].min(cap)];
         tan_y = [tan_y[0].max(-cap), tan_y[1].min(cap).min(horizon)];
-        let height = (camera.position.z - ground_z).max(s.pgm_min_height_m);
+        let height = (camera.position.z - ground_z).max(s.min_height_m);
         AuxCamera {
             yaw_deg: camera.yaw_deg,
             pitch_deg: pitch,
@@ -302,9 +307,20 @@ impl Drop for Raw {
     }
 }
 
+/// Descriptor set 1 (`shaders/pgm.wgsl`): the uniforms, the height mip chain, its sampler.
+pub const PGM_SET: &[Binding] = {
+    use vk::DescriptorType as T;
+    const V: vk::ShaderStageFlags = vk::ShaderStageFlags::VERTEX;
+    &[
+        Binding::new(0, T::UNIFORM_BUFFER, V, "pgm"),
+        Binding::new(1, T::SAMPLED_IMAGE, V, "height_mips"),
+        Binding::new(2, T::SAMPLER, V, "mip_sampler"),
+    ]
+};
+
 pub struct Pgm {
     gpu: Arc<Gpu>,
-    settings: LodSettings,
+    settings: PgmSettings,
     pipeline: Pipeline,
     indices: Buffer,
     index_count: u32,
@@ -322,9 +338,9 @@ pub struct Pgm {
 }
 
 impl Pgm {
-    pub fn new(ctx: &MethodContext<'_>) -> Result<Self> {
+    pub fn new(ctx: &MethodContext<'_>, settings: &PgmSettings) -> Result<Self> {
         let gpu = ctx.gpu;
-        let settings = ctx.settings.clone();
+        let settings = settings.clone();
         settings.validate()?;
         let d = &gpu.device;
         let format = vk::Format::R32_SFLOAT;
@@ -348,11 +364,7 @@ impl Pgm {
         };
         let data = ctx.data.require_grid("method pgm")?.clone();
         let levels = height_mips(&data);
-        let bytes: Vec<Vec<u8>> = levels
-            .iter()
-            .map(|l| l.iter().flat_map(|h| h.to_le_bytes()).collect())
-            .collect();
-        let refs: Vec<&[u8]> = bytes.iter().map(|b| b.as_slice()).collect();
+        let refs: Vec<&[u8]> = levels.iter().map(|l| bytemuck::cast_slice(l)).collect();
         let heights = Image::texture_with_mips(
             gpu,
             "pgm height mips",
@@ -377,18 +389,9 @@ impl Pgm {
             )
         }
         .vk("vkCreateSampler")?;
-        let sets = DescriptorSets::new(
-            gpu,
-            &[
-                vk::DescriptorType::UNIFORM_BUFFER,
-                vk::DescriptorType::SAMPLED_IMAGE,
-                vk::DescriptorType::SAMPLER,
-            ],
-            vk::ShaderStageFlags::VERTEX,
-            ctx.slots,
-        )?;
+        let sets = DescriptorSets::new(gpu, PGM_SET, ctx.slots)?;
         let mut uniforms = Vec::with_capacity(ctx.slots);
-        for (i, &set) in sets.sets.iter().enumerate() {
+        for i in 0..ctx.slots {
             let ubo = Buffer::new(
                 gpu,
                 &format!("pgm uniforms {i}"),
@@ -396,38 +399,20 @@ impl Pgm {
                 vk::BufferUsageFlags::UNIFORM_BUFFER,
                 MemoryLocation::CpuToGpu,
             )?;
-            let bi = [vk::DescriptorBufferInfo {
-                buffer: ubo.raw,
-                offset: 0,
-                range: vk::WHOLE_SIZE,
-            }];
-            let ii = [vk::DescriptorImageInfo {
-                sampler: vk::Sampler::null(),
-                image_view: heights.view,
-                image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
-            }];
-            let si = [vk::DescriptorImageInfo {
-                sampler: raw.sampler,
-                ..Default::default()
-            }];
-            let write = |b: u32, ty| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(b)
-                    .descriptor_type(ty)
-            };
-            let writes = [
-                write(0, vk::DescriptorType::UNIFORM_BUFFER).buffer_info(&bi),
-                write(1, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ii),
-                write(2, vk::DescriptorType::SAMPLER).image_info(&si),
-            ];
-            unsafe { d.update_descriptor_sets(&writes, &[]) };
+            sets.write(
+                i,
+                &[
+                    ("pgm", Resource::Buffer(ubo.raw)),
+                    ("height_mips", Resource::Image(heights.view)),
+                    ("mip_sampler", Resource::Sampler(raw.sampler)),
+                ],
+            )?;
             uniforms.push(ubo);
         }
-        let [cols, rows] = settings.pgm_grid;
+        let [cols, rows] = settings.grid();
         let band = band_rows(cols, rows);
         let grid = band_indices(cols, band);
-        let index_bytes: Vec<u8> = grid.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
         let mut indices = Buffer::new(
             gpu,
             "pgm band indices",
@@ -435,7 +420,7 @@ impl Pgm {
             vk::BufferUsageFlags::INDEX_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        indices.write(&index_bytes)?;
+        indices.write(index_bytes)?;
         let pipeline = terrain_pipeline(
             gpu,
             &ctx.formats,
@@ -494,20 +479,18 @@ impl LodMethod for Pgm {
         "pgm"
     }
 
-    fn update(&mut self, slot: usize, view: &ViewState) -> Result<()> {
+    fn update(&mut self, slot: ViewSlot, view: &ViewState) -> Result<()> {
         let aux = self.aux_for(view);
-        let u = aux.uniforms(self.settings.pgm_grid, self.band, self.mips);
-        // SAFETY: plain-old-data repr(C) struct of u32/f32 without padding.
-        let bytes = unsafe {
-            std::slice::from_raw_parts(
-                &u as *const PgmUniforms as *const u8,
-                size_of::<PgmUniforms>(),
-            )
-        };
-        self.uniforms[slot].write(bytes)
+        let u = aux.uniforms(self.settings.grid(), self.band, self.mips);
+        self.uniforms[slot.index()].write(bytemuck::bytes_of(&u))
     }
 
-    fn record_draw(&mut self, cmd: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet) {
+    fn record_draw(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        slot: ViewSlot,
+        frame_set: vk::DescriptorSet,
+    ) {
         let d = &self.gpu.device;
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline.raw);
@@ -516,7 +499,7 @@ impl LodMethod for Pgm {
                 vk::PipelineBindPoint::GRAPHICS,
                 self.pipeline.layout,
                 0,
-                &[frame_set, self.sets.sets[slot]],
+                &[frame_set, self.sets.sets[slot.index()]],
                 &[],
             );
             d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
@@ -525,12 +508,12 @@ impl LodMethod for Pgm {
     }
 
     /// Every drawn triangle, including the zero-area ones of the last band past the last row.
-    fn triangles(&self, _slot: usize) -> u64 {
+    fn triangles(&self, _slot: ViewSlot) -> u64 {
         self.instances as u64 * self.index_count as u64 / 3
     }
 
-    fn counters(&self, _slot: usize) -> Vec<(&'static str, u64)> {
-        let [cols, rows] = self.settings.pgm_grid;
+    fn counters(&self, _slot: ViewSlot) -> Vec<(&'static str, u64)> {
+        let [cols, rows] = self.settings.grid();
         vec![
             ("grid_triangles", 2 * (cols as u64 - 1) * (rows as u64 - 1)),
             ("mip_levels", self.mips as u64),

@@ -1,0 +1,234 @@
+//! The GPU mirror of the data set: heights, normals and albedo (or the clipmap's atlas) and
+//! one descriptor set 0 with its frame-uniform buffer per view slot
+//! (`shaders/include/terrain_common.wgsl`).
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use super::FrameUniforms;
+use crate::dataset::{Heightmap, Level0, Terrain};
+use crate::driver::Gpu;
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
+use crate::driver::memory::{Buffer, Image};
+use crate::error::{Error, Result, VkResultExt};
+use crate::slots::ViewSlot;
+
+/// Descriptor set 0, shared by every terrain shader (`shaders/include/terrain_common.wgsl` and
+/// `shaders/include/clipmap.wgsl`); every stage may read every binding.
+pub const TERRAIN_SET: &[Binding] = {
+    use vk::DescriptorType as T;
+    const ALL: vk::ShaderStageFlags = stages(
+        stages(vk::ShaderStageFlags::VERTEX, vk::ShaderStageFlags::FRAGMENT),
+        vk::ShaderStageFlags::COMPUTE,
+    );
+    &[
+        Binding::new(0, T::UNIFORM_BUFFER, ALL, "frame"),
+        Binding::new(1, T::SAMPLED_IMAGE, ALL, "height_tex"),
+        Binding::new(2, T::SAMPLED_IMAGE, ALL, "normal_tex"),
+        Binding::new(3, T::SAMPLED_IMAGE, ALL, "albedo_tex"),
+        Binding::new(4, T::SAMPLER, ALL, "linear_sampler"),
+        // The chunked clipmap: height atlas, the view slot's quadtree, shading atlases.
+        Binding::new(5, T::SAMPLED_IMAGE, ALL, "atlas_height"),
+        Binding::new(6, T::STORAGE_BUFFER, ALL, "clipmap"),
+        Binding::new(7, T::SAMPLED_IMAGE, ALL, "atlas_normal"),
+        Binding::new(8, T::SAMPLED_IMAGE, ALL, "atlas_albedo"),
+    ]
+};
+
+/// The facts about the data set that methods and uniforms need.
+#[derive(Clone, Debug)]
+pub struct TerrainInfo {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub spacing: f64,
+    pub min_height: f32,
+    pub max_height: f32,
+}
+
+/// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.
+pub struct TerrainGpu {
+    gpu: Arc<Gpu>,
+    pub info: TerrainInfo,
+    _height: Image,
+    _normal: Image,
+    _albedo: Image,
+    sampler: vk::Sampler,
+    /// Set 0: one per view slot (they differ in their uniform buffer and clipmap quadtree).
+    pub descriptors: DescriptorSets,
+    uniforms: Vec<Buffer>,
+}
+
+impl TerrainGpu {
+    /// Set 0 for `slots` view slots. `clipmap`: the clipmap's device mirror bound at bindings 5
+    /// (atlas) and 6 (the view slot's quadtree), 7 and 8 (normal and albedo atlases); a
+    /// disabled placeholder keeps the single-texture path.
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        data: &Terrain,
+        slots: usize,
+        clipmap: &crate::clipmap::gpu::ClipmapGpu,
+    ) -> Result<Self> {
+        let (height, normal, albedo) = if clipmap.enabled {
+            // Heights, normals and albedo all come through the clipmap's atlas: 1x1
+            // placeholders keep the bindings valid without the full-resolution textures.
+            let one = vk::Extent2D {
+                width: 1,
+                height: 1,
+            };
+            (
+                Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, one, &[0; 4])?,
+                Image::texture_with_data(gpu, "normals", vk::Format::R8G8B8A8_SNORM, one, &[0; 4])?,
+                Image::texture_with_data(gpu, "albedo", vk::Format::R8G8B8A8_SRGB, one, &[0; 4])?,
+            )
+        } else {
+            let data = data.require_grid("the single-texture path (clipmap off)")?;
+            Self::textures(gpu, data)?
+        };
+        let (min_height, max_height) = data.height_range();
+        let info = TerrainInfo {
+            name: data.name().to_string(),
+            width: data.width(),
+            height: data.height(),
+            spacing: data.spacing(),
+            min_height,
+            max_height,
+        };
+
+        let d = &gpu.device;
+        let anisotropy = gpu.enabled.sampler_anisotropy;
+        let sampler = unsafe {
+            d.create_sampler(
+                &vk::SamplerCreateInfo::default()
+                    .mag_filter(vk::Filter::LINEAR)
+                    .min_filter(vk::Filter::LINEAR)
+                    .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
+                    .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                    .anisotropy_enable(anisotropy)
+                    .max_anisotropy(if anisotropy {
+                        gpu.info.caps.max_anisotropy.min(16.0)
+                    } else {
+                        1.0
+                    })
+                    .max_lod(vk::LOD_CLAMP_NONE),
+                None,
+            )
+        }
+        .vk("vkCreateSampler")?;
+        let textures = [&height, &normal, &albedo];
+        let (descriptors, uniforms) = Self::descriptor_sets(gpu, slots, textures, sampler, clipmap)
+            .inspect_err(|_| unsafe { d.destroy_sampler(sampler, None) })?;
+        Ok(TerrainGpu {
+            gpu: gpu.clone(),
+            info,
+            _height: height,
+            _normal: normal,
+            _albedo: albedo,
+            sampler,
+            descriptors,
+            uniforms,
+        })
+    }
+}
+
+impl TerrainGpu {
+    /// Set 0 of every view slot, each with its frame-uniform buffer; `textures`: heights,
+    /// normals, albedo.
+    fn descriptor_sets(
+        gpu: &Arc<Gpu>,
+        slots: usize,
+        [height, normal, albedo]: [&Image; 3],
+        sampler: vk::Sampler,
+        clipmap: &crate::clipmap::gpu::ClipmapGpu,
+    ) -> Result<(DescriptorSets, Vec<Buffer>)> {
+        let descriptors = DescriptorSets::new(gpu, TERRAIN_SET, slots)?;
+        let mut uniforms = Vec::with_capacity(slots);
+        for slot in 0..slots {
+            let ubo = Buffer::new(
+                gpu,
+                &format!("frame uniforms {slot}"),
+                size_of::<FrameUniforms>() as u64,
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?;
+            descriptors.write(
+                slot,
+                &[
+                    ("frame", Resource::Buffer(ubo.raw)),
+                    ("height_tex", Resource::Image(height.view)),
+                    ("normal_tex", Resource::Image(normal.view)),
+                    ("albedo_tex", Resource::Image(albedo.view)),
+                    ("linear_sampler", Resource::Sampler(sampler)),
+                    ("atlas_height", Resource::Image(clipmap.atlas.view)),
+                    ("clipmap", Resource::Buffer(clipmap.quadtrees[slot].raw)),
+                    ("atlas_normal", Resource::Image(clipmap.normals.view)),
+                    ("atlas_albedo", Resource::Image(clipmap.albedo.view)),
+                ],
+            )?;
+            uniforms.push(ubo);
+        }
+        Ok((descriptors, uniforms))
+    }
+
+    /// Descriptor set 0 of `view`.
+    pub fn set(&self, view: ViewSlot) -> vk::DescriptorSet {
+        self.descriptors.sets[view.index()]
+    }
+
+    /// Writes the frame uniforms of `view` (its previous GPU use complete).
+    pub fn write_uniforms(&mut self, view: ViewSlot, uniforms: &FrameUniforms) -> Result<()> {
+        self.uniforms[view.index()].write(bytemuck::bytes_of(uniforms))
+    }
+
+    /// The full-resolution height, normal and albedo textures of the single-texture path.
+    fn textures(gpu: &Arc<Gpu>, data: &Heightmap) -> Result<(Image, Image, Image)> {
+        let max_side = gpu.info.limits.max_image_dimension2_d;
+        if data.width > max_side || data.height > max_side {
+            return Err(Error::invalid(
+                &data.name,
+                format!(
+                    "{}x{} exceeds the device's {max_side} texels per side",
+                    data.width, data.height
+                ),
+            ));
+        }
+        let extent = vk::Extent2D {
+            width: data.width,
+            height: data.height,
+        };
+        let heights = bytemuck::cast_slice(&data.heights);
+        let height =
+            Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, heights)?;
+        let normal = Image::texture_with_data(
+            gpu,
+            "normals",
+            vk::Format::R8G8B8A8_SNORM,
+            extent,
+            &data.normals_snorm8(),
+        )?;
+        let albedo_data = data.albedo_or_ramp();
+        let albedo = Image::texture_with_data(
+            gpu,
+            "albedo",
+            vk::Format::R8G8B8A8_SRGB,
+            vk::Extent2D {
+                width: albedo_data.width,
+                height: albedo_data.height,
+            },
+            &albedo_data.rgba,
+        )?;
+        Ok((height, normal, albedo))
+    }
+}
+
+impl Drop for TerrainGpu {
+    fn drop(&mut self) {
+        unsafe {
+            self.gpu.device.destroy_sampler(self.sampler, None);
+        }
+    }
+}

@@ -1,0 +1,105 @@
+//! UDLOD's settings (config `[method] name = "udlod"`, `docs/udlod.md`).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::lod::sweep::Sweep;
+
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct UdlodSettings {
+    /// Quads per tile side (even, 4..=64).
+    pub grid_size: u32,
+    /// Screen-space geometric error target in pixels.
+    pub tau_px: f64,
+    /// Fraction of each level's range over which vertices morph (0.05..=0.45).
+    pub morph_range: f64,
+    /// Capacity of the final tile list (tiles per frame).
+    pub max_tiles: u32,
+    /// Vertex morphing (off only to demonstrate popping and cracks in tests).
+    pub morph: bool,
+    /// Frustum culling of tiles.
+    pub cull: bool,
+    /// Cap of the per-region error field (1 = distance-only selection: every region refined
+    /// for the level's worst error). Larger lets smooth regions keep coarser levels.
+    pub error_field_max: f64,
+    /// Draw without an index buffer (six vertex-shader runs per quad) instead of the shared
+    /// indexed grid; kept for measurement (`benches/udlod.rs` compares the two).
+    pub vertex_pulling: bool,
+}
+
+impl Default for UdlodSettings {
+    fn default() -> Self {
+        UdlodSettings {
+            grid_size: 16,
+            tau_px: 1.0,
+            morph_range: 0.2,
+            max_tiles: 16384,
+            morph: true,
+            cull: true,
+            error_field_max: 8.0,
+            vertex_pulling: false,
+        }
+    }
+}
+
+impl UdlodSettings {
+    /// What `vkterrain eval --sweep KEY=...` varies for UDLOD.
+    pub const SWEEP: &[Sweep<Self>] = &[
+        Sweep {
+            key: "tau_px",
+            help: "screen-space error target (px)",
+            apply: |s, v| s.tau_px = v,
+        },
+        Sweep {
+            key: "error_field_max",
+            help: "error-field cap (1 = distance-only)",
+            apply: |s, v| s.error_field_max = v,
+        },
+        Sweep {
+            key: "grid_size",
+            help: "quads per tile side",
+            apply: |s, v| s.grid_size = v as u32,
+        },
+        Sweep {
+            key: "morph_range",
+            help: "share of each level's range that morphs",
+            apply: |s, v| s.morph_range = v,
+        },
+    ];
+
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid("udlod settings", m));
+        if !(4..=64).contains(&self.grid_size) || self.grid_size % 2 != 0 {
+            return bad(format!(
+                "grid_size {} must be even and within 4..=64",
+                self.grid_size
+            ));
+        }
+        if !(self.tau_px.is_finite() && self.tau_px >= 0.05 && self.tau_px <= 1000.0) {
+            return bad(format!(
+                "tau_px {} must be within 0.05..=1000 pixels",
+                self.tau_px
+            ));
+        }
+        if !(self.morph_range.is_finite() && (0.05..=0.45).contains(&self.morph_range)) {
+            return bad(format!(
+                "morph_range {} must be within 0.05..=0.45",
+                self.morph_range
+            ));
+        }
+        if !(16..=1 << 22).contains(&self.max_tiles) {
+            return bad(format!(
+                "max_tiles {} must be within 16..=4194304",
+                self.max_tiles
+            ));
+        }
+        if !(self.error_field_max.is_finite() && (1.0..=1024.0).contains(&self.error_field_max)) {
+            return bad(format!(
+                "error_field_max {} must be within 1..=1024",
+                self.error_field_max
+            ));
+        }
+        Ok(())
+    }
+}
