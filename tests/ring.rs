@@ -11,7 +11,7 @@
 mod mutate;
 
 use std::collections::BTreeMap;
-use std::io::Write;
+use std::io::{Read, Write};
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -155,17 +155,27 @@ fn python() -> Option<&'static str> {
     ok.then_some("python3")
 }
 
-fn spawn_c(exe: &Path, dir: &TestDir, name: &str, seconds: f64) -> Child {
-    Command::new(exe)
-        .args([name, "--verify", "--seconds", &seconds.to_string()])
-        .args(["--dir", &dir.s(), "--owner", &euid().to_string()])
-        .stdout(Stdio::piped())
+fn spawn_c(exe: &Path, dir: &TestDir, name: &str, seconds: f64, ready: Option<&Path>) -> Child {
+    let mut c = Command::new(exe);
+    c.args([name, "--verify", "--seconds", &seconds.to_string()])
+        .args(["--dir", &dir.s(), "--owner", &euid().to_string()]);
+    if let Some(r) = ready {
+        c.arg("--ready").arg(r);
+    }
+    c.stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap()
 }
 
-fn spawn_py(py: &str, dir: &TestDir, name: &str, seconds: f64, save: Option<&Path>) -> Child {
+fn spawn_py(
+    py: &str,
+    dir: &TestDir,
+    name: &str,
+    seconds: f64,
+    save: Option<&Path>,
+    ready: Option<&Path>,
+) -> Child {
     let mut c = Command::new(py);
     c.arg(root().join("consumers/python/vkterrain_ring.py"))
         .args([name, "--verify", "--seconds", &seconds.to_string()])
@@ -173,10 +183,60 @@ fn spawn_py(py: &str, dir: &TestDir, name: &str, seconds: f64, save: Option<&Pat
     if let Some(s) = save {
         c.arg("--save").arg(s);
     }
+    if let Some(r) = ready {
+        c.arg("--ready").arg(r);
+    }
     c.stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap()
+}
+
+/// Waits until consumer `child` has created its `--ready` file (it has read a frame); fails
+/// with the child's output if it exits first or takes longer than `limit`.
+fn wait_ready(child: &mut Child, ready: &Path, who: &str, limit: Duration) {
+    let started = Instant::now();
+    while !ready.exists() {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut out = String::new();
+            if let Some(mut o) = child.stdout.take() {
+                let _ = o.read_to_string(&mut out);
+            }
+            if let Some(mut e) = child.stderr.take() {
+                let _ = e.read_to_string(&mut out);
+            }
+            panic!("{who} exited ({status}) before reading a frame: {out}");
+        }
+        assert!(
+            started.elapsed() < limit,
+            "{who} read no frame within {limit:?}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A producer role that publishes until the test has what it needs (at most 60 s): slow
+/// consumers (Python on a loaded machine) never find the ring gone. [`StoppableProducer::stop`]
+/// ends it and returns its counters.
+struct StoppableProducer {
+    child: Child,
+    stop: PathBuf,
+}
+
+impl StoppableProducer {
+    fn spawn(dir: &TestDir, name: &str, extra: &[&str]) -> Self {
+        let stop = PathBuf::from(dir.s()).join(format!("{name}.stop"));
+        let arg = format!("stop={}", stop.display());
+        let mut args = vec![arg.as_str()];
+        args.extend_from_slice(extra);
+        let child = spawn_role("producer", dir, name, 60.0, &args);
+        StoppableProducer { child, stop }
+    }
+
+    fn stop(self) -> BTreeMap<String, u64> {
+        std::fs::write(&self.stop, b"").unwrap();
+        counters(self.child, "producer")
+    }
 }
 
 /// Waits for a child and parses its `key=value` counter line.
@@ -706,13 +766,13 @@ fn stress_four_consumers_rust_c_python() {
     let tmp = tempfile::tempdir().unwrap();
     let c_exe = build_c(tmp.path());
     let secs = 3.0;
-    let producer = spawn_role("producer", &dir, "stress", secs + 1.0, &[]);
+    let producer = StoppableProducer::spawn(&dir, "stress", &[]);
     std::thread::sleep(Duration::from_millis(300));
     let r1 = spawn_role("consumer", &dir, "stress", secs, &[]);
     let r2 = spawn_role("consumer", &dir, "stress", secs, &[]);
-    let c = spawn_c(&c_exe, &dir, "stress", secs);
+    let c = spawn_c(&c_exe, &dir, "stress", secs, None);
     let png = tmp.path().join("py.png");
-    let py = python().map(|py| spawn_py(py, &dir, "stress", secs, Some(&png)));
+    let py = python().map(|py| spawn_py(py, &dir, "stress", secs, Some(&png), None));
     for (child, who) in [
         (r1, "rust consumer 1"),
         (r2, "rust consumer 2"),
@@ -731,7 +791,7 @@ fn stress_four_consumers_rust_c_python() {
             "Python consumer saved no PNG"
         );
     }
-    let p = counters(producer, "producer");
+    let p = producer.stop();
     eprintln!("producer: {p:?}");
     assert!(p["published"] > 500, "producer too slow: {p:?}");
 }
@@ -742,11 +802,11 @@ fn verifiers_detect_corrupt_frames() {
     let dir = TestDir::new("corrupt");
     let tmp = tempfile::tempdir().unwrap();
     let c_exe = build_c(tmp.path());
-    let producer = spawn_role("producer", &dir, "corrupt", 1.5, &["corrupt=1"]);
+    let producer = StoppableProducer::spawn(&dir, "corrupt", &["corrupt=1"]);
     std::thread::sleep(Duration::from_millis(200));
     let r = spawn_role("consumer", &dir, "corrupt", 1.0, &[]);
-    let c = spawn_c(&c_exe, &dir, "corrupt", 1.0);
-    let py = python().map(|py| spawn_py(py, &dir, "corrupt", 1.0, None));
+    let c = spawn_c(&c_exe, &dir, "corrupt", 1.0, None);
+    let py = python().map(|py| spawn_py(py, &dir, "corrupt", 1.0, None, None));
     let mut all = vec![(counters(r, "rust"), "rust"), (counters(c, "C"), "C")];
     if let Some(py) = py {
         all.push((counters(py, "python"), "python"));
@@ -757,7 +817,7 @@ fn verifiers_detect_corrupt_frames() {
             "{who}: {k:?}"
         );
     }
-    counters(producer, "producer");
+    producer.stop();
 }
 
 #[test]
@@ -765,17 +825,17 @@ fn killed_consumer_does_not_affect_producer_or_others() {
     let dir = TestDir::new("kill");
     let tmp = tempfile::tempdir().unwrap();
     let c_exe = build_c(tmp.path());
-    let producer = spawn_role("producer", &dir, "kill", 3.0, &[]);
+    let producer = StoppableProducer::spawn(&dir, "kill", &[]);
     std::thread::sleep(Duration::from_millis(300));
     let survivor = spawn_role("consumer", &dir, "kill", 2.0, &[]);
-    let c = spawn_c(&c_exe, &dir, "kill", 2.0);
+    let c = spawn_c(&c_exe, &dir, "kill", 2.0, None);
     let mut victim = spawn_role("consumer", &dir, "kill", 10.0, &[]);
     std::thread::sleep(Duration::from_millis(700));
     victim.kill().unwrap(); // SIGKILL, most likely in the middle of a copy
     let _ = victim.wait();
     assert_clean(&counters(survivor, "surviving rust consumer"), "rust", 50);
     assert_clean(&counters(c, "C consumer"), "C", 50);
-    let p = counters(producer, "producer");
+    let p = producer.stop();
     assert!(p["published"] > 500, "{p:?}");
 }
 
@@ -788,17 +848,25 @@ fn restarted_producer_is_picked_up_by_waiting_consumers() {
     let mut first = spawn_role("producer", &dir, "restart", 30.0, &[]);
     let mut reader = RingReader::open_wait(&loc, Some(euid()), Duration::from_secs(10)).unwrap();
     let g1 = reader.generation();
-    let c = spawn_c(&c_exe, &dir, "restart", 4.0);
-    let py = python().map(|py| spawn_py(py, &dir, "restart", 4.0, None));
-    // Let the consumers start (Python takes a while on a loaded machine) and attach.
-    std::thread::sleep(Duration::from_millis(1500));
+    // The consumers run until the second producer closes the ring (or 60 s pass).
+    let c_ready = tmp.path().join("c.ready");
+    let py_ready = tmp.path().join("py.ready");
+    let mut c = spawn_c(&c_exe, &dir, "restart", 60.0, Some(&c_ready));
+    let mut py = python().map(|py| spawn_py(py, &dir, "restart", 60.0, None, Some(&py_ready)));
+    // The crash must come after every consumer read a frame of the first producer (Python
+    // takes seconds to start on a loaded machine): else it would open the second producer's
+    // ring directly and never see a restart.
+    wait_ready(&mut c, &c_ready, "C consumer", Duration::from_secs(30));
+    if let Some(py) = &mut py {
+        wait_ready(py, &py_ready, "Python consumer", Duration::from_secs(30));
+    }
     first.kill().unwrap(); // crash: the segment stays, marked live, its lock gone
     let _ = first.wait();
     assert!(matches!(
         reader.wait_next(Duration::from_millis(500)).unwrap(),
         Next::Frame(_) | Next::Timeout
     ));
-    let second = spawn_role("producer", &dir, "restart", 2.0, &[]);
+    let second = spawn_role("producer", &dir, "restart", 3.0, &[]);
     let started = Instant::now();
     let mut restarted = false;
     while started.elapsed() < Duration::from_secs(10) {

@@ -3,7 +3,7 @@
  *
  *   cc -O2 -std=c11 -o ring_reader ring_reader.c
  *   ./ring_reader NAME [--dir D] [--owner USER|UID] [--seconds S] [--frames N] [--timeout-ms T]
- *                 [--verify] [--save OUT.ppm]
+ *                 [--verify] [--save OUT.ppm] [--ready FILE]
  *   ./ring_reader --layout          # prints the header's offsets and sizes (tests use it)
  *
  * Without --dir/--owner: $VKTERRAIN_RING_DIR (default /run/vkterrain) and $VKTERRAIN_RING_OWNER
@@ -12,6 +12,8 @@
  * Reads frames until S seconds pass, N frames arrived or the ring closes, then prints one line
  * of counters. --verify checks the test pattern of tests/ring.rs (frame number in bytes 0..8 and
  * CRC-32 of bytes 16.. in bytes 8..12). --save writes the last frame as a binary PPM (RGB).
+ * --ready creates FILE once the first frame has been read (a supervisor, or a test, knows the
+ * reader is attached).
  */
 #define _GNU_SOURCE
 #include "vkterrain_ring.h"
@@ -82,10 +84,10 @@ int main(int argc, char **argv) {
     if (argc >= 2 && strcmp(argv[1], "--layout") == 0) { print_layout(); return 0; }
     if (argc < 2) {
         fprintf(stderr, "usage: %s NAME [--dir D] [--owner USER|UID] [--seconds S] [--frames N] "
-                        "[--timeout-ms T] [--verify] [--save OUT.ppm] | --layout\n", argv[0]);
+                        "[--timeout-ms T] [--verify] [--save OUT.ppm] [--ready FILE] | --layout\n", argv[0]);
         return 2;
     }
-    const char *name = argv[1], *save = NULL, *dir = NULL, *owner_arg = NULL;
+    const char *name = argv[1], *save = NULL, *dir = NULL, *owner_arg = NULL, *ready = NULL;
     double seconds = 5.0;
     unsigned long long max_frames = 0;
     int timeout_ms = 5000, verify = 0;
@@ -95,6 +97,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--timeout-ms") && i + 1 < argc) timeout_ms = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--verify")) verify = 1;
         else if (!strcmp(argv[i], "--save") && i + 1 < argc) save = argv[++i];
+        else if (!strcmp(argv[i], "--ready") && i + 1 < argc) ready = argv[++i];
         else if (!strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
         else if (!strcmp(argv[i], "--owner") && i + 1 < argc) owner_arg = argv[++i];
         else { fprintf(stderr, "error: unknown argument %s\n", argv[i]); return 2; }
@@ -146,6 +149,13 @@ int main(int argc, char **argv) {
                        (uint32_t)rd64(buf + 8) != crc32_of(buf + 16, n - 16)))
             bad++;
         last_meta = m;
+        if (ready && !have) {
+            FILE *f = fopen(ready, "w");
+            if (!f || fclose(f) != 0) {
+                fprintf(stderr, "error: cannot create %s\n", ready);
+                return 1;
+            }
+        }
         have = 1;
         if (save) {
             uint8_t *k = realloc(keep, n);

@@ -413,6 +413,7 @@ def main(argv):
     p.add_argument("--timeout", type=float, default=5.0, help="open and wait timeout, seconds")
     p.add_argument("--verify", action="store_true", help="check the tests' content checksums")
     p.add_argument("--save", help="write the last frame as PNG")
+    p.add_argument("--ready", help="create this file once the first frame has been read")
     a = p.parse_args(argv)
     t0 = time.monotonic()
     while True:
@@ -449,6 +450,8 @@ def main(argv):
             prev = meta["frame"]
             if a.verify and not check_pattern(meta, pixels):
                 bad += 1
+            if a.ready and last is None:
+                open(a.ready, "w").close()
             last = (meta, pixels)
         if a.save and last is not None:
             RingReader.save_png(a.save, *last)

@@ -2,8 +2,8 @@
 //! helper, built for the integration tests; not part of the product). Every role prints one
 //! `key=value` line the tests parse. Usage: `vkterrain-test-roles ROLE [KEY=VALUE...]`.
 //!
-//! Roles: `producer dir= name= seconds= [side=64] [corrupt=1]` (publishes the test pattern as
-//! fast as it can), `consumer dir= name= seconds= [owner=]` (verifies every frame),
+//! Roles: `producer dir= name= seconds= [side=64] [corrupt=1] [stop=FILE]` (publishes the test
+//! pattern as fast as it can, for `seconds` or until FILE exists), `consumer dir= name= seconds= [owner=]` (verifies every frame),
 //! `race dir= name= at_ns= hold_ms=` (creates a ring at a `CLOCK_REALTIME` instant, reports
 //! whether it got it), `register sock= count= [prefix=]` (reports `count` consumers over the
 //! control socket, then waits for its stdin to close), `efbig path=` (writes a file past
@@ -76,7 +76,17 @@ fn producer(a: &BTreeMap<String, String>) {
         vfov_deg: 60.0,
         ..Default::default()
     };
+    let stop = a.get("stop").map(std::path::PathBuf::from);
+    let mut checked = Instant::now();
     while Instant::now() < end {
+        if let Some(stop) = &stop
+            && checked.elapsed() > Duration::from_millis(10)
+        {
+            if stop.exists() {
+                break;
+            }
+            checked = Instant::now();
+        }
         pattern(p.published(), &mut buf);
         if corrupt {
             buf[20] ^= 0xff;
