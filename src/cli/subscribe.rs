@@ -12,7 +12,7 @@ use zenoh::Wait;
 use crate::output::ring::sys::monotonic_ns;
 use crate::render::stats::Percentiles;
 use crate::service::ZenohSettings;
-use crate::service::zenoh::{Keys, open_session, parse_payload};
+use crate::service::zenoh::{Keys, Payload, open_session, parse_payload};
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct SubscribeArgs {
@@ -110,7 +110,7 @@ pub fn run(args: &SubscribeArgs) -> anyhow::Result<()> {
         let is_shm = payload.as_shm().is_some();
         let bytes = payload.to_bytes();
         match parse_payload(&bytes) {
-            Ok((meta, pixels, _depth)) => {
+            Ok(Payload { meta, pixels, .. }) => {
                 let now = monotonic_ns();
                 let lat_us = now.saturating_sub(meta.publish_ns) as f64 / 1e3;
                 latency.push(lat_us);

@@ -320,9 +320,18 @@ pub fn write_payload(out: &mut [u8], meta: &FrameMeta, rgba: &[u8], depth: Optio
     }
 }
 
+/// A frame payload split into its parts ([`parse_payload`]).
+pub struct Payload<'a> {
+    pub meta: FrameMeta,
+    /// `meta.row_stride * meta.height` bytes of RGBA8.
+    pub pixels: &'a [u8],
+    /// `width * height` little-endian f32 depths, when the service publishes depth.
+    pub depth: Option<&'a [u8]>,
+}
+
 /// Splits a frame payload into metadata, pixels and depth, checking every size against the
 /// metadata (a subscriber never trusts the network).
-pub fn parse_payload(bytes: &[u8]) -> Result<(FrameMeta, &[u8], Option<&[u8]>)> {
+pub fn parse_payload(bytes: &[u8]) -> Result<Payload<'_>> {
     let m = size_of::<FrameMeta>();
     let bad = |s: String| Error::invalid("zenoh frame", s);
     if bytes.len() < m {
@@ -346,8 +355,16 @@ pub fn parse_payload(bytes: &[u8]) -> Result<(FrameMeta, &[u8], Option<&[u8]>)> 
     let rest = bytes.len() - m;
     let depth_len = meta.width as usize * meta.height as usize * 4;
     match rest {
-        r if r == px => Ok((meta, &bytes[m..], None)),
-        r if r == px + depth_len => Ok((meta, &bytes[m..m + px], Some(&bytes[m + px..]))),
+        r if r == px => Ok(Payload {
+            meta,
+            pixels: &bytes[m..],
+            depth: None,
+        }),
+        r if r == px + depth_len => Ok(Payload {
+            meta,
+            pixels: &bytes[m..m + px],
+            depth: Some(&bytes[m + px..]),
+        }),
         r => Err(bad(format!(
             "{r} bytes after the metadata, expected {px} (or {} with depth)",
             px + depth_len
