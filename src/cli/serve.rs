@@ -245,8 +245,9 @@ impl FrameSink for Outputs<'_> {
 
 #[cfg(feature = "zenoh")]
 type Zenoh = crate::service::zenoh::ZenohBridge;
+/// Without the `zenoh` feature there is never a bridge (`start_zenoh` refuses to start one).
 #[cfg(not(feature = "zenoh"))]
-type Zenoh = ();
+struct Zenoh;
 
 fn start_zenoh(config: &crate::config::Config, ring: &str) -> anyhow::Result<Option<Zenoh>> {
     if !config.zenoh.enabled {
