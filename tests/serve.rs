@@ -2,6 +2,8 @@
 //! control channel is rejected message by message while rendering goes on, a resolution change
 //! starts a new ring generation, `vkterrain status` reports, and SIGTERM shuts down cleanly.
 
+mod common;
+
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -12,11 +14,9 @@ use vkterrain::output::ring::{Next, RingLocation, RingReader};
 
 /// Rings of these tests live in the temporary directory `dir` of each test (mode 0700).
 fn exe_in(dir: &Path) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_vkterrain"));
-    c.env("VKTERRAIN_VALIDATION", "1")
-        .env("VKTERRAIN_RING_DIR", dir)
-        .env("VKTERRAIN_RING_OWNER", euid().to_string())
-        .env_remove("VKTERRAIN_DEVICE");
+    let mut c = common::cli::command();
+    c.env("VKTERRAIN_RING_DIR", dir)
+        .env("VKTERRAIN_RING_OWNER", euid().to_string());
     c
 }
 
@@ -39,7 +39,7 @@ fn open_ring(dir: &Path, name: &str, timeout: Duration) -> RingReader {
 }
 
 fn ci_config() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("config/ci.toml")
+    common::cli::shipped_config("ci.toml")
 }
 
 fn wait_exit(mut child: Child, limit: Duration) -> Output {
@@ -412,14 +412,7 @@ fn serve_bad_input_is_one_line() {
     ];
     for (args, word) in cases {
         let o = exe().args(&args).output().unwrap();
-        let stderr = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(1), "{args:?}: {stderr}");
-        let lines: Vec<&str> = stderr.lines().collect();
-        assert_eq!(lines.len(), 1, "{args:?}: {stderr}");
-        assert!(
-            lines[0].starts_with("error: ") && lines[0].contains(word),
-            "{args:?}: {stderr}"
-        );
+        common::cli::assert_one_line_error(&o, &[word]);
     }
     assert_eq!(
         std::fs::read(&not_socket).unwrap(),

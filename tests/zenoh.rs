@@ -4,20 +4,20 @@
 //! control message is counted, not fatal; status answers as a queryable.
 #![cfg(feature = "zenoh")]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 fn exe(dir: &Path) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_vkterrain"));
-    c.env("VKTERRAIN_VALIDATION", "1")
-        .env("VKTERRAIN_RING_DIR", dir)
-        .env_remove("VKTERRAIN_DEVICE");
+    let mut c = common::cli::command();
+    c.env("VKTERRAIN_RING_DIR", dir);
     c
 }
 
 fn ci_config() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("config/ci.toml")
+    common::cli::shipped_config("ci.toml")
 }
 
 /// A free TCP port on 127.0.0.1 (bound and released: good enough on a test machine).
