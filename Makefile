@@ -15,7 +15,7 @@ CARGO ?= cargo
 SHARED ?= ../shared
 export VKTERRAIN_SHARED_DATA ?= $(abspath $(SHARED)/data)
 
-.PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap bench-preprocess bench-startup fuzz data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test
+.PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap bench-ring bench-ring-fuzz bench-preprocess bench-startup fuzz data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test
 
 # The main job: UDLOD through the chunked clipmap over the embedded procedural terrain (its tile
 # pyramid is generated once into target/data/default).
@@ -31,6 +31,14 @@ bench: deps
 # UDLOD vs brute force on the procedural, Puget Sound and SRTM data (../shared/data).
 bench-udlod: deps data-srtm
 	$(CARGO) bench --locked --bench udlod
+
+# The ring: copy vs zero-copy publishing, consumers, wake-up latency (docs/ring.md).
+bench-ring: deps
+	$(CARGO) bench --locked --bench ring
+
+# 10^6 hostile segments against the Rust ring reader (CI runs 3000 in tests/ring.rs).
+bench-ring-fuzz: deps
+	$(CARGO) bench --locked --bench ring_fuzz
 
 data: data-srtm data-pyrenees data-franconia
 
@@ -87,3 +95,4 @@ deps:
 
 deps-test:
 	@scripts/ensure-packages.sh $(TEST_PACKAGES)
+	@scripts/ensure-python.sh

@@ -1,9 +1,12 @@
-//! Shared-memory ring benchmark (no GPU): producer cost per frame (copy into the slot) at
-//! 1280x720 and 1920x1080 RGBA8, publish-to-wake-up latency (median/p99), and publishing
-//! throughput with 0 and 4 consumers attached. Consumers are threads with their own read-only
-//! mapping (the same code path as separate processes). Results also go to
-//! `target/bench/ring.json`. `VKTERRAIN_BENCH_SECONDS` sets the length of each throughput run
-//! (default 2).
+//! Shared-memory ring benchmark. Part 1 (no GPU): producer cost per frame (copy into the slot)
+//! at 1280x720 and 1920x1080 RGBA8, publish-to-wake-up latency (median/p99), and publishing
+//! throughput with 0 and 4 consumers attached. Part 2 (the Vulkan device, lavapipe in CI): the
+//! renderer publishing into the ring by copy and zero-copy (`VK_EXT_external_memory_host`, the
+//! GPU writes into the slot): publish cost on the host, frames/s and capture-to-consumer
+//! latency with 0 and 4 consumers. Consumers are threads with their own read-only mapping (the
+//! same code path as separate processes). Results also go to `target/bench/ring.json`.
+//! `VKTERRAIN_BENCH_SECONDS` sets the length of each run (default 2); `VKTERRAIN_BENCH_RENDER=0`
+//! skips part 2.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -11,17 +14,18 @@ use std::time::{Duration, Instant};
 
 use vkterrain::output::ring::sys::monotonic_ns;
 use vkterrain::output::ring::{
-    FrameMeta, Geometry, Next, ProducerOptions, RingProducer, RingReader,
+    FrameMeta, Geometry, Next, ProducerOptions, RingLocation, RingProducer, RingReader,
+    ZeroCopyRequest,
 };
 use vkterrain::render::stats::Percentiles;
 
 fn geometry(w: u32, h: u32) -> Geometry {
-    Geometry {
-        width: w,
-        height: h,
-        slot_count: 4,
-        depth: false,
-    }
+    Geometry::new(w, h, 4, false)
+}
+
+fn euid() -> u32 {
+    // SAFETY: no arguments.
+    unsafe { libc::geteuid() }
 }
 
 fn meta(g: Geometry) -> FrameMeta {
@@ -34,17 +38,17 @@ fn meta(g: Geometry) -> FrameMeta {
 
 /// Consumers that copy every frame they can get until `stop`.
 fn consumers(
-    name: &str,
+    name: &RingLocation,
     n: usize,
     copy: bool,
     stop: &Arc<AtomicBool>,
 ) -> Vec<std::thread::JoinHandle<u64>> {
     (0..n)
         .map(|_| {
-            let name = name.to_string();
+            let name = name.clone();
             let stop = stop.clone();
             std::thread::spawn(move || {
-                let mut r = RingReader::open(&name).unwrap();
+                let mut r = RingReader::open(&name, Some(euid())).unwrap();
                 r.copy_pixels = copy;
                 while !stop.load(Ordering::Relaxed) {
                     if r.wait_next(Duration::from_millis(50)).unwrap() == Next::Closed {
@@ -62,7 +66,8 @@ fn main() -> anyhow::Result<()> {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(2.0);
-    let name = format!("vkt-bench-{}", std::process::id());
+    let dir = std::path::PathBuf::from(format!("/dev/shm/vkt-bench-{}", std::process::id()));
+    let name = RingLocation::new(&dir, "bench")?;
     let mut json = serde_json::Map::new();
     println!(
         "{:<10} {:>9} {:>13} {:>13} {:>13} {:>12} {:>12}",
@@ -140,7 +145,7 @@ fn main() -> anyhow::Result<()> {
         let mut p = RingProducer::create(&name, g, &ProducerOptions::default())?;
         let reader_name = name.clone();
         let t = std::thread::spawn(move || {
-            let mut r = RingReader::open(&reader_name).unwrap();
+            let mut r = RingReader::open(&reader_name, Some(euid())).unwrap();
             r.copy_pixels = copy;
             let (mut wake, mut from_capture) = (Vec::new(), Vec::new());
             loop {
@@ -180,11 +185,152 @@ fn main() -> anyhow::Result<()> {
             serde_json::json!({"frames": n, "publish_to_return_us": wake, "capture_to_return_us": cap}),
         );
     }
+    if std::env::var("VKTERRAIN_BENCH_RENDER").as_deref() != Ok("0") {
+        render_part(seconds, &name, &mut json)?;
+    }
+    let _ = std::fs::remove_dir_all(&dir);
     let root = env!("CARGO_MANIFEST_DIR");
     std::fs::create_dir_all(format!("{root}/target/bench"))?;
     std::fs::write(
         format!("{root}/target/bench/ring.json"),
         serde_json::to_string_pretty(&json)?,
     )?;
+    Ok(())
+}
+
+/// A sink that publishes into the ring and times the host side of publishing.
+struct Timed<'a> {
+    ring: &'a mut RingProducer,
+    ms: Vec<f64>,
+}
+
+impl vkterrain::readback::FrameSink for Timed<'_> {
+    fn frame(&mut self, f: &vkterrain::readback::FrameView<'_>) -> vkterrain::Result<()> {
+        let t = Instant::now();
+        self.ring.frame(f)?;
+        self.ms.push(t.elapsed().as_secs_f64() * 1e3);
+        Ok(())
+    }
+    fn direct_target(&mut self, i: u64, b: u64) -> Option<vkterrain::readback::DirectTarget> {
+        self.ring.direct_target(i, b)
+    }
+}
+
+/// Part 2: the renderer (brute force over a small plane, so the frame is mostly clear, raster
+/// and readback) publishing by copy and zero-copy.
+fn render_part(
+    seconds: f64,
+    name: &RingLocation,
+    json: &mut serde_json::Map<String, serde_json::Value>,
+) -> anyhow::Result<()> {
+    use vkterrain::driver::{Gpu, GpuOptions};
+    use vkterrain::lod::MethodKind;
+    use vkterrain::render::{RenderOptions, Renderer};
+    use vkterrain::scene::Camera;
+    let gpu = Gpu::new(&GpuOptions::default().with_env())?;
+    let data = vkterrain::dataset::procedural::analytic::plane(65, 10.0, 0.0, 0.0, 0.0)?;
+    println!(
+        "\nrenderer -> ring on {} (brute force, 65x65 plane, 2 frames in flight, 4 slots)",
+        gpu.info.name
+    );
+    println!(
+        "{:<10} {:>10} {:>9} {:>14} {:>14} {:>10} {:>18}",
+        "size", "path", "consumers", "publish med", "publish p99", "frames/s", "capture->read med"
+    );
+    for (w, h) in [(1280u32, 720u32), (1920, 1080)] {
+        for zero_copy in [false, true] {
+            for n_consumers in [0usize, 4] {
+                let options = RenderOptions {
+                    width: w,
+                    height: h,
+                    frames_in_flight: 2,
+                    readback_depth: false,
+                    light: vkterrain::frame::Lighting {
+                        sun_dir: [0.0, 0.0, 1.0],
+                        sky: [0.2, 0.4, 0.8],
+                        haze_distance_m: 0.0,
+                    },
+                    views: 1,
+                };
+                let mut renderer = Renderer::new(&gpu, &data, MethodKind::Brute, options)?;
+                let popts = ProducerOptions {
+                    zero_copy: zero_copy.then(|| ZeroCopyRequest {
+                        gpu: gpu.clone(),
+                        frames_in_flight: 2,
+                    }),
+                    ..Default::default()
+                };
+                let mut ring = RingProducer::create(name, Geometry::new(w, h, 4, false), &popts)?;
+                let path = if ring.zero_copy() {
+                    "zero-copy"
+                } else {
+                    "copy"
+                };
+                if zero_copy && !ring.zero_copy() {
+                    println!("  zero-copy unavailable: {:?}", ring.zero_copy_note());
+                }
+                let stop = Arc::new(AtomicBool::new(false));
+                let lat: Vec<_> = (0..n_consumers)
+                    .map(|_| {
+                        let name = name.clone();
+                        let stop = stop.clone();
+                        std::thread::spawn(move || {
+                            let mut r = RingReader::open(&name, Some(euid())).unwrap();
+                            let mut lat = Vec::new();
+                            while !stop.load(Ordering::Relaxed) {
+                                if let Ok(Next::Frame(m)) = r.wait_next(Duration::from_millis(50)) {
+                                    lat.push((monotonic_ns() - m.capture_ns) as f64 / 1e3);
+                                }
+                            }
+                            lat
+                        })
+                    })
+                    .collect();
+                let mut sink = Timed {
+                    ring: &mut ring,
+                    ms: Vec::new(),
+                };
+                let camera = Camera {
+                    position: glam::DVec3::new(320.0, 320.0, 50.0),
+                    pitch_deg: -10.0,
+                    ..Camera::default()
+                };
+                for _ in 0..5 {
+                    renderer.render(camera, &mut sink)?;
+                }
+                renderer.finish(&mut sink)?;
+                sink.ms.clear();
+                let start = Instant::now();
+                let mut frames = 0u64;
+                while start.elapsed().as_secs_f64() < seconds {
+                    renderer.render(camera, &mut sink)?;
+                    frames += 1;
+                }
+                renderer.finish(&mut sink)?;
+                let fps = frames as f64 / start.elapsed().as_secs_f64();
+                let publish = Percentiles::of(std::mem::take(&mut sink.ms));
+                stop.store(true, Ordering::Relaxed);
+                let lat: Vec<f64> = lat.into_iter().flat_map(|t| t.join().unwrap()).collect();
+                let lat = Percentiles::of(lat);
+                println!(
+                    "{:<10} {:>10} {:>9} {:>11.3} ms {:>11.3} ms {:>10.1} {:>15.0} us",
+                    format!("{w}x{h}"),
+                    path,
+                    n_consumers,
+                    publish.median,
+                    publish.p99,
+                    fps,
+                    lat.median
+                );
+                json.insert(
+                    format!("render_{w}x{h}_{path}_consumers{n_consumers}"),
+                    serde_json::json!({"publish_ms": publish, "frames_per_s": fps,
+                        "capture_to_consumer_us": lat, "device": gpu.info.name}),
+                );
+                drop(renderer);
+                drop(ring);
+            }
+        }
+    }
     Ok(())
 }

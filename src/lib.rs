@@ -21,6 +21,8 @@ pub mod output;
 pub mod readback;
 pub mod render;
 pub mod scene;
+/// `serve`'s control channel and Zenoh side.
+pub mod service;
 pub mod slots;
 
 pub use error::{Error, Result};

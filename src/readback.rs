@@ -46,9 +46,46 @@ pub struct FrameView<'a> {
     pub triangles: u64,
 }
 
+/// A buffer the GPU copies a frame's colour into directly instead of the renderer's readback
+/// buffer (zero-copy sinks: a ring slot imported with `VK_EXT_external_memory_host`). The
+/// renderer then delivers that frame with [`FrameView::rgba`] borrowing this memory.
+#[derive(Clone, Copy, Debug)]
+pub struct DirectTarget {
+    /// A `TRANSFER_DST` buffer of at least the frame's `4 * width * height` bytes.
+    pub buffer: ash::vk::Buffer,
+    ptr: *const u8,
+    len: usize,
+}
+
+impl DirectTarget {
+    /// # Safety
+    /// `buffer`'s memory must be the host range `ptr..ptr + len`, and that range must stay
+    /// mapped until the frame it is handed out for has been delivered to the sink.
+    pub unsafe fn new(buffer: ash::vk::Buffer, ptr: *const u8, len: usize) -> Self {
+        DirectTarget { buffer, ptr, len }
+    }
+
+    /// The host view of the target (what the GPU wrote, once the frame is complete).
+    pub fn host_bytes(&self) -> &[u8] {
+        // SAFETY: valid while the frame is pending or being delivered (constructor contract).
+        unsafe { std::slice::from_raw_parts(self.ptr, self.len) }
+    }
+
+    pub fn host_ptr(&self) -> *const u8 {
+        self.ptr
+    }
+}
+
 /// Receives frames in order.
 pub trait FrameSink {
     fn frame(&mut self, frame: &FrameView<'_>) -> Result<()>;
+
+    /// Called once per frame, in frame order, before frame `index` (`bytes` colour bytes) is
+    /// recorded: a sink may return a buffer for the GPU to write the colour into directly
+    /// (zero-copy). Default: none, the frame comes from the renderer's readback buffer.
+    fn direct_target(&mut self, _index: u64, _bytes: u64) -> Option<DirectTarget> {
+        None
+    }
 }
 
 impl<F: FnMut(&FrameView<'_>) -> Result<()>> FrameSink for F {

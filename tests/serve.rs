@@ -2,23 +2,44 @@
 //! control channel is rejected message by message while rendering goes on, a resolution change
 //! starts a new ring generation, `vkterrain status` reports, and SIGTERM shuts down cleanly.
 
+mod common;
+
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use vkterrain::output::ring::layout::STATE_CLOSED;
-use vkterrain::output::ring::{Next, RingReader};
+use vkterrain::output::ring::{Next, RingLocation, RingReader};
 
-fn exe() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_vkterrain"));
-    c.env("VKTERRAIN_VALIDATION", "1")
-        .env_remove("VKTERRAIN_DEVICE");
+/// Rings of these tests live in the temporary directory `dir` of each test (mode 0700).
+fn exe_in(dir: &Path) -> Command {
+    let mut c = common::cli::command();
+    c.env("VKTERRAIN_RING_DIR", dir)
+        .env("VKTERRAIN_RING_OWNER", euid().to_string());
     c
 }
 
+fn exe() -> Command {
+    exe_in(Path::new("/nonexistent-ring-dir"))
+}
+
+fn euid() -> u32 {
+    // SAFETY: no arguments.
+    unsafe { libc::geteuid() }
+}
+
+fn open_ring(dir: &Path, name: &str, timeout: Duration) -> RingReader {
+    RingReader::open_wait(
+        &RingLocation::new(dir, name).unwrap(),
+        Some(euid()),
+        timeout,
+    )
+    .unwrap()
+}
+
 fn ci_config() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("config/ci.toml")
+    common::cli::shipped_config("ci.toml")
 }
 
 fn wait_exit(mut child: Child, limit: Duration) -> Output {
@@ -55,7 +76,7 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
     let name = format!("vkt-serve-{}", std::process::id());
     let sock_path = tmp.path().join("control.sock");
     let status_path = tmp.path().join("status.json");
-    let child = exe()
+    let child = exe_in(tmp.path())
         .arg("serve")
         .arg("--config")
         .arg(ci_config())
@@ -69,7 +90,7 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
         .spawn()
         .unwrap();
     let pid = child.id();
-    let mut r = RingReader::open_wait(&name, Duration::from_secs(60)).unwrap();
+    let mut r = open_ring(tmp.path(), &name, Duration::from_secs(60));
     let m = next_frame(&mut r);
     assert_eq!((m.width, m.height), (64, 64));
     assert!(m.triangles > 0 && m.fx > 0.0 && m.publish_ns >= m.capture_ns);
@@ -80,7 +101,7 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
     );
     {
         use std::os::unix::fs::PermissionsExt;
-        let mode = std::fs::metadata(Path::new("/dev/shm").join(&name))
+        let mode = std::fs::metadata(tmp.path().join(&name))
             .unwrap()
             .permissions()
             .mode();
@@ -200,7 +221,7 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
     assert_eq!(s["camera"], "control");
     assert_eq!(s["consumers"]["test-reader"], serde_json::json!([7, 2]));
     assert!(s["frames_rendered"].as_u64().unwrap() > 1);
-    let o = exe()
+    let o = exe_in(tmp.path())
         .args(["status", "--status-file"])
         .arg(&status_path)
         .args(["--ring", &name])
@@ -251,11 +272,16 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
         assert!(start.elapsed() < Duration::from_secs(10));
     }
     assert_eq!(r.state(), STATE_CLOSED);
-    assert!(
-        !Path::new("/dev/shm").join(&name).exists(),
-        "segment left behind"
-    );
+    assert!(!tmp.path().join(&name).exists(), "segment left behind");
     assert!(!sock_path.exists(), "control socket left behind");
+    assert!(
+        std::fs::read_dir(tmp.path()).unwrap().all(|e| !e
+            .unwrap()
+            .file_name()
+            .to_string_lossy()
+            .ends_with(".lock")),
+        "lock files left behind"
+    );
     assert_eq!(status_json(&status_path)["state"], "stopped");
 }
 
@@ -263,13 +289,14 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
 fn serve_frame_limit_keeps_segment_when_configured() {
     let tmp = tempfile::tempdir().unwrap();
     let name = format!("vkt-keep-{}", std::process::id());
+    let rings = tmp.path().join("rings");
     let config = tmp.path().join("keep.toml");
     std::fs::write(
         &config,
         format!(
             "[render]\nwidth = 32\nheight = 24\nreadback_depth = true\n\
              [dataset]\nkind = \"procedural\"\nsize = 129\n\
-             [ring]\nname = \"{name}\"\nslots = 3\nkeep_segment = true\n"
+             [ring]\nname = \"{name}\"\nslots = 3\nkeep_segment = true\ndir = \"rings\"\n"
         ),
     )
     .unwrap();
@@ -281,10 +308,10 @@ fn serve_frame_limit_keeps_segment_when_configured() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let seg = Path::new("/dev/shm").join(&name);
+    let seg = rings.join(&name);
     assert!(seg.exists(), "keep_segment = true but the segment is gone");
-    let mut r = RingReader::open(&name).unwrap();
-    let _cleanup = Unlink(seg);
+    let mut r = RingReader::open(&RingLocation::new(&rings, &name).unwrap(), Some(euid())).unwrap();
+    assert!(!r.producer_alive(), "the service exited");
     assert_eq!(r.state(), STATE_CLOSED);
     assert_eq!(
         r.latest(),
@@ -301,13 +328,6 @@ fn serve_frame_limit_keeps_segment_when_configured() {
     assert_eq!(r.wait_next(Duration::from_secs(1)).unwrap(), Next::Closed);
 }
 
-struct Unlink(PathBuf);
-impl Drop for Unlink {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-    }
-}
-
 #[test]
 fn serve_bad_input_is_one_line() {
     let tmp = tempfile::tempdir().unwrap();
@@ -317,6 +337,8 @@ fn serve_bad_input_is_one_line() {
     std::fs::write(&bad_key, "[service]\ncontrl = \"x\"\n").unwrap();
     let not_socket = tmp.path().join("file");
     std::fs::write(&not_socket, "x").unwrap();
+    let big = tmp.path().join("big.json");
+    std::fs::write(&big, vec![b' '; (1 << 20) + 10]).unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
             vec!["serve".into(), "--ring".into(), "../etc".into()],
@@ -351,6 +373,30 @@ fn serve_bad_input_is_one_line() {
             "not a socket",
         ),
         (vec!["status".into()], "--status-file"),
+        // A device is no status file: refused at once, never read without bound.
+        (
+            vec!["status".into(), "--status-file".into(), "/dev/zero".into()],
+            "not a regular file",
+        ),
+        (
+            vec![
+                "status".into(),
+                "--status-file".into(),
+                big.display().to_string(),
+            ],
+            "larger than",
+        ),
+        // And never replaced by a status file.
+        (
+            vec![
+                "serve".into(),
+                "--config".into(),
+                ci_config().display().to_string(),
+                "--status-file".into(),
+                "/dev/null".into(),
+            ],
+            "not a regular file",
+        ),
         (
             vec![
                 "status".into(),
@@ -366,14 +412,7 @@ fn serve_bad_input_is_one_line() {
     ];
     for (args, word) in cases {
         let o = exe().args(&args).output().unwrap();
-        let stderr = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(1), "{args:?}: {stderr}");
-        let lines: Vec<&str> = stderr.lines().collect();
-        assert_eq!(lines.len(), 1, "{args:?}: {stderr}");
-        assert!(
-            lines[0].starts_with("error: ") && lines[0].contains(word),
-            "{args:?}: {stderr}"
-        );
+        common::cli::assert_one_line_error(&o, &[word]);
     }
     assert_eq!(
         std::fs::read(&not_socket).unwrap(),
@@ -381,7 +420,7 @@ fn serve_bad_input_is_one_line() {
         "a non-socket was replaced"
     );
     assert!(
-        !Path::new("/dev/shm")
+        !Path::new("/nonexistent-ring-dir")
             .join(format!("vkt-badsock-{}", std::process::id()))
             .exists()
     );
@@ -406,6 +445,7 @@ fn serve_streams_through_the_clipmap_with_two_views() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let name = format!("vkt-clip-{}", std::process::id());
+    let rings = tmp.path().join("rings");
     let config = tmp.path().join("clip.toml");
     std::fs::write(
         &config,
@@ -414,7 +454,7 @@ fn serve_streams_through_the_clipmap_with_two_views() {
              [[render.extra_views]]\nyaw_deg = 180.0\n\
              [dataset]\nkind = \"tiles\"\npath = {:?}\n\
              [clipmap]\nenabled = true\natlas_capacity = 40\nnode_count = 4\n\
-             [ring]\nname = \"{name}\"\nslots = 3\nkeep_segment = true\n",
+             [ring]\nname = \"{name}\"\nslots = 3\nkeep_segment = true\ndir = \"rings\"\n",
             data.display().to_string()
         ),
     )
@@ -429,8 +469,6 @@ fn serve_streams_through_the_clipmap_with_two_views() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let seg = Path::new("/dev/shm").join(&name);
-    let _cleanup = Unlink(seg);
     let s = status_json(&status);
     assert_eq!(s["state"], "stopped");
     let c = &s["clipmap"];
@@ -439,7 +477,7 @@ fn serve_streams_through_the_clipmap_with_two_views() {
     assert!(c["resident_nodes"].as_u64().unwrap() <= 40, "{s}");
     assert_eq!(c["load_errors"], 0, "{s}");
     // The ring's frames hold both views side by side, terrain in each.
-    let mut r = RingReader::open(&name).unwrap();
+    let mut r = RingReader::open(&RingLocation::new(&rings, &name).unwrap(), Some(euid())).unwrap();
     let Next::Frame(m) = r.wait_next(Duration::from_secs(1)).unwrap() else {
         panic!("no frame in a kept ring");
     };
@@ -451,4 +489,263 @@ fn serve_streams_through_the_clipmap_with_two_views() {
             "no terrain in columns {half:?}"
         );
     }
+}
+
+fn spawn_serve(dir: &Path, name: &str, extra: &[&str]) -> Child {
+    exe_in(dir)
+        .arg("serve")
+        .arg("--config")
+        .arg(ci_config())
+        .args(["--width", "32", "--height", "32", "--ring", name])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+fn wait_status(
+    path: &Path,
+    what: &str,
+    ok: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let start = Instant::now();
+    loop {
+        if let Ok(text) = std::fs::read_to_string(path)
+            && let Ok(s) = serde_json::from_str::<serde_json::Value>(&text)
+            && ok(&s)
+        {
+            return s;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "{what}: {path:?}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn second_service_cannot_take_over_socket_status_or_ring() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sock = tmp.path().join("control.sock");
+    let status = tmp.path().join("status.json");
+    let (s, st) = (sock.display().to_string(), status.display().to_string());
+    let first = spawn_serve(
+        tmp.path(),
+        "first",
+        &["--control", &s, "--status-file", &st],
+    );
+    let mut r = open_ring(tmp.path(), "first", Duration::from_secs(60));
+    next_frame(&mut r);
+    wait_status(&status, "first status", |v| v["state"] == "running");
+    // A second service on the same socket, the same status file, or the same ring: refused
+    // with one line naming the owner; the first keeps its socket and its status.
+    for (args, what) in [
+        (vec!["--control", &s], "control socket"),
+        (vec!["--status-file", &st], "status file"),
+    ] {
+        let o = exe_in(tmp.path())
+            .arg("serve")
+            .arg("--config")
+            .arg(ci_config())
+            .args(["--ring", "second", "--frames", "2"])
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{what}: {err}");
+        assert!(
+            err.contains("in use by a live process") && err.lines().count() == 1,
+            "{what}: {err}"
+        );
+    }
+    let o = exe_in(tmp.path())
+        .arg("serve")
+        .arg("--config")
+        .arg(ci_config())
+        .args(["--ring", "first", "--frames", "2"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("in use by a live process"), "{err}");
+    // The first service still listens: a pose sent now is rendered.
+    let c = UnixDatagram::unbound().unwrap();
+    c.send_to(
+        br#"{"pose":{"position":[100,200,900],"yaw_deg":10,"pitch_deg":-20},"fov_deg":33}"#,
+        &sock,
+    )
+    .unwrap();
+    let start = Instant::now();
+    while next_frame(&mut r).vfov_deg != 33.0 {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the first service went deaf"
+        );
+    }
+    // Negative control: once the owner is gone (killed: its socket, lock files, status and
+    // ring stay behind), the same paths are free.
+    let mut first = first;
+    first.kill().unwrap();
+    let _ = first.wait();
+    assert!(sock.exists() && tmp.path().join("first").exists());
+    let o = exe_in(tmp.path())
+        .arg("serve")
+        .arg("--config")
+        .arg(ci_config())
+        .args([
+            "--width", "32", "--height", "32", "--ring", "first", "--frames", "2",
+        ])
+        .args(["--control", &s, "--status-file", &st])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+fn roles() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_vkterrain-test-roles"))
+}
+
+#[test]
+fn dead_consumers_give_their_slots_back_and_status_sees_stale_rings() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sock = tmp.path().join("control.sock");
+    let status = tmp.path().join("status.json");
+    let (s, st) = (sock.display().to_string(), status.display().to_string());
+    let serve = spawn_serve(
+        tmp.path(),
+        "reclaim",
+        &["--control", &s, "--status-file", &st],
+    );
+    let mut r = open_ring(tmp.path(), "reclaim", Duration::from_secs(60));
+    next_frame(&mut r);
+    // A live process fills all 64 consumer entries: the next registration is rejected.
+    let mut filler = roles()
+        .args(["register", &format!("sock={s}"), "count=64"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    use std::io::BufRead;
+    std::io::BufReader::new(filler.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert!(line.contains("sent=64"), "{line}");
+    wait_status(&status, "64 consumers", |v| {
+        v["consumers"].as_object().is_some_and(|c| c.len() == 64)
+    });
+    let c = UnixDatagram::unbound().unwrap();
+    let mine = br#"{"consumer":{"name":"late","received":5,"lost":1}}"#;
+    c.send_to(mine, &sock).unwrap();
+    let v = wait_status(&status, "rejected registration", |v| {
+        v["control_rejected"].as_u64() == Some(1)
+    });
+    assert!(v["consumers"].get("late").is_none(), "{v}");
+    // The filler exits: its entries are reclaimed and the same registration is accepted.
+    drop(filler.stdin.take());
+    filler.wait().unwrap();
+    c.send_to(mine, &sock).unwrap();
+    let v = wait_status(&status, "reclaimed", |v| {
+        v["consumers"].get("late").is_some()
+    });
+    assert_eq!(v["consumers"]["late"], serde_json::json!([5, 1]));
+    assert_eq!(v["consumers"].as_object().unwrap().len(), 1, "{v}");
+
+    // A killed service leaves its ring "live" in the state word; `status` says stale.
+    let mut serve = serve;
+    serve.kill().unwrap();
+    let _ = serve.wait();
+    let o = exe_in(tmp.path())
+        .args(["status", "--ring", "reclaim"])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.contains("stale (its producer is gone)"), "{out}");
+    let o = exe_in(tmp.path())
+        .args(["status", "--status-file", &st])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("dead (process gone"), "{out}");
+}
+
+#[test]
+fn failed_status_write_leaves_no_temporary_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let target = tmp.path().join("status.json");
+    // RLIMIT_FSIZE stands in for a full disk: the write fails part way.
+    let o = roles()
+        .args(["efbig", &format!("path={}", target.display())])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("failed=1"), "{out}");
+    let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+#[test]
+fn serve_publishes_zero_copy_where_the_device_can() {
+    // lavapipe (CI) offers VK_EXT_external_memory_host: the GPU writes into the ring slots.
+    let tmp = tempfile::tempdir().unwrap();
+    let status = tmp.path().join("status.json");
+    let config = tmp.path().join("zc.toml");
+    std::fs::write(
+        &config,
+        "[render]\nwidth = 48\nheight = 32\nframes_in_flight = 2\n[dataset]\nkind = \"procedural\"\nsize = 129\n\
+         [ring]\nname = \"zc\"\nslots = 3\nkeep_segment = true\n",
+    )
+    .unwrap();
+    let o = exe_in(tmp.path())
+        .arg("serve")
+        .arg("--config")
+        .arg(&config)
+        .args(["--frames", "8", "--status-file"])
+        .arg(&status)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = status_json(&status);
+    let info = exe().arg("info").output().unwrap();
+    let offered = String::from_utf8_lossy(&info.stdout)
+        .lines()
+        .any(|l| l.contains("external memory host") && l.contains("yes /"));
+    assert_eq!(s["zero_copy"].as_bool(), Some(offered), "{s}");
+    let mut r =
+        RingReader::open(&RingLocation::new(tmp.path(), "zc").unwrap(), Some(euid())).unwrap();
+    let Next::Frame(m) = r.wait_next(Duration::from_secs(1)).unwrap() else {
+        panic!("no frame");
+    };
+    assert_eq!((m.frame, m.width, m.height), (7, 48, 32));
+    let px = r.pixels();
+    assert!(px.chunks(4).any(|p| p != &px[..4]), "an empty frame");
+    // Fallback: with as many slots as frames in flight zero-copy is refused and says why;
+    // frames are copied instead.
+    std::fs::write(
+        &config,
+        "[render]\nwidth = 48\nheight = 32\nframes_in_flight = 2\n[dataset]\nkind = \"procedural\"\nsize = 129\n\
+         [ring]\nname = \"zc2\"\nslots = 2\n",
+    )
+    .unwrap();
+    let o = exe_in(tmp.path())
+        .arg("serve")
+        .arg("--config")
+        .arg(&config)
+        .args(["--frames", "4", "--status-file"])
+        .arg(&status)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = status_json(&status);
+    assert_eq!(s["zero_copy"].as_bool(), Some(false), "{s}");
+    if offered {
+        assert!(
+            s["zero_copy_note"].as_str().unwrap().contains("more slots"),
+            "{s}"
+        );
+    }
+    assert_eq!(s["frames_rendered"], 4);
 }

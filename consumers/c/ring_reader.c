@@ -2,12 +2,18 @@
  * ring_reader: example consumer of a vkterrain ring, in C with vkterrain_ring.h.
  *
  *   cc -O2 -std=c11 -o ring_reader ring_reader.c
- *   ./ring_reader NAME [--seconds S] [--frames N] [--timeout-ms T] [--verify] [--save OUT.ppm]
+ *   ./ring_reader NAME [--dir D] [--owner USER|UID] [--seconds S] [--frames N] [--timeout-ms T]
+ *                 [--verify] [--save OUT.ppm] [--ready FILE]
  *   ./ring_reader --layout          # prints the header's offsets and sizes (tests use it)
+ *
+ * Without --dir/--owner: $VKTERRAIN_RING_DIR (default /run/vkterrain) and $VKTERRAIN_RING_OWNER
+ * (default: the owner of the directory, if nobody else can write it).
  *
  * Reads frames until S seconds pass, N frames arrived or the ring closes, then prints one line
  * of counters. --verify checks the test pattern of tests/ring.rs (frame number in bytes 0..8 and
  * CRC-32 of bytes 16.. in bytes 8..12). --save writes the last frame as a binary PPM (RGB).
+ * --ready creates FILE once the first frame has been read (a supervisor, or a test, knows the
+ * reader is attached).
  */
 #define _GNU_SOURCE
 #include "vkterrain_ring.h"
@@ -47,7 +53,7 @@ static void print_layout(void) {
     OFF(vkt_ring_header, slot_count); OFF(vkt_ring_header, depth_format);
     OFF(vkt_ring_header, slot_size); OFF(vkt_ring_header, pixels_offset);
     OFF(vkt_ring_header, depth_offset); OFF(vkt_ring_header, producer_pid);
-    OFF(vkt_ring_header, latest); OFF(vkt_ring_header, state);
+    OFF(vkt_ring_header, latest); OFF(vkt_ring_header, state); OFF(vkt_ring_header, flags);
     OFF(vkt_ring_header, wake); OFF(vkt_ring_header, published);
     printf("vkt_slot_header.size %zu\n", sizeof(vkt_slot_header));
     OFF(vkt_slot_header, seq); OFF(vkt_slot_header, meta);
@@ -77,11 +83,11 @@ static int save_ppm(const char *path, const uint8_t *rgba, uint32_t w, uint32_t 
 int main(int argc, char **argv) {
     if (argc >= 2 && strcmp(argv[1], "--layout") == 0) { print_layout(); return 0; }
     if (argc < 2) {
-        fprintf(stderr, "usage: %s NAME [--seconds S] [--frames N] [--timeout-ms T] [--verify] "
-                        "[--save OUT.ppm] | --layout\n", argv[0]);
+        fprintf(stderr, "usage: %s NAME [--dir D] [--owner USER|UID] [--seconds S] [--frames N] "
+                        "[--timeout-ms T] [--verify] [--save OUT.ppm] [--ready FILE] | --layout\n", argv[0]);
         return 2;
     }
-    const char *name = argv[1], *save = NULL;
+    const char *name = argv[1], *save = NULL, *dir = NULL, *owner_arg = NULL, *ready = NULL;
     double seconds = 5.0;
     unsigned long long max_frames = 0;
     int timeout_ms = 5000, verify = 0;
@@ -91,12 +97,23 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--timeout-ms") && i + 1 < argc) timeout_ms = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--verify")) verify = 1;
         else if (!strcmp(argv[i], "--save") && i + 1 < argc) save = argv[++i];
+        else if (!strcmp(argv[i], "--ready") && i + 1 < argc) ready = argv[++i];
+        else if (!strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
+        else if (!strcmp(argv[i], "--owner") && i + 1 < argc) owner_arg = argv[++i];
         else { fprintf(stderr, "error: unknown argument %s\n", argv[i]); return 2; }
     }
     crc_init();
+    if (dir) setenv("VKTERRAIN_RING_DIR", dir, 1);
+    if (owner_arg) setenv("VKTERRAIN_RING_OWNER", owner_arg, 1);
     vkt_ring r;
     uint64_t t_open = vkt__now_ms();
     while (vkt_ring_open(&r, name) != 0) {
+        if (errno == EPERM || errno == EPROTO) { /* not a ring we trust: no point in waiting */
+            fprintf(stderr, "error: refusing ring %s: %s\n", name,
+                    errno == EPERM ? "not owned by the expected user, or writable by others"
+                                   : "invalid header");
+            return 1;
+        }
         if (vkt__now_ms() - t_open > (uint64_t)timeout_ms) {
             fprintf(stderr, "error: cannot open ring %s: %s\n", name, strerror(errno));
             return 1;
@@ -132,6 +149,13 @@ int main(int argc, char **argv) {
                        (uint32_t)rd64(buf + 8) != crc32_of(buf + 16, n - 16)))
             bad++;
         last_meta = m;
+        if (ready && !have) {
+            FILE *f = fopen(ready, "w");
+            if (!f || fclose(f) != 0) {
+                fprintf(stderr, "error: cannot create %s\n", ready);
+                return 1;
+            }
+        }
         have = 1;
         if (save) {
             uint8_t *k = realloc(keep, n);
@@ -145,9 +169,10 @@ int main(int argc, char **argv) {
         return 1;
     }
     printf("received=%llu lost=%llu gaps=%llu bad=%llu nonincreasing=%llu torn_retries=%llu "
-           "restarts=%llu closed=%d\n",
+           "restarts=%llu bad_slots=%llu closed=%d\n",
            (unsigned long long)r.received, (unsigned long long)r.lost, gaps, bad, nonincreasing,
-           (unsigned long long)r.torn_retries, (unsigned long long)r.restarts, closed);
+           (unsigned long long)r.torn_retries, (unsigned long long)r.restarts,
+           (unsigned long long)r.bad_slots, closed);
     vkt_ring_close(&r);
     free(buf);
     free(keep);

@@ -1,13 +1,20 @@
 /*
- * vkterrain_ring.h: read frames from a vkterrain shared-memory ring (layout version 1).
- * Single header, C11, Linux. See docs/ring.md for the protocol; a test compiles this file
- * and checks every offset below against the Rust layout (src/output/ring/layout.rs).
+ * vkterrain_ring.h: read frames from a vkterrain shared-memory ring (layout version 2).
+ * Single header, C11, Linux. See docs/ring.md for the protocol and the threat model; a test
+ * compiles this file and checks every offset below against the Rust layout
+ * (src/output/ring/layout.rs). Define _GNU_SOURCE before including it.
  *
  *   vkt_ring r;
- *   if (vkt_ring_open(&r, "vkterrain") != 0) ...;          // read-only mapping
+ *   if (vkt_ring_open(&r, "vkterrain") != 0) ...;          // $VKTERRAIN_RING_DIR or /run/vkterrain
  *   vkt_frame_meta m;
  *   int ev = vkt_ring_wait_next(&r, 1000, &m, buf, bufsize); // VKT_FRAME, VKT_TIMEOUT, ...
  *   vkt_ring_close(&r);
+ *
+ * Trust: a ring is accepted only if it is a regular file owned by the expected user (given, or
+ * $VKTERRAIN_RING_OWNER, or else the owner of a ring directory that nobody else can write) that
+ * nobody else may write. Every header field is checked against the mapped size once, at open;
+ * the checked copy in vkt_ring is all that is used afterwards, and every slot's metadata is
+ * checked against it before a frame is returned.
  *
  * Seqlock: a slot's `seq` is 2*frame+1 while the producer writes it and 2*frame+2 once complete.
  * A reader loads seq (acquire), copies, issues an acquire fence and re-loads seq; the copy is
@@ -19,9 +26,12 @@
 #include <stdint.h>
 #include <stddef.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <limits.h>
+#include <pwd.h>
 #include <time.h>
 #include <unistd.h>
 #include <stdatomic.h>
@@ -30,8 +40,14 @@
 #include <sys/syscall.h>
 #include <linux/futex.h>
 
+#ifndef F_OFD_GETLK
+#define F_OFD_GETLK 36
+#endif
+
 #define VKT_MAGIC 0x31474E4952544B56ull /* "VKTRING1" little-endian */
-#define VKT_LAYOUT_VERSION 1u
+#define VKT_LAYOUT_VERSION 2u
+#define VKT_FLAG_ZERO_COPY 1u
+#define VKT_DEFAULT_DIR "/run/vkterrain"
 #define VKT_FORMAT_RGBA8_SRGB 1u
 #define VKT_DEPTH_NONE 0u
 #define VKT_DEPTH_F32_REVERSED_Z 1u
@@ -44,7 +60,7 @@ typedef struct vkt_ring_header {
     /* line 0: written once before the segment gets its name */
     uint64_t magic;            /*   0 */
     uint32_t layout_version;   /*   8 */
-    uint32_t header_size;      /*  12 */
+    uint32_t header_size;      /*  12: where slot 0 starts */
     uint64_t generation;       /*  16 */
     uint32_t width;            /*  24 */
     uint32_t height;           /*  28 */
@@ -55,11 +71,12 @@ typedef struct vkt_ring_header {
     uint32_t slot_size;        /*  48 */
     uint32_t pixels_offset;    /*  52 */
     uint32_t depth_offset;     /*  56 */
-    uint32_t producer_pid;     /*  60 */
+    uint32_t producer_pid;     /*  60: informational; liveness is the producer's lock */
     /* line 1 */
     _Atomic uint64_t latest;   /*  64: newest published frame, VKT_NO_FRAME before the first */
     _Atomic uint32_t state;    /*  72 */
-    uint8_t _pad1[52];
+    uint32_t flags;            /*  76: VKT_FLAG_ZERO_COPY */
+    uint8_t _pad1[48];
     /* line 2 */
     _Atomic uint32_t wake;     /* 128: futex word, +1 per publish and on close */
     uint8_t _pad2[60];
@@ -111,7 +128,12 @@ typedef struct vkt_ring {
     size_t size;
     uint64_t generation;
     uint64_t last;        /* last frame returned, VKT_NO_FRAME before the first */
-    uint64_t received, lost, torn_retries, restarts;
+    uint64_t received, lost, torn_retries, restarts, bad_slots;
+    /* The checked header (never re-read from the segment after open). */
+    uint32_t width, height, row_stride, slot_count, depth_format, flags;
+    uint64_t header_size, slot_size, pixels_offset, depth_offset, pixel_bytes;
+    uid_t owner;
+    char dir[PATH_MAX];
 } vkt_ring;
 
 static inline const vkt_ring_header *vkt_header(const vkt_ring *r) {
@@ -130,37 +152,102 @@ static inline int vkt__name_ok(const char *name) {
     return 1;
 }
 
-/* Opens /dev/shm/<name> read-only and checks the header. 0 on success, -1 with errno set. */
-static inline int vkt_ring_open(vkt_ring *r, const char *name) {
+/* Checks the constant line of a header against a segment of `mapped` bytes and stores the
+ * checked values in `r`. 0 on success; -1 (errno EPROTO) if any field does not fit. */
+static inline int vkt__check_header(const vkt_ring_header *h, uint64_t mapped, vkt_ring *r) {
+    uint64_t w = h->width, ht = h->height, px = (uint64_t)h->row_stride * ht;
+    uint64_t hs = h->header_size, ss = h->slot_size, po = h->pixels_offset, dof = h->depth_offset;
+    int ok = h->magic == VKT_MAGIC && h->layout_version == VKT_LAYOUT_VERSION &&
+             hs >= sizeof(vkt_ring_header) && hs % 64 == 0 && hs <= 65536 &&
+             w >= 1 && w <= 16384 && ht >= 1 && ht <= 16384 &&
+             h->pixel_format == VKT_FORMAT_RGBA8_SRGB && (uint64_t)h->row_stride == 4 * w &&
+             h->slot_count >= 2 && h->slot_count <= 64 &&
+             (h->depth_format == VKT_DEPTH_NONE || h->depth_format == VKT_DEPTH_F32_REVERSED_Z) &&
+             ss % 64 == 0 && po >= sizeof(vkt_slot_header) && po % 64 == 0 && po + px <= ss;
+    if (ok && h->depth_format == VKT_DEPTH_F32_REVERSED_Z)
+        ok = dof % 64 == 0 && dof >= po + px && dof + w * ht * 4 <= ss;
+    else if (ok)
+        ok = dof == 0;
+    if (ok) ok = hs + ss * h->slot_count <= mapped;
+    if (!ok) { errno = EPROTO; return -1; }
+    r->width = h->width; r->height = h->height; r->row_stride = h->row_stride;
+    r->slot_count = h->slot_count; r->depth_format = h->depth_format; r->flags = h->flags;
+    r->header_size = hs; r->slot_size = ss; r->pixels_offset = po; r->depth_offset = dof;
+    r->pixel_bytes = px; r->generation = h->generation;
+    return 0;
+}
+
+/* Whose rings to accept in `dir` when no owner is given: the directory's owner, if neither it
+ * nor any directory above it can be written by anyone but root and that owner. -1 otherwise. */
+static inline int vkt__dir_owner(const char *dir, uid_t *owner) {
+    char path[PATH_MAX];
+    struct stat st;
+    if (!realpath(dir, path) || stat(path, &st) != 0) return -1;
+    *owner = st.st_uid;
+    for (;;) {
+        if (stat(path, &st) != 0) return -1;
+        if ((st.st_uid != 0 && st.st_uid != *owner) || (st.st_mode & 022)) { errno = EPERM; return -1; }
+        char *slash = strrchr(path, '/');
+        if (!slash || slash == path) {
+            if (strcmp(path, "/") == 0) return 0;
+            path[1] = '\0';
+            continue;
+        }
+        *slash = '\0';
+    }
+}
+
+/* Opens <dir>/<name> read-only and checks it: owned by `owner` ((uid_t)-1: the owner of a ring
+ * directory nobody else can write), not writable by group or others, every header field inside
+ * the mapping. 0 on success, -1 with errno set (EPERM: not trusted, EPROTO: bad header). */
+static inline int vkt_ring_open_at(vkt_ring *r, const char *dir, const char *name, uid_t owner) {
     memset(r, 0, sizeof *r);
     r->fd = -1;
     r->last = VKT_NO_FRAME;
-    if (!vkt__name_ok(name)) { errno = EINVAL; return -1; }
+    if (!vkt__name_ok(name) || strlen(dir) + strlen(name) + 2 > PATH_MAX) { errno = EINVAL; return -1; }
+    if (owner == (uid_t)-1 && vkt__dir_owner(dir, &owner) != 0) return -1;
     strcpy(r->name, name);
-    char path[260];
-    path[0] = '/';
-    strcpy(path + 1, name);
-    int fd = shm_open(path, O_RDONLY | O_CLOEXEC, 0);
+    strcpy(r->dir, dir);
+    r->owner = owner;
+    char path[PATH_MAX + 256];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    int fd = open(path, O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
     if (fd < 0) return -1;
     struct stat st;
-    if (fstat(fd, &st) != 0 || (size_t)st.st_size < sizeof(vkt_ring_header)) {
-        close(fd); errno = EPROTO; return -1;
+    if (fstat(fd, &st) != 0) { close(fd); return -1; }
+    if (!S_ISREG(st.st_mode) || st.st_uid != owner || (st.st_mode & 022)) {
+        close(fd); errno = EPERM; return -1;
     }
+    if ((size_t)st.st_size < sizeof(vkt_ring_header)) { close(fd); errno = EPROTO; return -1; }
     void *p = mmap(NULL, (size_t)st.st_size, PROT_READ, MAP_SHARED, fd, 0);
     if (p == MAP_FAILED) { close(fd); return -1; }
-    const vkt_ring_header *h = (const vkt_ring_header *)p;
-    uint64_t need = (uint64_t)h->header_size + (uint64_t)h->slot_size * h->slot_count;
-    if (h->magic != VKT_MAGIC || h->layout_version != VKT_LAYOUT_VERSION ||
-        h->header_size != sizeof(vkt_ring_header) || h->slot_count == 0 ||
-        need > (uint64_t)st.st_size ||
-        h->pixels_offset + (uint64_t)h->row_stride * h->height > h->slot_size) {
+    if (vkt__check_header((const vkt_ring_header *)p, (uint64_t)st.st_size, r) != 0) {
         munmap(p, (size_t)st.st_size); close(fd); errno = EPROTO; return -1;
     }
     r->fd = fd;
     r->base = (const uint8_t *)p;
     r->size = (size_t)st.st_size;
-    r->generation = h->generation;
     return 0;
+}
+
+/* Opens `name` in $VKTERRAIN_RING_DIR (default /run/vkterrain), owned by $VKTERRAIN_RING_OWNER
+ * (a user name or uid; default: the directory's owner, see vkt_ring_open_at). */
+static inline int vkt_ring_open(vkt_ring *r, const char *name) {
+    const char *dir = getenv("VKTERRAIN_RING_DIR");
+    const char *who = getenv("VKTERRAIN_RING_OWNER");
+    uid_t owner = (uid_t)-1;
+    if (!dir || !*dir) dir = VKT_DEFAULT_DIR;
+    if (who && *who) {
+        char *end;
+        unsigned long v = strtoul(who, &end, 10);
+        if (*end == '\0') owner = (uid_t)v;
+        else {
+            struct passwd *pw = getpwnam(who);
+            if (!pw) { errno = EINVAL; return -1; }
+            owner = pw->pw_uid;
+        }
+    }
+    return vkt_ring_open_at(r, dir, name, owner);
 }
 
 static inline void vkt_ring_close(vkt_ring *r) {
@@ -171,16 +258,27 @@ static inline void vkt_ring_close(vkt_ring *r) {
 }
 
 static inline size_t vkt_ring_pixel_bytes(const vkt_ring *r) {
-    return (size_t)vkt_header(r)->row_stride * vkt_header(r)->height;
+    return (size_t)r->pixel_bytes;
+}
+
+/* Whether a producer process holds the segment (its lock; a crashed producer's segment still
+ * says "live" in its state word). 1 alive, 0 not, -1 error. */
+static inline int vkt_ring_producer_alive(const vkt_ring *r) {
+    struct flock fl;
+    memset(&fl, 0, sizeof fl);
+    fl.l_type = F_RDLCK;
+    fl.l_whence = SEEK_SET;
+    if (fcntl(r->fd, F_OFD_GETLK, &fl) != 0) return -1;
+    return fl.l_type == F_WRLCK;
 }
 
 static inline const vkt_slot_header *vkt__slot(const vkt_ring *r, uint64_t frame) {
-    const vkt_ring_header *h = vkt_header(r);
-    return (const vkt_slot_header *)(r->base + h->header_size +
-                                     (size_t)(frame % h->slot_count) * h->slot_size);
+    return (const vkt_slot_header *)(r->base + r->header_size +
+                                     (size_t)(frame % r->slot_count) * r->slot_size);
 }
 
-/* Seqlock copy of the slot holding `frame`: 1 ok, 0 torn/being written, -1 empty. */
+/* Seqlock copy of the slot holding `frame`: 1 ok, 0 torn/being written, -1 empty, 2 the slot's
+ * metadata disagrees with the header (never returned as a frame). */
 static inline int vkt__read_slot(const vkt_ring *r, uint64_t frame, vkt_frame_meta *meta,
                                  void *pixels, size_t cap) {
     const vkt_slot_header *s = vkt__slot(r, frame);
@@ -190,31 +288,34 @@ static inline int vkt__read_slot(const vkt_ring *r, uint64_t frame, vkt_frame_me
     memcpy(meta, (const void *)&s->meta, sizeof *meta);
     size_t n = vkt_ring_pixel_bytes(r);
     if (pixels && cap >= n)
-        memcpy(pixels, (const uint8_t *)s + vkt_header(r)->pixels_offset, n);
+        memcpy(pixels, (const uint8_t *)s + r->pixels_offset, n);
     atomic_thread_fence(memory_order_acquire);
     uint64_t s2 = atomic_load_explicit(&s->seq, memory_order_relaxed);
-    return (s1 == s2 && meta->frame == (s1 - 2) / 2) ? 1 : 0;
+    if (s1 != s2 || meta->frame != (s1 - 2) / 2) return 0;
+    if (meta->width != r->width || meta->height != r->height || meta->row_stride != r->row_stride)
+        return 2;
+    return 1;
 }
 
-/* Whether /dev/shm/<name> now names a different segment; if so, re-open it (1). */
+/* Whether <dir>/<name> now names a different segment; if so, re-open it (1). */
 static inline int vkt__try_reopen(vkt_ring *r) {
-    char path[270];
-    snprintf(path, sizeof path, "/dev/shm/%s", r->name);
+    char path[PATH_MAX + 256];
+    snprintf(path, sizeof path, "%s/%s", r->dir, r->name);
     struct stat a, b;
-    if (fstat(r->fd, &a) != 0 || stat(path, &b) != 0) return 0;
+    if (fstat(r->fd, &a) != 0 || lstat(path, &b) != 0) return 0;
     if (a.st_ino == b.st_ino && a.st_dev == b.st_dev) return 0;
     vkt_ring fresh;
-    if (vkt_ring_open(&fresh, r->name) != 0) return 0;
+    if (vkt_ring_open_at(&fresh, r->dir, r->name, r->owner) != 0) return 0;
     if (fresh.generation == r->generation) { vkt_ring_close(&fresh); return 0; }
     fresh.received = r->received;
     fresh.lost = r->lost;
     fresh.torn_retries = r->torn_retries;
+    fresh.bad_slots = r->bad_slots;
     fresh.restarts = r->restarts + 1;
     vkt_ring_close(r);
     *r = fresh;
     return 1;
 }
-
 static inline uint64_t vkt__now_ms(void) {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -227,6 +328,7 @@ static inline uint64_t vkt__now_ms(void) {
 static inline int vkt_ring_wait_next(vkt_ring *r, int timeout_ms, vkt_frame_meta *meta,
                                      void *pixels, size_t cap) {
     uint64_t deadline = vkt__now_ms() + (uint64_t)(timeout_ms < 0 ? 0 : timeout_ms);
+    uint64_t torn = 0;
     for (;;) {
         const vkt_ring_header *h = vkt_header(r);
         uint32_t wake = atomic_load_explicit(&h->wake, memory_order_acquire);
@@ -239,7 +341,15 @@ static inline int vkt_ring_wait_next(vkt_ring *r, int timeout_ms, vkt_frame_meta
                 r->received++;
                 return VKT_FRAME;
             }
-            if (ok == 0) { r->torn_retries++; continue; }
+            if (ok == 0) {
+                /* Being written or overwritten: retry, never past the deadline (a slot a
+                 * crashed or hostile producer left odd stays odd). */
+                r->torn_retries++;
+                if (vkt__now_ms() >= deadline) return VKT_TIMEOUT;
+                if (++torn % 64 == 0) usleep(100);
+                continue;
+            }
+            if (ok == 2) { r->bad_slots++; r->last = latest; }
         }
         uint32_t state = atomic_load_explicit(&h->state, memory_order_acquire);
         uint64_t now = vkt__now_ms();

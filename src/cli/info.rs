@@ -149,8 +149,8 @@ pub fn describe(gpu: &Gpu) -> String {
         (
             "external memory host",
             c.external_memory_host,
-            false,
-            "could map readback into shared memory",
+            e.external_memory_host,
+            "zero-copy ring publishing (GPU writes into the ring slot)",
         ),
         ("BC / ETC2 / ASTC", c.texture_compression_bc, false, ""),
     ];

@@ -1,4 +1,5 @@
-//! The `vkterrain` command line: `info`, `render`, `bench`, `preprocess`, `serve` and `status`.
+//! The `vkterrain` command line: `info`, `render`, `bench`, `preprocess`, `serve`, `status`
+//! and (with Zenoh) `subscribe`.
 
 pub mod bench;
 pub mod eval;
@@ -6,6 +7,8 @@ pub mod info;
 pub mod preprocess;
 pub mod render;
 pub mod serve;
+#[cfg(feature = "zenoh")]
+pub mod subscribe;
 
 use std::path::PathBuf;
 
@@ -46,6 +49,10 @@ pub enum Command {
     Serve(serve::ServeArgs),
     /// Print the status file of a running `serve` and/or a ring's header.
     Status(serve::StatusArgs),
+    /// Receive `serve`'s frames over Zenoh (print metadata, save PNG), send it control
+    /// messages, or query its status.
+    #[cfg(feature = "zenoh")]
+    Subscribe(subscribe::SubscribeArgs),
 }
 
 /// Runs the parsed command line.
@@ -58,5 +65,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval(args) => eval::run(&args),
         Command::Serve(args) => serve::run(&args),
         Command::Status(args) => serve::status(&args),
+        #[cfg(feature = "zenoh")]
+        Command::Subscribe(args) => subscribe::run(&args),
     }
 }

@@ -1,38 +1,37 @@
 //! `vkterrain serve`: the headless service. Renders until SIGTERM/SIGINT (or `--frames`) and
-//! publishes every frame into the shared-memory ring; the camera follows the scenario (looped)
-//! until a control message takes over. `vkterrain status` reads the status file it writes.
-//!
-//! Control channel: a Unix datagram socket; one JSON object per datagram, e.g.
-//! `{"pose":{"position":[x,y,z],"yaw_deg":0,"pitch_deg":-20,"roll_deg":0},"fov_deg":60}`,
-//! `{"resolution":[640,360]}`, `{"scripted":true}`,
-//! `{"consumer":{"name":"detector","received":100,"lost":3}}`. Anything malformed or out of
-//! range is rejected and counted; nothing a client sends can stop the renderer.
+//! publishes every frame into the shared-memory ring (and over Zenoh when enabled); the camera
+//! follows the scenario (looped) until a control message takes over (`service::control`).
+//! `vkterrain status` reads the status file it writes.
 
 use std::collections::{BTreeMap, VecDeque};
-use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
 use clap::Args;
 use serde::{Deserialize, Serialize};
 
 use super::render::{RenderArgs, check_validation, prepare};
-
-use crate::output::ring::{Geometry, ProducerOptions, RingProducer, sys};
+use crate::output::lock::{PathLock, lock_path_for};
+use crate::output::ring::{
+    Geometry, ProducerOptions, RingLocation, RingProducer, ZeroCopyRequest, sys,
+};
+use crate::readback::{DirectTarget, FrameSink, FrameView};
 use crate::render::stats::Percentiles;
 use crate::render::{FrameRequest, RenderOptions};
-use crate::scene::Camera;
+use crate::service::control::{Control, ControlSocket};
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct ServeArgs {
     /// Configuration file (TOML); built-in defaults without one.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Ring (shared-memory segment) name, overrides `ring.name`.
+    /// Ring name, overrides `ring.name`.
     #[arg(long)]
     pub ring: Option<String>,
+    /// Ring directory, overrides `ring.dir` (default `$VKTERRAIN_RING_DIR` or /run/vkterrain).
+    #[arg(long)]
+    pub ring_dir: Option<PathBuf>,
     /// Stop after this many frames (tests); default: run until SIGTERM/SIGINT.
     #[arg(long)]
     pub frames: Option<u64>,
@@ -49,6 +48,15 @@ pub struct ServeArgs {
     /// Device override: index or name substring.
     #[arg(long)]
     pub device: Option<String>,
+    /// Publish over Zenoh too (`zenoh.enabled`).
+    #[arg(long)]
+    pub zenoh: bool,
+    /// Zenoh endpoint to listen on (repeatable), e.g. tcp/127.0.0.1:7447.
+    #[arg(long)]
+    pub zenoh_listen: Vec<String>,
+    /// Zenoh endpoint to connect to (repeatable).
+    #[arg(long)]
+    pub zenoh_connect: Vec<String>,
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -77,152 +85,26 @@ fn install_signal_handlers() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Largest accepted position coordinate (metres): far beyond any data set, finite.
-const MAX_COORD_M: f64 = 1.0e7;
-/// Accepted resolution change range per side.
-const RES_RANGE: std::ops::RangeInclusive<u32> = 16..=8192;
-/// Control datagrams handled per frame at most, so a flood cannot starve rendering.
-const MAX_MESSAGES_PER_FRAME: usize = 256;
-/// Consumers remembered in the status.
-const MAX_CONSUMERS: usize = 64;
 /// Frame intervals the status percentiles are taken over.
 const WINDOW: usize = 512;
+/// Largest status file `vkterrain status` reads.
+const MAX_STATUS_BYTES: u64 = 1 << 20;
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ControlMsg {
-    pose: Option<Pose>,
-    fov_deg: Option<f64>,
-    resolution: Option<[u32; 2]>,
-    scripted: Option<bool>,
-    consumer: Option<ConsumerReport>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Pose {
-    position: [f64; 3],
-    yaw_deg: f64,
-    pitch_deg: f64,
-    #[serde(default)]
-    roll_deg: f64,
-}
-
-#[derive(Clone, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-struct ConsumerReport {
-    name: String,
-    received: u64,
-    lost: u64,
-}
-
-/// What the render loop should change after a control message.
-#[derive(Default)]
-struct Control {
-    live: Option<Camera>,
-    resize: Option<(u32, u32)>,
-    accepted: u64,
-    rejected: u64,
-    last_error: Option<String>,
-    consumers: BTreeMap<String, ConsumerReport>,
-}
-
-impl Control {
-    /// Applies one datagram; errors are reasons to reject it (counted by the caller).
-    fn apply(&mut self, bytes: &[u8], current: &Camera) -> Result<(), String> {
-        let text = std::str::from_utf8(bytes).map_err(|_| "not UTF-8".to_string())?;
-        let msg: ControlMsg = serde_json::from_str(text.trim()).map_err(|e| e.to_string())?;
-        let mut cam = self.live.unwrap_or(*current);
-        let mut changed = false;
-        if let Some(p) = &msg.pose {
-            if p.position
-                .iter()
-                .any(|v| !v.is_finite() || v.abs() > MAX_COORD_M)
-            {
-                return Err(format!("position outside +-{MAX_COORD_M} m"));
-            }
-            cam.position = glam::DVec3::from_array(p.position);
-            (cam.yaw_deg, cam.pitch_deg, cam.roll_deg) = (p.yaw_deg, p.pitch_deg, p.roll_deg);
-            if !(cam.yaw_deg.abs() <= 3600.0 && cam.roll_deg.abs() <= 3600.0) {
-                return Err("yaw/roll outside +-3600 deg".into());
-            }
-            changed = true;
-        }
-        if let Some(f) = msg.fov_deg {
-            if !(f.is_finite() && (1.0..=170.0).contains(&f)) {
-                return Err(format!("fov_deg {f} is outside 1..=170"));
-            }
-            cam.vfov_deg = f;
-            changed = true;
-        }
-        cam.validate().map_err(|e| e.to_string())?;
-        let resize = match msg.resolution {
-            Some([w, h]) if RES_RANGE.contains(&w) && RES_RANGE.contains(&h) => Some((w, h)),
-            Some([w, h]) => {
-                return Err(format!(
-                    "resolution {w}x{h} is outside {RES_RANGE:?} per side"
-                ));
-            }
-            None => None,
-        };
-        if let Some(c) = &msg.consumer
-            && (c.name.is_empty()
-                || c.name.len() > 64
-                || c.name.chars().any(char::is_control)
-                || (self.consumers.len() >= MAX_CONSUMERS && !self.consumers.contains_key(&c.name)))
-        {
-            return Err("consumer report: bad name or too many consumers".into());
-        }
-        if msg.pose.is_none()
-            && msg.fov_deg.is_none()
-            && resize.is_none()
-            && msg.scripted.is_none()
-            && msg.consumer.is_none()
-        {
-            return Err("empty message".into());
-        }
-        // Everything checked: apply.
-        if changed {
-            self.live = Some(cam);
-        }
-        if msg.scripted == Some(true) {
-            self.live = None;
-        }
-        if resize.is_some() {
-            self.resize = resize;
-        }
-        if let Some(c) = msg.consumer {
-            self.consumers.insert(c.name.clone(), c);
-        }
-        Ok(())
+/// The status file, ours while we live (`<path>.lock`): a second service refuses it. An
+/// existing path must be a regular file (never `/dev/zero` or a device replaced by rename).
+fn claim_status_file(path: &Path) -> anyhow::Result<PathLock> {
+    if let Ok(m) = std::fs::symlink_metadata(path)
+        && !m.file_type().is_file()
+    {
+        anyhow::bail!(
+            "{}: exists and is not a regular file; refusing to replace it with the status",
+            path.display()
+        );
     }
-}
-
-/// Binds the control socket (mode 0600), replacing a stale socket but nothing else.
-fn bind_control(path: &Path) -> anyhow::Result<UnixDatagram> {
-    use std::os::unix::fs::{FileTypeExt, PermissionsExt};
-    if let Ok(m) = std::fs::symlink_metadata(path) {
-        if m.file_type().is_socket() {
-            std::fs::remove_file(path).with_context(|| format!("{}", path.display()))?;
-        } else {
-            anyhow::bail!("{}: exists and is not a socket", path.display());
-        }
-    }
-    let sock = UnixDatagram::bind(path)
-        .with_context(|| format!("{}: cannot bind control socket", path.display()))?;
-    std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600))
-        .with_context(|| format!("{}", path.display()))?;
-    sock.set_nonblocking(true)?;
-    Ok(sock)
-}
-
-/// Removes a file when dropped (the control socket).
-struct RemoveOnDrop(PathBuf);
-
-impl Drop for RemoveOnDrop {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-    }
+    Ok(PathLock::acquire(
+        &lock_path_for(path),
+        &format!("status file {}", path.display()),
+    )?)
 }
 
 /// What `status.json` holds.
@@ -248,6 +130,21 @@ pub struct Status {
     /// Streaming state when heights come through the clipmap.
     #[serde(default)]
     pub clipmap: Option<ClipmapStatus>,
+    /// The ring's directory (the segment is `<ring_dir>/<ring>`).
+    #[serde(default)]
+    pub ring_dir: String,
+    /// The GPU writes frames straight into the ring slots.
+    #[serde(default)]
+    pub zero_copy: bool,
+    /// Why zero-copy is off although the device could do it, if so.
+    #[serde(default)]
+    pub zero_copy_note: Option<String>,
+    /// Median host time to publish a frame into the ring (and Zenoh), last 512 frames.
+    #[serde(default)]
+    pub publish_ms_median: f64,
+    /// Zenoh: frames published / dropped (slow network or subscriber), when enabled.
+    #[serde(default)]
+    pub zenoh: Option<ZenohStatus>,
     pub uptime_s: f64,
     pub updated_unix_ms: u64,
 }
@@ -265,6 +162,15 @@ pub struct ClipmapStatus {
     pub fallback_frames: u64,
 }
 
+/// Zenoh counters in `status.json`.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+pub struct ZenohStatus {
+    pub key: String,
+    pub published: u64,
+    pub dropped: u64,
+    pub shm_frames: u64,
+}
+
 impl ClipmapStatus {
     fn of(c: &crate::clipmap::Clipmap) -> Self {
         ClipmapStatus {
@@ -279,22 +185,86 @@ impl ClipmapStatus {
     }
 }
 
+/// The ring's geometry for the renderer's frames: page-aligned slots, or what the device needs
+/// to import them (zero-copy).
+fn ring_geometry(opts: &RenderOptions, slots: u32, popts: &ProducerOptions) -> Geometry {
+    let device_align = popts
+        .zero_copy
+        .as_ref()
+        .map_or(0, |z| z.gpu.info.host_pointer_alignment);
+    let align = (crate::output::ring::layout::SLOT_ALIGN as u64)
+        .max(device_align.next_power_of_two())
+        .min(crate::output::ring::layout::MAX_ALIGN as u64) as u32;
+    Geometry {
+        align,
+        ..Geometry::new(opts.width, opts.height, slots, opts.readback_depth)
+    }
+}
+
 fn make_ring(
-    name: &str,
+    location: &RingLocation,
     opts: &RenderOptions,
     slots: u32,
     popts: &ProducerOptions,
 ) -> anyhow::Result<RingProducer> {
     Ok(RingProducer::create(
-        name,
-        Geometry {
-            width: opts.width,
-            height: opts.height,
-            slot_count: slots,
-            depth: opts.readback_depth,
-        },
+        location,
+        ring_geometry(opts, slots, popts),
         popts,
     )?)
+}
+
+/// Every frame to the ring and, when enabled, to Zenoh; zero-copy targets come from the ring.
+struct Outputs<'a> {
+    ring: &'a mut RingProducer,
+    #[cfg(feature = "zenoh")]
+    zenoh: Option<&'a mut crate::service::zenoh::ZenohBridge>,
+    publish_ms: &'a mut VecDeque<f64>,
+}
+
+impl FrameSink for Outputs<'_> {
+    fn frame(&mut self, frame: &FrameView<'_>) -> crate::Result<()> {
+        let start = Instant::now();
+        self.ring.frame(frame)?;
+        #[cfg(feature = "zenoh")]
+        if let Some(z) = self.zenoh.as_deref_mut() {
+            z.publish(frame);
+        }
+        if self.publish_ms.len() == WINDOW {
+            self.publish_ms.pop_front();
+        }
+        self.publish_ms
+            .push_back(start.elapsed().as_secs_f64() * 1e3);
+        Ok(())
+    }
+
+    fn direct_target(&mut self, index: u64, bytes: u64) -> Option<DirectTarget> {
+        self.ring.direct_target(index, bytes)
+    }
+}
+
+#[cfg(feature = "zenoh")]
+type Zenoh = crate::service::zenoh::ZenohBridge;
+/// Without the `zenoh` feature there is never a bridge (`start_zenoh` refuses to start one).
+#[cfg(not(feature = "zenoh"))]
+struct Zenoh;
+
+fn start_zenoh(config: &crate::config::Config, ring: &str) -> anyhow::Result<Option<Zenoh>> {
+    if !config.zenoh.enabled {
+        return Ok(None);
+    }
+    #[cfg(feature = "zenoh")]
+    {
+        Ok(Some(crate::service::zenoh::ZenohBridge::start(
+            &config.zenoh,
+            ring,
+        )?))
+    }
+    #[cfg(not(feature = "zenoh"))]
+    {
+        let _ = ring;
+        anyhow::bail!("zenoh.enabled, but this build has no Zenoh (cargo feature `zenoh`)")
+    }
 }
 
 pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
@@ -310,6 +280,28 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         crate::output::ring::validate_name(r)?;
         config.ring.name = r.clone();
     }
+    if let Some(d) = &args.ring_dir {
+        config.ring.dir = Some(d.clone());
+    }
+    config.zenoh.enabled |= args.zenoh;
+    config
+        .zenoh
+        .listen
+        .extend(args.zenoh_listen.iter().cloned());
+    config
+        .zenoh
+        .connect
+        .extend(args.zenoh_connect.iter().cloned());
+    config.zenoh.validate()?;
+    let location = RingLocation::new(
+        config
+            .ring
+            .dir
+            .as_ref()
+            .map(|d| config.resolve(d))
+            .unwrap_or_else(crate::output::ring::location::default_dir),
+        &config.ring.name,
+    )?;
     let control_path = args
         .control
         .clone()
@@ -321,26 +313,37 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             .as_ref()
             .map(|c| config.resolve(c))
     });
-    let popts = ProducerOptions {
-        group: config
-            .ring
-            .group
-            .as_deref()
-            .map(sys::group_id)
-            .transpose()?,
-        keep_segment: config.ring.keep_segment,
-    };
+    let group = config
+        .ring
+        .group
+        .as_deref()
+        .map(sys::group_id)
+        .transpose()?;
     install_signal_handlers()?;
-    // Bind first: a bad path fails before the (slow) device start-up; removed on every exit.
-    let control = control_path.as_deref().map(bind_control).transpose()?;
-    let _socket_guard = control_path.clone().map(RemoveOnDrop);
+    // Claim the paths first: a bad or taken path fails before the (slow) device start-up.
+    let _status_lock = status_path.as_deref().map(claim_status_file).transpose()?;
+    let mut control = control_path
+        .as_deref()
+        .map(ControlSocket::bind)
+        .transpose()?;
 
     let gpu = config.open_gpu()?;
     let mut options = config.render_options();
+    let popts = ProducerOptions {
+        group,
+        keep_segment: config.ring.keep_segment,
+        zero_copy: config.ring.zero_copy.then(|| ZeroCopyRequest {
+            gpu: gpu.clone(),
+            frames_in_flight: options.frames_in_flight,
+        }),
+    };
     let mut renderer = config.open_renderer(&gpu, &p.data, options.clone())?;
-    let mut ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
+    let mut ring = make_ring(&location, &options, config.ring.slots, &popts)?;
+    #[allow(unused_mut, clippy::let_unit_value)]
+    let mut zenoh = start_zenoh(&config, &config.ring.name)?;
     tracing::info!(
-        ring = config.ring.name,
+        ring = %location,
+        zero_copy = ring.zero_copy(),
         device = gpu.info.name,
         dataset = p.data.name(),
         width = options.width,
@@ -351,13 +354,13 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut ctl = Control::default();
     let mut intervals: VecDeque<f64> = VecDeque::with_capacity(WINDOW);
+    let mut publish_ms: VecDeque<f64> = VecDeque::with_capacity(WINDOW);
     let mut rendered: u64 = 0;
     let mut last_status = Instant::now() - Duration::from_secs(3600);
     let status_every = Duration::from_secs_f64(config.service.status_interval_s);
     let frame_budget = (config.service.max_fps > 0.0)
         .then(|| Duration::from_secs_f64(1.0 / config.service.max_fps));
     let scripted_frames = p.scenario.frames.max(1) as u64;
-    let mut buf = vec![0u8; 65536];
     let mut camera = p.scenario.camera(0);
 
     let status = |state: &str,
@@ -365,10 +368,13 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                   options: &RenderOptions,
                   ctl: &Control,
                   intervals: &VecDeque<f64>,
+                  publish_ms: &VecDeque<f64>,
                   rendered: u64,
-                  clipmap: Option<ClipmapStatus>|
+                  clipmap: Option<ClipmapStatus>,
+                  zenoh: Option<ZenohStatus>|
      -> Status {
         let pc = Percentiles::of(intervals.iter().copied().collect());
+        let pub_ms = Percentiles::of(publish_ms.iter().copied().collect());
         Status {
             state: state.into(),
             pid: std::process::id(),
@@ -389,70 +395,86 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             control_accepted: ctl.accepted,
             control_rejected: ctl.rejected,
             control_last_error: ctl.last_error.clone(),
-            consumers: ctl
-                .consumers
-                .iter()
-                .map(|(k, v)| (k.clone(), (v.received, v.lost)))
-                .collect(),
+            consumers: ctl.consumers(),
             clipmap,
+            ring_dir: ring.location().dir.display().to_string(),
+            zero_copy: ring.zero_copy(),
+            zero_copy_note: ring.zero_copy_note().map(String::from),
+            publish_ms_median: pub_ms.median,
+            zenoh,
             uptime_s: started.elapsed().as_secs_f64(),
             updated_unix_ms: sys::realtime_ns() / 1_000_000,
         }
     };
-    let write_status = |s: &Status| {
-        if let Some(path) = &status_path {
-            let text = serde_json::to_string_pretty(s).unwrap_or_default();
-            if let Err(e) = crate::output::write_atomic(path, text.as_bytes()) {
-                tracing::warn!("status file: {e}");
-            }
+    #[allow(unused_variables)]
+    let zenoh_status = |z: &Option<Zenoh>| -> Option<ZenohStatus> {
+        #[cfg(feature = "zenoh")]
+        {
+            z.as_ref().map(|z| ZenohStatus {
+                key: z.keys().frame.clone(),
+                published: z.counters.published.load(Ordering::Relaxed),
+                dropped: z.counters.dropped.load(Ordering::Relaxed),
+                shm_frames: z.counters.shm_frames.load(Ordering::Relaxed),
+            })
+        }
+        #[cfg(not(feature = "zenoh"))]
+        None
+    };
+    let write_status = |s: &Status, z: &Option<Zenoh>| {
+        let text = serde_json::to_string_pretty(s).unwrap_or_default();
+        #[cfg(feature = "zenoh")]
+        if let Some(z) = z {
+            z.set_status(text.clone());
+        }
+        let _ = z;
+        if let Some(path) = &status_path
+            && let Err(e) = crate::output::write_atomic(path, text.as_bytes())
+        {
+            tracing::warn!("status file: {e}");
         }
     };
 
     let result = (|| -> anyhow::Result<()> {
         while !STOP.load(Ordering::SeqCst) && args.frames.is_none_or(|n| rendered < n) {
             let frame_start = Instant::now();
-            if let Some(sock) = &control {
-                for _ in 0..MAX_MESSAGES_PER_FRAME {
-                    match sock.recv(&mut buf) {
-                        Ok(n) if n < buf.len() => match ctl.apply(&buf[..n], &camera) {
-                            Ok(()) => ctl.accepted += 1,
-                            Err(e) => {
-                                ctl.rejected += 1;
-                                if ctl.rejected <= 10 {
-                                    tracing::warn!("control message rejected: {e}");
-                                }
-                                ctl.last_error = Some(e);
-                            }
-                        },
-                        Ok(_) => {
-                            ctl.rejected += 1;
-                            ctl.last_error = Some("message too long".into());
-                        }
-                        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
-                        Err(e) => {
-                            tracing::warn!("control socket: {e}");
-                            break;
-                        }
-                    }
-                }
+            if let Some(sock) = &mut control {
+                sock.drain(&mut ctl, &camera);
+            }
+            #[cfg(feature = "zenoh")]
+            if let Some(z) = &mut zenoh {
+                z.drain_control(&mut ctl, &camera);
             }
             if let Some((w, h)) = ctl.resize.take()
                 && (w, h) != (options.width, options.height)
             {
                 // Deliver what is in flight, then a new renderer and a new ring generation.
-                renderer.finish(&mut ring)?;
+                renderer.finish(&mut Outputs {
+                    ring: &mut ring,
+                    #[cfg(feature = "zenoh")]
+                    zenoh: zenoh.as_mut(),
+                    publish_ms: &mut publish_ms,
+                })?;
                 options.width = w;
                 options.height = h;
                 // A fresh clipmap too: its atlas lives in the old renderer's device memory.
                 renderer = config.open_renderer(&gpu, &p.data, options.clone())?;
-                ring = make_ring(&config.ring.name, &options, config.ring.slots, &popts)?;
+                let geometry = ring_geometry(&options, config.ring.slots, &popts);
+                ring.replace(geometry, &popts)?;
                 tracing::info!(width = w, height = h, "resolution changed");
             }
             camera = ctl
                 .live
                 .unwrap_or_else(|| p.scenario.camera(rendered % scripted_frames));
             let views = FrameRequest::with_extra_views(camera, &config.render.extra_views);
-            renderer.render_views(&views, &mut ring)?;
+            renderer.render_views(
+                &views,
+                &mut Outputs {
+                    ring: &mut ring,
+                    #[cfg(feature = "zenoh")]
+                    zenoh: zenoh.as_mut(),
+                    publish_ms: &mut publish_ms,
+                },
+            )?;
             rendered += 1;
             for rec in renderer.stats.frames.drain(..) {
                 if rec.interval_ms > 0.0 {
@@ -463,15 +485,20 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
                 }
             }
             if last_status.elapsed() >= status_every {
-                write_status(&status(
-                    "running",
-                    &ring,
-                    &options,
-                    &ctl,
-                    &intervals,
-                    rendered,
-                    renderer.clipmap().map(ClipmapStatus::of),
-                ));
+                write_status(
+                    &status(
+                        "running",
+                        &ring,
+                        &options,
+                        &ctl,
+                        &intervals,
+                        &publish_ms,
+                        rendered,
+                        renderer.clipmap().map(ClipmapStatus::of),
+                        zenoh_status(&zenoh),
+                    ),
+                    &zenoh,
+                );
                 last_status = Instant::now();
             }
             if let Some(budget) = frame_budget {
@@ -482,21 +509,35 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             }
         }
         // The frames in flight are finished and published before the ring closes.
-        renderer.finish(&mut ring)?;
+        renderer.finish(&mut Outputs {
+            ring: &mut ring,
+            #[cfg(feature = "zenoh")]
+            zenoh: zenoh.as_mut(),
+            publish_ms: &mut publish_ms,
+        })?;
         Ok(())
     })();
+    // No GPU work may still write into the ring when it closes (zero-copy).
+    let _ = gpu.wait_idle();
     ring.close();
-    write_status(&status(
-        "stopped",
-        &ring,
-        &options,
-        &ctl,
-        &intervals,
-        rendered,
-        renderer.clipmap().map(ClipmapStatus::of),
-    ));
+    write_status(
+        &status(
+            "stopped",
+            &ring,
+            &options,
+            &ctl,
+            &intervals,
+            &publish_ms,
+            rendered,
+            renderer.clipmap().map(ClipmapStatus::of),
+            zenoh_status(&zenoh),
+        ),
+        &zenoh,
+    );
+    drop(zenoh);
     result?;
     drop(renderer);
+    drop(ring);
     check_validation(&gpu)?;
     tracing::info!(frames = rendered, "stopped");
     Ok(())
@@ -510,6 +551,37 @@ pub struct StatusArgs {
     /// Also (or only) read a ring's header directly.
     #[arg(long)]
     pub ring: Option<String>,
+    /// The ring's directory (default `$VKTERRAIN_RING_DIR` or /run/vkterrain).
+    #[arg(long)]
+    pub ring_dir: Option<PathBuf>,
+    /// User (name or uid) the ring must belong to (default: the ring directory's owner).
+    #[arg(long)]
+    pub ring_owner: Option<String>,
+}
+
+/// Reads a status file: a regular file of at most [`MAX_STATUS_BYTES`], never more.
+fn read_status_file(path: &Path) -> crate::Result<Status> {
+    use std::io::Read;
+    let f = std::fs::File::open(path).map_err(|e| crate::Error::io(path, e))?;
+    let m = f.metadata().map_err(|e| crate::Error::io(path, e))?;
+    if !m.is_file() {
+        return Err(crate::Error::invalid(
+            "status file",
+            format!("{}: not a regular file", path.display()),
+        ));
+    }
+    let mut text = String::new();
+    f.take(MAX_STATUS_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(|e| crate::Error::io(path, e))?;
+    if text.len() as u64 > MAX_STATUS_BYTES {
+        return Err(crate::Error::invalid(
+            "status file",
+            format!("{}: larger than {MAX_STATUS_BYTES} bytes", path.display()),
+        ));
+    }
+    serde_json::from_str(&text)
+        .map_err(|e| crate::Error::invalid("status file", format!("{}: {e}", path.display())))
 }
 
 /// `vkterrain status`: prints the service status file and/or a ring's header.
@@ -518,10 +590,7 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
         anyhow::bail!("status needs --status-file PATH and/or --ring NAME");
     }
     if let Some(path) = &args.status_file {
-        let text = std::fs::read_to_string(path).map_err(|e| crate::Error::io(path, e))?;
-        let s: Status = serde_json::from_str(&text).map_err(|e| {
-            crate::Error::invalid("status file", format!("{}: {e}", path.display()))
-        })?;
+        let s = read_status_file(path)?;
         let age_s = (sys::realtime_ns() / 1_000_000).saturating_sub(s.updated_unix_ms) as f64 / 1e3;
         let state = if s.state == "running" && !sys::pid_alive(s.pid) {
             "dead (process gone without stopping)".to_string()
@@ -532,14 +601,23 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
             "state:           {state} (pid {}, updated {age_s:.1} s ago)",
             s.pid
         );
-        println!("ring:            {} (generation {})", s.ring, s.generation);
+        println!(
+            "ring:            {} in {} (generation {}, {})",
+            s.ring,
+            s.ring_dir,
+            s.generation,
+            if s.zero_copy { "zero-copy" } else { "copied" }
+        );
+        if let Some(n) = &s.zero_copy_note {
+            println!("zero-copy off:   {n}");
+        }
         println!("device:          {}", s.device);
         println!("dataset:         {}", s.dataset);
         println!("resolution:      {}x{}", s.width, s.height);
         println!("frames rendered: {}", s.frames_rendered);
         println!(
-            "frame time:      median {:.2} ms, p99 {:.2} ms",
-            s.frame_ms_median, s.frame_ms_p99
+            "frame time:      median {:.2} ms, p99 {:.2} ms; publish median {:.3} ms",
+            s.frame_ms_median, s.frame_ms_p99, s.publish_ms_median
         );
         println!("camera:          {}", s.camera);
         println!(
@@ -563,18 +641,34 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
                 c.fallback_frames
             );
         }
+        if let Some(z) = &s.zenoh {
+            println!(
+                "zenoh:           {}: {} published ({} in shared memory), {} dropped",
+                z.key, z.published, z.shm_frames, z.dropped
+            );
+        }
         for (name, (received, lost)) in &s.consumers {
             println!("consumer:        {name}: {received} received, {lost} skipped");
         }
         println!("uptime:          {:.1} s", s.uptime_s);
     }
     if let Some(name) = &args.ring {
-        let r = crate::output::ring::RingReader::open(name)?;
+        let dir = args
+            .ring_dir
+            .clone()
+            .unwrap_or_else(crate::output::ring::location::default_dir);
+        let owner = match &args.ring_owner {
+            Some(o) => Some(sys::user_id(o)?),
+            None => crate::output::ring::location::owner_from_env()?,
+        };
+        let r = crate::output::ring::RingReader::open(&RingLocation::new(dir, name)?, owner)?;
         let g = r.geometry();
-        let state = match r.state() {
-            1 => "live",
-            2 => "closed",
-            3 => "replaced",
+        let alive = r.producer_alive();
+        let state = match (r.state(), alive) {
+            (1, true) => "live",
+            (1, false) => "stale (its producer is gone)",
+            (2, _) => "closed",
+            (3, _) => "replaced",
             _ => "unknown",
         };
         println!(

@@ -2,7 +2,8 @@
 //!
 //! The top of the library: each section's type lives next to what it configures
 //! (`driver::GpuOptions`, `render::settings`, `dataset::settings`, `lod::MethodConfig`,
-//! `clipmap::ClipmapSettings`), and this module only assembles them, checks what spans
+//! `clipmap::ClipmapSettings`, `output::ring::RingConfig`,
+//! `service::settings`), and this module only assembles them, checks what spans
 //! sections, and opens what a configuration names ([`open`]). No lower module imports it.
 //!
 //! Every field has a default, so an empty file is a valid configuration. Relative paths in a
@@ -20,7 +21,9 @@ use crate::dataset::settings::DatasetConfig;
 use crate::driver::GpuOptions;
 use crate::error::{Error, Result};
 use crate::lod::{MethodConfig, MethodKind};
+pub use crate::output::ring::RingConfig;
 use crate::render::settings::RenderSettings;
+pub use crate::service::{ServiceConfig, ZenohSettings};
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -36,6 +39,8 @@ pub struct Config {
     pub output: OutputConfig,
     pub ring: RingConfig,
     pub service: ServiceConfig,
+    /// Frames, control and status over Zenoh (`serve`).
+    pub zenoh: ZenohSettings,
     /// Directory relative paths are resolved against (the config file's directory).
     #[serde(skip)]
     pub base_dir: PathBuf,
@@ -67,55 +72,6 @@ impl Default for OutputConfig {
     }
 }
 
-/// The shared-memory ring `vkterrain serve` publishes into (`docs/ring.md`).
-#[derive(Clone, Debug, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RingConfig {
-    /// Segment name: `/dev/shm/<name>`, 1..=200 characters from `[A-Za-z0-9._-]`.
-    pub name: String,
-    /// Slots in the ring (2..=64): how far a consumer may fall behind before it skips frames.
-    pub slots: u32,
-    /// Group allowed to read the ring (mode 0640); none: owner only (mode 0600).
-    pub group: Option<String>,
-    /// Leave the segment (marked closed) in place after shutdown.
-    pub keep_segment: bool,
-}
-
-impl Default for RingConfig {
-    fn default() -> Self {
-        RingConfig {
-            name: "vkterrain".into(),
-            slots: 4,
-            group: None,
-            keep_segment: false,
-        }
-    }
-}
-
-/// `vkterrain serve`: control channel, status file, pacing.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct ServiceConfig {
-    /// Unix datagram socket for live camera control (JSON messages); none: scripted only.
-    pub control: Option<PathBuf>,
-    /// JSON status file, rewritten atomically every `status_interval_s`.
-    pub status_file: Option<PathBuf>,
-    pub status_interval_s: f64,
-    /// Frame-rate cap (0: as fast as the device renders).
-    pub max_fps: f64,
-}
-
-impl Default for ServiceConfig {
-    fn default() -> Self {
-        ServiceConfig {
-            control: None,
-            status_file: None,
-            status_interval_s: 1.0,
-            max_fps: 0.0,
-        }
-    }
-}
-
 impl Default for Config {
     fn default() -> Self {
         Config {
@@ -128,6 +84,7 @@ impl Default for Config {
             output: Default::default(),
             ring: Default::default(),
             service: Default::default(),
+            zenoh: Default::default(),
             // No config file: relative paths are relative to the working directory.
             base_dir: PathBuf::new(),
         }
@@ -172,27 +129,9 @@ impl Config {
     }
 
     fn validate_service(&self) -> Result<()> {
-        crate::output::ring::validate_name(&self.ring.name)?;
-        if !(2..=64).contains(&self.ring.slots) {
-            return Err(Error::invalid(
-                "ring.slots",
-                format!("{} is outside 2..=64", self.ring.slots),
-            ));
-        }
-        let s = &self.service;
-        if !(s.status_interval_s.is_finite() && (0.05..=3600.0).contains(&s.status_interval_s)) {
-            return Err(Error::invalid(
-                "service.status_interval_s",
-                format!("{} is outside 0.05..=3600", s.status_interval_s),
-            ));
-        }
-        if !(s.max_fps.is_finite() && (0.0..=10000.0).contains(&s.max_fps)) {
-            return Err(Error::invalid(
-                "service.max_fps",
-                format!("{} is outside 0..=10000", s.max_fps),
-            ));
-        }
-        Ok(())
+        self.ring.validate()?;
+        self.service.validate()?;
+        self.zenoh.validate()
     }
 
     /// The clipmap streams a tile pyramid to methods that read heights through set 0.

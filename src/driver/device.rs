@@ -26,6 +26,9 @@ pub struct DeviceInfo {
     pub queue_families: Vec<vk::QueueFamilyProperties>,
     pub extensions: Vec<String>,
     pub caps: Capabilities,
+    /// `minImportedHostPointerAlignment` of `VK_EXT_external_memory_host` (0 without it): host
+    /// memory imported for zero-copy readback must start and end on this boundary.
+    pub host_pointer_alignment: u64,
 }
 
 /// Optional features, as offered by the device (`offered`) and as enabled by vkterrain.
@@ -194,10 +197,6 @@ pub(crate) fn describe(
     pd: vk::PhysicalDevice,
 ) -> Result<DeviceInfo> {
     unsafe {
-        let mut driver_props = vk::PhysicalDeviceDriverProperties::default();
-        let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver_props);
-        instance.get_physical_device_properties2(pd, &mut props2);
-        let props = props2.properties;
         let extensions: Vec<String> = instance
             .enumerate_device_extension_properties(pd)
             .vk("vkEnumerateDeviceExtensionProperties")?
@@ -208,6 +207,21 @@ pub(crate) fn describe(
                     .map(|s| s.to_string_lossy().into_owned())
             })
             .collect();
+        let host_ext = ash::ext::external_memory_host::NAME.to_string_lossy();
+        let has_host_ext = extensions.iter().any(|e| *e == host_ext);
+        let mut driver_props = vk::PhysicalDeviceDriverProperties::default();
+        let mut host_props = vk::PhysicalDeviceExternalMemoryHostPropertiesEXT::default();
+        let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver_props);
+        if has_host_ext {
+            props2 = props2.push_next(&mut host_props);
+        }
+        instance.get_physical_device_properties2(pd, &mut props2);
+        let props = props2.properties;
+        let host_pointer_alignment = if has_host_ext {
+            host_props.min_imported_host_pointer_alignment
+        } else {
+            0
+        };
         let memory = instance.get_physical_device_memory_properties(pd);
         let queue_families = instance.get_physical_device_queue_family_properties(pd);
 
@@ -258,6 +272,7 @@ pub(crate) fn describe(
             queue_families,
             extensions,
             caps: Capabilities::default(),
+            host_pointer_alignment,
         };
         info.caps = Capabilities {
             timeline_semaphore: f12.timeline_semaphore == vk::TRUE,

@@ -6,6 +6,7 @@
 pub mod barrier;
 pub mod descriptors;
 pub mod device;
+pub mod host_memory;
 pub mod instance;
 pub mod memory;
 pub mod pipeline;
@@ -128,8 +129,17 @@ impl Gpu {
         let queues = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
+        // Zero-copy ring publishing imports the ring's slots as buffers (host_memory.rs).
+        let external_memory_host = offered.external_memory_host;
+        let extensions = [ash::ext::external_memory_host::NAME.as_ptr()];
+        let extensions = if external_memory_host {
+            &extensions[..]
+        } else {
+            &[]
+        };
         let mut create = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
+            .enabled_extension_names(extensions)
             .enabled_features(&base)
             .push_next(&mut f12);
         if info.api_version >= vk::API_VERSION_1_3 {
@@ -162,6 +172,7 @@ impl Gpu {
             sampler_anisotropy: anisotropy,
             // Enabled only when a method needs it (none does yet).
             geometry_shader: false,
+            external_memory_host,
             ..offered
         };
         Ok(Arc::new(Gpu {

@@ -1,5 +1,6 @@
 //! Where frames go after readback: PNG files and the shared-memory ring.
 
+pub mod lock;
 pub mod png;
 pub mod ring;
 
@@ -25,7 +26,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         name.to_string_lossy(),
         std::process::id()
     ));
-    std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
+    // Nothing half-written stays behind: on a failed write (a full disk) the temporary goes.
+    if let Err(e) = std::fs::write(&tmp, bytes) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(Error::io(&tmp, e));
+    }
     std::fs::rename(&tmp, path).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         Error::io(path, e)

@@ -64,8 +64,15 @@ impl Readback {
     }
 
     /// Records the copies of `targets` (transfer sources after the pass) and makes them
-    /// visible to the host.
-    pub fn record(&self, gpu: &Gpu, cmd: vk::CommandBuffer, targets: &Targets) {
+    /// visible to the host; the colour goes to `color_dst` (a sink's zero-copy target) when
+    /// given, else to this readback's buffer.
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        targets: &Targets,
+        color_dst: Option<vk::Buffer>,
+    ) {
         let copy = |aspect| {
             [vk::BufferImageCopy::default()
                 .image_subresource(vk::ImageSubresourceLayers {
@@ -87,7 +94,7 @@ impl Readback {
                 cmd,
                 targets.color.raw,
                 layout,
-                self.color.raw,
+                color_dst.unwrap_or(self.color.raw),
                 &copy(vk::ImageAspectFlags::COLOR),
             );
             if let Some(depth) = &self.depth {

@@ -36,7 +36,7 @@ use crate::driver::sync::Timeline;
 use crate::error::{Error, Result};
 use crate::frame::{FrameUniforms, Lighting, TerrainGpu, TerrainInfo, ViewState};
 use crate::lod::{LodMethod, MethodConfig, MethodContext};
-use crate::readback::{FrameSink, FrameTimings, FrameView};
+use crate::readback::{DirectTarget, FrameSink, FrameTimings, FrameView};
 use crate::scene::Camera;
 use crate::slots::{FrameSlot, SlotLayout};
 pub use delivery::ReadbackPath;
@@ -326,12 +326,15 @@ impl Renderer {
         debug_assert!(self.slots[frame.index()].pending.is_none());
         let started = Instant::now();
         self.update_views(frame, requests)?;
-        self.record(frame, requests[0].sky.unwrap_or(self.options.light.sky))?;
+        let direct = self.direct_target(index, sink);
+        let sky = requests[0].sky.unwrap_or(self.options.light.sky);
+        self.record(frame, sky, direct.map(|d| d.buffer))?;
         self.submit(frame, index)?;
         self.slots[frame.index()].pending = Some(Pending {
             index,
             camera: requests[0].camera,
             cpu_record_ms: started.elapsed().as_secs_f64() * 1e3,
+            direct,
         });
         self.in_flight.push_back(frame);
         self.next_frame += 1;
@@ -367,6 +370,19 @@ impl Renderer {
             self.method.update(view, &state)?;
         }
         Ok(())
+    }
+
+    /// The sink's zero-copy target for frame `index` ([`FrameSink::direct_target`]), if it
+    /// offers one large enough for the frame's colour.
+    fn direct_target(&self, index: u64, sink: &mut dyn FrameSink) -> Option<DirectTarget> {
+        let color_bytes = self.color_bytes() as u64;
+        sink.direct_target(index, color_bytes)
+            .filter(|d| d.host_bytes().len() as u64 >= color_bytes)
+    }
+
+    /// Bytes of one frame's RGBA8 colour.
+    fn color_bytes(&self) -> usize {
+        self.options.width as usize * self.options.height as usize * 4
     }
 
     /// Submits frame slot `frame`'s commands as frame `index` (signals timeline `index + 1`).
@@ -420,7 +436,11 @@ impl Renderer {
             cpu_record_ms: pending.cpu_record_ms,
             cpu_wait_ms,
         };
-        let (rgba, depth) = slot.readback.frame()?;
+        let (readback_rgba, depth) = slot.readback.frame()?;
+        let rgba = match &pending.direct {
+            Some(d) => &d.host_bytes()[..self.color_bytes()],
+            None => readback_rgba,
+        };
         let view = FrameView {
             index: pending.index,
             width: self.options.width,

@@ -7,7 +7,14 @@ use crate::error::Result;
 use crate::slots::FrameSlot;
 
 impl Renderer {
-    pub(super) fn record(&mut self, frame: FrameSlot, sky: [f32; 3]) -> Result<()> {
+    /// Records frame slot `frame`; the colour is copied into `color_dst` (a sink's zero-copy
+    /// target) or else the slot's readback buffer.
+    pub(super) fn record(
+        &mut self,
+        frame: FrameSlot,
+        sky: [f32; 3],
+        color_dst: Option<ash::vk::Buffer>,
+    ) -> Result<()> {
         let slot = &self.slots[frame.index()];
         let cmd = slot.begin()?;
         // New atlas nodes first: after every earlier frame's sampling, before this frame's.
@@ -25,7 +32,8 @@ impl Renderer {
         }
         slot.targets.end_pass(cmd, &self.pass);
         slot.timestamps.write(cmd, Stamp::AfterTerrain);
-        slot.readback.record(&self.gpu, cmd, &slot.targets);
+        slot.readback
+            .record(&self.gpu, cmd, &slot.targets, color_dst);
         slot.timestamps.write(cmd, Stamp::AfterReadback);
         slot.end()
     }

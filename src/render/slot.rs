@@ -9,6 +9,7 @@ use super::delivery::{Readback, Timestamps};
 use super::targets::{Targets, TerrainPass};
 use crate::driver::Gpu;
 use crate::error::{Result, VkResultExt};
+use crate::readback::DirectTarget;
 use crate::scene::Camera;
 use crate::slots::FrameSlot;
 
@@ -17,6 +18,8 @@ pub(super) struct Pending {
     pub index: u64,
     pub camera: Camera,
     pub cpu_record_ms: f64,
+    /// Where the colour went when the sink asked for zero-copy ([`crate::readback::FrameSink::direct_target`]).
+    pub direct: Option<DirectTarget>,
 }
 
 pub(super) struct FrameResources {

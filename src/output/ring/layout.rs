@@ -1,16 +1,26 @@
-//! The ring's shared-memory layout, version 1: a [`RingHeader`] followed by `slot_count` slots,
-//! each a [`SlotHeader`] followed by the pixels (and optionally depth). Everything is
+//! The ring's shared-memory layout, version 2: a [`RingHeader`] on the segment's first
+//! `header_size` bytes, followed by `slot_count` slots, each a [`SlotHeader`] followed (at
+//! `pixels_offset`) by the pixels and optionally (at `depth_offset`) the depth. Everything is
 //! little-endian with natural alignment; words written often (the latest frame number, the
-//! wake-up word, each slot's sequence) sit alone on their 64-byte cache line. The same layout is
+//! wake-up word, each slot's sequence) sit alone on their 64-byte cache line. Slots and the pixels
+//! inside them start on [`Geometry::align`] boundaries (a page) so that the GPU can write a
+//! frame straight into its slot (`VK_EXT_external_memory_host`, docs/ring.md). The same layout is
 //! spelled out in `consumers/c/vkterrain_ring.h` and `docs/ring.md`; a test compiles the header
 //! and compares every offset with this file.
+//!
+//! Readers never trust the header: [`Layout::from_header`] checks every field against the mapped
+//! size before any offset is used, and every slot's metadata is checked against the header.
 
 use std::sync::atomic::{AtomicU32, AtomicU64};
 
 /// `"VKTRING1"` read as a little-endian u64.
 pub const MAGIC: u64 = u64::from_le_bytes(*b"VKTRING1");
-/// Bumped on any incompatible change of this file.
-pub const LAYOUT_VERSION: u32 = 1;
+/// Bumped on any incompatible change of this file (2: page-aligned slots and pixels, `flags`).
+pub const LAYOUT_VERSION: u32 = 2;
+/// Default alignment of slots and pixels: a page, what `VK_EXT_external_memory_host` needs.
+pub const SLOT_ALIGN: u32 = 4096;
+/// Largest alignment accepted (64 KiB pages exist on some aarch64 kernels).
+pub const MAX_ALIGN: u32 = 1 << 16;
 /// Cache-line size the hot words are separated by (and slot alignment).
 pub const LINE: usize = 64;
 
@@ -28,6 +38,9 @@ pub const STATE_CLOSED: u32 = 2;
 /// `state`: a newer producer replaced this segment; re-open the name.
 pub const STATE_REPLACED: u32 = 3;
 
+/// `flags` bit: the GPU writes the pixels straight into the slot (zero-copy publishing).
+pub const FLAG_ZERO_COPY: u32 = 1;
+
 /// `latest` before the first frame is published.
 pub const NO_FRAME: u64 = u64::MAX;
 
@@ -39,7 +52,7 @@ pub struct RingHeader {
     pub magic: u64,
     /// [`LAYOUT_VERSION`].
     pub layout_version: u32,
-    /// `size_of::<RingHeader>()`: where slot 0 starts.
+    /// Where slot 0 starts: [`Geometry::align`] (at least `size_of::<RingHeader>()`).
     pub header_size: u32,
     /// Changes every time a producer creates the segment (restart detection).
     pub generation: u64,
@@ -58,13 +71,15 @@ pub struct RingHeader {
     pub pixels_offset: u32,
     /// Offset of the depth inside a slot (0 without depth).
     pub depth_offset: u32,
-    /// Process id of the producer (to refuse replacing a live one).
+    /// Process id of the producer (informational: liveness is the producer's lock, docs/ring.md).
     pub producer_pid: u32,
     /// Hot line: the newest completely published frame number ([`NO_FRAME`] before the first).
     pub latest: AtomicU64,
     /// [`STATE_LIVE`], [`STATE_CLOSED`] or [`STATE_REPLACED`].
     pub state: AtomicU32,
-    pub _pad1: [u8; 52],
+    /// [`FLAG_ZERO_COPY`]; written before the segment gets its name, never changed.
+    pub flags: u32,
+    pub _pad1: [u8; 48],
     /// Futex word: incremented after every publish and on close; waiters `FUTEX_WAIT` on it.
     pub wake: AtomicU32,
     pub _pad2: [u8; 60],
@@ -118,55 +133,55 @@ pub struct FrameMeta {
     pub triangles: u64,
 }
 
-/// Offset of the pixels inside a slot.
-pub const PIXELS_OFFSET: usize = size_of::<SlotHeader>();
-
 const _: () = {
     assert!(size_of::<RingHeader>() == 256);
     assert!(size_of::<SlotHeader>() == 256);
     assert!(size_of::<FrameMeta>() == 192);
     assert!(std::mem::offset_of!(RingHeader, latest) == 64);
+    assert!(std::mem::offset_of!(RingHeader, flags) == 76);
     assert!(std::mem::offset_of!(RingHeader, wake) == 128);
     assert!(std::mem::offset_of!(RingHeader, published) == 192);
     assert!(std::mem::offset_of!(SlotHeader, meta) == 64);
 };
 
-/// Geometry of a ring: everything the header's constant line says.
+/// Geometry of a ring: what the producer asks for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Geometry {
     pub width: u32,
     pub height: u32,
     pub slot_count: u32,
     pub depth: bool,
+    /// Alignment of slot 0, every slot size and the pixels (a power of two, 256..=[`MAX_ALIGN`]);
+    /// [`SLOT_ALIGN`] unless a device needs more for zero-copy.
+    pub align: u32,
 }
 
 /// Largest segment accepted (a sanity bound against absurd headers and configs).
 pub const MAX_SEGMENT_BYTES: u64 = 16 << 30;
 
 impl Geometry {
+    /// A geometry with the default alignment.
+    pub fn new(width: u32, height: u32, slot_count: u32, depth: bool) -> Self {
+        Geometry {
+            width,
+            height,
+            slot_count,
+            depth,
+            align: SLOT_ALIGN,
+        }
+    }
     pub fn row_stride(&self) -> u32 {
         self.width * 4
     }
     pub fn pixel_bytes(&self) -> u64 {
         self.row_stride() as u64 * self.height as u64
     }
-    pub fn depth_offset(&self) -> u64 {
+    pub fn depth_bytes(&self) -> u64 {
         if self.depth {
-            round_up(PIXELS_OFFSET as u64 + self.pixel_bytes(), LINE as u64)
+            self.width as u64 * self.height as u64 * 4
         } else {
             0
         }
-    }
-    pub fn slot_size(&self) -> u64 {
-        let end = if self.depth {
-            self.depth_offset() + self.width as u64 * self.height as u64 * 4
-        } else {
-            PIXELS_OFFSET as u64 + self.pixel_bytes()
-        };
-        round_up(end, LINE as u64)
-    }
-    pub fn segment_size(&self) -> u64 {
-        size_of::<RingHeader>() as u64 + self.slot_size() * self.slot_count as u64
     }
 
     /// Rejects sizes that overflow the 32-bit offsets or exceed [`MAX_SEGMENT_BYTES`].
@@ -181,14 +196,170 @@ impl Geometry {
         if !(2..=64).contains(&self.slot_count) {
             return bad(format!("{} slots is outside 2..=64", self.slot_count));
         }
-        if self.slot_size() > u32::MAX as u64 || self.segment_size() > MAX_SEGMENT_BYTES {
+        if !self.align.is_power_of_two() || !(256..=MAX_ALIGN).contains(&self.align) {
+            return bad(format!(
+                "alignment {} is not a power of two in 256..={MAX_ALIGN}",
+                self.align
+            ));
+        }
+        let l = Layout::of(*self);
+        if l.slot_size > u32::MAX as u64 || l.segment_size() > MAX_SEGMENT_BYTES {
             return bad(format!(
                 "{} bytes exceed the {} byte limit",
-                self.segment_size(),
+                l.segment_size(),
                 MAX_SEGMENT_BYTES
             ));
         }
         Ok(())
+    }
+}
+
+/// Where everything lies in a segment: computed from a [`Geometry`] by the producer, or read
+/// and checked from a header by readers ([`Layout::from_header`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layout {
+    pub geometry: Geometry,
+    /// Offset of slot 0.
+    pub header_size: u64,
+    pub slot_size: u64,
+    /// Offset of the pixels inside a slot.
+    pub pixels_offset: u64,
+    /// Offset of the depth inside a slot (0 without depth).
+    pub depth_offset: u64,
+}
+
+impl Layout {
+    /// The producer's layout: header, slot header and pixels each start on an `align`
+    /// boundary, so the pixels of every slot are page aligned in the segment.
+    pub fn of(g: Geometry) -> Self {
+        let a = g.align as u64;
+        let pixels_offset = round_up(size_of::<SlotHeader>() as u64, a);
+        let depth_offset = if g.depth {
+            round_up(pixels_offset + g.pixel_bytes(), a)
+        } else {
+            0
+        };
+        let end = if g.depth {
+            depth_offset + g.depth_bytes()
+        } else {
+            pixels_offset + g.pixel_bytes()
+        };
+        Layout {
+            geometry: g,
+            header_size: round_up(size_of::<RingHeader>() as u64, a),
+            slot_size: round_up(end, a),
+            pixels_offset,
+            depth_offset,
+        }
+    }
+
+    pub fn segment_size(&self) -> u64 {
+        self.header_size + self.slot_size * self.geometry.slot_count as u64
+    }
+
+    /// Offset of slot `index % slot_count` in the segment.
+    pub fn slot_offset(&self, frame: u64) -> u64 {
+        self.header_size + (frame % self.geometry.slot_count as u64) * self.slot_size
+    }
+
+    /// Reads and checks a header's constant line against a segment of `mapped` bytes. Every
+    /// offset a reader will use is proven to lie inside the mapping; the error names the first
+    /// field that does not fit.
+    pub fn from_header(h: &RingHeader, mapped: u64) -> std::result::Result<Self, String> {
+        if h.magic != MAGIC {
+            return Err("not a vkterrain ring (bad magic)".into());
+        }
+        if h.layout_version != LAYOUT_VERSION {
+            return Err(format!(
+                "layout version {} is not the supported {LAYOUT_VERSION}",
+                h.layout_version
+            ));
+        }
+        let header_size = h.header_size as u64;
+        if header_size < size_of::<RingHeader>() as u64
+            || header_size % LINE as u64 != 0
+            || header_size > MAX_ALIGN as u64
+        {
+            return Err(format!(
+                "header_size {header_size} is not a multiple of 64 in 256..=65536"
+            ));
+        }
+        if h.width == 0 || h.height == 0 || h.width > 16384 || h.height > 16384 {
+            return Err(format!("{}x{} is outside 1..=16384", h.width, h.height));
+        }
+        if h.pixel_format != FORMAT_RGBA8_SRGB {
+            return Err(format!("pixel_format {} is unknown", h.pixel_format));
+        }
+        if h.row_stride as u64 != h.width as u64 * 4 {
+            return Err(format!(
+                "row_stride {} is not 4 * width ({})",
+                h.row_stride, h.width
+            ));
+        }
+        if !(2..=64).contains(&h.slot_count) {
+            return Err(format!("slot_count {} is outside 2..=64", h.slot_count));
+        }
+        let depth = match h.depth_format {
+            DEPTH_NONE => false,
+            DEPTH_F32_REVERSED_Z => true,
+            d => return Err(format!("depth_format {d} is unknown")),
+        };
+        let g = Geometry {
+            width: h.width,
+            height: h.height,
+            slot_count: h.slot_count,
+            depth,
+            align: h.header_size,
+        };
+        let (slot_size, pixels_offset, depth_offset) = (
+            h.slot_size as u64,
+            h.pixels_offset as u64,
+            h.depth_offset as u64,
+        );
+        if slot_size % LINE as u64 != 0 {
+            return Err(format!("slot_size {slot_size} is not a multiple of 64"));
+        }
+        if pixels_offset < size_of::<SlotHeader>() as u64
+            || pixels_offset % LINE as u64 != 0
+            || pixels_offset + g.pixel_bytes() > slot_size
+        {
+            return Err(format!(
+                "pixels at {pixels_offset} ({} bytes) do not fit a {slot_size}-byte slot after its header",
+                g.pixel_bytes()
+            ));
+        }
+        if depth
+            && (depth_offset % LINE as u64 != 0
+                || depth_offset < pixels_offset + g.pixel_bytes()
+                || depth_offset + g.depth_bytes() > slot_size)
+        {
+            return Err(format!(
+                "depth at {depth_offset} does not fit the slot after the pixels"
+            ));
+        }
+        if !depth && depth_offset != 0 {
+            return Err("depth_offset set without depth".into());
+        }
+        let need = header_size + slot_size * h.slot_count as u64;
+        if need > mapped || need > MAX_SEGMENT_BYTES {
+            return Err(format!(
+                "header and slots need {need} bytes but the segment has {mapped}"
+            ));
+        }
+        Ok(Layout {
+            geometry: g,
+            header_size,
+            slot_size,
+            pixels_offset,
+            depth_offset,
+        })
+    }
+
+    /// Whether a slot's metadata agrees with this layout (a reader rejects the slot otherwise).
+    pub fn meta_matches(&self, m: &FrameMeta) -> bool {
+        m.width == self.geometry.width
+            && m.height == self.geometry.height
+            && m.row_stride == self.geometry.row_stride()
     }
 }
 

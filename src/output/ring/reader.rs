@@ -3,14 +3,13 @@
 //! and follow producer restarts.
 
 use std::os::fd::OwnedFd;
-use std::os::unix::fs::MetadataExt;
 use std::sync::atomic::{Ordering, fence};
 use std::time::{Duration, Instant};
 
 use super::layout::{
-    FrameMeta, Geometry, LAYOUT_VERSION, MAGIC, NO_FRAME, PIXELS_OFFSET, RingHeader, STATE_CLOSED,
-    STATE_LIVE, SlotHeader, validate_name,
+    FrameMeta, Geometry, Layout, NO_FRAME, RingHeader, STATE_CLOSED, STATE_LIVE, SlotHeader,
 };
+use super::location::{RingLocation, check_segment, expected_owner, owner_from_env};
 use super::sys::{self, Mapping};
 use crate::error::{Error, Result};
 
@@ -40,19 +39,20 @@ pub struct ReaderStats {
     pub lost: u64,
     /// Copies discarded because the producer overwrote the slot meanwhile.
     pub torn_retries: u64,
+    /// Slots whose metadata disagreed with the header (never returned).
+    pub bad_slots: u64,
     /// New generations followed.
     pub restarts: u64,
 }
 
 /// A read-only view of one ring segment.
 pub struct RingReader {
-    name: String,
+    location: RingLocation,
+    owner: u32,
     map: Mapping,
     fd: OwnedFd,
-    geometry: Geometry,
+    layout: Layout,
     generation: u64,
-    slot_size: u64,
-    depth_offset: u64,
     last: Option<u64>,
     pixels: Vec<u8>,
     depth: Vec<f32>,
@@ -91,76 +91,69 @@ enum Read {
     Ok(FrameMeta),
     /// The slot is being written or was overwritten during the copy.
     Torn,
+    /// The slot's metadata does not match the header.
+    Bad,
     /// The slot holds nothing yet.
     Empty,
 }
 
 impl RingReader {
-    /// Opens `name` read-only and checks its header.
-    pub fn open(name: &str) -> Result<Self> {
-        validate_name(name)?;
-        let path = sys::shm_path(name);
-        let fd = sys::shm_open(name, libc::O_RDONLY, 0).map_err(|e| Error::io(&path, e))?;
-        let (_, _, size) = sys::fstat(&fd).map_err(|e| Error::io(&path, e))?;
+    /// Opens the ring `location` read-only and checks it: the segment must belong to
+    /// `owner` (default: the owner of a ring directory nobody else can write, see
+    /// [`expected_owner`]), be writable by nobody else, and every header field must fit the
+    /// mapped size ([`Layout::from_header`]).
+    pub fn open(location: &RingLocation, owner: Option<u32>) -> Result<Self> {
+        let owner = expected_owner(&location.dir, owner)?;
+        let path = location.segment_path();
+        let fd = sys::open(&path, libc::O_RDONLY, 0).map_err(|e| Error::io(&path, e))?;
+        let st = sys::fstat(&fd).map_err(|e| Error::io(&path, e))?;
+        check_segment(&st, owner, &path)?;
+        let size = st.st_size as u64;
         let bad = |m: String| Error::invalid("ring segment", format!("{}: {m}", path.display()));
         if size < size_of::<RingHeader>() as u64 {
             return Err(bad(format!("{size} bytes is smaller than a header")));
         }
         let map = Mapping::new(&fd, size as usize, false).map_err(|e| Error::io(&path, e))?;
-        // SAFETY: at least a header long, page aligned; the constant line never changes after
-        // the segment got its name.
+        // SAFETY: at least a header long, page aligned. The constant line is read once, here;
+        // everything later uses the checked copy in `layout`.
         let h = unsafe { &*(map.ptr() as *const RingHeader) };
-        if h.magic != MAGIC {
-            return Err(bad("not a vkterrain ring (bad magic)".into()));
-        }
-        if h.layout_version != LAYOUT_VERSION || h.header_size as usize != size_of::<RingHeader>() {
-            return Err(bad(format!(
-                "layout version {} (header {} bytes) is not the supported {LAYOUT_VERSION}",
-                h.layout_version, h.header_size
-            )));
-        }
-        let geometry = Geometry {
-            width: h.width,
-            height: h.height,
-            slot_count: h.slot_count,
-            depth: h.depth_format != 0,
-        };
-        geometry.validate().map_err(|e| bad(e.to_string()))?;
-        if geometry.segment_size() > size
-            || h.slot_size as u64 != geometry.slot_size()
-            || h.pixels_offset as usize != PIXELS_OFFSET
-            || h.depth_offset as u64 != geometry.depth_offset()
-            || h.row_stride != geometry.row_stride()
-        {
-            return Err(bad("header geometry does not match the segment".into()));
-        }
+        let layout = Layout::from_header(h, size).map_err(bad)?;
+        let g = layout.geometry;
         let mut r = RingReader {
-            name: name.to_string(),
+            location: location.clone(),
+            owner,
             generation: h.generation,
-            slot_size: h.slot_size as u64,
-            depth_offset: h.depth_offset as u64,
             map,
             fd,
-            geometry,
+            layout,
             last: None,
             pixels: Vec::new(),
             depth: Vec::new(),
             stats: ReaderStats::default(),
             copy_pixels: true,
         };
-        r.pixels.resize(geometry.pixel_bytes() as usize, 0);
-        if geometry.depth {
-            r.depth
-                .resize(geometry.width as usize * geometry.height as usize, 0.0);
+        r.pixels.resize(g.pixel_bytes() as usize, 0);
+        if g.depth {
+            r.depth.resize(g.width as usize * g.height as usize, 0.0);
         }
         Ok(r)
     }
 
-    /// Opens `name`, retrying until it exists or `timeout` passes.
-    pub fn open_wait(name: &str, timeout: Duration) -> Result<Self> {
+    /// [`RingReader::open`] of `name` in the default directory, with the owner from the
+    /// environment (`VKTERRAIN_RING_DIR`, `VKTERRAIN_RING_OWNER`).
+    pub fn open_named(name: &str) -> Result<Self> {
+        Self::open(&RingLocation::named(name)?, owner_from_env()?)
+    }
+
+    /// Opens the ring, retrying until it exists or `timeout` passes.
+    pub fn open_wait(
+        location: &RingLocation,
+        owner: Option<u32>,
+        timeout: Duration,
+    ) -> Result<Self> {
         let deadline = Instant::now() + timeout;
         loop {
-            match Self::open(name) {
+            match Self::open(location, owner) {
                 Ok(r) => return Ok(r),
                 Err(e) if Instant::now() >= deadline => return Err(e),
                 Err(_) => std::thread::sleep(Duration::from_millis(10)),
@@ -169,10 +162,21 @@ impl RingReader {
     }
 
     pub fn name(&self) -> &str {
-        &self.name
+        &self.location.name
+    }
+    pub fn location(&self) -> &RingLocation {
+        &self.location
     }
     pub fn geometry(&self) -> Geometry {
-        self.geometry
+        self.layout.geometry
+    }
+    pub fn layout(&self) -> Layout {
+        self.layout
+    }
+    /// Whether a producer process holds this segment (its lock; a crashed producer's segment
+    /// still says "live" in its state word, this does not).
+    pub fn producer_alive(&self) -> bool {
+        sys::ofd_write_locked(&self.fd).unwrap_or(false)
     }
     pub fn generation(&self) -> u64 {
         self.generation
@@ -186,7 +190,7 @@ impl RingReader {
     }
     /// Depth of the frame last returned, if the ring carries depth.
     pub fn depth(&self) -> Option<&[f32]> {
-        self.geometry.depth.then_some(&self.depth[..])
+        self.layout.geometry.depth.then_some(&self.depth[..])
     }
 
     fn header(&self) -> &RingHeader {
@@ -206,10 +210,8 @@ impl RingReader {
     }
 
     fn slot(&self, frame: u64) -> *const u8 {
-        let i = frame % self.geometry.slot_count as u64;
-        let off = size_of::<RingHeader>() as u64 + i * self.slot_size;
-        // SAFETY: inside the mapping (checked geometry).
-        unsafe { self.map.ptr().add(off as usize) }
+        // SAFETY: inside the mapping (Layout::from_header checked every slot against the size).
+        unsafe { self.map.ptr().add(self.layout.slot_offset(frame) as usize) }
     }
 
     /// Seqlock read of the slot that holds `frame`: copies metadata (and pixels/depth when
@@ -234,13 +236,13 @@ impl RingReader {
             );
             if copy {
                 std::ptr::copy_nonoverlapping(
-                    slot.add(PIXELS_OFFSET),
+                    slot.add(self.layout.pixels_offset as usize),
                     self.pixels.as_mut_ptr(),
                     self.pixels.len(),
                 );
-                if self.geometry.depth {
+                if self.layout.geometry.depth {
                     std::ptr::copy_nonoverlapping(
-                        slot.add(self.depth_offset as usize),
+                        slot.add(self.layout.depth_offset as usize),
                         self.depth.as_mut_ptr().cast::<u8>(),
                         self.depth.len() * 4,
                     );
@@ -254,6 +256,9 @@ impl RingReader {
         let s2 = sh.seq.load(Ordering::Relaxed);
         if s1 != s2 || meta.frame != (s1 - 2) / 2 {
             return Read::Torn;
+        }
+        if !self.layout.meta_matches(&meta) {
+            return Read::Bad;
         }
         Read::Ok(meta)
     }
@@ -276,13 +281,16 @@ impl RingReader {
                 )
             };
             fence(Ordering::Acquire);
-            if sh.seq.load(Ordering::Relaxed) == s1 && meta.frame == (s1 - 2) / 2 {
+            if sh.seq.load(Ordering::Relaxed) == s1
+                && meta.frame == (s1 - 2) / 2
+                && self.layout.meta_matches(&meta)
+            {
                 return Some(FrameRef {
                     meta,
                     seq: s1,
                     slot: sh,
                     // SAFETY: inside the slot.
-                    pixels: unsafe { slot.add(PIXELS_OFFSET) },
+                    pixels: unsafe { slot.add(self.layout.pixels_offset as usize) },
                     len: self.pixels.len(),
                 });
             }
@@ -290,15 +298,10 @@ impl RingReader {
         None
     }
 
-    /// Whether `/dev/shm/<name>` now refers to a different segment than ours.
+    /// Whether the ring's name now refers to a different segment than ours.
     fn replaced_on_disk(&self) -> bool {
-        match (
-            sys::fstat(&self.fd),
-            std::fs::metadata(sys::shm_path(&self.name)),
-        ) {
-            (Ok((dev, ino, _)), Ok(m)) => m.dev() != dev || m.ino() != ino,
-            _ => false,
-        }
+        let path = self.location.segment_path();
+        std::fs::symlink_metadata(&path).is_ok() && !sys::same_file(&self.fd, &path)
     }
 
     /// Re-opens the name if it refers to a new generation; true if it did.
@@ -306,13 +309,13 @@ impl RingReader {
         if !self.replaced_on_disk() {
             return false;
         }
-        match Self::open(&self.name) {
+        match Self::open(&self.location, Some(self.owner)) {
             Ok(mut fresh) if fresh.generation != self.generation => {
                 fresh.stats = self.stats;
                 fresh.stats.restarts += 1;
                 fresh.copy_pixels = self.copy_pixels;
                 tracing::info!(
-                    name = self.name,
+                    ring = %self.location,
                     generation = fresh.generation,
                     "ring restarted"
                 );
@@ -328,6 +331,7 @@ impl RingReader {
     /// frame; the frames in between are counted in [`ReaderStats::lost`].
     pub fn wait_next(&mut self, timeout: Duration) -> Result<Next> {
         let deadline = Instant::now() + timeout;
+        let mut torn = 0u64;
         loop {
             // Load the wake word before checking for frames: a publish after the check changes
             // it, so the futex wait below returns at once instead of missing the wake-up.
@@ -346,8 +350,22 @@ impl RingReader {
                         return Ok(Next::Frame(meta));
                     }
                     Read::Torn => {
+                        // Being written or overwritten: retry, but never past the deadline
+                        // (a slot a crashed or hostile producer left odd stays odd).
                         self.stats.torn_retries += 1;
+                        torn += 1;
+                        if Instant::now() >= deadline {
+                            return Ok(Next::Timeout);
+                        }
+                        if torn % 64 == 0 {
+                            std::thread::sleep(Duration::from_micros(100));
+                        }
                         continue;
+                    }
+                    Read::Bad => {
+                        // A corrupt slot is skipped, never returned; wait for the next frame.
+                        self.stats.bad_slots += 1;
+                        self.last = Some(latest);
                     }
                     _ => {}
                 }

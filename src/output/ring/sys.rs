@@ -1,32 +1,31 @@
 //! The few Linux calls the ring needs, wrapped so that the rest of the module is safe code:
-//! POSIX shared memory (`shm_open`, `/dev/shm`), `mmap`, and a cross-process futex.
+//! `open` without following symlinks, open-file-description locks, `mmap`, and a
+//! cross-process futex.
 
 use std::ffi::CString;
 use std::io;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
-use std::path::PathBuf;
+use std::os::unix::ffi::OsStrExt;
+use std::path::Path;
 use std::ptr::NonNull;
 use std::sync::atomic::AtomicU32;
 use std::time::Duration;
 
 use crate::error::{Error, Result};
 
-/// Where Linux keeps POSIX shared-memory objects (`shm_open("/x")` is `/dev/shm/x`).
-pub const SHM_DIR: &str = "/dev/shm";
-
-pub fn shm_path(name: &str) -> PathBuf {
-    PathBuf::from(SHM_DIR).join(name)
-}
-
-fn c_name(name: &str) -> Result<CString> {
-    CString::new(format!("/{name}")).map_err(|_| Error::invalid("ring name", "contains NUL"))
-}
-
-/// `shm_open` with the given flags and mode.
-pub fn shm_open(name: &str, flags: i32, mode: u32) -> io::Result<OwnedFd> {
-    let c = c_name(name).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
+/// `open(2)` relative to nothing: `O_CLOEXEC | O_NOFOLLOW` always (a ring, lock or status
+/// path is never followed through a symlink in its last component).
+pub fn open(path: &Path, flags: i32, mode: u32) -> io::Result<OwnedFd> {
+    let c = CString::new(path.as_os_str().as_bytes())
+        .map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "path contains NUL"))?;
     // SAFETY: `c` is a valid NUL-terminated string; the returned fd is owned by us.
-    let fd = unsafe { libc::shm_open(c.as_ptr(), flags | libc::O_CLOEXEC, mode as libc::mode_t) };
+    let fd = unsafe {
+        libc::open(
+            c.as_ptr(),
+            flags | libc::O_CLOEXEC | libc::O_NOFOLLOW,
+            mode as libc::c_uint,
+        )
+    };
     if fd < 0 {
         return Err(io::Error::last_os_error());
     }
@@ -34,21 +33,87 @@ pub fn shm_open(name: &str, flags: i32, mode: u32) -> io::Result<OwnedFd> {
     Ok(unsafe { OwnedFd::from_raw_fd(fd) })
 }
 
-pub fn shm_unlink(name: &str) -> io::Result<()> {
-    let c = c_name(name).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
-    // SAFETY: valid C string.
-    if unsafe { libc::shm_unlink(c.as_ptr()) } < 0 {
+/// `fstat` of an open descriptor.
+pub fn fstat(fd: &OwnedFd) -> io::Result<libc::stat> {
+    // SAFETY: valid fd and out pointer.
+    let mut st: libc::stat = unsafe { std::mem::zeroed() };
+    if unsafe { libc::fstat(fd.as_raw_fd(), &mut st) } < 0 {
         return Err(io::Error::last_os_error());
     }
-    Ok(())
+    Ok(st)
 }
 
-/// (device, inode, size) of an open descriptor.
-pub fn fstat(fd: &OwnedFd) -> io::Result<(u64, u64, u64)> {
-    let f = std::fs::File::from(fd.try_clone()?);
-    let m = f.metadata()?;
+/// Whether `path` (not following a final symlink) is the file open as `fd`.
+pub fn same_file(fd: &OwnedFd, path: &Path) -> bool {
     use std::os::unix::fs::MetadataExt;
-    Ok((m.dev(), m.ino(), m.size()))
+    match (fstat(fd), std::fs::symlink_metadata(path)) {
+        (Ok(st), Ok(m)) => m.dev() == st.st_dev && m.ino() == st.st_ino,
+        _ => false,
+    }
+}
+
+/// Open-file-description lock on the whole file: `F_OFD_SETLK` with `kind` (`F_WRLCK` or
+/// `F_RDLCK`), never waiting. Released when the last descriptor of this open file closes, so a
+/// crashed process never leaves a lock behind. `Ok(false)`: another open file holds a
+/// conflicting lock.
+pub fn ofd_try_lock(fd: &OwnedFd, kind: i32) -> io::Result<bool> {
+    let mut fl = flock_of(kind);
+    // SAFETY: valid fd and flock struct.
+    if unsafe { libc::fcntl(fd.as_raw_fd(), libc::F_OFD_SETLK, &mut fl) } < 0 {
+        let e = io::Error::last_os_error();
+        return match e.raw_os_error() {
+            Some(libc::EAGAIN) | Some(libc::EACCES) => Ok(false),
+            _ => Err(e),
+        };
+    }
+    Ok(true)
+}
+
+/// Whether another open file holds a write lock on `fd`'s file (`F_OFD_GETLK`: only tests,
+/// takes nothing, so a reader checking liveness never gets in a producer's way).
+pub fn ofd_write_locked(fd: &OwnedFd) -> io::Result<bool> {
+    let mut fl = flock_of(libc::F_RDLCK);
+    // SAFETY: valid fd and flock struct.
+    if unsafe { libc::fcntl(fd.as_raw_fd(), libc::F_OFD_GETLK, &mut fl) } < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(fl.l_type == libc::F_WRLCK as libc::c_short)
+}
+
+fn flock_of(kind: i32) -> libc::flock {
+    // SAFETY: plain C struct; all-zero is a valid value (l_pid must be 0 for OFD locks).
+    let mut fl: libc::flock = unsafe { std::mem::zeroed() };
+    fl.l_type = kind as libc::c_short;
+    fl.l_whence = libc::SEEK_SET as libc::c_short;
+    fl.l_start = 0;
+    fl.l_len = 0;
+    fl
+}
+
+/// Effective user id of this process.
+pub fn euid() -> u32 {
+    // SAFETY: no arguments, cannot fail.
+    unsafe { libc::geteuid() }
+}
+
+/// User id of a user name or a decimal uid.
+pub fn user_id(name: &str) -> Result<u32> {
+    if let Ok(uid) = name.trim().parse::<u32>() {
+        return Ok(uid);
+    }
+    let c = CString::new(name).map_err(|_| Error::invalid("ring owner", "contains NUL"))?;
+    // SAFETY: zeroed passwd is a valid out value; buffers outlive the call.
+    let mut pw: libc::passwd = unsafe { std::mem::zeroed() };
+    let mut buf = vec![0 as libc::c_char; 16384];
+    let mut out: *mut libc::passwd = std::ptr::null_mut();
+    let r = unsafe { libc::getpwnam_r(c.as_ptr(), &mut pw, buf.as_mut_ptr(), buf.len(), &mut out) };
+    if r != 0 || out.is_null() {
+        return Err(Error::invalid(
+            "ring owner",
+            format!("no user named {name:?}"),
+        ));
+    }
+    Ok(pw.pw_uid)
 }
 
 /// A shared mapping of a whole segment; unmapped on drop.
