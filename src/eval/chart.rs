@@ -347,3 +347,100 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_front_keeps_the_non_dominated_points() {
+        let pts = [(1.0, 5.0), (2.0, 2.0), (3.0, 3.0), (4.0, 1.0), (2.0, 2.5)];
+        assert_eq!(pareto_front(&pts), vec![0, 1, 3]);
+    }
+
+    #[test]
+    fn axes_go_logarithmic_over_decades_only() {
+        let log = Axis::fit([0.02, 0.5, 3.0].into_iter(), false);
+        assert!(log.log && log.range == (0.01..10.0), "{log:?}");
+        let lin = Axis::fit([2.0, 3.0, f64::NAN].into_iter(), true);
+        assert!(
+            !lin.log && lin.range.start == 0.0 && lin.range.end > 3.0,
+            "{lin:?}"
+        );
+        // Linear from the data's minimum (never below 0 for non-negative data).
+        let lin = Axis::fit([0.1, 0.9].into_iter(), false);
+        assert!(
+            !lin.log && lin.range.start >= 0.0 && lin.range.start < 0.1,
+            "{lin:?}"
+        );
+        assert_eq!(format_tick(0.25), "0.25");
+        assert_eq!(format_tick(2.0), "2");
+        assert_eq!(format_tick(1500.0), "1500");
+        assert_eq!(format_tick(0.0001), "1e-4");
+    }
+
+    fn chart(x_label: &str) -> Chart {
+        Chart {
+            title: "Frame time vs error <test>".into(),
+            x_label: x_label.into(),
+            y_label: "frame time (ms)".into(),
+            series: vec![
+                Series {
+                    name: "udlod".into(),
+                    points: vec![(0.4, 3.0), (1.1, 2.0), (3.9, 1.5)],
+                    labels: vec!["tau_px=0.5".into(), "tau_px=1".into(), "tau_px=4".into()],
+                    markers: true,
+                    line: true,
+                },
+                Series {
+                    name: "pgm".into(),
+                    points: vec![(8.0, 1.0), (f64::NAN, 2.0)],
+                    labels: vec!["120x525".into()],
+                    markers: true,
+                    line: false,
+                },
+            ],
+            highlight: vec![(0.4, 3.0), (1.1, 2.0), (3.9, 1.5), (8.0, 1.0)],
+            y_from_zero: true,
+        }
+    }
+
+    /// Dark pixels (text, lines) in a region of an RGBA image.
+    fn dark(rgba: &[u8], w: u32, (x0, y0, x1, y1): (u32, u32, u32, u32)) -> usize {
+        (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| ((y * w + x) * 4) as usize))
+            .filter(|&i| rgba[i] < 128 && rgba[i + 1] < 128 && rgba[i + 2] < 128)
+            .count()
+    }
+
+    #[test]
+    fn charts_carry_their_titles_labels_and_legend() {
+        let c = chart("screen-space error (px)");
+        let svg = c.to_svg().unwrap();
+        for text in [
+            "Frame time vs error &lt;test&gt;",
+            "screen-space error (px) (log)",
+            "frame time (ms)",
+            "tau_px=0.5",
+            "120x525",
+            "udlod",
+            "pgm",
+            "Pareto front",
+        ] {
+            assert!(svg.contains(text), "SVG lacks {text:?}");
+        }
+        assert!(svg.contains("<text"), "labels are SVG text");
+        // The PNG has text in the label areas: the x-axis title band below the plot, the
+        // y-axis band on the left, the title above; an unlabelled x axis leaves its band
+        // emptier (negative control).
+        let (w, h, rgba) = c.to_rgba().unwrap();
+        let below = (w / 3, h - 30, 2 * w / 3, h);
+        let left = (0, h / 4, 30, 3 * h / 4);
+        let top = (w / 4, 0, 3 * w / 4, 36);
+        for band in [below, left, top] {
+            assert!(dark(&rgba, w, band) > 40, "no text in {band:?}");
+        }
+        let (_, _, bare) = chart("").to_rgba().unwrap();
+        assert!(dark(&bare, w, below) * 2 < dark(&rgba, w, below));
+    }
+}

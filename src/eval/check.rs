@@ -67,6 +67,39 @@ impl From<&GpuFrameMetrics> for FrameMeasures {
     }
 }
 
+/// A frame measured on the CPU ([`metrics`]): the measures and the signed screen-space error
+/// image (for the next frame's popping, against `previous`).
+pub fn cpu_measures<S: metrics::ExactSurface + ?Sized>(
+    data: &S,
+    views: &[ViewColumns],
+    shape: FrameShape,
+    frame: &CpuFrame<'_>,
+    previous: Option<&[Option<f64>]>,
+) -> Result<(FrameMeasures, Vec<Option<f64>>)> {
+    let missing = || Error::invalid("cross-check", "needs read-back depth and colour");
+    let depth = frame.depth.ok_or_else(missing)?;
+    let reference_depth = frame.reference_depth.ok_or_else(missing)?;
+    let reference_rgba = frame.reference_rgba.ok_or_else(missing)?;
+    let (w, h) = (shape.width, shape.height);
+    let errors = metrics::pixel_errors_views(views, w, h, depth, data);
+    let mut cpu = FrameMeasures::default();
+    let mut image = vec![None; (w * h) as usize];
+    for e in &errors {
+        cpu.metres.add(e.metres.abs());
+        cpu.pixels.add(e.pixels);
+        image[(e.y * w + e.x) as usize] = Some(e.pixels.copysign(e.metres));
+    }
+    if let Some(previous) = previous {
+        for v in metrics::popping(previous, &image, depth, w, h) {
+            cpu.popping.add(v);
+        }
+    }
+    cpu.holes = metrics::holes(reference_depth, depth, w, h);
+    cpu.psnr_db = metrics::psnr(reference_rgba, frame.rgba);
+    cpu.ssim = metrics::ssim(reference_rgba, frame.rgba, w, h);
+    Ok((cpu, image))
+}
+
 /// The CPU side of one renderer's cross-check.
 pub struct CpuRun {
     shape: FrameShape,
@@ -96,34 +129,20 @@ impl CpuRun {
         frame: &CpuFrame<'_>,
         gpu: &GpuFrameMetrics,
     ) -> Result<()> {
-        let missing = || Error::invalid("cross-check", "needs read-back depth and colour");
-        let depth = frame.depth.ok_or_else(missing)?;
-        let reference_depth = frame.reference_depth.ok_or_else(missing)?;
-        let reference_rgba = frame.reference_rgba.ok_or_else(missing)?;
+        let (cpu, image) = cpu_measures(data, views, self.shape, frame, self.previous.as_deref())?;
         let (w, h) = (self.shape.width, self.shape.height);
-        let errors = metrics::pixel_errors_views(views, w, h, depth, data);
-        let mut cpu = FrameMeasures::default();
-        let mut image = vec![None; (w * h) as usize];
-        for e in &errors {
-            cpu.metres.add(e.metres.abs());
-            cpu.pixels.add(e.pixels);
-            image[(e.y * w + e.x) as usize] = Some(e.pixels.copysign(e.metres));
-        }
         let floors = Floors::of(views, h);
         if let Some(gpu_image) = &gpu.error_image
             && let Some(p) = compare_images(gpu_image, &image, w, floors.pixels)
         {
             self.problems.push(format!("frame {k}: {p}"));
         }
-        if let Some(previous) = &self.previous {
-            for v in metrics::popping(previous, &image, depth, w, h) {
-                cpu.popping.add(v);
-            }
-        }
         self.previous = Some(image);
-        cpu.holes = metrics::holes(reference_depth, depth, w, h);
-        cpu.psnr_db = metrics::psnr(reference_rgba, frame.rgba);
-        cpu.ssim = metrics::ssim(reference_rgba, frame.rgba, w, h);
+        let missing = || Error::invalid("cross-check", "needs read-back depth");
+        let (depth, reference_depth) = (
+            frame.depth.ok_or_else(missing)?,
+            frame.reference_depth.ok_or_else(missing)?,
+        );
         if k % SWIM_SEED_EVERY == 0 {
             self.swim.seed(views, w, h, reference_depth, data);
         }

@@ -99,16 +99,4 @@ mod tests {
         let colours = magma_rgba(&error_map(&a, &b, w, h), w, h);
         assert_eq!(colours.len(), (w * h * 4) as usize);
     }
-
-    #[test]
-    #[ignore = "timing probe: cargo test --release --lib flip_speed -- --ignored --nocapture"]
-    fn flip_speed() {
-        for (w, h) in [(1280u32, 720u32), (1920, 1080)] {
-            let a = pattern(w, h, 0);
-            let b = pattern(w, h, 1);
-            let t = std::time::Instant::now();
-            let s = FlipStats::of(&error_map(&a, &b, w, h));
-            println!("{w}x{h}: {:.1} ms ({s:?})", t.elapsed().as_secs_f64() * 1e3);
-        }
-    }
 }

@@ -392,13 +392,8 @@ fn open_run(
     options.frames_in_flight = 1;
     options.readback_depth = setup.cross_check;
     let mut renderer = config.open_renderer(setup.gpu, setup.data, options)?;
-    let (tx, rx): (Sender<GpuFrameMetrics>, _) = unbounded();
-    renderer.set_analysis(Box::new(GpuAnalysis::new(
-        shared,
-        role,
-        setup.image_frames.clone(),
-        tx,
-    )?))?;
+    let (analysis, rx) = GpuAnalysis::new(shared, role, setup.image_frames.clone())?;
+    renderer.set_analysis(Box::new(analysis))?;
     Ok(Run {
         label: label.to_string(),
         method: method.clone(),

@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
-use crossbeam_channel::Sender;
+use crossbeam_channel::{Receiver, Sender, unbounded};
 use gpu_allocator::MemoryLocation;
 
 use self::layout::{EvalFrame, EvalView, PARTIAL_BYTES, Seed, Totals};
@@ -241,13 +241,14 @@ pub struct GpuAnalysis {
 
 impl GpuAnalysis {
     /// The analysis of one renderer of `shared`'s evaluation; the error images of
-    /// `image_frames` are read back too. Results go to `results` as frames complete.
+    /// `image_frames` are read back too. Each frame's results arrive on the returned receiver
+    /// when the renderer delivers the frame.
     pub fn new(
         shared: &Arc<EvalShared>,
         role: Role,
         image_frames: Vec<u64>,
-        results: Sender<GpuFrameMetrics>,
-    ) -> Result<Self> {
+    ) -> Result<(Self, Receiver<GpuFrameMetrics>)> {
+        let (results, receiver) = unbounded();
         let gpu = &shared.gpu;
         let index = shared.next_set.fetch_add(1, Ordering::Relaxed);
         let set = *shared.sets.sets.get(index).ok_or_else(|| {
@@ -358,7 +359,7 @@ impl GpuAnalysis {
             })
             .collect();
         unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
-        Ok(GpuAnalysis {
+        let analysis = GpuAnalysis {
             shared: shared.clone(),
             role,
             set,
@@ -375,7 +376,8 @@ impl GpuAnalysis {
             groups,
             recorded: 0,
             results,
-        })
+        };
+        Ok((analysis, receiver))
     }
 
     /// The uniforms of frame `frame`.
