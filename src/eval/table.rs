@@ -20,6 +20,10 @@ pub const SUMMARY_COLUMNS: &[Column<RunSummary>] = &[
         cell: |s| format!("{:.2} / {:.2}", s.gpu_ms.median, s.gpu_ms.p99),
     },
     Column {
+        header: "eval GPU ms",
+        cell: |s| format!("{:.2}", s.gpu_eval_ms_median),
+    },
+    Column {
         header: "triangles",
         cell: |s| format!("{:.0}", s.triangles_median),
     },

@@ -234,7 +234,8 @@ pub struct GpuAnalysis {
     stats_host: Buffer,
     export: Option<Buffer>,
     image_frames: Vec<u64>,
-    groups: (u32, u32),
+    /// 8x8 pixel blocks per row and rows of blocks.
+    blocks: (u32, u32),
     recorded: u64,
     results: Sender<GpuFrameMetrics>,
 }
@@ -259,7 +260,7 @@ impl GpuAnalysis {
         })?;
         let shape = shared.shape;
         let pixels = shape.width as u64 * shape.height as u64;
-        let groups = (
+        let blocks = (
             shape.width.div_ceil(EVAL_TILE_PX),
             shape.height.div_ceil(EVAL_TILE_PX),
         );
@@ -291,7 +292,7 @@ impl GpuAnalysis {
         let error_image = device("eval error image", pixels * 4, copy_usage)?;
         let partials = device(
             "eval partials",
-            groups.0 as u64 * groups.1 as u64 * PARTIAL_BYTES,
+            blocks.0 as u64 * blocks.1 as u64 * PARTIAL_BYTES,
             vk::BufferUsageFlags::empty(),
         )?;
         let stats_size = stats_bytes(max_points(shared.frames));
@@ -373,7 +374,7 @@ impl GpuAnalysis {
             stats_host,
             export,
             image_frames,
-            groups,
+            blocks,
             recorded: 0,
             results,
         };
@@ -429,9 +430,9 @@ impl GpuAnalysis {
                 (round + 1) * grid,
                 round * grid,
                 if seeding { grid } else { 0 },
-                self.groups.0 * self.groups.1,
+                self.blocks.0 * self.blocks.1,
             ],
-            grid: [SWIM_GRID.0, SWIM_GRID.1, self.groups.0, 0],
+            grid: [SWIM_GRID.0, SWIM_GRID.1, self.blocks.0, 0],
         })
     }
 
@@ -544,7 +545,8 @@ impl FrameAnalysis for GpuAnalysis {
                 MemoryAccess::ComputeReadWrite,
             );
         }
-        self.dispatch(cmd, &s.pixels, self.groups);
+        let blocks = self.blocks.0 * self.blocks.1;
+        self.dispatch(cmd, &s.pixels, (blocks.div_ceil(EVAL_POINT_WORKGROUP), 1));
         let points = uniforms.points[0];
         self.dispatch(cmd, &s.swim, (points.div_ceil(EVAL_POINT_WORKGROUP), 1));
         b.memory(
