@@ -79,4 +79,6 @@ shared_constants! {
     EVAL_POINT_WORKGROUP: u32 = 64;
     /// Threads of the one workgroup that sums the per-workgroup partials.
     EVAL_REDUCE_WORKGROUP: u32 = 256;
+    /// Threads per workgroup of the UDLOD morph probe (tests: morphed vertices read back).
+    UDLOD_PROBE_WORKGROUP: u32 = 64;
 }

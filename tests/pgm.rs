@@ -261,25 +261,6 @@ fn grazing_views_lose_only_a_thin_band_under_the_skyline() {
     );
 }
 
-/// Height of brute force's mesh at world `(x, y)`: the two triangles of each quad split along
-/// the diagonal from (c+1, r) to (c, r+1), exactly as `brute::grid_indices` draws them.
-fn mesh_height(data: &Heightmap, x: f64, y: f64) -> f64 {
-    let gx = (x / data.spacing).clamp(0.0, (data.width - 1) as f64);
-    let gy = (y / data.spacing).clamp(0.0, (data.height - 1) as f64);
-    let (c, r) = (
-        (gx.floor() as u32).min(data.width - 2),
-        (gy.floor() as u32).min(data.height - 2),
-    );
-    let (fx, fy) = (gx - c as f64, gy - r as f64);
-    let h = |c: u32, r: u32| data.heights[(r * data.width + c) as usize] as f64;
-    let (a, b, cc, d) = (h(c, r), h(c + 1, r), h(c, r + 1), h(c + 1, r + 1));
-    if fx + fy <= 1.0 {
-        a + (b - a) * fx + (cc - a) * fy
-    } else {
-        d + (cc - d) * (1.0 - fx) + (b - d) * (1.0 - fy)
-    }
-}
-
 /// Rendered height error per world cell (`cell_m` metres): each terrain pixel's depth is turned
 /// back into a world point; its height minus the exact mesh height there, averaged per cell.
 fn error_per_cell(
@@ -298,7 +279,7 @@ fn error_per_cell(
             }
             let ray = cam.pixel_ray(x as f64 + 0.5, y as f64 + 0.5, f.width, f.height);
             let p = cam.position + ray * (cam.linear_depth(depth) / ray.dot(forward));
-            let e = p.z - mesh_height(data, p.x, p.y);
+            let e = p.z - data.mesh_height_at(p.x, p.y);
             let key = ((p.x / cell_m).floor() as i64, (p.y / cell_m).floor() as i64);
             let entry = cells.entry(key).or_insert((0.0, 0));
             entry.0 += e;

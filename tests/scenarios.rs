@@ -4,6 +4,8 @@
 //! The real data sets come from `../shared/data` (SRTM pairs preprocessed into a temporary
 //! directory); without it the files are checked against procedural terrain only.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
@@ -45,16 +47,9 @@ fn srtm_pair(data: &Path, south: &str, north: &str, tmp: &Path) -> Heightmap {
     tiles::load(&out, None, tiles::DEFAULT_MAX_SAMPLES).unwrap()
 }
 
-/// Data sets by file-name prefix; `None` without ../shared/data.
+/// Data sets by file-name prefix; `None` without ../shared/data (a failure in CI).
 fn real_datasets() -> Option<Vec<(&'static str, Heightmap)>> {
-    let data = root().join("../shared/data");
-    if !data.is_dir() {
-        eprintln!(
-            "note: {} absent, scenarios checked on procedural terrain only",
-            data.display()
-        );
-        return None;
-    }
+    let data = common::shared_data()?;
     // One directory per call: tests run in parallel threads of one process.
     static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);

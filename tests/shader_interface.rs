@@ -1,20 +1,68 @@
-//! The CPU and WGSL sides of shared data must agree: the uniform block layout is checked
-//! against naga's reflection of the composed shader, and the shared constants against the
-//! values the shader was built with.
+//! The CPU and WGSL sides of shared data must agree, checked against naga's reflection of each
+//! composed shader: struct layouts (uniform blocks, indirect arguments, probe records), the
+//! shared constants, and every descriptor-set table (binding, WGSL name, resource kind, stages)
+//! against the shaders' `@group/@binding` globals.
 
 use std::mem::{offset_of, size_of};
 
-use vkterrain::driver::shaders::{BRUTE_WGSL, PGM_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL};
+use ash::vk;
+use vkterrain::driver::descriptors::{Binding, PROBE_SET};
+use vkterrain::driver::shaders::{
+    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL,
+};
+use vkterrain::eval::gpu::EVAL_SET;
 use vkterrain::frame::FrameUniforms;
+use vkterrain::frame::terrain::TERRAIN_SET;
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
-use vkterrain::lod::udlod::{TilingState, UdlodUniforms};
+use vkterrain::lod::pgm::PGM_SET;
+use vkterrain::lod::udlod::{DRAW_OFFSET, DRAW_STRIDE, TilingState, UDLOD_SET, UdlodUniforms};
 
+/// The drawing shaders (the probes come on top where a test covers them too).
 fn composed_shaders() -> [(&'static str, &'static str); 4] {
     [
         ("brute", BRUTE_WGSL),
         ("udlod", UDLOD_WGSL),
         ("udlod_tiling", UDLOD_TILING_WGSL),
         ("pgm", PGM_WGSL),
+    ]
+}
+
+/// A descriptor-set table by name.
+type Table = (&'static str, &'static [Binding]);
+
+/// Shaders (name, composed source) with the table bound at each of their groups.
+type ShaderSets = Vec<(&'static str, &'static str, Vec<(u32, Table)>)>;
+
+/// Every shader with the table bound at each of its groups (what each pipeline layout uses).
+fn shader_sets() -> ShaderSets {
+    let terrain = ("TERRAIN_SET", TERRAIN_SET);
+    let udlod = ("UDLOD_SET", UDLOD_SET);
+    let pgm = ("PGM_SET", PGM_SET);
+    let probe = ("PROBE_SET", PROBE_SET);
+    vec![
+        ("brute", BRUTE_WGSL, vec![(0, terrain)]),
+        ("udlod", UDLOD_WGSL, vec![(0, terrain), (1, udlod)]),
+        (
+            "udlod_tiling",
+            UDLOD_TILING_WGSL,
+            vec![(0, terrain), (1, udlod)],
+        ),
+        ("pgm", PGM_WGSL, vec![(0, terrain), (1, pgm)]),
+        (
+            "clipmap_probe",
+            CLIPMAP_PROBE_WGSL,
+            vec![(0, terrain), (1, probe)],
+        ),
+        (
+            "udlod_probe",
+            UDLOD_PROBE_WGSL,
+            vec![(0, terrain), (1, udlod), (2, probe)],
+        ),
+        (
+            "eval_metrics",
+            EVAL_METRICS_WGSL,
+            vec![(0, ("EVAL_SET", EVAL_SET))],
+        ),
     ]
 }
 
@@ -69,6 +117,7 @@ fn frame_uniforms_match_the_wgsl_struct() {
         ("camera_offset", offset_of!(FrameUniforms, camera_offset)),
         ("sun_dir", offset_of!(FrameUniforms, sun_dir)),
         ("data_size", offset_of!(FrameUniforms, data_size)),
+        ("haze", offset_of!(FrameUniforms, haze)),
     ];
     assert_struct_layout(
         &composed_shaders(),
@@ -121,10 +170,59 @@ fn tiling_state_matches_the_wgsl_struct() {
         &rust,
         size_of::<TilingState>(),
     );
-    // The vkCmdDispatchIndirect / vkCmdDrawIndexedIndirect argument layouts.
-    assert_eq!(offset_of!(TilingState, dispatch), 0);
+}
+
+/// The indirect arguments inside `TilingState` are laid out as Vulkan reads them: the WGSL
+/// members sit at the offsets of `VkDispatchIndirectCommand` (at 0, where the prepass
+/// dispatches from) and `VkDrawIndexedIndirectCommand` (at `DRAW_OFFSET`, drawn with
+/// `DRAW_STRIDE`), and the first four draw words read as a `VkDrawIndirectCommand` for vertex
+/// pulling.
+#[test]
+fn indirect_arguments_are_vulkan_commands() {
+    let module = naga::front::wgsl::parse_str(UDLOD_TILING_WGSL).unwrap();
+    let wgsl = struct_offsets(&module, "TilingState");
+    let at = |name: &str| wgsl.iter().find(|(n, _)| n == name).unwrap().1;
+    type D = vk::DispatchIndirectCommand;
+    assert_eq!(at("dispatch_x"), offset_of!(D, x));
+    assert_eq!(at("dispatch_y"), offset_of!(D, y));
+    assert_eq!(at("dispatch_z"), offset_of!(D, z));
+    type I = vk::DrawIndexedIndirectCommand;
+    let draw = DRAW_OFFSET as usize;
+    assert_eq!(draw, offset_of!(TilingState, draw));
+    assert_eq!(at("index_count"), draw + offset_of!(I, index_count));
+    assert_eq!(at("instance_count"), draw + offset_of!(I, instance_count));
+    assert_eq!(at("first_index"), draw + offset_of!(I, first_index));
+    assert_eq!(at("vertex_offset"), draw + offset_of!(I, vertex_offset));
+    assert_eq!(at("first_instance"), draw + offset_of!(I, first_instance));
+    // Vulkan: the offset is a multiple of 4, the stride at least the command's size.
     assert_eq!(draw % 4, 0);
-    assert_eq!(size_of::<[u32; 5]>(), 20);
+    assert_eq!(DRAW_STRIDE as usize, size_of::<I>());
+    // The whole command lies inside `draw`, before the next member.
+    assert!(draw + size_of::<I>() <= offset_of!(TilingState, parent_count));
+    // Vertex pulling: vertex_count, instance_count, first_vertex, first_instance read
+    // index_count, instance_count, first_index and vertex_offset (which `finish` leaves 0).
+    type P = vk::DrawIndirectCommand;
+    assert_eq!(at("index_count"), draw + offset_of!(P, vertex_count));
+    assert_eq!(at("instance_count"), draw + offset_of!(P, instance_count));
+    assert_eq!(at("first_index"), draw + offset_of!(P, first_vertex));
+    assert_eq!(at("vertex_offset"), draw + offset_of!(P, first_instance));
+}
+
+/// Member names and byte offsets of WGSL struct `name`.
+fn struct_offsets(module: &naga::Module, name: &str) -> Vec<(String, usize)> {
+    let ty = module
+        .types
+        .iter()
+        .find(|(_, t)| t.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("no struct {name}"))
+        .1;
+    let naga::TypeInner::Struct { members, .. } = &ty.inner else {
+        panic!("{name} is not a struct")
+    };
+    members
+        .iter()
+        .map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize))
+        .collect()
 }
 
 #[test]
@@ -139,7 +237,7 @@ fn tile_record_matches_the_wgsl_struct() {
 
 #[test]
 fn shared_constants_are_in_every_shader_with_their_rust_values() {
-    for (name, source) in composed_shaders() {
+    for (name, source, _) in shader_sets() {
         let module = naga::front::wgsl::parse_str(source).expect("composed shader parses");
         for &(constant_name, rust_value) in WGSL_CONSTANTS {
             let (_, constant) = module
@@ -167,37 +265,233 @@ fn shared_constants_are_in_every_shader_with_their_rust_values() {
 
 #[test]
 fn clipmap_header_matches_the_wgsl_struct() {
-    use vkterrain::clipmap::quadtree::HEADER_BYTES;
-    use vkterrain::driver::shaders::CLIPMAP_PROBE_WGSL;
+    use vkterrain::clipmap::quadtree::{ClipmapHeader, HEADER_BYTES};
     let mut shaders = composed_shaders().to_vec();
     shaders.push(("clipmap_probe", CLIPMAP_PROBE_WGSL));
     for (name, source) in shaders {
         let module = naga::front::wgsl::parse_str(source).expect("composed shader parses");
-        let ty = module
-            .types
-            .iter()
-            .find(|(_, t)| t.name.as_deref() == Some("Clipmap"))
-            .unwrap_or_else(|| panic!("{name}: no struct Clipmap"))
-            .1;
-        let naga::TypeInner::Struct { members, .. } = &ty.inner else {
-            panic!("{name}: Clipmap is not a struct")
+        let wgsl = struct_offsets(&module, "Clipmap");
+        // `ViewQuadtree::gpu_bytes`: the header, then the entries.
+        let rust = [
+            ("params", offset_of!(ClipmapHeader, params)),
+            ("params2", offset_of!(ClipmapHeader, params2)),
+            ("viewer", offset_of!(ClipmapHeader, viewer)),
+            ("levels", offset_of!(ClipmapHeader, levels)),
+            ("entries", HEADER_BYTES as usize),
+        ]
+        .map(|(n, o)| (n.to_string(), o));
+        assert_eq!(wgsl, rust, "{name}");
+    }
+}
+
+#[test]
+fn udlod_probe_record_matches_the_wgsl_struct() {
+    use vkterrain::lod::udlod::probe::ProbeVertex;
+    let rust = [
+        ("tile", offset_of!(ProbeVertex, tile)),
+        ("local", offset_of!(ProbeVertex, local)),
+        ("cell", offset_of!(ProbeVertex, cell)),
+        ("frac", offset_of!(ProbeVertex, frac)),
+        ("values", offset_of!(ProbeVertex, values)),
+    ];
+    assert_struct_layout(
+        &[("udlod_probe", UDLOD_PROBE_WGSL)],
+        "ProbeVertex",
+        &rust,
+        size_of::<ProbeVertex>(),
+    );
+}
+
+/// The descriptor type a WGSL resource global needs, from its address space and type.
+fn descriptor_type(
+    module: &naga::Module,
+    var: &naga::GlobalVariable,
+) -> Option<vk::DescriptorType> {
+    match (var.space, &module.types[var.ty].inner) {
+        (naga::AddressSpace::Uniform, _) => Some(vk::DescriptorType::UNIFORM_BUFFER),
+        (naga::AddressSpace::Storage { .. }, _) => Some(vk::DescriptorType::STORAGE_BUFFER),
+        (naga::AddressSpace::Handle, naga::TypeInner::Sampler { .. }) => {
+            Some(vk::DescriptorType::SAMPLER)
+        }
+        (naga::AddressSpace::Handle, naga::TypeInner::Image { class, .. }) => match class {
+            naga::ImageClass::Storage { .. } => Some(vk::DescriptorType::STORAGE_IMAGE),
+            _ => Some(vk::DescriptorType::SAMPLED_IMAGE),
+        },
+        _ => None,
+    }
+}
+
+fn stage_flag(stage: naga::ShaderStage) -> vk::ShaderStageFlags {
+    match stage {
+        naga::ShaderStage::Vertex => vk::ShaderStageFlags::VERTEX,
+        naga::ShaderStage::Fragment => vk::ShaderStageFlags::FRAGMENT,
+        naga::ShaderStage::Compute => vk::ShaderStageFlags::COMPUTE,
+        other => panic!("stage {other:?} is not used by vkterrain"),
+    }
+}
+
+/// What disagrees between a shader's `@group/@binding` globals and the tables bound at its
+/// groups (`sets`: group, table): a global whose group has no table, whose binding the table
+/// lacks, or whose name or resource kind differs; an entry point reading a binding from a stage
+/// the table does not grant. Also returns the `(group, binding)` pairs the shader declares.
+fn interface_problems(
+    shader: &str,
+    source: &str,
+    sets: &[(u32, Table)],
+) -> (Vec<String>, Vec<(u32, u32)>) {
+    let module = naga::front::wgsl::parse_str(source).expect("composed shader parses");
+    let info = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module)
+    .expect("composed shader validates");
+    let mut problems = Vec::new();
+    let mut declared = Vec::new();
+    for (handle, var) in module.global_variables.iter() {
+        let Some(rb) = &var.binding else { continue };
+        let name = var.name.as_deref().unwrap_or("?");
+        let what = format!(
+            "{shader}: @group({}) @binding({}) {name}",
+            rb.group, rb.binding
+        );
+        declared.push((rb.group, rb.binding));
+        let Some((_, (_, table))) = sets.iter().find(|(g, _)| *g == rb.group) else {
+            problems.push(format!("{what}: no table for group {}", rb.group));
+            continue;
         };
-        let wgsl: Vec<(&str, u64)> = members
-            .iter()
-            .map(|m| (m.name.as_deref().unwrap_or("?"), m.offset as u64))
+        let Some(entry) = table.iter().find(|b| b.binding == rb.binding) else {
+            problems.push(format!("{what}: not in the table"));
+            continue;
+        };
+        if entry.name != name {
+            problems.push(format!("{what}: the table calls it {:?}", entry.name));
+        }
+        let ty = descriptor_type(&module, var);
+        if ty != Some(entry.ty) {
+            problems.push(format!(
+                "{what}: is a {ty:?}, the table says {:?}",
+                entry.ty
+            ));
+        }
+        for (i, ep) in module.entry_points.iter().enumerate() {
+            let stage = stage_flag(ep.stage);
+            if !info.get_entry_point(i)[handle].is_empty() && !entry.stages.contains(stage) {
+                problems.push(format!(
+                    "{what}: used by {} ({stage:?}), the table grants {:?}",
+                    ep.name, entry.stages
+                ));
+            }
+        }
+    }
+    (problems, declared)
+}
+
+/// Every problem of every table against every shader that binds it, plus table entries that
+/// no shader binding that table declares.
+fn all_interface_problems(shaders: &ShaderSets) -> Vec<String> {
+    let mut problems = Vec::new();
+    // Per table: the bindings its shaders declare at the group they bind it to.
+    let mut seen: Vec<(Table, Vec<u32>)> = Vec::new();
+    for (name, source, sets) in shaders {
+        let (p, declared) = interface_problems(name, source, sets);
+        problems.extend(p);
+        for &(group, table) in sets {
+            let bindings = declared
+                .iter()
+                .filter(|(g, _)| *g == group)
+                .map(|(_, b)| *b);
+            match seen.iter_mut().find(|(t, _)| t.0 == table.0) {
+                Some((_, v)) => v.extend(bindings),
+                None => seen.push((table, bindings.collect())),
+            }
+        }
+    }
+    for ((table_name, table), used) in seen {
+        for (i, b) in table.iter().enumerate() {
+            let what = format!("{table_name} entry {} {:?}", b.binding, b.name);
+            if !used.contains(&b.binding) {
+                problems.push(format!("{what}: no shader using the table declares it"));
+            }
+            if table[..i].iter().any(|o| o.binding == b.binding) {
+                problems.push(format!("{what}: binding twice"));
+            }
+        }
+    }
+    problems
+}
+
+#[test]
+fn descriptor_tables_match_the_shader_bindings() {
+    let problems = all_interface_problems(&shader_sets());
+    assert!(problems.is_empty(), "{problems:#?}");
+}
+
+/// Negative control: wrong tables are reported, each with the binding it concerns.
+#[test]
+fn a_wrong_descriptor_table_is_reported() {
+    let leak = |v: Vec<Binding>| -> &'static [Binding] { Box::leak(v.into_boxed_slice()) };
+    let mutate = |f: &dyn Fn(&mut Vec<Binding>)| {
+        let mut t = TERRAIN_SET.to_vec();
+        f(&mut t);
+        leak(t)
+    };
+    let cases: Vec<(&str, &'static [Binding])> = vec![
+        (
+            "the table calls it \"quadtree\"",
+            mutate(&|t| t[6].name = "quadtree"),
+        ),
+        (
+            "the table says UNIFORM_BUFFER",
+            mutate(&|t| t[6].ty = vk::DescriptorType::UNIFORM_BUFFER),
+        ),
+        (
+            "atlas_albedo: not in the table",
+            mutate(&|t| {
+                t.pop();
+            }),
+        ),
+        (
+            "TERRAIN_SET entry 9 \"extra\": no shader",
+            mutate(&|t| {
+                t.push(Binding::new(
+                    9,
+                    vk::DescriptorType::SAMPLER,
+                    t[0].stages,
+                    "extra",
+                ))
+            }),
+        ),
+        (
+            "height_tex: used by vs_main (VERTEX)",
+            mutate(&|t| t[1].stages = vk::ShaderStageFlags::FRAGMENT),
+        ),
+        ("binding twice", mutate(&|t| t[8].binding = 7)),
+    ];
+    for (words, table) in cases {
+        let shaders: Vec<_> = shader_sets()
+            .into_iter()
+            .map(|(n, s, sets)| {
+                let sets = sets
+                    .into_iter()
+                    .map(|(g, t)| match t.0 {
+                        "TERRAIN_SET" => (g, ("TERRAIN_SET", table)),
+                        _ => (g, t),
+                    })
+                    .collect();
+                (n, s, sets)
+            })
             .collect();
-        // `ViewQuadtree::gpu_bytes`: two vec4<u32>, a vec4<f32>, CLIPMAP_MAX_LEVELS vec4<i32>, then
-        // entries.
-        assert_eq!(
-            wgsl,
-            [
-                ("params", 0),
-                ("params2", 16),
-                ("viewer", 32),
-                ("levels", 48),
-                ("entries", HEADER_BYTES)
-            ],
-            "{name}"
+        let problems = all_interface_problems(&shaders);
+        assert!(
+            problems.iter().any(|p| p.contains(words)),
+            "expected {words:?} among {problems:#?}"
         );
     }
+    // A shader whose group has no table at all.
+    let (problems, _) = interface_problems("pgm", PGM_WGSL, &[(0, ("TERRAIN_SET", TERRAIN_SET))]);
+    assert!(
+        problems.iter().any(|p| p.contains("no table for group 1")),
+        "{problems:#?}"
+    );
 }

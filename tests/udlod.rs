@@ -9,6 +9,7 @@ use std::collections::{HashMap, HashSet};
 
 use glam::DVec3;
 use vkterrain::dataset::Heightmap;
+use vkterrain::dataset::interp::GridCell;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
 use vkterrain::lod::{MethodKind, UdlodSettings};
@@ -128,6 +129,149 @@ fn gpu_selection_equals_cpu_reference() {
     }
 }
 
+/// A low flight across the data (150 m above the ground, looking ahead and down), where many
+/// tiles are inside their morph zone.
+fn low_flight(data: &Heightmap, n: usize) -> Vec<Camera> {
+    let (ex, ey) = data.extent();
+    (0..n)
+        .map(|i| {
+            let f = i as f64 / n as f64;
+            let (x, y) = (ex * (0.15 + 0.7 * f), ey * (0.3 + 0.4 * f));
+            Camera {
+                position: DVec3::new(x, y, data.height_at(x, y) + 150.0),
+                yaw_deg: 40.0 + 30.0 * f,
+                pitch_deg: -20.0,
+                near: 0.25,
+                ..Camera::default()
+            }
+        })
+        .collect()
+}
+
+/// Compared over one morph-probe run.
+#[derive(Default, Debug)]
+struct MorphComparison {
+    vertices: usize,
+    mid_morph: usize,
+    /// Odd vertices strictly between their own and their parent's grid position.
+    sliding: usize,
+    /// Vertices where the CPU and GPU differ in any bit, and the first few of them.
+    mismatched: usize,
+    mismatches: Vec<String>,
+    worst_height_ulps: f32,
+}
+
+/// Renders `cameras` with UDLOD (`lod`) and, after each frame, evaluates the GPU's vertex morph
+/// (`morphed_vertex` in shaders/include/udlod_morph.wgsl, through the state that frame drew
+/// with) at every vertex of every tile the GPU drew, against `select::morphed_vertex`.
+fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> MorphComparison {
+    let gpu = common::gpu(false);
+    let levels = Levels::new(data, lod.grid_size, lod.error_field_max).unwrap();
+    let g = lod.grid_size;
+    let mut out = MorphComparison::default();
+    {
+        let mut r = Renderer::new(&gpu, data, lod.clone(), common::options(W, H, 1)).unwrap();
+        let mut sink = CollectSink::default();
+        for cam in cameras {
+            r.render(*cam, &mut sink).unwrap();
+            r.finish(&mut sink).unwrap();
+            let tiles = r.method().debug_tiles(ViewSlot(0)).unwrap().unwrap();
+            let inputs: Vec<(Tile, [u32; 2])> = tiles
+                .iter()
+                .flat_map(|&[x, y, lod]| {
+                    (0..=g).flat_map(move |j| (0..=g).map(move |i| (Tile { x, y, lod }, [i, j])))
+                })
+                .collect();
+            let gpu_vertices = r.probe_morph_in_view(0, &inputs).unwrap();
+            assert_eq!(gpu_vertices.len(), inputs.len());
+            let p = SelectionParams::new(&levels, data, lod, cam, cam.position, W, H);
+            for ((t, local), gv) in inputs.iter().zip(&gpu_vertices) {
+                let cv = select::morphed_vertex(&levels, &p, *t, *local);
+                out.vertices += 1;
+                if cv.morph > 0.0 && cv.morph < 1.0 {
+                    out.mid_morph += 1;
+                    out.sliding += (local[0] | local[1]) as usize & 1;
+                }
+                let bits = |v: [f32; 2]| v.map(f32::to_bits);
+                let same = cv.cell == gv.cell
+                    && bits(cv.frac) == bits(gv.frac)
+                    && bits(cv.grid_pos()) == bits(gv.grid_pos)
+                    && cv.morph.to_bits() == gv.morph.to_bits();
+                out.mismatched += !same as usize;
+                if !same && out.mismatches.len() < 8 {
+                    out.mismatches.push(format!(
+                        "{cam:?} tile {t:?} vertex {local:?}: cpu {cv:?}, gpu {gv:?}"
+                    ));
+                }
+                // Height: the single texture's bilinear in f32 against f64, within 4 ulp of
+                // the largest corner (mix() in f32: two roundings per lerp, three lerps).
+                let [gx, gy] = gv.grid_pos.map(f64::from);
+                let cell = GridCell::at(gx, gy, data.width, data.height);
+                let want = cell.bilinear(|c, r| data.sample(c, r) as f64);
+                let scale = [
+                    (cell.c0, cell.r0),
+                    (cell.c1, cell.r0),
+                    (cell.c0, cell.r1),
+                    (cell.c1, cell.r1),
+                ]
+                .iter()
+                .map(|&(c, r)| data.sample(c, r).abs())
+                .fold(1.0f32, f32::max);
+                let ulps = ((gv.height as f64 - want).abs() / (scale * f32::EPSILON) as f64) as f32;
+                out.worst_height_ulps = out.worst_height_ulps.max(ulps);
+            }
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    out
+}
+
+/// One formula on both sides: the CPU mirror of the vertex morph equals what the vertex
+/// shaders compute, bit for bit (integer cell, fraction, grid position, morph factor), at every
+/// vertex of every tile drawn over a low flight plus the varied poses, with morphing on and off
+/// (the on/off switch is part of the formula). Many vertices are mid-morph, so the comparison
+/// covers the sliding arithmetic, not only the end points. Negative control: dropping the
+/// integer fold (`c += whole; f -= whole`) from `select::morphed_vertex` fails it.
+#[test]
+fn gpu_vertex_morph_equals_the_cpu_mirror() {
+    let data = terrain(257, 30.0);
+    let mut cameras = low_flight(&data, 10);
+    cameras.extend(poses(&data, 10));
+    let on = compare_morph(&data, &cameras, &settings());
+    println!(
+        "morph on: {} vertices, {} mid-morph ({} sliding odd vertices), {} mismatches, heights within {:.2} ulp",
+        on.vertices, on.mid_morph, on.sliding, on.mismatched, on.worst_height_ulps
+    );
+    assert!(
+        on.mismatched == 0,
+        "{} vertices differ, e.g. {:#?}",
+        on.mismatched,
+        on.mismatches
+    );
+    assert!(
+        on.mid_morph >= 2000 && on.sliding >= 1000 && on.mid_morph * 50 >= on.vertices,
+        "too few vertices mid-morph to mean anything: {on:?}"
+    );
+    assert!(on.worst_height_ulps <= 4.0, "{on:?}");
+    let off = UdlodSettings {
+        morph: false,
+        ..settings()
+    };
+    let off = compare_morph(&data, &cameras[..4], &off);
+    println!(
+        "morph off: {} vertices, {} mismatches",
+        off.vertices, off.mismatched
+    );
+    assert!(
+        off.mismatched == 0,
+        "{} vertices differ, e.g. {:#?}",
+        off.mismatched,
+        off.mismatches
+    );
+    assert_eq!(off.mid_morph, 0);
+    assert!(off.vertices > 1000);
+}
+
 /// Level of the final tile covering each leaf cell (tiles at level 0).
 fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
     let mut m = HashMap::new();
@@ -181,20 +325,13 @@ fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
             };
             if (t.x & 1) == 1 && by_tile.contains(&coarse) {
                 for j in 0..=g {
-                    let fine =
-                        select::morphed_position(&levels, &p, *t, [g, j], lod.morph_range as f32);
+                    let fine = select::morphed_vertex(&levels, &p, *t, [g, j]);
                     // The coarse tile's west edge: vertices at its local x = 0.
-                    let on_coarse: Vec<[f32; 2]> = (0..=g)
-                        .map(|k| {
-                            select::morphed_position(
-                                &levels,
-                                &p,
-                                coarse,
-                                [0, k],
-                                lod.morph_range as f32,
-                            )
-                        })
+                    let on_coarse: Vec<_> = (0..=g)
+                        .map(|k| select::morphed_vertex(&levels, &p, coarse, [0, k]))
+                        .map(|v| (v.cell, v.frac))
                         .collect();
+                    let fine = (fine.cell, fine.frac);
                     assert!(
                         on_coarse.iter().any(|c| c == &fine),
                         "{cam:?}: fine tile {t:?} edge vertex {j} at {fine:?} is not a vertex of coarse {coarse:?}"

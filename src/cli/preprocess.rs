@@ -6,7 +6,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::dataset::preprocess::{self, Input, Options, Progress};
-use crate::dataset::procedural::ProceduralParams;
+use crate::dataset::procedural::{ProceduralParams, Style};
 
 #[derive(Args, Debug)]
 pub struct PreprocessArgs {
@@ -31,6 +31,15 @@ pub struct PreprocessArgs {
     /// Procedural: samples per side.
     #[arg(long, default_value_t = 4097)]
     pub size: u32,
+    /// Procedural: height of the tallest possible peak, metres.
+    #[arg(long, default_value_t = ProceduralParams::default().max_height)]
+    pub max_height: f64,
+    /// Procedural: wavelength of the largest features, metres.
+    #[arg(long, default_value_t = ProceduralParams::default().feature_size)]
+    pub feature_size: f64,
+    /// Procedural: the terrain's character.
+    #[arg(long, value_enum, default_value = "classic")]
+    pub style: Style,
     /// Procedural (and --amplify): seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -79,12 +88,20 @@ impl Progress for Bars {
 }
 
 pub fn run(args: &PreprocessArgs) -> anyhow::Result<()> {
+    if !(args.max_height.is_finite() && args.max_height > 0.0 && args.max_height <= 20_000.0) {
+        anyhow::bail!("--max-height {} m is outside (0, 20000]", args.max_height);
+    }
+    if !(args.feature_size.is_finite() && (1.0..=1e7).contains(&args.feature_size)) {
+        anyhow::bail!("--feature-size {} m is outside 1..=1e7", args.feature_size);
+    }
     let input = if args.procedural {
         Input::Procedural(ProceduralParams {
             size: args.size,
             seed: args.seed,
             spacing: args.spacing.unwrap_or(ProceduralParams::default().spacing),
-            ..Default::default()
+            max_height: args.max_height,
+            feature_size: args.feature_size,
+            style: args.style,
         })
     } else {
         Input::Files(args.inputs.clone())

@@ -19,6 +19,7 @@ use std::sync::Arc;
 
 use glam::DVec2;
 
+use crate::dataset::interp;
 use crate::dataset::tiles::Dataset;
 use crate::error::{Error, Result};
 use crate::gpu_constants::CLIPMAP_MAX_LEVELS;
@@ -134,22 +135,10 @@ impl Geometry {
     /// followed by RGBA8 sRGB albedo (the data set's, else the height/slope ramp) with its
     /// mips (2x2 box averages per channel; normals are renormalised in the shader).
     pub fn shading(&self, lod: u32, node: &NodeData) -> Vec<u8> {
-        let s = self.side() as i64;
-        let texels = (s * s) as usize;
-        let h = |i: i64, j: i64| {
-            node.heights[(j.clamp(0, s - 1) * s + i.clamp(0, s - 1)) as usize] as f64
-        };
+        let s = self.side() as usize;
+        let texels = s * s;
         let step = self.spacing * (1u64 << lod.min(62)) as f64;
-        let mut normals = Vec::with_capacity(texels * 4);
-        for j in 0..s {
-            for i in 0..s {
-                let (il, ir) = ((i - 1).max(0), (i + 1).min(s - 1));
-                let (jd, ju) = ((j - 1).max(0), (j + 1).min(s - 1));
-                let dx = (h(ir, j) - h(il, j)) / ((ir - il) as f64 * step);
-                let dy = (h(i, ju) - h(i, jd)) / ((ju - jd) as f64 * step);
-                normals.extend(crate::dataset::normal_snorm8(dx, dy));
-            }
-        }
+        let normals = interp::normals_snorm8(s, s, step, |i, j| node.heights[j * s + i] as f64);
         let albedo = match &node.rgba {
             Some(rgba) => rgba.clone(),
             None => {

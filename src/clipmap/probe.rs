@@ -4,13 +4,9 @@
 use std::sync::Arc;
 
 use ash::vk;
-use gpu_allocator::MemoryLocation;
 
 use crate::driver::Gpu;
-use crate::driver::barrier::{Barriers, MemoryAccess};
-use crate::driver::descriptors::DescriptorSets;
-use crate::driver::memory::Buffer;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::gpu_constants::CLIPMAP_PROBE_WORKGROUP;
 
 /// What [`probe`] evaluates at each point.
@@ -35,74 +31,21 @@ pub fn probe(
     if points.is_empty() {
         return Ok(Vec::new());
     }
-    let d = &gpu.device;
-    let mut io = Buffer::new(
-        gpu,
-        "clipmap probe",
-        16 + points.len() as u64 * 16,
-        vk::BufferUsageFlags::STORAGE_BUFFER,
-        MemoryLocation::GpuToCpu,
-    )?;
-    let mut bytes = Vec::with_capacity(16 + points.len() * 16);
-    for v in [points.len() as u32, 0, 0, 0] {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    for p in points {
-        for v in [p[0], p[1], 0.0, 0.0] {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-    io.write(&bytes)?;
-    let probe_set = DescriptorSets::new(
-        gpu,
-        &[vk::DescriptorType::STORAGE_BUFFER],
-        vk::ShaderStageFlags::COMPUTE,
-        1,
-    )?;
-    let set = probe_set.sets[0];
-    let info = [vk::DescriptorBufferInfo {
-        buffer: io.raw,
-        offset: 0,
-        range: vk::WHOLE_SIZE,
-    }];
-    unsafe {
-        d.update_descriptor_sets(
-            &[vk::WriteDescriptorSet::default()
-                .dst_set(set)
-                .dst_binding(0)
-                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                .buffer_info(&info)],
-            &[],
-        )
-    };
-    let pipeline = crate::driver::pipeline::compute_pipeline(
+    // `Probe` in shaders/clipmap_probe.wgsl: a count, then per point (x, y, result, result).
+    let header = [points.len() as u32, 0, 0, 0];
+    let items: Vec<[f32; 4]> = points.iter().map(|p| [p[0], p[1], 0.0, 0.0]).collect();
+    let io = [bytemuck::bytes_of(&header), bytemuck::cast_slice(&items)].concat();
+    let out = crate::driver::probe::run(
         gpu,
         crate::driver::shaders::CLIPMAP_PROBE_SPV,
         match kind {
             ProbeKind::Heights => c"probe_main",
             ProbeKind::Normals => c"probe_surface_main",
         },
-        &[frame_layout, probe_set.layout],
+        &[(frame_layout, frame_set)],
+        &io,
+        (points.len() as u32).div_ceil(CLIPMAP_PROBE_WORKGROUP),
     )?;
-    let groups = (points.len() as u32).div_ceil(CLIPMAP_PROBE_WORKGROUP);
-    gpu.one_shot(|cmd| unsafe {
-        d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
-        d.cmd_bind_descriptor_sets(
-            cmd,
-            vk::PipelineBindPoint::COMPUTE,
-            pipeline.layout,
-            0,
-            &[frame_set, set],
-            &[],
-        );
-        d.cmd_dispatch(cmd, groups, 1, 1);
-        Barriers::new(gpu).memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::HostRead);
-    })?;
-    let m = io
-        .mapped()
-        .ok_or_else(|| Error::invalid("clipmap probe", "buffer not mapped"))?;
-    let f = |o: usize| f32::from_le_bytes([m[o], m[o + 1], m[o + 2], m[o + 3]]);
-    Ok((0..points.len())
-        .map(|i| [f(16 + i * 16 + 8), f(16 + i * 16 + 12)])
-        .collect())
+    let items: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&out[size_of_val(&header)..]);
+    Ok(items.iter().map(|v| [v[2], v[3]]).collect())
 }

@@ -268,38 +268,50 @@ impl ViewQuadtree {
         h1 + (h - h1) * weight
     }
 
-    /// The GPU form: header (`params`, `params2`, `CLIPMAP_MAX_LEVELS` level windows) followed by
-    /// the entries, little-endian (`Clipmap` in `shaders/include/clipmap.wgsl`).
+    /// The GPU form: [`ClipmapHeader`] followed by the entries (`Clipmap` in
+    /// `shaders/include/clipmap.wgsl`).
     pub fn gpu_bytes(&self, geometry: &Geometry, out: &mut Vec<u8>) {
-        out.clear();
         let side = geometry.center + 2 * geometry.border;
-        for v in [
-            1,
-            geometry.levels.len() as u32,
-            self.node_count,
-            geometry.center,
-            geometry.border,
-            side,
-            self.blend_inv.to_bits(),
-            inv_center(geometry).to_bits(),
-            self.viewer[0].to_bits(),
-            self.viewer[1].to_bits(),
-            0,
-            0,
-        ] {
-            out.extend_from_slice(&v.to_le_bytes());
+        let mut header = ClipmapHeader {
+            params: [
+                1,
+                geometry.levels.len() as u32,
+                self.node_count,
+                geometry.center,
+            ],
+            params2: [
+                geometry.border,
+                side,
+                self.blend_inv.to_bits(),
+                inv_center(geometry).to_bits(),
+            ],
+            viewer: [self.viewer[0], self.viewer[1], 0.0, 0.0],
+            levels: [[0, 0, 1, 1]; CLIPMAP_MAX_LEVELS as usize],
+        };
+        for (dst, src) in header.levels.iter_mut().zip(&self.levels) {
+            *dst = *src;
         }
-        for l in 0..CLIPMAP_MAX_LEVELS as usize {
-            let lv = self.levels.get(l).copied().unwrap_or([0, 0, 1, 1]);
-            for v in lv {
-                out.extend_from_slice(&v.to_le_bytes());
-            }
-        }
-        for e in &self.entries {
-            out.extend_from_slice(&e.to_le_bytes());
-        }
+        out.clear();
+        out.extend_from_slice(bytemuck::bytes_of(&header));
+        out.extend_from_slice(bytemuck::cast_slice(&self.entries));
     }
 }
 
+/// The header of a view's quadtree on the GPU (`Clipmap` in `shaders/include/clipmap.wgsl`,
+/// the members before `entries`; a test proves the layouts equal).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ClipmapHeader {
+    /// Enabled (1), levels, node count, centre texels.
+    pub params: [u32; 4],
+    /// Border texels, texels per layer side, f32 bits of 1 / blend band, of 1 / centre texels.
+    pub params2: [u32; 4],
+    /// The viewer in level-0 samples (xy).
+    pub viewer: [f32; 4],
+    /// Per level: window origin (nodes) xy, the level's node counts zw (unused levels 0, 0,
+    /// 1, 1).
+    pub levels: [[i32; 4]; CLIPMAP_MAX_LEVELS as usize],
+}
+
 /// Bytes of the GPU header before the entries.
-pub const HEADER_BYTES: u64 = 48 + 16 * CLIPMAP_MAX_LEVELS as u64;
+pub const HEADER_BYTES: u64 = size_of::<ClipmapHeader>() as u64;

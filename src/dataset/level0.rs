@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use super::Heightmap;
+use super::interp::GridCell;
 use super::tiles::Dataset;
 use crate::error::{Error, Result};
 
@@ -43,17 +44,9 @@ pub trait Level0 {
     /// Bilinear height at a world position, clamped to the grid: the same arithmetic as
     /// [`Heightmap::height_at`] (bit for bit).
     fn bilinear(&self, x: f64, y: f64) -> Result<f64> {
-        let (w, h) = (self.width(), self.height());
-        let gx = (x / self.spacing()).clamp(0.0, (w - 1) as f64);
-        let gy = (y / self.spacing()).clamp(0.0, (h - 1) as f64);
-        let (c0, r0) = (gx.floor() as u32, gy.floor() as u32);
-        let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
-        let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
-        let (h00, h10) = (self.sample(c0, r0)? as f64, self.sample(c1, r0)? as f64);
-        let (h01, h11) = (self.sample(c0, r1)? as f64, self.sample(c1, r1)? as f64);
-        let south = h00 * (1.0 - fx) + h10 * fx;
-        let north = h01 * (1.0 - fx) + h11 * fx;
-        Ok(south * (1.0 - fy) + north * fy)
+        let (sx, sy) = (x / self.spacing(), y / self.spacing());
+        GridCell::at(sx, sy, self.width(), self.height())
+            .try_bilinear(|c, r| self.sample(c, r).map(f64::from))
     }
 
     /// Height of the full-resolution triangle mesh at a world position, clamped to the grid:

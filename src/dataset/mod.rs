@@ -5,6 +5,7 @@
 //! images whose first row is north are flipped when loaded. Heights are metres.
 
 pub mod geotiff;
+pub mod interp;
 pub mod level0;
 pub mod manifest;
 pub mod preprocess;
@@ -17,6 +18,8 @@ pub mod tiles;
 pub mod voids;
 
 use crate::error::{Error, Result};
+use interp::GridCell;
+pub use interp::normal_snorm8;
 pub use level0::{Level0, PyramidReader, Terrain};
 
 /// A regular height grid in metres, with optional albedo of the same extent.
@@ -104,15 +107,8 @@ impl Heightmap {
     /// Bilinear height at a world position (clamped to the grid), the same interpolation the
     /// GPU applies between samples.
     pub fn height_at(&self, x: f64, y: f64) -> f64 {
-        let gx = (x / self.spacing).clamp(0.0, (self.width - 1) as f64);
-        let gy = (y / self.spacing).clamp(0.0, (self.height - 1) as f64);
-        let (c0, r0) = (gx.floor() as u32, gy.floor() as u32);
-        let (c1, r1) = ((c0 + 1).min(self.width - 1), (r0 + 1).min(self.height - 1));
-        let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
-        let h = |c, r| self.sample(c, r) as f64;
-        let south = h(c0, r0) * (1.0 - fx) + h(c1, r0) * fx;
-        let north = h(c0, r1) * (1.0 - fx) + h(c1, r1) * fx;
-        south * (1.0 - fy) + north * fy
+        GridCell::at(x / self.spacing, y / self.spacing, self.width, self.height)
+            .bilinear(|c, r| self.sample(c, r) as f64)
     }
 
     /// Height of the exact surface at world `(x, y)`: the full-resolution triangle mesh the
@@ -121,19 +117,18 @@ impl Heightmap {
     pub fn mesh_height_at(&self, x: f64, y: f64) -> f64 {
         let gx = (x / self.spacing).clamp(0.0, (self.width - 1) as f64);
         let gy = (y / self.spacing).clamp(0.0, (self.height - 1) as f64);
+        // The last row and column belong to the quad before them (fraction 1).
         let (c0, r0) = (
             (gx.floor() as u32).min(self.width.saturating_sub(2)),
             (gy.floor() as u32).min(self.height.saturating_sub(2)),
         );
         let (c1, r1) = ((c0 + 1).min(self.width - 1), (r0 + 1).min(self.height - 1));
-        let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
         let h = |c, r| self.sample(c, r) as f64;
-        let (h00, h10, h01, h11) = (h(c0, r0), h(c1, r0), h(c0, r1), h(c1, r1));
-        if fx + fy <= 1.0 {
-            h00 + (h10 - h00) * fx + (h01 - h00) * fy
-        } else {
-            h11 + (h01 - h11) * (1.0 - fx) + (h10 - h11) * (1.0 - fy)
-        }
+        interp::triangulated(
+            [h(c0, r0), h(c1, r0), h(c0, r1), h(c1, r1)],
+            gx - c0 as f64,
+            gy - r0 as f64,
+        )
     }
 
     /// World extent in metres: `(x_max, y_max)`; the grid starts at the origin.
@@ -156,20 +151,12 @@ impl Heightmap {
     /// Unit surface normal at each sample from central differences (one-sided at the edges),
     /// packed as RGBA8 snorm (x, y, z, 0) for the normal texture.
     pub fn normals_snorm8(&self) -> Vec<u8> {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let mut out = Vec::with_capacity((w * h * 4) as usize);
-        let at =
-            |c: i64, r: i64| self.sample(c.clamp(0, w - 1) as u32, r.clamp(0, h - 1) as u32) as f64;
-        for r in 0..h {
-            for c in 0..w {
-                let (cl, cr) = ((c - 1).max(0), (c + 1).min(w - 1));
-                let (rd, ru) = ((r - 1).max(0), (r + 1).min(h - 1));
-                let dx = (at(cr, r) - at(cl, r)) / ((cr - cl) as f64 * self.spacing);
-                let dy = (at(c, ru) - at(c, rd)) / ((ru - rd) as f64 * self.spacing);
-                out.extend(normal_snorm8(dx, dy));
-            }
-        }
-        out
+        interp::normals_snorm8(
+            self.width as usize,
+            self.height as usize,
+            self.spacing,
+            |c, r| self.sample(c as u32, r as u32) as f64,
+        )
     }
 
     /// The albedo to draw: the data's own if it has one, else a colour ramp by height and
@@ -191,12 +178,6 @@ impl Heightmap {
             rgba,
         }
     }
-}
-
-/// A unit normal from the height gradient (metres per metre), as RGBA8 snorm `(x, y, z, 0)`.
-pub fn normal_snorm8(dx: f64, dy: f64) -> [u8; 4] {
-    let n = glam::DVec3::new(-dx, -dy, 1.0).normalize();
-    [n.x, n.y, n.z, 0.0].map(|v| ((v * 127.0).round().clamp(-127.0, 127.0) as i8) as u8)
 }
 
 /// The colour ramp of untextured data (grass, rock, snow) for height `h` in a data set

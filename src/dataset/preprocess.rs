@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::interp::GridCell;
 use super::manifest::{self, LevelInfo, Manifest};
 use super::procedural::{self, ProceduralParams};
 use super::pyramid::{self, Block, LayerSet, Layout, LeafSource};
@@ -282,23 +283,17 @@ impl AlbedoSampler {
     }
 
     pub fn at(&self, fx: f64, fy: f64) -> [u8; 4] {
-        let x = (self.map[0] + fx * self.map[1]).clamp(0.0, (self.width - 1) as f64);
-        let y = (self.map[2] + fy * self.map[3]).clamp(0.0, (self.height - 1) as f64);
-        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-        let (x1, y1) = (
-            (x0 + 1).min(self.width as usize - 1),
-            (y0 + 1).min(self.height as usize - 1),
+        let cell = GridCell::at(
+            self.map[0] + fx * self.map[1],
+            self.map[2] + fy * self.map[3],
+            self.width,
+            self.height,
         );
-        let (tx, ty) = (x - x0 as f64, y - y0 as f64);
         let w = self.width as usize;
-        let p = |xx: usize, yy: usize, ch: usize| self.rgba[(yy * w + xx) * 4 + ch] as f64;
-        let mut out = [0u8; 4];
-        for (ch, o) in out.iter_mut().enumerate() {
-            let s = p(x0, y0, ch) * (1.0 - tx) + p(x1, y0, ch) * tx;
-            let n = p(x0, y1, ch) * (1.0 - tx) + p(x1, y1, ch) * tx;
-            *o = (s * (1.0 - ty) + n * ty).round() as u8;
-        }
-        out
+        std::array::from_fn(|ch| {
+            let p = |x: u32, y: u32| self.rgba[(y as usize * w + x as usize) * 4 + ch] as f64;
+            cell.bilinear(p).round() as u8
+        })
     }
 }
 
@@ -332,16 +327,10 @@ impl LeafSource for RasterLeaves<'_> {
                     }
                     Some((f, seed, wl, amp, sp)) => {
                         let (gx, gy) = (u as f64 / f as f64, v as f64 / f as f64);
-                        let (x0, y0) = (gx.floor() as usize, gy.floor() as usize);
-                        let (x1, y1) = (
-                            (x0 + 1).min(self.w as usize - 1),
-                            (y0 + 1).min(self.h as usize - 1),
-                        );
-                        let (tx, ty) = (gx - x0 as f64, gy - y0 as f64);
-                        let s =
-                            |xx: usize, yy: usize| self.heights[yy * self.w as usize + xx] as f64;
-                        let base = (s(x0, y0) * (1.0 - tx) + s(x1, y0) * tx) * (1.0 - ty)
-                            + (s(x0, y1) * (1.0 - tx) + s(x1, y1) * tx) * ty;
+                        let s = |x: u32, y: u32| {
+                            self.heights[y as usize * self.w as usize + x as usize] as f64
+                        };
+                        let base = GridCell::at(gx, gy, self.w, self.h).bilinear(s);
                         let d =
                             procedural::detail(seed, u as f64 * sp[0], v as f64 * sp[1], wl, amp);
                         let near = gy.round() as usize * self.w as usize + gx.round() as usize;
@@ -521,8 +510,8 @@ pub fn run(opts: &Options, progress: &mut dyn Progress) -> Result<Summary> {
             ),
             None,
             vec![format!(
-                "procedural fBm generator (seed {}, max height {} m, feature size {} m)",
-                p.seed, p.max_height, p.feature_size
+                "procedural generator (style {:?}, seed {}, max height {} m, feature size {} m)",
+                p.style, p.seed, p.max_height, p.feature_size
             )],
             "procedural",
         ),

@@ -19,6 +19,20 @@ pub struct ProceduralParams {
     pub max_height: f64,
     /// Wavelength of the largest features in metres.
     pub feature_size: f64,
+    /// The character of the terrain.
+    pub style: Style,
+}
+
+/// Terrain characters of the generator.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Style {
+    /// Rolling fBm hills with ridged mountains in a few masked regions (the tests' terrain).
+    #[default]
+    Classic,
+    /// Ridged multifractal mountains over warped, rotated octaves: ridges, valleys and crests
+    /// everywhere, no lattice-aligned features (the main job's terrain).
+    Alpine,
 }
 
 impl Default for ProceduralParams {
@@ -29,6 +43,7 @@ impl Default for ProceduralParams {
             spacing: 30.0,
             max_height: 2400.0,
             feature_size: 12_000.0,
+            style: Style::Classic,
         }
     }
 }
@@ -64,6 +79,66 @@ fn value_noise(seed: u64, x: f64, y: f64) -> f64 {
 
 /// Height in metres at world position `(x, y)`.
 pub fn height(params: &ProceduralParams, x: f64, y: f64) -> f64 {
+    match params.style {
+        Style::Classic => classic(params, x, y),
+        Style::Alpine => alpine(params, x, y),
+    }
+}
+
+/// A 3-4-5 rotation (about 36.87 degrees) and a shift between octaves, so no two octaves share
+/// lattice axes or origins.
+fn next_octave(u: f64, v: f64) -> (f64, f64) {
+    (
+        2.0 * (0.8 * u - 0.6 * v) + 17.31,
+        2.0 * (0.6 * u + 0.8 * v) - 9.17,
+    )
+}
+
+/// fBm in [0, 1] over `octaves` rotated octaves.
+fn rotated_fbm(seed: u64, mut u: f64, mut v: f64, octaves: u64) -> f64 {
+    let (mut sum, mut amplitude, mut norm) = (0.0, 0.5, 0.0);
+    for octave in 0..octaves {
+        sum += amplitude * value_noise(seed.wrapping_add(octave), u, v);
+        norm += amplitude;
+        amplitude *= 0.5;
+        (u, v) = next_octave(u, v);
+    }
+    sum / norm
+}
+
+/// Ridged multifractal (each octave's detail weighted by the ridge below it, so crests are
+/// rough and valleys smooth) over a domain warped by low-frequency fBm, on broad hills.
+fn alpine(params: &ProceduralParams, x: f64, y: f64) -> f64 {
+    let f = 1.0 / params.feature_size;
+    let seed = params.seed.wrapping_mul(0x51ED);
+    let warp = 0.35 * params.feature_size;
+    let x = x + warp * (rotated_fbm(seed ^ 0x1111, x * f * 0.5, y * f * 0.5, 4) - 0.5);
+    let y = y + warp * (rotated_fbm(seed ^ 0x2222, x * f * 0.5 + 5.2, y * f * 0.5, 4) - 0.5);
+    // Even the first octave off the lattice axes (the rotation of `next_octave`, unscaled).
+    let (mut u, mut v) = ((0.8 * x - 0.6 * y) * f, (0.6 * x + 0.8 * y) * f);
+    let (mut sum, mut amplitude, mut weight, mut norm) = (0.0, 0.5, 1.0, 0.0);
+    // Band-limited to the samples: octaves down to a wavelength of 2.5 samples. Finer ones
+    // would only alias into sample-to-sample noise that no renderer can show.
+    let octaves = (params.feature_size / (2.5 * params.spacing))
+        .log2()
+        .floor()
+        .clamp(1.0, 11.0) as u64;
+    for octave in 0..octaves {
+        let n = value_noise(seed.wrapping_add(100 + octave), u, v);
+        let ridge = (1.0 - (2.0 * n - 1.0).abs()).powi(2);
+        sum += amplitude * ridge * weight;
+        norm += amplitude;
+        weight = (2.0 * ridge).clamp(0.0, 1.0);
+        amplitude *= 0.5;
+        (u, v) = next_octave(u, v);
+    }
+    let hills = rotated_fbm(seed ^ 0x3333, x * f * 0.35, y * f * 0.35, 5);
+    let shaped = (0.3 * hills + 0.9 * sum / norm).clamp(0.0, 1.0);
+    params.max_height * shaped.powf(1.4)
+}
+
+/// Rolling fBm hills with ridged mountains where a low-frequency mask is high.
+fn classic(params: &ProceduralParams, x: f64, y: f64) -> f64 {
     let mut fbm = 0.0;
     let mut ridge = 0.0;
     let mut amplitude = 0.5;

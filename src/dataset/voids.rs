@@ -3,6 +3,7 @@
 //! Every filled value is a convex combination of valid samples, so fills never overshoot the
 //! surrounding terrain (no spikes), and a hole of any size is filled smoothly.
 
+use super::interp::GridCell;
 use crate::error::{Error, Result};
 
 /// Fills every `NaN` in `heights` (row-major `w x h`). Returns the mask (1 = filled) and the
@@ -61,15 +62,8 @@ pub fn fill(name: &str, heights: &mut [f32], w: u32, h: u32) -> Result<(Vec<u8>,
             (l.0, l.1, &mut l.2[..])
         };
         let sample = |x: f64, y: f64| -> f32 {
-            let x = x.clamp(0.0, (*cw - 1) as f64);
-            let y = y.clamp(0.0, (*ch - 1) as f64);
-            let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-            let (x1, y1) = ((x0 + 1).min(cw - 1), (y0 + 1).min(ch - 1));
-            let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-            let v = |xx: usize, yy: usize| cvals[yy * cw + xx] as f64;
-            let s = v(x0, y0) * (1.0 - fx) + v(x1, y0) * fx;
-            let n = v(x0, y1) * (1.0 - fx) + v(x1, y1) * fx;
-            (s * (1.0 - fy) + n * fy) as f32
+            GridCell::at(x, y, *cw as u32, *ch as u32)
+                .bilinear(|xx, yy| cvals[yy as usize * cw + xx as usize] as f64) as f32
         };
         let mut holes = Vec::new();
         for y in 0..fh {

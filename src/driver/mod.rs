@@ -9,6 +9,8 @@ pub mod device;
 pub mod instance;
 pub mod memory;
 pub mod pipeline;
+#[cfg(feature = "test-support")]
+pub mod probe;
 pub mod shaders;
 pub mod sync;
 

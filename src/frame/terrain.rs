@@ -10,10 +10,32 @@ use gpu_allocator::MemoryLocation;
 use super::FrameUniforms;
 use crate::dataset::{Heightmap, Level0, Terrain};
 use crate::driver::Gpu;
-use crate::driver::descriptors::DescriptorSets;
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::{Buffer, Image};
 use crate::error::{Error, Result, VkResultExt};
 use crate::slots::ViewSlot;
+
+/// Descriptor set 0, shared by every terrain shader (`shaders/include/terrain_common.wgsl` and
+/// `shaders/include/clipmap.wgsl`); every stage may read every binding.
+pub const TERRAIN_SET: &[Binding] = {
+    use vk::DescriptorType as T;
+    const ALL: vk::ShaderStageFlags = stages(
+        stages(vk::ShaderStageFlags::VERTEX, vk::ShaderStageFlags::FRAGMENT),
+        vk::ShaderStageFlags::COMPUTE,
+    );
+    &[
+        Binding::new(0, T::UNIFORM_BUFFER, ALL, "frame"),
+        Binding::new(1, T::SAMPLED_IMAGE, ALL, "height_tex"),
+        Binding::new(2, T::SAMPLED_IMAGE, ALL, "normal_tex"),
+        Binding::new(3, T::SAMPLED_IMAGE, ALL, "albedo_tex"),
+        Binding::new(4, T::SAMPLER, ALL, "linear_sampler"),
+        // The chunked clipmap: height atlas, the view slot's quadtree, shading atlases.
+        Binding::new(5, T::SAMPLED_IMAGE, ALL, "atlas_height"),
+        Binding::new(6, T::STORAGE_BUFFER, ALL, "clipmap"),
+        Binding::new(7, T::SAMPLED_IMAGE, ALL, "atlas_normal"),
+        Binding::new(8, T::SAMPLED_IMAGE, ALL, "atlas_albedo"),
+    ]
+};
 
 /// The facts about the data set that methods and uniforms need.
 #[derive(Clone, Debug)]
@@ -97,86 +119,9 @@ impl TerrainGpu {
             )
         }
         .vk("vkCreateSampler")?;
-        use vk::DescriptorType as T;
-        let descriptors = DescriptorSets::new(
-            gpu,
-            &[
-                T::UNIFORM_BUFFER, // 0: frame uniforms
-                T::SAMPLED_IMAGE,  // 1: heights
-                T::SAMPLED_IMAGE,  // 2: normals
-                T::SAMPLED_IMAGE,  // 3: albedo
-                T::SAMPLER,        // 4: linear sampler
-                T::SAMPLED_IMAGE,  // 5: clipmap height atlas
-                T::STORAGE_BUFFER, // 6: clipmap quadtree of the view slot
-                T::SAMPLED_IMAGE,  // 7: clipmap normal atlas
-                T::SAMPLED_IMAGE,  // 8: clipmap albedo atlas
-            ],
-            vk::ShaderStageFlags::VERTEX
-                | vk::ShaderStageFlags::FRAGMENT
-                | vk::ShaderStageFlags::COMPUTE,
-            slots,
-        )
-        .inspect_err(|_| unsafe { d.destroy_sampler(sampler, None) })?;
-        let mut uniforms = Vec::with_capacity(slots);
-        for (slot, &set) in descriptors.sets.iter().enumerate() {
-            let ubo = Buffer::new(
-                gpu,
-                &format!("frame uniforms {slot}"),
-                size_of::<FrameUniforms>() as u64,
-                vk::BufferUsageFlags::UNIFORM_BUFFER,
-                MemoryLocation::CpuToGpu,
-            )?;
-            let buffer_info = [vk::DescriptorBufferInfo {
-                buffer: ubo.raw,
-                offset: 0,
-                range: vk::WHOLE_SIZE,
-            }];
-            let image_info = |view| {
-                [vk::DescriptorImageInfo {
-                    sampler: vk::Sampler::null(),
-                    image_view: view,
-                    image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
-                }]
-            };
-            let (hi, ni, ai, ci) = (
-                image_info(height.view),
-                image_info(normal.view),
-                image_info(albedo.view),
-                image_info(clipmap.atlas.view),
-            );
-            let (cn, ca) = (
-                image_info(clipmap.normals.view),
-                image_info(clipmap.albedo.view),
-            );
-            let qi = [vk::DescriptorBufferInfo {
-                buffer: clipmap.quadtrees[slot].raw,
-                offset: 0,
-                range: vk::WHOLE_SIZE,
-            }];
-            let si = [vk::DescriptorImageInfo {
-                sampler,
-                ..Default::default()
-            }];
-            let write = |b: u32, ty| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(b)
-                    .descriptor_type(ty)
-            };
-            let writes = [
-                write(0, vk::DescriptorType::UNIFORM_BUFFER).buffer_info(&buffer_info),
-                write(1, vk::DescriptorType::SAMPLED_IMAGE).image_info(&hi),
-                write(2, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ni),
-                write(3, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ai),
-                write(4, vk::DescriptorType::SAMPLER).image_info(&si),
-                write(5, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ci),
-                write(6, vk::DescriptorType::STORAGE_BUFFER).buffer_info(&qi),
-                write(7, vk::DescriptorType::SAMPLED_IMAGE).image_info(&cn),
-                write(8, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ca),
-            ];
-            unsafe { d.update_descriptor_sets(&writes, &[]) };
-            uniforms.push(ubo);
-        }
+        let textures = [&height, &normal, &albedo];
+        let (descriptors, uniforms) = Self::descriptor_sets(gpu, slots, textures, sampler, clipmap)
+            .inspect_err(|_| unsafe { d.destroy_sampler(sampler, None) })?;
         Ok(TerrainGpu {
             gpu: gpu.clone(),
             info,
@@ -191,6 +136,44 @@ impl TerrainGpu {
 }
 
 impl TerrainGpu {
+    /// Set 0 of every view slot, each with its frame-uniform buffer; `textures`: heights,
+    /// normals, albedo.
+    fn descriptor_sets(
+        gpu: &Arc<Gpu>,
+        slots: usize,
+        [height, normal, albedo]: [&Image; 3],
+        sampler: vk::Sampler,
+        clipmap: &crate::clipmap::gpu::ClipmapGpu,
+    ) -> Result<(DescriptorSets, Vec<Buffer>)> {
+        let descriptors = DescriptorSets::new(gpu, TERRAIN_SET, slots)?;
+        let mut uniforms = Vec::with_capacity(slots);
+        for slot in 0..slots {
+            let ubo = Buffer::new(
+                gpu,
+                &format!("frame uniforms {slot}"),
+                size_of::<FrameUniforms>() as u64,
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?;
+            descriptors.write(
+                slot,
+                &[
+                    ("frame", Resource::Buffer(ubo.raw)),
+                    ("height_tex", Resource::Image(height.view)),
+                    ("normal_tex", Resource::Image(normal.view)),
+                    ("albedo_tex", Resource::Image(albedo.view)),
+                    ("linear_sampler", Resource::Sampler(sampler)),
+                    ("atlas_height", Resource::Image(clipmap.atlas.view)),
+                    ("clipmap", Resource::Buffer(clipmap.quadtrees[slot].raw)),
+                    ("atlas_normal", Resource::Image(clipmap.normals.view)),
+                    ("atlas_albedo", Resource::Image(clipmap.albedo.view)),
+                ],
+            )?;
+            uniforms.push(ubo);
+        }
+        Ok((descriptors, uniforms))
+    }
+
     /// Descriptor set 0 of `view`.
     pub fn set(&self, view: ViewSlot) -> vk::DescriptorSet {
         self.descriptors.sets[view.index()]
@@ -217,10 +200,9 @@ impl TerrainGpu {
             width: data.width,
             height: data.height,
         };
-        let heights: Vec<u8> = data.heights.iter().flat_map(|h| h.to_le_bytes()).collect();
+        let heights = bytemuck::cast_slice(&data.heights);
         let height =
-            Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, &heights)?;
-        drop(heights);
+            Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, heights)?;
         let normal = Image::texture_with_data(
             gpu,
             "normals",

@@ -54,7 +54,7 @@ impl BruteForce {
     pub fn new(ctx: &MethodContext<'_>) -> Result<Self> {
         let gpu = ctx.gpu;
         let indices_data = grid_indices(BRUTE_CHUNK_QUADS);
-        let bytes: Vec<u8> = indices_data.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let bytes: &[u8] = bytemuck::cast_slice(&indices_data);
         let mut indices = Buffer::new(
             gpu,
             "brute grid indices",
@@ -62,7 +62,7 @@ impl BruteForce {
             vk::BufferUsageFlags::INDEX_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        indices.write(&bytes)?;
+        indices.write(bytes)?;
         let pipeline = terrain_pipeline(
             gpu,
             &ctx.formats,

@@ -217,6 +217,18 @@ pub trait LodMethod {
     fn debug_tiles(&self, _slot: ViewSlot) -> Result<Option<Vec<[u32; 3]>>> {
         Ok(None)
     }
+    #[cfg(feature = "test-support")]
+    /// Tests only: the method's vertex morph evaluated on the GPU for `(tile, local vertex)`
+    /// pairs through set 0 `frame` (layout, set) and the method's own set of `slot`, as the last
+    /// completed frame left them (`None`: the method has no morph).
+    fn probe_vertices(
+        &self,
+        _slot: ViewSlot,
+        _frame: (vk::DescriptorSetLayout, vk::DescriptorSet),
+        _inputs: &[(udlod::select::Tile, [u32; 2])],
+    ) -> Result<Option<Vec<udlod::probe::ProbedVertex>>> {
+        Ok(None)
+    }
 }
 
 /// Creates the method `config` names, with its settings.

@@ -4,6 +4,9 @@
 use super::Renderer;
 use crate::clipmap::probe::ProbeKind;
 use crate::error::{Error, Result};
+use crate::lod::udlod::probe::ProbedVertex;
+use crate::lod::udlod::select::Tile;
+use crate::slots::ViewSlot;
 
 impl Renderer {
     /// Tests and tools: GPU heights at level-0 sample positions for the state of the last
@@ -26,25 +29,49 @@ impl Renderer {
         points: &[[f32; 2]],
         kind: ProbeKind,
     ) -> Result<Vec<[f32; 2]>> {
+        let slot = self.last_view_slot("probe_heights", view)?;
+        crate::clipmap::probe::probe(
+            &self.gpu,
+            self.terrain.descriptors.layout,
+            self.terrain.set(slot),
+            points,
+            kind,
+        )
+    }
+
+    /// Tests and tools: the method's vertex morph on the GPU (UDLOD's `morphed_vertex`) for
+    /// each `(tile, local vertex)` through the state view `view` had in the last rendered
+    /// frame. Call after [`Renderer::finish`]; waits for the GPU. An error for a method
+    /// without a morph.
+    pub fn probe_morph_in_view(
+        &self,
+        view: usize,
+        inputs: &[(Tile, [u32; 2])],
+    ) -> Result<Vec<ProbedVertex>> {
+        let slot = self.last_view_slot("probe_morph", view)?;
+        let frame = (self.terrain.descriptors.layout, self.terrain.set(slot));
+        self.method
+            .probe_vertices(slot, frame, inputs)?
+            .ok_or_else(|| {
+                Error::invalid(
+                    "probe_morph",
+                    format!("method {} has no vertex morph", self.method.name()),
+                )
+            })
+    }
+
+    /// The view slot view `view` used in the last rendered frame, once that frame is done.
+    fn last_view_slot(&self, what: &str, view: usize) -> Result<ViewSlot> {
         if self.next_frame == 0 || !self.in_flight.is_empty() {
-            return Err(Error::invalid(
-                "probe_heights",
-                "needs a rendered, finished frame",
-            ));
+            return Err(Error::invalid(what, "needs a rendered, finished frame"));
         }
         if view >= self.options.views {
             return Err(Error::invalid(
-                "probe_heights",
+                what,
                 format!("view {view} of {}", self.options.views),
             ));
         }
         let frame = self.layout.frame_slot(self.next_frame - 1);
-        crate::clipmap::probe::probe(
-            &self.gpu,
-            self.terrain.descriptors.layout,
-            self.terrain.set(self.layout.view_slot(frame, view)),
-            points,
-            kind,
-        )
+        Ok(self.layout.view_slot(frame, view))
     }
 }

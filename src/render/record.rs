@@ -17,7 +17,7 @@ impl Renderer {
         index: u64,
         requests: &[FrameRequest],
     ) -> Result<()> {
-        let sky = requests[0].sky.unwrap_or(self.options.sky);
+        let sky = requests[0].sky.unwrap_or(self.options.light.sky);
         let slot = &self.slots[frame.index()];
         let cmd = slot.begin()?;
         // New atlas nodes first: after every earlier frame's sampling, before this frame's.

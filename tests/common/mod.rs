@@ -37,8 +37,11 @@ pub fn options(width: u32, height: u32, frames_in_flight: usize) -> RenderOption
         height,
         frames_in_flight,
         readback_depth: true,
-        sky: [0.2, 0.4, 0.8],
-        sun_dir: [0.0, 0.0, 1.0],
+        light: vkterrain::frame::Lighting {
+            sun_dir: [0.0, 0.0, 1.0],
+            sky: [0.2, 0.4, 0.8],
+            haze_distance_m: 0.0,
+        },
         views: 1,
     }
 }
@@ -114,4 +117,22 @@ pub fn procedural_pyramid(name: &str, size: u32, seed: u64, center: u32) -> std:
     };
     preprocess::run(&opts, &mut NoProgress).unwrap();
     out
+}
+
+/// `../shared/data` (the real DEMs tests read, never committed), or `None` when it is absent.
+/// Absent data is a skip on a developer's machine but a failure in CI (`CI` set, as `.ci/run`
+/// and every CI system do), so no real-data test can pass there without checking anything.
+pub fn shared_data() -> Option<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    if dir.is_dir() {
+        return Some(dir);
+    }
+    if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) {
+        panic!(
+            "{} is absent but CI is set: the real-data tests must run in CI",
+            dir.display()
+        );
+    }
+    eprintln!("note: {} absent, real-data checks skipped", dir.display());
+    None
 }

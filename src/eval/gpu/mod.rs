@@ -28,13 +28,34 @@ use super::metrics::{Histogram, SWIM_GRID, SWIM_SEED_EVERY};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
-use crate::driver::descriptors::DescriptorSets;
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource};
 use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, compute_pipeline};
 use crate::error::{Error, Result};
 use crate::gpu_constants::{EVAL_HIST_BINS, EVAL_NO_ERROR_PX, EVAL_POINT_WORKGROUP, EVAL_TILE_PX};
 use crate::render::analysis::{AnalysisFrame, FrameAnalysis};
 use crate::slots::FrameSlot;
+
+/// The analysis' one descriptor set (`shaders/eval_metrics.wgsl`, every pass reads it).
+pub const EVAL_SET: &[Binding] = {
+    use vk::DescriptorType as T;
+    const C: vk::ShaderStageFlags = vk::ShaderStageFlags::COMPUTE;
+    &[
+        Binding::new(0, T::UNIFORM_BUFFER, C, "frame"),
+        // Level-0 reference tiles and the table of their slots.
+        Binding::new(1, T::STORAGE_BUFFER, C, "ref_tiles"),
+        Binding::new(2, T::STORAGE_BUFFER, C, "ref_table"),
+        // The analysed frame and the reference frame of the same cameras.
+        Binding::new(3, T::STORAGE_BUFFER, C, "depth"),
+        Binding::new(4, T::STORAGE_BUFFER, C, "color"),
+        Binding::new(5, T::STORAGE_BUFFER, C, "ref_depth"),
+        Binding::new(6, T::STORAGE_BUFFER, C, "ref_color"),
+        Binding::new(7, T::STORAGE_BUFFER, C, "seeds"),
+        Binding::new(8, T::STORAGE_BUFFER, C, "error_image"),
+        Binding::new(9, T::STORAGE_BUFFER, C, "partials"),
+        Binding::new(10, T::STORAGE_BUFFER, C, "stats"),
+    ]
+};
 
 const TOTALS_BYTES: u64 = size_of::<Totals>() as u64;
 const HIST_BYTES: u64 = 3 * EVAL_HIST_BINS as u64 * 4;
@@ -105,25 +126,7 @@ impl EvalShared {
         )?;
         zeros.write(&vec![0u8; (TOTALS_BYTES + HIST_BYTES) as usize])?;
         debug_assert!(stats >= TOTALS_BYTES + HIST_BYTES);
-        use vk::DescriptorType as T;
-        let sets = DescriptorSets::new(
-            gpu,
-            &[
-                T::UNIFORM_BUFFER, // 0: EvalFrame
-                T::STORAGE_BUFFER, // 1: reference tiles
-                T::STORAGE_BUFFER, // 2: reference tile table
-                T::STORAGE_BUFFER, // 3: depth
-                T::STORAGE_BUFFER, // 4: colour
-                T::STORAGE_BUFFER, // 5: reference depth
-                T::STORAGE_BUFFER, // 6: reference colour
-                T::STORAGE_BUFFER, // 7: seeds
-                T::STORAGE_BUFFER, // 8: error image
-                T::STORAGE_BUFFER, // 9: partials
-                T::STORAGE_BUFFER, // 10: statistics
-            ],
-            vk::ShaderStageFlags::COMPUTE,
-            runs.max(1),
-        )?;
+        let sets = DescriptorSets::new(gpu, EVAL_SET, runs.max(1))?;
         let spv = crate::driver::shaders::EVAL_METRICS_SPV;
         let layouts = [sets.layout];
         Ok(Arc::new(EvalShared {
@@ -325,41 +328,23 @@ impl GpuAnalysis {
             gpu.device
                 .cmd_fill_buffer(cmd, image, 0, vk::WHOLE_SIZE, no_error)
         })?;
-        let buffers = [
-            (0, uniform.raw, vk::DescriptorType::UNIFORM_BUFFER),
-            (1, shared.atlas, vk::DescriptorType::STORAGE_BUFFER),
-            (2, shared.table, vk::DescriptorType::STORAGE_BUFFER),
-            (3, depth, vk::DescriptorType::STORAGE_BUFFER),
-            (4, color, vk::DescriptorType::STORAGE_BUFFER),
-            (5, shared.ref_depth.raw, vk::DescriptorType::STORAGE_BUFFER),
-            (6, shared.ref_color.raw, vk::DescriptorType::STORAGE_BUFFER),
-            (7, shared.seeds.raw, vk::DescriptorType::STORAGE_BUFFER),
-            (8, error_image.raw, vk::DescriptorType::STORAGE_BUFFER),
-            (9, partials.raw, vk::DescriptorType::STORAGE_BUFFER),
-            (10, stats.raw, vk::DescriptorType::STORAGE_BUFFER),
-        ];
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
-            .iter()
-            .map(|&(_, buffer, _)| {
-                [vk::DescriptorBufferInfo {
-                    buffer,
-                    offset: 0,
-                    range: vk::WHOLE_SIZE,
-                }]
-            })
-            .collect();
-        let writes: Vec<vk::WriteDescriptorSet> = buffers
-            .iter()
-            .zip(&infos)
-            .map(|(&(binding, _, ty), info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(binding)
-                    .descriptor_type(ty)
-                    .buffer_info(info)
-            })
-            .collect();
-        unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
+        let buffer = Resource::Buffer;
+        shared.sets.write(
+            index,
+            &[
+                ("frame", buffer(uniform.raw)),
+                ("ref_tiles", buffer(shared.atlas)),
+                ("ref_table", buffer(shared.table)),
+                ("depth", buffer(depth)),
+                ("color", buffer(color)),
+                ("ref_depth", buffer(shared.ref_depth.raw)),
+                ("ref_color", buffer(shared.ref_color.raw)),
+                ("seeds", buffer(shared.seeds.raw)),
+                ("error_image", buffer(error_image.raw)),
+                ("partials", buffer(partials.raw)),
+                ("stats", buffer(stats.raw)),
+            ],
+        )?;
         let analysis = GpuAnalysis {
             shared: shared.clone(),
             role,

@@ -26,7 +26,7 @@ use gpu_allocator::MemoryLocation;
 use super::{LodMethod, MethodContext};
 use crate::dataset::Heightmap;
 use crate::driver::Gpu;
-use crate::driver::descriptors::DescriptorSets;
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource};
 use crate::driver::memory::{Buffer, Image};
 use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
 use crate::error::{Error, Result, VkResultExt};
@@ -307,6 +307,17 @@ impl Drop for Raw {
     }
 }
 
+/// Descriptor set 1 (`shaders/pgm.wgsl`): the uniforms, the height mip chain, its sampler.
+pub const PGM_SET: &[Binding] = {
+    use vk::DescriptorType as T;
+    const V: vk::ShaderStageFlags = vk::ShaderStageFlags::VERTEX;
+    &[
+        Binding::new(0, T::UNIFORM_BUFFER, V, "pgm"),
+        Binding::new(1, T::SAMPLED_IMAGE, V, "height_mips"),
+        Binding::new(2, T::SAMPLER, V, "mip_sampler"),
+    ]
+};
+
 pub struct Pgm {
     gpu: Arc<Gpu>,
     settings: PgmSettings,
@@ -353,11 +364,7 @@ impl Pgm {
         };
         let data = ctx.data.require_grid("method pgm")?.clone();
         let levels = height_mips(&data);
-        let bytes: Vec<Vec<u8>> = levels
-            .iter()
-            .map(|l| l.iter().flat_map(|h| h.to_le_bytes()).collect())
-            .collect();
-        let refs: Vec<&[u8]> = bytes.iter().map(|b| b.as_slice()).collect();
+        let refs: Vec<&[u8]> = levels.iter().map(|l| bytemuck::cast_slice(l)).collect();
         let heights = Image::texture_with_mips(
             gpu,
             "pgm height mips",
@@ -382,18 +389,9 @@ impl Pgm {
             )
         }
         .vk("vkCreateSampler")?;
-        let sets = DescriptorSets::new(
-            gpu,
-            &[
-                vk::DescriptorType::UNIFORM_BUFFER,
-                vk::DescriptorType::SAMPLED_IMAGE,
-                vk::DescriptorType::SAMPLER,
-            ],
-            vk::ShaderStageFlags::VERTEX,
-            ctx.slots,
-        )?;
+        let sets = DescriptorSets::new(gpu, PGM_SET, ctx.slots)?;
         let mut uniforms = Vec::with_capacity(ctx.slots);
-        for (i, &set) in sets.sets.iter().enumerate() {
+        for i in 0..ctx.slots {
             let ubo = Buffer::new(
                 gpu,
                 &format!("pgm uniforms {i}"),
@@ -401,38 +399,20 @@ impl Pgm {
                 vk::BufferUsageFlags::UNIFORM_BUFFER,
                 MemoryLocation::CpuToGpu,
             )?;
-            let bi = [vk::DescriptorBufferInfo {
-                buffer: ubo.raw,
-                offset: 0,
-                range: vk::WHOLE_SIZE,
-            }];
-            let ii = [vk::DescriptorImageInfo {
-                sampler: vk::Sampler::null(),
-                image_view: heights.view,
-                image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
-            }];
-            let si = [vk::DescriptorImageInfo {
-                sampler: raw.sampler,
-                ..Default::default()
-            }];
-            let write = |b: u32, ty| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(b)
-                    .descriptor_type(ty)
-            };
-            let writes = [
-                write(0, vk::DescriptorType::UNIFORM_BUFFER).buffer_info(&bi),
-                write(1, vk::DescriptorType::SAMPLED_IMAGE).image_info(&ii),
-                write(2, vk::DescriptorType::SAMPLER).image_info(&si),
-            ];
-            unsafe { d.update_descriptor_sets(&writes, &[]) };
+            sets.write(
+                i,
+                &[
+                    ("pgm", Resource::Buffer(ubo.raw)),
+                    ("height_mips", Resource::Image(heights.view)),
+                    ("mip_sampler", Resource::Sampler(raw.sampler)),
+                ],
+            )?;
             uniforms.push(ubo);
         }
         let [cols, rows] = settings.grid();
         let band = band_rows(cols, rows);
         let grid = band_indices(cols, band);
-        let index_bytes: Vec<u8> = grid.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
         let mut indices = Buffer::new(
             gpu,
             "pgm band indices",
@@ -440,7 +420,7 @@ impl Pgm {
             vk::BufferUsageFlags::INDEX_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        indices.write(&index_bytes)?;
+        indices.write(index_bytes)?;
         let pipeline = terrain_pipeline(
             gpu,
             &ctx.formats,

@@ -7,6 +7,8 @@
 //! distances from the pixel error target, frustum planes); the tile lists never come back to
 //! the host in the render path (only 64 bytes of counters, for statistics).
 
+#[cfg(feature = "test-support")]
+pub mod probe;
 pub mod select;
 pub mod settings;
 
@@ -19,7 +21,7 @@ use super::{LodMethod, MethodContext};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
-use crate::driver::descriptors::DescriptorSets;
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use crate::error::{Error, Result};
@@ -58,7 +60,26 @@ pub struct TilingState {
     pub passes_started: u32,
 }
 
-const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
+/// Descriptor set 1 (`shaders/include/udlod_common.wgsl`, `shaders/udlod_tiling.wgsl`,
+/// `shaders/udlod.wgsl`): the tiling passes and the vertex shaders (and the morph probe).
+pub const UDLOD_SET: &[Binding] = {
+    use vk::DescriptorType as T;
+    const CV: vk::ShaderStageFlags =
+        stages(vk::ShaderStageFlags::COMPUTE, vk::ShaderStageFlags::VERTEX);
+    &[
+        Binding::new(0, T::UNIFORM_BUFFER, CV, "udlod"),
+        Binding::new(1, T::STORAGE_BUFFER, CV, "state"),
+        Binding::new(2, T::STORAGE_BUFFER, CV, "temp_tiles"),
+        Binding::new(3, T::STORAGE_BUFFER, CV, "final_tiles"),
+        Binding::new(4, T::STORAGE_BUFFER, CV, "min_max"),
+        Binding::new(5, T::STORAGE_BUFFER, CV, "error_field"),
+    ]
+};
+
+/// Where `TilingState::draw` starts: the `vkCmdDrawIndexedIndirect` arguments.
+pub const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
+/// Bytes between consecutive indexed indirect draws (one is drawn; Vulkan wants the stride).
+pub const DRAW_STRIDE: u32 = size_of::<[u32; 5]>() as u32;
 pub const TILE_BYTES: u64 = 16;
 
 struct SlotBuffers {
@@ -88,7 +109,8 @@ pub struct Udlod {
     index_count: u32,
     slots: Vec<SlotBuffers>,
     /// Set 1 of every slot (`SlotBuffers::set`).
-    _sets: DescriptorSets,
+    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
+    sets: DescriptorSets,
     prepare: Pipeline,
     refine: Pipeline,
     finish: Pipeline,
@@ -108,34 +130,19 @@ impl Udlod {
                 Levels::new(&p.sweep(), settings.grid_size, settings.error_field_max)?
             }
         };
-        if levels.levels() > UDLOD_MAX_LEVELS {
+        // The morph reads the split distance one level past the root (never morphs).
+        if levels.levels() >= UDLOD_MAX_LEVELS {
             return Err(Error::invalid(
                 "udlod",
                 format!(
-                    "{} levels exceed the maximum of {UDLOD_MAX_LEVELS}; raise grid_size",
-                    levels.levels()
+                    "{} levels exceed the maximum of {}; raise grid_size",
+                    levels.levels(),
+                    UDLOD_MAX_LEVELS - 1
                 ),
             ));
         }
-        let sets = DescriptorSets::new(
-            gpu,
-            &[
-                vk::DescriptorType::UNIFORM_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::DescriptorType::STORAGE_BUFFER,
-            ],
-            vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::VERTEX,
-            ctx.slots,
-        )?;
-        let d = &gpu.device;
-        let mm_bytes: Vec<u8> = levels
-            .min_max
-            .iter()
-            .flat_map(|m| m.iter().flat_map(|v| v.to_le_bytes()))
-            .collect();
+        let sets = DescriptorSets::new(gpu, UDLOD_SET, ctx.slots)?;
+        let mm_bytes: &[u8] = bytemuck::cast_slice(&levels.min_max);
         let mut min_max = Buffer::new(
             gpu,
             "udlod min/max",
@@ -143,13 +150,8 @@ impl Udlod {
             vk::BufferUsageFlags::STORAGE_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        min_max.write(&mm_bytes)?;
-        let field_bytes: Vec<u8> = levels
-            .field
-            .corners
-            .iter()
-            .flat_map(|v| v.to_le_bytes())
-            .collect();
+        min_max.write(mm_bytes)?;
+        let field_bytes: &[u8] = bytemuck::cast_slice(&levels.field.corners);
         let mut error_field = Buffer::new(
             gpu,
             "udlod error field",
@@ -157,9 +159,9 @@ impl Udlod {
             vk::BufferUsageFlags::STORAGE_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        error_field.write(&field_bytes)?;
+        error_field.write(field_bytes)?;
         let grid = super::brute::grid_indices(settings.grid_size);
-        let index_bytes: Vec<u8> = grid.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
         let mut indices = Buffer::new(
             gpu,
             "udlod grid indices",
@@ -167,7 +169,7 @@ impl Udlod {
             vk::BufferUsageFlags::INDEX_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
-        indices.write(&index_bytes)?;
+        indices.write(index_bytes)?;
 
         let final_capacity = settings.max_tiles;
         // Parents and children of one pass share the temporary list: a pass has at most
@@ -214,36 +216,17 @@ impl Udlod {
                 vk::BufferUsageFlags::TRANSFER_DST,
                 MemoryLocation::GpuToCpu,
             )?;
-            let infos = [
-                (0, vk::DescriptorType::UNIFORM_BUFFER, uniforms.raw),
-                (1, vk::DescriptorType::STORAGE_BUFFER, state.raw),
-                (2, vk::DescriptorType::STORAGE_BUFFER, temp_tiles.raw),
-                (3, vk::DescriptorType::STORAGE_BUFFER, final_tiles.raw),
-                (4, vk::DescriptorType::STORAGE_BUFFER, min_max.raw),
-                (5, vk::DescriptorType::STORAGE_BUFFER, error_field.raw),
-            ];
-            let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = infos
-                .iter()
-                .map(|&(_, _, b)| {
-                    [vk::DescriptorBufferInfo {
-                        buffer: b,
-                        offset: 0,
-                        range: vk::WHOLE_SIZE,
-                    }]
-                })
-                .collect();
-            let writes: Vec<vk::WriteDescriptorSet> = infos
-                .iter()
-                .zip(&buffer_infos)
-                .map(|(&(binding, ty, _), info)| {
-                    vk::WriteDescriptorSet::default()
-                        .dst_set(set)
-                        .dst_binding(binding)
-                        .descriptor_type(ty)
-                        .buffer_info(info)
-                })
-                .collect();
-            unsafe { d.update_descriptor_sets(&writes, &[]) };
+            sets.write(
+                i,
+                &[
+                    ("udlod", Resource::Buffer(uniforms.raw)),
+                    ("state", Resource::Buffer(state.raw)),
+                    ("temp_tiles", Resource::Buffer(temp_tiles.raw)),
+                    ("final_tiles", Resource::Buffer(final_tiles.raw)),
+                    ("min_max", Resource::Buffer(min_max.raw)),
+                    ("error_field", Resource::Buffer(error_field.raw)),
+                ],
+            )?;
             slots.push(SlotBuffers {
                 uniforms,
                 state,
@@ -284,7 +267,7 @@ impl Udlod {
             indices,
             index_count: grid.len() as u32,
             slots,
-            _sets: sets,
+            sets,
             prepare,
             refine,
             finish,
@@ -359,9 +342,9 @@ impl LodMethod for Udlod {
         u.viewer = [p.viewer[0], p.viewer[1], p.viewer[2], 0.0];
         u.params = [
             0.0,
-            self.settings.morph_range as f32,
-            if self.settings.morph { 1.0 } else { 0.0 },
-            if self.settings.cull { 1.0 } else { 0.0 },
+            p.morph_range,
+            if p.morph { 1.0 } else { 0.0 },
+            if p.cull { 1.0 } else { 0.0 },
         ];
         u.counts = [self.index_count, 0, 0, 0];
         self.slots[slot.index()]
@@ -464,10 +447,11 @@ impl LodMethod for Udlod {
                 // The indexed arguments (index_count, instance_count, first_index,
                 // vertex_offset, ...) read as non-indexed ones: 6 * quads^2 vertices per
                 // instance, first vertex 0, first instance 0.
-                d.cmd_draw_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, 16);
+                let stride = size_of::<vk::DrawIndirectCommand>() as u32;
+                d.cmd_draw_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, stride);
             } else {
                 d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
-                d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, 20);
+                d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, DRAW_STRIDE);
             }
         }
     }
@@ -518,13 +502,20 @@ impl LodMethod for Udlod {
         })?;
         let bytes = host
             .mapped()
+            .and_then(|b| b.get(..(n * TILE_BYTES) as usize))
             .ok_or_else(|| Error::invalid("udlod", "debug buffer not mapped"))?;
-        let words: Vec<u32> = bytes
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
-        Ok(Some(
-            words.chunks_exact(4).map(|t| [t[0], t[1], t[2]]).collect(),
-        ))
+        let tiles: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(bytes);
+        Ok(Some(tiles.iter().map(|t| [t[0], t[1], t[2]]).collect()))
+    }
+
+    #[cfg(feature = "test-support")]
+    fn probe_vertices(
+        &self,
+        slot: ViewSlot,
+        frame: (vk::DescriptorSetLayout, vk::DescriptorSet),
+        inputs: &[(select::Tile, [u32; 2])],
+    ) -> Result<Option<Vec<probe::ProbedVertex>>> {
+        let udlod = (self.sets.layout, self.slots[slot.index()].set);
+        probe::probe(&self.gpu, frame, udlod, inputs).map(Some)
     }
 }

@@ -1,16 +1,17 @@
 //! UDLOD on the CPU: the level structure, per-tile min/max heights and geometric errors, the
 //! per-region error field, the split-distance table derived from the screen-space error
-//! target, the frustum, the morph function, and a reference implementation of the GPU's tile
+//! target, the frustum, the vertex morph, and a reference implementation of the GPU's tile
 //! selection (tests compare the GPU's final tile list against it).
 //!
-//! Arithmetic that must agree with the shaders (`select_tiles`, `morph_factor`, `field_at`) is
-//! written in f32 in the same order as `shaders/udlod_tiling.wgsl`, `shaders/udlod.wgsl` and
+//! Arithmetic that must agree with the shaders (`select_tiles`, `morph_factor`,
+//! `morphed_vertex`, `field_at`) is written in f32 in the same order as
+//! `shaders/udlod_tiling.wgsl`, `shaders/include/udlod_morph.wgsl` and
 //! `shaders/include/udlod_common.wgsl`.
 
 use glam::{DVec3, Vec3};
 
 use super::settings::UdlodSettings;
-use crate::dataset::{Heightmap, Level0};
+use crate::dataset::{Heightmap, Level0, interp};
 use crate::error::Result;
 use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
 use crate::scene::Camera;
@@ -233,15 +234,11 @@ fn level_corners<D: Level0 + ?Sized>(data: &D, lod: u32, c: u32, r: u32) -> Resu
     ])
 }
 
-fn level_interpolate(lod: u32, [h00, h10, h01, h11]: [f64; 4], c: u32, r: u32) -> f64 {
+fn level_interpolate(lod: u32, corners: [f64; 4], c: u32, r: u32) -> f64 {
     let step = 1u32 << lod;
     let (c0, r0) = (c / step * step, r / step * step);
     let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
-    if fx + fy <= 1.0 {
-        h00 + (h10 - h00) * fx + (h01 - h00) * fy
-    } else {
-        h11 + (h01 - h11) * (1.0 - fx) + (h10 - h11) * (1.0 - fy)
-    }
+    interp::triangulated(corners, fx, fy)
 }
 
 /// The per-region error field `m_l(p) >= 1`: how much farther than the level's global error
@@ -495,6 +492,10 @@ pub struct SelectionParams {
     pub split: Vec<f32>,
     pub frustum: [[f32; 4]; 6],
     pub cull: bool,
+    /// Fraction of each level's range over which vertices morph.
+    pub morph_range: f32,
+    /// Vertex morphing on (off: every morph factor is 0).
+    pub morph: bool,
 }
 
 impl SelectionParams {
@@ -550,6 +551,8 @@ impl SelectionParams {
             split,
             frustum: frustum_planes(camera, width as f64 / height as f64),
             cull: settings.cull,
+            morph_range: settings.morph_range as f32,
+            morph: settings.morph,
         }
     }
 
@@ -639,43 +642,71 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
 }
 
 /// Morph factor of a vertex of a level-`lod` tile at integer sample `sample` (0 = own level,
-/// 1 = fully on the parent level's grid): the parent level's scaled distance against the last
-/// `morph_range` of its split distance. A pure function of the vertex's world position and
-/// the tile's level, so vertices shared by tiles agree.
-pub fn morph_factor(
-    levels: &Levels,
-    p: &SelectionParams,
-    sample: [i32; 2],
-    lod: u32,
-    morph_range: f32,
-) -> f32 {
+/// 1 = fully on the parent level's grid; 0 everywhere with morphing off): the parent level's
+/// scaled distance against the last `morph_range` of its split distance. A pure function of
+/// the vertex's world position and the tile's level, so vertices shared by tiles agree.
+/// `morph_factor` in `shaders/include/udlod_morph.wgsl`, operation for operation.
+pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
     let rel = p.from_viewer(sample);
     let d = Vec3::new(rel[0], rel[1], p.viewer[2]).length();
     let scaled = d * levels.field_at(sample, lod + 1);
     let parent_split = p.split[lod as usize + 1];
-    (1.0 - (1.0 - scaled / parent_split) / morph_range).clamp(0.0, 1.0)
+    let on = if p.morph { 1.0 } else { 0.0 };
+    (1.0 - (1.0 - scaled / parent_split) / p.morph_range).clamp(0.0, 1.0) * on
 }
 
-/// Where a vertex of a level-`lod` tile ends up after morphing, in samples (the CPU mirror of
-/// the vertex shader; `local` is the vertex's grid position inside the tile).
-pub fn morphed_position(
+/// A tile's grid vertex after morphing (`MorphedVertex` in `shaders/include/udlod_morph.wgsl`
+/// without the height): an integer sample `cell` plus a fraction in `[0, 1)` per axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MorphedVertex {
+    pub cell: [i32; 2],
+    pub frac: [f32; 2],
+    pub morph: f32,
+}
+
+impl MorphedVertex {
+    /// The position in samples as the shaders form it (`vec2<f32>(cell) + frac`).
+    pub fn grid_pos(&self) -> [f32; 2] {
+        [
+            self.cell[0] as f32 + self.frac[0],
+            self.cell[1] as f32 + self.frac[1],
+        ]
+    }
+}
+
+/// Where vertex `local` (column, row in the tile's grid) of tile `t` ends up after morphing:
+/// the CPU mirror of `morphed_vertex` in `shaders/include/udlod_morph.wgsl`, the same f32 and
+/// integer operations in the same order (odd vertices slide towards their even neighbour,
+/// clamped at the data's last sample, whole samples folded from the fraction into the cell).
+/// `tests/udlod.rs` proves it equal to the GPU's through the morph probe.
+pub fn morphed_vertex(
     levels: &Levels,
     p: &SelectionParams,
     t: Tile,
     local: [u32; 2],
-    morph_range: f32,
-) -> [f32; 2] {
+) -> MorphedVertex {
     let step = 1u32 << t.lod;
-    let span = levels.grid_size * step;
-    let sample = [
-        (t.x * span + local[0] * step) as i32,
-        (t.y * span + local[1] * step) as i32,
-    ];
-    let m = morph_factor(levels, p, sample, t.lod, morph_range);
-    let hi = [levels.width as f32 - 1.0, levels.height as f32 - 1.0];
-    std::array::from_fn(|i| {
-        let odd = (local[i] & 1) as f32;
-        let cell = sample[i] as f32 - odd * step as f32;
-        (cell + (1.0 - m) * odd * step as f32).min(hi[i])
-    })
+    // u32 arithmetic (wrapping), then the cast, as the shader does.
+    let tile = [t.x, t.y];
+    let sample: [i32; 2] = std::array::from_fn(|i| {
+        let origin = tile[i].wrapping_mul(levels.grid_size).wrapping_mul(step);
+        origin.wrapping_add(local[i].wrapping_mul(step)) as i32
+    });
+    let morph = morph_factor(levels, p, sample, t.lod);
+    let last = [levels.width as i32 - 1, levels.height as i32 - 1];
+    let mut cell = [0i32; 2];
+    let mut frac = [0f32; 2];
+    for i in 0..2 {
+        let odd = (local[i] & 1) as i32;
+        let mut c = sample[i] - odd * step as i32;
+        let mut f = (1.0 - morph) * odd as f32 * step as f32;
+        f = f.min((last[i] - c).max(0) as f32);
+        c = c.min(last[i]);
+        let whole = f.floor();
+        c += whole as i32;
+        f -= whole;
+        cell[i] = c;
+        frac[i] = f;
+    }
+    MorphedVertex { cell, frac, morph }
 }

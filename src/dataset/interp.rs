@@ -1,0 +1,149 @@
+//! Interpolation and gradients over a regular grid of samples: one implementation of each for
+//! every CPU user (height maps, level-0 readers, void filling, imagery, UDLOD's level errors,
+//! the clipmap's shading planes), so they cannot drift apart.
+//!
+//! The GPU's own arithmetic (f32, `shaders/include/terrain_common.wgsl`) is mirrored where a test
+//! compares the two (`clipmap::quadtree`, `lod::udlod::select`), not here: these helpers work in
+//! f64 on the host.
+
+/// Where a position in sample units falls in a `width x height` grid, clamped to the grid: the
+/// cell's south-west sample `(c0, r0)`, its far corner `(c1, r1)` (clamped to the last sample)
+/// and the fraction `(fx, fy)` inside the cell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridCell {
+    pub c0: u32,
+    pub r0: u32,
+    pub c1: u32,
+    pub r1: u32,
+    pub fx: f64,
+    pub fy: f64,
+}
+
+impl GridCell {
+    /// The cell of `(gx, gy)` (sample units); positions outside the grid clamp onto its edge.
+    /// `width` and `height` are at least 1.
+    pub fn at(gx: f64, gy: f64, width: u32, height: u32) -> Self {
+        let gx = gx.clamp(0.0, (width - 1) as f64);
+        let gy = gy.clamp(0.0, (height - 1) as f64);
+        let (c0, r0) = (gx.floor() as u32, gy.floor() as u32);
+        GridCell {
+            c0,
+            r0,
+            c1: (c0 + 1).min(width - 1),
+            r1: (r0 + 1).min(height - 1),
+            fx: gx - c0 as f64,
+            fy: gy - r0 as f64,
+        }
+    }
+
+    /// Bilinear interpolation of the cell's corners `[(c0, r0), (c1, r0), (c0, r1), (c1, r1)]`
+    /// as `sample` gives them.
+    pub fn bilinear(&self, mut sample: impl FnMut(u32, u32) -> f64) -> f64 {
+        let Ok(h) = self.try_bilinear(|c, r| Ok::<_, std::convert::Infallible>(sample(c, r)));
+        h
+    }
+
+    /// [`GridCell::bilinear`] with a fallible `sample` (its first error is returned).
+    pub fn try_bilinear<E>(
+        &self,
+        mut sample: impl FnMut(u32, u32) -> Result<f64, E>,
+    ) -> Result<f64, E> {
+        let corners = [
+            sample(self.c0, self.r0)?,
+            sample(self.c1, self.r0)?,
+            sample(self.c0, self.r1)?,
+            sample(self.c1, self.r1)?,
+        ];
+        Ok(bilinear(corners, self.fx, self.fy))
+    }
+}
+
+/// Bilinear interpolation of the corners `[h00, h10, h01, h11]` (south-west, south-east,
+/// north-west, north-east) at fraction `(fx, fy)`: along x first, then y. Exact at the corners
+/// (weights 1 and 0).
+#[inline]
+pub fn bilinear([h00, h10, h01, h11]: [f64; 4], fx: f64, fy: f64) -> f64 {
+    let south = h00 * (1.0 - fx) + h10 * fx;
+    let north = h01 * (1.0 - fx) + h11 * fx;
+    south * (1.0 - fy) + north * fy
+}
+
+/// The height of a quad drawn as two triangles split along the diagonal from `(1, 0)` to
+/// `(0, 1)` (as `lod::brute::grid_indices` orders them), at fraction `(fx, fy)` of the quad with
+/// corners `[h00, h10, h01, h11]`: the surface a rasterizer draws between the four samples.
+#[inline]
+pub fn triangulated([h00, h10, h01, h11]: [f64; 4], fx: f64, fy: f64) -> f64 {
+    if fx + fy <= 1.0 {
+        h00 + (h10 - h00) * fx + (h01 - h00) * fy
+    } else {
+        h11 + (h01 - h11) * (1.0 - fx) + (h10 - h11) * (1.0 - fy)
+    }
+}
+
+/// Unit surface normals of a `width x height` grid of heights (`height(col, row)`, metres,
+/// samples `step` metres apart) from central differences, one-sided at the grid's edges, packed
+/// as RGBA8 snorm `(x, y, z, 0)` row by row (the layout of the normal textures).
+pub fn normals_snorm8(
+    width: usize,
+    height: usize,
+    step: f64,
+    heights: impl Fn(usize, usize) -> f64,
+) -> Vec<u8> {
+    let mut out = Vec::with_capacity(width * height * 4);
+    for r in 0..height {
+        for c in 0..width {
+            let (cl, cr) = (c.saturating_sub(1), (c + 1).min(width - 1));
+            let (rd, ru) = (r.saturating_sub(1), (r + 1).min(height - 1));
+            let dx = (heights(cr, r) - heights(cl, r)) / ((cr - cl) as f64 * step);
+            let dy = (heights(c, ru) - heights(c, rd)) / ((ru - rd) as f64 * step);
+            out.extend(normal_snorm8(dx, dy));
+        }
+    }
+    out
+}
+
+/// A unit normal from the height gradient (metres per metre), as RGBA8 snorm `(x, y, z, 0)`.
+pub fn normal_snorm8(dx: f64, dy: f64) -> [u8; 4] {
+    let n = glam::DVec3::new(-dx, -dy, 1.0).normalize();
+    [n.x, n.y, n.z, 0.0].map(|v| ((v * 127.0).round().clamp(-127.0, 127.0) as i8) as u8)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bilinear_is_exact_at_corners_and_linear_along_edges() {
+        let k = [1.0, 3.0, 5.0, 11.0];
+        assert_eq!(bilinear(k, 0.0, 0.0), 1.0);
+        assert_eq!(bilinear(k, 1.0, 0.0), 3.0);
+        assert_eq!(bilinear(k, 0.0, 1.0), 5.0);
+        assert_eq!(bilinear(k, 1.0, 1.0), 11.0);
+        assert_eq!(bilinear(k, 0.5, 0.0), 2.0);
+        // The centre: the mean of the corners (the triangulated quad takes the diagonal's).
+        assert_eq!(bilinear(k, 0.5, 0.5), 5.0);
+        assert_eq!(triangulated(k, 0.5, 0.5), 4.0);
+    }
+
+    #[test]
+    fn grid_cell_clamps_onto_the_grid() {
+        let c = GridCell::at(-3.0, 7.5, 4, 8);
+        assert_eq!((c.c0, c.c1, c.fx), (0, 1, 0.0));
+        assert_eq!((c.r0, c.r1, c.fy), (7, 7, 0.0));
+        let c = GridCell::at(2.25, 3.0, 4, 8);
+        assert_eq!(
+            (c.c0, c.c1, c.fx, c.r0, c.r1, c.fy),
+            (2, 3, 0.25, 3, 4, 0.0)
+        );
+    }
+
+    #[test]
+    fn normals_of_a_plane_are_its_normal_everywhere_including_edges() {
+        // z = 0.5 x: normal (-0.5, 0, 1) / |..|, at every sample (one-sided differences agree
+        // with central ones on a plane).
+        let n = normals_snorm8(5, 3, 2.0, |c, _| c as f64);
+        let want = normal_snorm8(0.5, 0.0);
+        assert!(n.chunks_exact(4).all(|t| t == want));
+        assert_eq!(n.len(), 5 * 3 * 4);
+    }
+}
