@@ -4,7 +4,7 @@
 // triangle mesh brute force draws), the height and screen-space errors, popping against the
 // previous frame, holes against the reference frame, the PSNR and SSIM terms; per tracked
 // world point the swimming observation; for the reference frame the swim seeds. Histograms
-// are accumulated with atomics, sums per 8x8 block then in one reducing workgroup: the host
+// are accumulated with atomics, sums per workgroup then in one reducing workgroup: the host
 // reads kilobytes. Mirrors src/eval/metrics.rs; tests/eval_gpu.rs proves both equal.
 
 struct EvalView {
@@ -30,9 +30,9 @@ struct EvalFrame {
     // x: sample spacing (m).
     params: vec4<f32>,
     // x: tracked points; y: first seed written this frame; z: seeds written this frame (0:
-    // none); w: 8x8 pixel blocks (partials to sum).
+    // none); w: pixel workgroups (partials to sum).
     points: vec4<u32>,
-    // x, y: the seed grid (columns, rows); z: 8x8 pixel blocks per row.
+    // x, y: the seed grid (columns, rows); z: pixel workgroups per row.
     grid: vec4<u32>,
 }
 
@@ -46,7 +46,7 @@ struct Seed {
     pad1: f32,
 }
 
-// One 8x8 pixel block's sums.
+// One workgroup's sums.
 struct Partial {
     // height error |m|, screen-space error px, SSIM of the window, 1 when the window counts.
     sums: vec4<f32>,
@@ -186,7 +186,8 @@ fn view_of(x: u32) -> u32 {
 
 // Camera-relative world point of the surface at pixel (x, y) (x within the view) with
 // reversed-Z depth d > 0 (metrics::world_point).
-fn world_rel(view: EvalView, x: u32, y: u32, d: f32) -> vec3<f32> {
+fn world_rel(v: u32, x: u32, y: u32, d: f32) -> vec3<f32> {
+    let view = frame.views[v];
     let focal = view.right.w;
     let near = view.up.w;
     let far = view.forward.w;
@@ -202,7 +203,8 @@ struct GridPos {
     frac: vec2<f32>,
 }
 
-fn grid_pos(view: EvalView, rel: vec3<f32>) -> GridPos {
+fn grid_pos(v: u32, rel: vec3<f32>) -> GridPos {
+    let view = frame.views[v];
     let q = (view.offset.xy + rel.xy) / frame.params.x;
     let fl = floor(q);
     return GridPos(view.cell.xy + vec2<i32>(fl), q - fl);
@@ -219,8 +221,8 @@ fn on_data(p: GridPos) -> bool {
 }
 
 // Height of a camera-relative point above the exact surface at `p` (metres).
-fn height_error(view: EvalView, rel_z: f32, h: f32) -> f32 {
-    let off = view.offset;
+fn height_error(v: u32, rel_z: f32, h: f32) -> f32 {
+    let off = frame.views[v].offset;
     return ((off.z - h) + rel_z) + off.w;
 }
 
@@ -232,15 +234,8 @@ fn hist_bin(value: f32) -> u32 {
     return u32(min(b, f32(EVAL_HIST_BINS - 1u)));
 }
 
-// The per-block pass counts into workgroup memory first (two 16-bit counts per word: at most
-// 64 blocks of 64 pixels per workgroup), then adds the non-zero words to stats.hist: few
-// global atomics, none contended within a workgroup.
-const HIST_WORDS: u32 = EVAL_HIST_TOTAL / 2u;
-var<workgroup> local_hist: array<atomic<u32>, HIST_WORDS>;
-
 fn count_in(hist: u32, value: f32) {
-    let b = hist * EVAL_HIST_BINS + hist_bin(value);
-    atomicAdd(&local_hist[b >> 1u], 1u << ((b & 1u) * 16u));
+    atomicAdd(&stats.hist[hist * EVAL_HIST_BINS + hist_bin(value)], 1u);
 }
 
 fn luma(c: u32) -> f32 {
@@ -254,6 +249,23 @@ fn sq_diff(a: u32, b: u32) -> u32 {
     return u32(dot(d, d));
 }
 
+var<workgroup> red_sum: array<vec4<f32>, 64>;
+var<workgroup> red_max: array<vec4<f32>, 64>;
+var<workgroup> red_cnt: array<vec4<u32>, 64>;
+
+// Sums (and maxima) of the workgroup's 64 entries into entry 0.
+fn reduce_workgroup(li: u32) {
+    for (var stride = 32u; stride > 0u; stride >>= 1u) {
+        workgroupBarrier();
+        if li < stride {
+            red_sum[li] += red_sum[li + stride];
+            red_max[li] = max(red_max[li], red_max[li + stride]);
+            red_cnt[li] += red_cnt[li + stride];
+        }
+    }
+    workgroupBarrier();
+}
+
 struct PixelResult {
     // |height error| m, screen-space error px (valid when counted).
     metres: f32,
@@ -263,14 +275,15 @@ struct PixelResult {
     signed_px: f32,
 }
 
-// The error at pixel (x, y) (frame columns) of `view`, which shows it.
-fn pixel_error(view: EvalView, x: u32, y: u32, d: f32) -> PixelResult {
+fn pixel_error(x: u32, y: u32, d: f32) -> PixelResult {
     var out = PixelResult(0.0, 0.0, false, NO_ERROR);
     if !(d > 0.0) {
         return out;
     }
-    let rel = world_rel(view, x - u32(view.cell.z), y, d);
-    let p = grid_pos(view, rel);
+    let v = view_of(x);
+    let view = frame.views[v];
+    let rel = world_rel(v, x - u32(view.cell.z), y, d);
+    let p = grid_pos(v, rel);
     if !on_data(p) {
         return out;
     }
@@ -278,7 +291,7 @@ fn pixel_error(view: EvalView, x: u32, y: u32, d: f32) -> PixelResult {
     if !h.ok {
         return out;
     }
-    let dh = height_error(view, rel.z, h.h);
+    let dh = height_error(v, rel.z, h.h);
     out.metres = abs(dh);
     out.pixels = abs(dh) * view.right.w / length(rel);
     out.counted = true;
@@ -316,64 +329,33 @@ fn is_hole(x: u32, y: u32, d: f32) -> bool {
     return true;
 }
 
-// Per pixel of an 8x8 block (one invocation each, no workgroup barriers: CPU rasterizers run
-// those slowly): errors, popping, holes, PSNR terms; per block: one SSIM window.
-@compute @workgroup_size(EVAL_POINT_WORKGROUP)
+// Per pixel: errors, popping, holes, PSNR terms; per 8x8 workgroup: one SSIM window.
+@compute @workgroup_size(EVAL_TILE_PX, EVAL_TILE_PX)
 fn pixels_main(
     @builtin(global_invocation_id) gid: vec3<u32>,
     @builtin(local_invocation_index) li: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
 ) {
-    for (var k = li; k < HIST_WORDS; k += EVAL_POINT_WORKGROUP) {
-        atomicStore(&local_hist[k], 0u);
-    }
-    workgroupBarrier();
-    if gid.x < frame.points.w {
-        measure_block(gid.x);
-    }
-    workgroupBarrier();
-    for (var k = li; k < HIST_WORDS; k += EVAL_POINT_WORKGROUP) {
-        let v = atomicLoad(&local_hist[k]);
-        if (v & 0xffffu) != 0u {
-            atomicAdd(&stats.hist[2u * k], v & 0xffffu);
-        }
-        if (v >> 16u) != 0u {
-            atomicAdd(&stats.hist[2u * k + 1u], v >> 16u);
-        }
-    }
-}
-
-// One 8x8 block: its pixels into the workgroup's histograms, its sums into partials[block].
-fn measure_block(block: u32) {
-    let per_row = frame.grid.z;
-    let origin = vec2<u32>(block % per_row, block / per_row) * EVAL_TILE_PX;
     let w = frame.size.x;
     let hgt = frame.size.y;
+    let x = gid.x;
+    let y = gid.y;
+    let inside = x < w && y < hgt;
     var sums = vec4<f32>(0.0);
     var maxes = vec4<f32>(0.0);
     var counts = vec4<u32>(0u);
-    var la_sum = 0.0;
-    var lb_sum = 0.0;
-    for (var j = 0u; j < EVAL_TILE_PX * EVAL_TILE_PX; j += 1u) {
-        let x = origin.x + j % EVAL_TILE_PX;
-        let y = origin.y + j / EVAL_TILE_PX;
-        if x >= w || y >= hgt {
-            continue;
-        }
+    var la = 0.0;
+    var lb = 0.0;
+    if inside {
         let i = y * w + x;
         let d = depth[i];
-        var e: PixelResult;
-        if frame.size.z == 1u {
-            // One view: a constant index (no per-pixel view lookup).
-            e = pixel_error(frame.views[0], x, y, d);
-        } else {
-            e = pixel_error(frame.views[view_of(x)], x, y, d);
-        }
+        let e = pixel_error(x, y, d);
         if e.counted {
-            sums.x += e.metres;
-            sums.y += e.pixels;
-            maxes.x = max(maxes.x, e.metres);
-            maxes.y = max(maxes.y, e.pixels);
-            counts.x += 1u;
+            sums.x = e.metres;
+            sums.y = e.pixels;
+            maxes.x = e.metres;
+            maxes.y = e.pixels;
+            counts.x = 1u;
             count_in(0u, e.metres);
             count_in(1u, e.pixels);
         }
@@ -383,38 +365,48 @@ fn measure_block(block: u32) {
         if frame.size.w == 1u && interior && e.counted && previous != NO_ERROR
             && continuous(i, d) {
             count_in(2u, abs(e.signed_px - previous));
-            counts.w += 1u;
+            counts.w = 1u;
         }
         if interior && is_hole(x, y, d) {
-            counts.y += 1u;
+            counts.y = 1u;
         }
-        counts.z += sq_diff(ref_color[i], color[i]);
-        la_sum += luma(ref_color[i]);
-        lb_sum += luma(color[i]);
+        let c = color[i];
+        let r = ref_color[i];
+        counts.z = sq_diff(r, c);
+        la = luma(r);
+        lb = luma(c);
     }
-    // SSIM of the block's window (metrics::ssim): means first, then centred moments.
-    let window = origin.x + EVAL_TILE_PX <= w && origin.y + EVAL_TILE_PX <= hgt;
-    var ssim = 0.0;
-    if window {
-        let ma = la_sum / 64.0;
-        let mb = lb_sum / 64.0;
-        var m = vec3<f32>(0.0);
-        for (var j = 0u; j < EVAL_TILE_PX * EVAL_TILE_PX; j += 1u) {
-            let i = (origin.y + j / EVAL_TILE_PX) * w + origin.x + j % EVAL_TILE_PX;
-            let a = luma(ref_color[i]) - ma;
-            let b = luma(color[i]) - mb;
-            m += vec3<f32>(a * a, b * b, a * b);
+    // SSIM of the workgroup's window (metrics::ssim): means first, then centred moments.
+    red_sum[li] = vec4<f32>(sums.xy, la, lb);
+    red_max[li] = maxes;
+    red_cnt[li] = counts;
+    reduce_workgroup(li);
+    let total_sum = red_sum[0];
+    let total_max = red_max[0];
+    let total_cnt = red_cnt[0];
+    let ma = total_sum.z / 64.0;
+    let mb = total_sum.w / 64.0;
+    workgroupBarrier();
+    red_sum[li] = vec4<f32>((la - ma) * (la - ma), (lb - mb) * (lb - mb), (la - ma) * (lb - mb), 0.0);
+    red_max[li] = vec4<f32>(0.0);
+    red_cnt[li] = vec4<u32>(0u);
+    reduce_workgroup(li);
+    if li == 0u {
+        let origin = wg.xy * EVAL_TILE_PX;
+        let window = origin.x + EVAL_TILE_PX <= w && origin.y + EVAL_TILE_PX <= hgt;
+        var ssim = 0.0;
+        if window {
+            let m = red_sum[0] / 64.0;
+            let c1 = (0.01 * 255.0) * (0.01 * 255.0);
+            let c2 = (0.03 * 255.0) * (0.03 * 255.0);
+            ssim = ((2.0 * ma * mb + c1) * (2.0 * m.z + c2)) / ((ma * ma + mb * mb + c1) * (m.x + m.y + c2));
         }
-        m /= 64.0;
-        let c1 = (0.01 * 255.0) * (0.01 * 255.0);
-        let c2 = (0.03 * 255.0) * (0.03 * 255.0);
-        ssim = ((2.0 * ma * mb + c1) * (2.0 * m.z + c2)) / ((ma * ma + mb * mb + c1) * (m.x + m.y + c2));
+        partials[wg.y * frame.grid.z + wg.x] = Partial(
+            vec4<f32>(total_sum.xy, ssim, select(0.0, 1.0, window)),
+            total_max,
+            total_cnt,
+        );
     }
-    partials[block] = Partial(
-        vec4<f32>(sums.xy, ssim, select(0.0, 1.0, window)),
-        maxes,
-        counts,
-    );
 }
 
 // Sums the pixel pass's partials into stats.totals (one workgroup).
@@ -492,9 +484,9 @@ fn seed_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var s = Seed(vec2<i32>(0), 0u, 0u, vec2<f32>(0.0), 0.0, 0.0);
     let d = ref_depth[y * frame.size.x + x];
     if d > 0.0 {
-        let view = frame.views[view_of(x)];
-        let rel = world_rel(view, x - u32(view.cell.z), y, d);
-        let p = grid_pos(view, rel);
+        let v = view_of(x);
+        let rel = world_rel(v, x - u32(frame.views[v].cell.z), y, d);
+        let p = grid_pos(v, rel);
         let h = exact_height(p.cell, p.frac);
         if h.ok {
             s = Seed(p.cell, 1u, 0u, p.frac, h.h, 0.0);
@@ -550,17 +542,17 @@ fn observe(s: Seed) -> vec2<f32> {
         if !(d > 0.0) {
             return none;
         }
-        let q = world_rel(view, x, y, d);
+        let q = world_rel(v, x, y, d);
         let footprint = length(rel) / focal;
         if length(q.xy - rel.xy) > 2.0 * footprint + 1e-6 {
             return none;
         }
-        let p = grid_pos(view, q);
+        let p = grid_pos(v, q);
         let h = exact_height(p.cell, p.frac);
         if !h.ok {
             return none;
         }
-        return vec2<f32>(height_error(view, q.z, h.h), length(q));
+        return vec2<f32>(height_error(v, q.z, h.h), length(q));
     }
     return none;
 }

@@ -55,9 +55,8 @@ shared_constants! {
     CLIPMAP_LOD_SHIFT: u32 = 16;
     /// Threads per workgroup of the height probe (tests: GPU heights read back).
     CLIPMAP_PROBE_WORKGROUP: u32 = 64;
-    /// Evaluator (`src/eval/gpu/`): pixels per side of the block one invocation of the
-    /// per-pixel pass measures, which is also the side of an SSIM window (non-overlapping 8x8
-    /// windows).
+    /// Evaluator (`src/eval/gpu/`): pixels per side of a workgroup of the per-pixel pass,
+    /// which is also the side of an SSIM window (non-overlapping 8x8 windows).
     EVAL_TILE_PX: u32 = 8;
     /// Evaluator: samples per side of a reference tile of level 0 (a tile stores one more
     /// row and column, shared with its neighbours, so every mesh triangle lies in one tile).
@@ -75,7 +74,7 @@ shared_constants! {
     EVAL_EDGE_BAND: f32 = 1e-3;
     /// Evaluator: the error-image value of a pixel without an error (sky, off the data).
     EVAL_NO_ERROR_PX: f32 = 3.0e38;
-    /// Threads per workgroup of the per-block, swimming and seeding passes.
+    /// Threads per workgroup of the swimming and seeding passes.
     EVAL_POINT_WORKGROUP: u32 = 64;
     /// Threads of the one workgroup that sums the per-workgroup partials.
     EVAL_REDUCE_WORKGROUP: u32 = 256;

@@ -54,10 +54,10 @@ pub struct EvalFrame {
     pub data: [u32; 4],
     /// Sample spacing (m).
     pub params: [f32; 4],
-    /// Tracked points, first seed written this frame, seeds written this frame, 8x8 pixel
-    /// blocks.
+    /// Tracked points, first seed written this frame, seeds written this frame, pixel
+    /// workgroups.
     pub points: [u32; 4],
-    /// Seed grid columns and rows, 8x8 pixel blocks per row.
+    /// Seed grid columns and rows, pixel workgroups per row.
     pub grid: [u32; 4],
 }
 

@@ -237,8 +237,7 @@ pub struct GpuAnalysis {
     stats_host: Buffer,
     export: Option<Buffer>,
     image_frames: Vec<u64>,
-    /// 8x8 pixel blocks per row and rows of blocks.
-    blocks: (u32, u32),
+    groups: (u32, u32),
     recorded: u64,
     results: Sender<GpuFrameMetrics>,
 }
@@ -263,7 +262,7 @@ impl GpuAnalysis {
         })?;
         let shape = shared.shape;
         let pixels = shape.width as u64 * shape.height as u64;
-        let blocks = (
+        let groups = (
             shape.width.div_ceil(EVAL_TILE_PX),
             shape.height.div_ceil(EVAL_TILE_PX),
         );
@@ -295,7 +294,7 @@ impl GpuAnalysis {
         let error_image = device("eval error image", pixels * 4, copy_usage)?;
         let partials = device(
             "eval partials",
-            blocks.0 as u64 * blocks.1 as u64 * PARTIAL_BYTES,
+            groups.0 as u64 * groups.1 as u64 * PARTIAL_BYTES,
             vk::BufferUsageFlags::empty(),
         )?;
         let stats_size = stats_bytes(max_points(shared.frames));
@@ -359,7 +358,7 @@ impl GpuAnalysis {
             stats_host,
             export,
             image_frames,
-            blocks,
+            groups,
             recorded: 0,
             results,
         };
@@ -415,9 +414,9 @@ impl GpuAnalysis {
                 (round + 1) * grid,
                 round * grid,
                 if seeding { grid } else { 0 },
-                self.blocks.0 * self.blocks.1,
+                self.groups.0 * self.groups.1,
             ],
-            grid: [SWIM_GRID.0, SWIM_GRID.1, self.blocks.0, 0],
+            grid: [SWIM_GRID.0, SWIM_GRID.1, self.groups.0, 0],
         })
     }
 
@@ -530,8 +529,7 @@ impl FrameAnalysis for GpuAnalysis {
                 MemoryAccess::ComputeReadWrite,
             );
         }
-        let blocks = self.blocks.0 * self.blocks.1;
-        self.dispatch(cmd, &s.pixels, (blocks.div_ceil(EVAL_POINT_WORKGROUP), 1));
+        self.dispatch(cmd, &s.pixels, self.groups);
         let points = uniforms.points[0];
         self.dispatch(cmd, &s.swim, (points.div_ceil(EVAL_POINT_WORKGROUP), 1));
         b.memory(
