@@ -8,7 +8,8 @@ use std::mem::{offset_of, size_of};
 use ash::vk;
 use vkterrain::driver::descriptors::{Binding, PROBE_SET};
 use vkterrain::driver::shaders::{
-    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL,
+    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL,
+    UDLOD_TILING_WGSL, UDLOD_WGSL,
 };
 use vkterrain::eval::gpu::EVAL_SET;
 use vkterrain::frame::FrameUniforms;

@@ -263,6 +263,15 @@ impl EvalSetup<'_> {
     }
 }
 
+/// A delivered frame as the evaluator keeps it: RGBA (sampled frames only), depth (with
+/// `--cross-check`), timings, triangles.
+type Delivered = (
+    Vec<u8>,
+    Option<Vec<f32>>,
+    crate::readback::FrameTimings,
+    u64,
+);
+
 /// A finished FLIP computation: run, frame, statistics, coloured map (image frames).
 type FlipDone = (usize, u64, FlipStats, Option<Vec<u8>>);
 
@@ -437,12 +446,7 @@ impl Run {
         let is_reference = index == 0;
         let flip_frame = setup.flip_frame(k);
         let keep_rgba = flip_frame || setup.cross_check;
-        let mut delivered: Option<(
-            Vec<u8>,
-            Option<Vec<f32>>,
-            crate::readback::FrameTimings,
-            u64,
-        )> = None;
+        let mut delivered: Option<Delivered> = None;
         let mut sink = |f: &FrameView<'_>| {
             delivered = Some((
                 if keep_rgba {
