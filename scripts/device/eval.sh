@@ -23,6 +23,9 @@ W=${W:-1920}
 H=${H:-1080}
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
+# The "after" evaluations (report.md, charts, images) stay here ($OUT on the device machine).
+KEEP=${OUT:-out/device-eval}
+mkdir -p "$KEEP"
 
 # The before binary reads the older config format: no [method] section.
 mkdir -p "$TMP/old/scenarios"
@@ -53,15 +56,30 @@ for c in "${cases[@]}"; do
   fi
   s=$(date +%s.%N)
   "$BIN" eval --config "$cfg" --width "$W" --height "$H" --frames "$FRAMES" \
-    --methods brute,udlod --out "$TMP/after_$name" --force >"$TMP/after_$name.log" 2>&1 \
-    || { echo "after $name failed:"; tail -5 "$TMP/after_$name.log"; continue; }
+    --methods brute,udlod --out "$KEEP/after_$name" --force >"$KEEP/after_$name.log" 2>&1 \
+    || { echo "after $name failed:"; tail -5 "$KEEP/after_$name.log"; continue; }
   e=$(date +%s.%N)
   timed "$name" after "$s" "$e"
-  grep -A3 '^variant' "$TMP/after_$name.log" | sed 's/^/    /'
+  grep -A2 '^variant' "$KEEP/after_$name.log" | sed 's/^/    /'
+  # The speed axis against a plain benchmark loop (columns: resolution, frames in flight,
+  # triangles, median ms, p99 ms, gpu ms, readback, overlap).
   for m in brute udlod; do
-    printf '    bench %s: ' "$m"
+    printf '    bench %-6s' "$m"
     "$BIN" bench --config "$cfg" --width "$W" --height "$H" --frames "$FRAMES" --method "$m" 2>&1 \
-      | grep -i 'gpu' | head -2 | tr '\n' ' '
-    echo
+      | grep -E "^ *${W}x${H} +1 " | head -1
   done
 done
+
+# The chart: Fischer S3 (Pyrenees), every method and sweep, frame time vs error.
+if [ -f out/datasets/pyrenees/manifest.json ]; then
+  s=$(date +%s.%N)
+  "$BIN" eval --config config/pyrenees.toml --width "$W" --height "$H" --frames "$FRAMES" \
+    --methods brute,udlod,pgm --sweep tau_px=0.5,1,2,4 --sweep grid_scale=0.5,1 \
+    --out "$KEEP/fischer_s3_all" --force >"$KEEP/fischer_s3_all.log" 2>&1 \
+    || { echo "fischer_s3_all failed:"; tail -5 "$KEEP/fischer_s3_all.log"; exit 1; }
+  e=$(date +%s.%N)
+  renderers=7 # brute force + UDLOD at 4 taus + PGM at 2 grids
+  timed fischer_all after "$s" "$e"
+  grep -A8 '^variant' "$KEEP/fischer_s3_all.log" | sed 's/^/    /'
+  echo "chart: $KEEP/fischer_s3_all/frame_time_vs_error.png"
+fi
