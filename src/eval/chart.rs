@@ -12,6 +12,7 @@ use std::sync::Once;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::error::{Error, Result};
 
@@ -106,6 +107,16 @@ impl Axis {
         Axis {
             range: start..hi + 0.05 * span,
             log: false,
+        }
+    }
+
+    /// Where `v` lies along the axis: 0 at its start, 1 at its end.
+    pub fn fraction(&self, v: f64) -> f64 {
+        let (a, b) = (self.range.start, self.range.end);
+        if self.log {
+            (v.ln() - a.ln()) / (b.ln() - a.ln())
+        } else {
+            (v - a) / (b - a)
         }
     }
 }
@@ -236,12 +247,17 @@ impl Chart {
             let labelled = s.points.iter().zip(&s.labels).filter(|(p, _)| inside(**p));
             chart
                 .draw_series(labelled.map(|(&p, text)| {
-                    EmptyElement::at(p)
-                        + Text::new(
-                            text.clone(),
-                            (7, -16),
-                            (FONT, 13).into_font().color(&colour),
-                        )
+                    // Labels of points near the right edge end at the point (else clipped).
+                    let (dx, h) = if x.fraction(p.0) > 0.8 {
+                        (-7, HPos::Right)
+                    } else {
+                        (7, HPos::Left)
+                    };
+                    let style = (FONT, 13)
+                        .into_font()
+                        .color(&colour)
+                        .pos(Pos::new(h, VPos::Top));
+                    EmptyElement::at(p) + Text::new(text.clone(), (dx, -16), style)
                 }))
                 .map_err(err)?;
         }
@@ -430,6 +446,14 @@ mod tests {
             assert!(svg.contains(text), "SVG lacks {text:?}");
         }
         assert!(svg.contains("<text"), "labels are SVG text");
+        // The label of the point near the right edge ends at it (not clipped); the others start
+        // at theirs.
+        let element = |label: &str| {
+            let end = svg.find(label).expect("label drawn");
+            svg[..end].rsplit("<text").next().unwrap().to_string()
+        };
+        assert!(element("120x525").contains("text-anchor=\"end\""));
+        assert!(!element("tau_px=0.5").contains("text-anchor=\"end\""));
         // The PNG has text in the label areas: the x-axis title band below the plot, the
         // y-axis band on the left, the title above; an unlabelled x axis leaves its band
         // emptier (negative control).
