@@ -6,17 +6,25 @@
 //! `VKTERRAIN_EVAL_SHORT=1` is the CI version (one procedural scenario at 320x180, a few
 //! minutes at most). It asserts correctness, never absolute times: UDLOD has no holes, its
 //! 99.9th-percentile screen-space error is within 1.25 tau, brute force measures ~0 error, and
-//! PGM swims more than UDLOD; frame times are printed as ratios to brute force of the same
-//! run. Without it, the Fischer flights S1 (Franconia, flat) and S3 (Pyrenees, rough) run at
-//! 1280x720 (data: `make data`).
+//! PGM swims more than UDLOD; GPU times are printed as ratios to brute force of the same run;
+//! and the evaluator's GPU time of each method agrees with a plain benchmark loop's (the
+//! `vkterrain bench` loop, no evaluation) as a ratio within a generous noise band. Without it,
+//! the Fischer flights S1 (Franconia, flat) and S3 (Pyrenees, rough) run at 1280x720 (data:
+//! `make data`).
 
 use std::path::PathBuf;
 
 use clap::Parser;
-use vkterrain::cli::render::{RenderArgs, prepare};
+use vkterrain::cli::render::{Prepared, RenderArgs, prepare};
 use vkterrain::eval::run::{EvalSetup, Evaluation, evaluate, variants};
 use vkterrain::eval::{report, table};
-use vkterrain::lod::{MethodKind, sweep};
+use vkterrain::lod::{MethodConfig, MethodKind, sweep};
+use vkterrain::render::FrameRequest;
+use vkterrain::render::stats::Percentiles;
+
+/// The evaluator's GPU time may differ from the benchmark loop's by this factor either way
+/// (the machines are noisy: the same command runs up to 1.7x apart).
+const AGREEMENT_BAND: f64 = 1.6;
 
 #[derive(Parser)]
 struct Wrapper {
@@ -32,7 +40,77 @@ struct Case {
     size: (u32, u32),
 }
 
-fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
+/// GPU time per frame of the method's passes (prepass + terrain, median after warm-up) in the
+/// `vkterrain bench` loop: a sink that reads every row, no evaluation, one frame in flight
+/// like the evaluator (`vkterrain bench`'s N = 1 row). With two frames in flight the frames
+/// overlap, and on lavapipe both share the same CPU cores, so each frame's GPU interval grows
+/// (UDLOD at 720p: 407 ms at N = 1, 662 ms at N = 2 in one `vkterrain bench` run).
+fn bench_gpu_ms(p: &Prepared, method: &MethodConfig, warmup: usize) -> anyhow::Result<f64> {
+    let gpu = p.config.open_gpu()?;
+    let mut config = p.config.clone();
+    config.method = method.clone();
+    let mut options = config.render_options();
+    options.frames_in_flight = 1;
+    let mut renderer = config.open_renderer(&gpu, &p.data, options)?;
+    let mut checksum = 0u64;
+    let mut sink = |f: &vkterrain::readback::FrameView<'_>| {
+        checksum = checksum.wrapping_add(f.rgba.chunks(f.row_stride).map(|r| r[0] as u64).sum());
+        Ok(())
+    };
+    for frame in 0..p.frames as u64 {
+        let views =
+            FrameRequest::with_extra_views(p.scenario.camera(frame), &config.render.extra_views);
+        renderer.render_views(&views, &mut sink)?;
+    }
+    renderer.finish(&mut sink)?;
+    let times = renderer
+        .stats
+        .frames
+        .iter()
+        .skip(warmup)
+        .map(|f| f.timings.gpu_prepass_ms + f.timings.gpu_terrain_ms)
+        .collect();
+    Ok(Percentiles::of(times).median)
+}
+
+/// Eval and bench agree on every method's GPU time within [`AGREEMENT_BAND`].
+fn check_agreement(p: &Prepared, evaluation: &Evaluation, warmup: usize) -> anyhow::Result<()> {
+    let mut failures = Vec::new();
+    for s in evaluation
+        .summaries
+        .iter()
+        .filter(|s| s.method == "brute" || s.method == "pgm" || s.variant == "udlod tau_px=1")
+    {
+        let mut method = p
+            .config
+            .method
+            .clone()
+            .with_kind(MethodKind::parse(&s.method)?);
+        for (k, v) in &s.params {
+            method.apply_sweep(k, *v)?;
+        }
+        let bench = bench_gpu_ms(p, &method, warmup)?;
+        let ratio = s.gpu_ms.median / bench;
+        println!(
+            "{}: eval {:.3} ms, bench {:.3} ms: ratio {ratio:.2}",
+            s.variant, s.gpu_ms.median, bench
+        );
+        if !(1.0 / AGREEMENT_BAND..=AGREEMENT_BAND).contains(&ratio) {
+            failures.push(format!("{} ratio {ratio:.2}", s.variant));
+        }
+    }
+    if failures.is_empty() {
+        println!("eval and bench agree within {AGREEMENT_BAND}x");
+        Ok(())
+    } else {
+        anyhow::bail!(
+            "eval and bench GPU times differ by more than {AGREEMENT_BAND}x: {}",
+            failures.join("; ")
+        )
+    }
+}
+
+fn run_case(root: &str, case: &Case, short: bool) -> anyhow::Result<Option<Evaluation>> {
     let mut argv = vec![
         "eval".to_string(),
         "--config".into(),
@@ -68,26 +146,36 @@ fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
         &sweeps,
         &p.config.method,
     )?;
+    let warmup = 4;
+    let command = format!(
+        "{}cargo bench --bench eval",
+        if short { "VKTERRAIN_EVAL_SHORT=1 " } else { "" }
+    );
     let setup = EvalSetup {
         gpu: &gpu,
-        data: p.data.require_grid("eval bench")?,
+        config: &p.config,
+        data: &p.data,
         scenario: &p.scenario,
         frames: p.frames,
-        warmup: 4,
+        warmup,
         options: p.config.render_options(),
         image_frames: vec![p.frames as u64 / 2],
+        flip_every: 8,
+        cross_check: false,
+        reference_mib: 512,
+        command,
     };
     let evaluation = evaluate(&setup, &variants, &mut ())?;
     let out = PathBuf::from(format!("{root}/target/bench/eval/{}", case.name));
-    report::write(&evaluation, p.data.require_grid("eval bench")?, &out, true)?;
+    report::write(&evaluation, &out, true)?;
     let brute = evaluation
         .summaries
         .iter()
         .find(|s| s.method == "brute")
-        .map(|s| s.frame_ms.median)
+        .map(|s| s.gpu_ms.median)
         .unwrap_or(f64::NAN);
     println!(
-        "\n{} ({} on {}, {}x{}, {} frames, {}) -> {}/report.md",
+        "\n{} ({} on {}, {}x{}, {} frames, {}, {:.1} s) -> {}/report.md",
         case.name,
         evaluation.scenario,
         evaluation.dataset,
@@ -95,20 +183,24 @@ fn run_case(root: &str, case: &Case) -> anyhow::Result<Option<Evaluation>> {
         evaluation.height,
         evaluation.frames,
         evaluation.device,
+        evaluation.wall_s,
         out.display()
     );
     print!(
         "{}",
         table::text(table::SUMMARY_COLUMNS, &evaluation.summaries)
     );
-    // Frame times as ratios to brute force of the same run (the machines are noisy; absolute
+    // GPU times as ratios to brute force of the same run (the machines are noisy; absolute
     // times drift between runs).
     let ratios: Vec<String> = evaluation
         .summaries
         .iter()
-        .map(|s| format!("{} {:.2}", s.variant, s.frame_ms.median / brute))
+        .map(|s| format!("{} {:.2}", s.variant, s.gpu_ms.median / brute))
         .collect();
-    println!("median frame time / brute force's: {}", ratios.join(", "));
+    println!("median GPU time / brute force's: {}", ratios.join(", "));
+    if short {
+        check_agreement(&p, &evaluation, warmup)?;
+    }
     Ok(Some(evaluation))
 }
 
@@ -190,7 +282,7 @@ fn main() -> anyhow::Result<()> {
     };
     let mut all = Vec::new();
     for case in &cases {
-        if let Some(e) = run_case(root, case)? {
+        if let Some(e) = run_case(root, case, short)? {
             if short {
                 check(&e)?;
             }

@@ -161,7 +161,7 @@ fn main() -> anyhow::Result<()> {
                         f.width,
                         f.height,
                         f.depth.as_ref().unwrap(),
-                        &grid,
+                        &*grid,
                     )
                 })
                 .collect();

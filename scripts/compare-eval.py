@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Compare two evaluation runs (each a results.json from `vkterrain eval` or
-target/bench/eval/<case>/results.json) as ratios within each run: frame time relative to
-brute force of the same run, triangles and errors as they are. Absolute times from two runs
-are not compared (the machines are shared and noisy).
+target/bench/eval/<case>/results.json) as ratios within each run: the speed (GPU time of
+the method's passes, `gpu_ms`; older files: `frame_ms`) relative to brute force of the same
+run, errors and swimming as they are. Absolute times from two runs are not compared (the
+machines are shared and noisy).
 
 usage: scripts/compare-eval.py OLD/results.json NEW/results.json
 """
@@ -10,12 +11,17 @@ import json
 import sys
 
 
+def speed(summary):
+    """The speed axis: `gpu_ms` since the GPU evaluator, `frame_ms` before it."""
+    return (summary.get("gpu_ms") or summary["frame_ms"])["median"]
+
+
 def load(path):
     with open(path) as f:
         data = json.load(f)
     rows = {s["variant"]: s for s in data["summaries"]}
     brute = rows.get("brute")
-    base = brute["frame_ms"]["median"] if brute else float("nan")
+    base = speed(brute) if brute else float("nan")
     return data, rows, base
 
 
@@ -30,7 +36,7 @@ def main():
         if name not in rb:
             continue
         o, n = ra[name], rb[name]
-        print(f"{name:<20} {o['frame_ms']['median'] / ba:>14.3f} {n['frame_ms']['median'] / bb:>8.3f} "
+        print(f"{name:<20} {speed(o) / ba:>14.3f} {speed(n) / bb:>8.3f} "
               f"{o['error']['pixels']['p999']:>14.3f} {n['error']['pixels']['p999']:>8.3f} "
               f"{o['swimming_px']['mean']:>9.4f} {n['swimming_px']['mean']:>8.4f}")
 

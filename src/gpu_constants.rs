@@ -56,6 +56,29 @@ shared_constants! {
     CLIPMAP_LOD_SHIFT: u32 = 16;
     /// Threads per workgroup of the height probe (tests: GPU heights read back).
     CLIPMAP_PROBE_WORKGROUP: u32 = 64;
+    /// Evaluator (`src/eval/gpu/`): pixels per side of a workgroup of the per-pixel pass,
+    /// which is also the side of an SSIM window (non-overlapping 8x8 windows).
+    EVAL_TILE_PX: u32 = 8;
+    /// Evaluator: samples per side of a reference tile of level 0 (a tile stores one more
+    /// row and column, shared with its neighbours, so every mesh triangle lies in one tile).
+    EVAL_REF_TILE: u32 = 64;
+    /// Evaluator: most views (cameras) of one frame (`render::MAX_VIEWS`).
+    EVAL_MAX_VIEWS: u32 = 4;
+    /// Evaluator histograms: log-spaced bins, bin `i` holding values up to
+    /// `EVAL_HIST_MIN * EVAL_HIST_STEP^i` (bin 0 everything up to `EVAL_HIST_MIN`).
+    EVAL_HIST_BINS: u32 = 2200;
+    EVAL_HIST_MIN: f32 = 1e-6;
+    EVAL_HIST_STEP: f32 = 1.012;
+    /// Evaluator: points closer than this (in samples) to the data's border are not measured:
+    /// methods collapse geometry that leaves the data onto the border (PGM), and whether such
+    /// a point lies in or out is f32 noise.
+    EVAL_EDGE_BAND: f32 = 1e-3;
+    /// Evaluator: the error-image value of a pixel without an error (sky, off the data).
+    EVAL_NO_ERROR_PX: f32 = 3.0e38;
+    /// Threads per workgroup of the swimming and seeding passes.
+    EVAL_POINT_WORKGROUP: u32 = 64;
+    /// Threads of the one workgroup that sums the per-workgroup partials.
+    EVAL_REDUCE_WORKGROUP: u32 = 256;
     /// Threads per workgroup of the UDLOD morph probe (tests: morphed vertices read back).
     UDLOD_PROBE_WORKGROUP: u32 = 64;
     /// Threads per workgroup of the terrain-helper probes (tests: WGSL vs GLSL helpers).

@@ -1,6 +1,8 @@
 //! `vkterrain eval` end to end (validation on): a small run writes every output (results.json
-//! with one row per variant and frame, CSVs, SVG+PNG charts, images, report.md) into a
-//! directory that appears complete; bad sweeps and an existing directory are one-line errors
+//! with one row per variant and frame, CSVs, SVG+PNG charts with text, four-panel images with
+//! the FLIP map, report.md with device, resolution, data set, frames and the command) into a
+//! directory that appears complete; clipmap and multi-view frames are evaluated and
+//! cross-checked against the CPU path; bad sweeps and an existing directory are one-line errors
 //! that leave nothing behind.
 
 mod common;
@@ -74,6 +76,33 @@ fn eval_writes_results_charts_images_and_report() {
     assert_eq!(frames_csv.lines().count(), 1 + 4 * 8);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("| udlod tau_px=4 |") && report.contains("Pareto front"));
+    for what in [
+        "- Device: ",
+        "- Resolution: 96x64",
+        "- Data set: procedural",
+        "- Frames: 8 (2 warm-up",
+        "vkterrain eval --config",
+        "--sweep grid_scale=0.25",
+    ] {
+        assert!(report.contains(what), "report.md lacks {what:?}:\n{report}");
+    }
+    // FLIP on the image frames (0 and 7) and every 16th measured frame from the end of the
+    // warm-up (2) of every variant; the reference's is 0.
+    let rows = results["rows"].as_array().unwrap();
+    let flips = |v: &str| {
+        rows.iter()
+            .filter(|r| r["variant"] == v && !r["flip"].is_null())
+            .map(|r| r["flip"]["mean"].as_f64().unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(flips("brute"), [0.0, 0.0, 0.0]);
+    let pgm = flips("pgm 60x263");
+    assert!(pgm.len() == 3 && pgm.iter().all(|&f| f > 0.0), "{pgm:?}");
+    // Side by side: reference | method | error | FLIP.
+    let img = image::open(out.join("images/pgm_60x263_f0007.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (4 * 96, 64));
+    let svg = std::fs::read_to_string(out.join("frame_time_vs_error.svg")).unwrap();
+    assert!(svg.contains("screen-space error, 99.9th percentile") && svg.contains("tau_px=4"));
 
     // The same directory again without --force: refused, untouched.
     let before = std::fs::read(out.join("results.json")).unwrap();
@@ -102,4 +131,73 @@ fn bad_sweeps_and_methods_are_one_line_errors() {
         one_line_error(&vkterrain(&a), expected);
         assert!(!out.exists() && !tmp.path().join("ev.partial").exists());
     }
+}
+
+/// Everything the renderer can render is evaluable, and the GPU metrics equal the CPU path on
+/// it: heights through the clipmap over a tile pyramid (the reference from the pyramid's level
+/// 0), and two views side by side. `--cross-check` fails the run on any difference.
+#[test]
+fn clipmap_and_two_view_frames_are_evaluated_and_cross_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let pyramid = common::procedural_pyramid("eval-clipmap", 257, 5, 32);
+    let clipmap = tmp.path().join("clipmap.toml");
+    std::fs::write(
+        &clipmap,
+        format!(
+            "[render]\nwidth = 96\nheight = 64\n\n[dataset]\nkind = \"tiles\"\npath = {:?}\n\n[method]\nname = \"udlod\"\n\n[clipmap]\nenabled = true\natlas_capacity = 48\nnode_count = 4\n",
+            pyramid.display().to_string()
+        ),
+    )
+    .unwrap();
+    let views = tmp.path().join("views.toml");
+    std::fs::write(
+        &views,
+        format!(
+            "[render]\nwidth = 160\nheight = 48\n\n[[render.extra_views]]\nyaw_deg = 180.0\n\n[dataset]\nkind = \"procedural\"\nsize = 257\nspacing = 60.0\n\n[method]\nname = \"brute\"\n\n[scenario]\npath = {:?}\n",
+            format!("{}/config/scenarios/default.toml", env!("CARGO_MANIFEST_DIR"))
+        ),
+    )
+    .unwrap();
+    for (config, methods, expect_views, expect_clipmap) in [
+        (&clipmap, "brute,udlod", 1, true),
+        (&views, "brute,udlod,pgm", 2, false),
+    ] {
+        let out = tmp.path().join(format!("ev{expect_views}"));
+        let o = vkterrain(&[
+            "eval",
+            "--config",
+            config.to_str().unwrap(),
+            "--methods",
+            methods,
+            "--frames",
+            "9",
+            "--warmup",
+            "1",
+            "--cross-check",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let results: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap())
+                .unwrap();
+        assert_eq!(results["views"], expect_views);
+        assert_eq!(results["clipmap"], expect_clipmap);
+        let runs = methods.split(',').count() as u64;
+        let check = &results["cross_check"];
+        assert_eq!(check["frames"].as_u64(), Some(9 * runs), "{check}");
+        assert_eq!(check["problems"].as_array().map(Vec::len), Some(0));
+        let summaries = results["summaries"].as_array().unwrap();
+        assert_eq!(summaries.len() as u64, runs);
+        // Every run measured terrain pixels.
+        for s in summaries {
+            assert!(
+                s["error"]["pixels"]["count"].as_u64().unwrap() > 1000,
+                "{s}"
+            );
+        }
+        let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+        assert!(report.contains("equal within the tolerances"), "{report}");
+    }
+    let _ = std::fs::remove_dir_all(pyramid.parent().unwrap());
 }

@@ -8,8 +8,10 @@ use std::mem::{offset_of, size_of};
 use ash::vk;
 use vkterrain::driver::descriptors::{Binding, PROBE_SET};
 use vkterrain::driver::shaders::{
-    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL,
+    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL,
+    UDLOD_TILING_WGSL, UDLOD_WGSL,
 };
+use vkterrain::eval::gpu::EVAL_SET;
 use vkterrain::frame::FrameUniforms;
 use vkterrain::frame::terrain::TERRAIN_SET;
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
@@ -56,6 +58,11 @@ fn shader_sets() -> ShaderSets {
             "udlod_probe",
             UDLOD_PROBE_WGSL,
             vec![(0, terrain), (1, udlod), (2, probe)],
+        ),
+        (
+            "eval_metrics",
+            EVAL_METRICS_WGSL,
+            vec![(0, ("EVAL_SET", EVAL_SET))],
         ),
     ]
 }

@@ -1,5 +1,7 @@
-//! `vkterrain eval`: a scenario rendered by several methods over parameter sweeps, measured
-//! against the exact surface; writes results.json, CSV, charts, images and report.md.
+//! `vkterrain eval`: a scenario rendered by several methods over parameter sweeps, measured on
+//! the GPU against the exact surface; writes results.json, CSV, charts, images and report.md.
+//! Any configuration the renderer draws is evaluable: one texture or the clipmap, several
+//! views.
 
 use std::path::PathBuf;
 
@@ -26,6 +28,17 @@ pub struct EvalArgs {
     /// from the end.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [0i64, -1])]
     pub images: Vec<i64>,
+    /// FLIP of every Nth measured frame (on the CPU, in parallel with the rendering; the image
+    /// frames always); 0: the image frames only.
+    #[arg(long, default_value_t = 16)]
+    pub flip_every: u32,
+    /// Also measure every frame on the CPU from read-back depth and fail unless both agree
+    /// (slow: checks the GPU metrics on this device).
+    #[arg(long)]
+    pub cross_check: bool,
+    /// Most memory (MiB) for the level-0 reference tiles around the views.
+    #[arg(long, default_value_t = 512)]
+    pub reference_mib: u64,
 }
 
 struct Bars(Option<ProgressBar>);
@@ -58,11 +71,8 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     if methods.is_empty() {
         anyhow::bail!("--methods lists no method");
     }
-    if !p.config.render.extra_views.is_empty() {
-        // The metrics reconstruct world positions from one camera per image.
-        anyhow::bail!(
-            "render.extra_views: eval compares one camera per frame; remove the extra views"
-        );
+    if args.reference_mib == 0 {
+        anyhow::bail!("--reference-mib must be at least 1");
     }
     let sweeps = args
         .sweep
@@ -80,33 +90,83 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     }
     let gpu = p.config.open_gpu()?;
     let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
-    let data = p.data.require_grid("eval (exact-surface metrics)")?;
     let setup = EvalSetup {
         gpu: &gpu,
-        data,
+        config: &p.config,
+        data: &p.data,
         scenario: &p.scenario,
         frames: p.frames,
         warmup,
         options: p.config.render_options(),
         image_frames: super::render::png_frames(&args.images, p.frames),
+        flip_every: args.flip_every,
+        cross_check: args.cross_check,
+        reference_mib: args.reference_mib,
+        command: command_line(),
     };
     eprintln!(
-        "eval: {} variants + reference, {} frames of {} on {} at {}x{}, device {}",
+        "eval: {} variants + reference, {} frames of {} on {} at {}x{} ({} view(s){}), device {}",
         variants.len(),
         p.frames,
         p.scenario.name,
-        data.name,
+        p.data.name(),
         setup.options.width,
         setup.options.height,
+        setup.options.views,
+        if p.config.clipmap.enabled {
+            ", clipmap"
+        } else {
+            ""
+        },
         gpu.info.name
     );
     let evaluation = evaluate(&setup, &variants, &mut Bars(None))?;
     super::render::check_validation(&gpu)?;
-    report::write(&evaluation, data, &out, args.force)?;
+    if let Some(check) = &evaluation.cross_check
+        && let Some(first) = check.problems.first()
+    {
+        for p in check.problems.iter().take(20) {
+            eprintln!("cross-check: {p}");
+        }
+        anyhow::bail!(
+            "cross-check: GPU and CPU metrics differ in {} place(s); first: {first}",
+            check.problems.len()
+        );
+    }
+    report::write(&evaluation, &out, args.force)?;
     print!(
         "{}",
         crate::eval::table::text(crate::eval::table::SUMMARY_COLUMNS, &evaluation.summaries)
     );
-    println!("wrote {}/report.md", out.display());
+    if let Some(check) = &evaluation.cross_check {
+        println!(
+            "cross-check: GPU metrics equal the CPU path's on {} frames",
+            check.frames
+        );
+    }
+    println!(
+        "evaluated in {:.1} s; wrote {}/report.md",
+        evaluation.wall_s,
+        out.display()
+    );
     Ok(())
+}
+
+/// This process's command line, quoted for a POSIX shell.
+fn command_line() -> String {
+    std::env::args()
+        .enumerate()
+        .map(|(i, a)| {
+            let a = if i == 0 { "vkterrain".to_string() } else { a };
+            if !a.is_empty()
+                && a.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_./=,:@+".contains(c))
+            {
+                a
+            } else {
+                format!("'{}'", a.replace('\'', "'\\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }

@@ -51,6 +51,27 @@ pub trait Level0 {
         GridCell::at(sx, sy, self.width(), self.height())
             .try_bilinear(|c, r| self.sample(c, r).map(f64::from))
     }
+
+    /// Height of the full-resolution triangle mesh at a world position, clamped to the grid:
+    /// the same arithmetic as [`Heightmap::mesh_height_at`] (bit for bit).
+    fn mesh_height(&self, x: f64, y: f64) -> Result<f64> {
+        let (w, h) = (self.width(), self.height());
+        let gx = (x / self.spacing()).clamp(0.0, (w - 1) as f64);
+        let gy = (y / self.spacing()).clamp(0.0, (h - 1) as f64);
+        let (c0, r0) = (
+            (gx.floor() as u32).min(w.saturating_sub(2)),
+            (gy.floor() as u32).min(h.saturating_sub(2)),
+        );
+        let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
+        let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
+        let (h00, h10) = (self.sample(c0, r0)? as f64, self.sample(c1, r0)? as f64);
+        let (h01, h11) = (self.sample(c0, r1)? as f64, self.sample(c1, r1)? as f64);
+        Ok(if fx + fy <= 1.0 {
+            h00 + (h10 - h00) * fx + (h01 - h00) * fy
+        } else {
+            h11 + (h01 - h11) * (1.0 - fx) + (h10 - h11) * (1.0 - fy)
+        })
+    }
 }
 
 impl Level0 for Heightmap {

@@ -1,28 +1,53 @@
-//! Small line/scatter charts written as SVG (with labels) and PNG (the same plot rasterized,
-//! without text: the SVG carries the labels). No plotting crate is available offline here, and
-//! the charts need only axes, polylines, markers and a legend.
+//! Charts of an evaluation, drawn with `plotters` as SVG and as PNG, both with their text: the
+//! PNG's glyphs come from DejaVu Sans, embedded (`assets/fonts/`, no system font lookup), the
+//! SVG names the same family. Axes become logarithmic where the data spans a decade or more;
+//! ticks are plotters' round values; each point of a sweep can carry its parameter as a label;
+//! series differ in colour and marker shape and are drawn half-transparent so none hides
+//! another; a Pareto front is ringed and joined.
 
-use std::fmt::Write as _;
+use std::ops::Range;
 use std::path::Path;
+use std::sync::Once;
 
-use crate::error::Result;
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::coord::types::RangedCoordf64;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+
+use crate::error::{Error, Result};
+
+/// Pixel size of every chart.
+pub const SIZE: (u32, u32) = (960, 600);
+
+const FONT: &str = "sans-serif";
+static FONT_BYTES: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 
 /// Colours of successive series (RGB).
-const PALETTE: [[u8; 3]; 8] = [
-    [31, 119, 180],
-    [214, 39, 40],
-    [44, 160, 44],
-    [255, 127, 14],
-    [148, 103, 189],
-    [140, 86, 75],
-    [227, 119, 194],
-    [23, 190, 207],
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
 ];
 
-#[derive(Clone, Debug)]
+fn register_font() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // The embedded file is a valid TrueType font (checked by the chart tests).
+        let _ = plotters::style::register_font(FONT, FontStyle::Normal, FONT_BYTES);
+    });
+}
+
+#[derive(Clone, Debug, Default)]
 pub struct Series {
     pub name: String,
     pub points: Vec<(f64, f64)>,
+    /// A label per point (e.g. the sweep parameter), or none.
+    pub labels: Vec<String>,
     /// Draw markers at the points.
     pub markers: bool,
     /// Connect the points.
@@ -35,270 +60,292 @@ pub struct Chart {
     pub x_label: String,
     pub y_label: String,
     pub series: Vec<Series>,
-    /// Points to ring (e.g. the Pareto front).
+    /// Points to ring and join (the Pareto front), in x order.
     pub highlight: Vec<(f64, f64)>,
-    pub log_x: bool,
+    /// Start the y axis at 0 when it stays linear (frame times, triangle counts).
+    pub y_from_zero: bool,
 }
 
-const W: f64 = 720.0;
-const H: f64 = 440.0;
-const LEFT: f64 = 70.0;
-const RIGHT: f64 = 190.0;
-const TOP: f64 = 40.0;
-const BOTTOM: f64 = 50.0;
+/// One axis: its range and whether it is logarithmic.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Axis {
+    pub range: Range<f64>,
+    pub log: bool,
+}
+
+impl Axis {
+    /// The axis for `values` (finite ones): logarithmic over whole decades when all are
+    /// positive and the largest is at least ten times the smallest, else linear with 5%
+    /// margins (from 0 when `from_zero` and nothing is negative).
+    pub fn fit(values: impl Iterator<Item = f64>, from_zero: bool) -> Axis {
+        let v: Vec<f64> = values.filter(|v| v.is_finite()).collect();
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        if v.is_empty() {
+            return Axis {
+                range: 0.0..1.0,
+                log: false,
+            };
+        }
+        if lo > 0.0 && hi >= 10.0 * lo {
+            return Axis {
+                range: 10f64.powf(lo.log10().floor())..10f64.powf(hi.log10().ceil()),
+                log: true,
+            };
+        }
+        let span = (hi - lo).max(hi.abs() * 1e-3).max(1e-9);
+        let start = if from_zero && lo >= 0.0 {
+            0.0
+        } else if lo >= 0.0 {
+            (lo - 0.05 * span).max(0.0)
+        } else {
+            lo - 0.05 * span
+        };
+        Axis {
+            range: start..hi + 0.05 * span,
+            log: false,
+        }
+    }
+
+    /// Where `v` lies along the axis: 0 at its start, 1 at its end.
+    pub fn fraction(&self, v: f64) -> f64 {
+        let (a, b) = (self.range.start, self.range.end);
+        if self.log {
+            (v.ln() - a.ln()) / (b.ln() - a.ln())
+        } else {
+            (v - a) / (b - a)
+        }
+    }
+}
+
+/// A tick label: few significant digits, no trailing noise.
+pub fn format_tick(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if !(1e-3..1e5).contains(&a) {
+        format!("{v:.0e}")
+    } else if a >= 100.0 {
+        format!("{v:.0}")
+    } else {
+        let s = format!("{v:.3}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    }
+}
+
+type DrawResult = std::result::Result<(), String>;
 
 impl Chart {
-    fn finite_points(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+    fn finite(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
         self.series
             .iter()
             .flat_map(|s| s.points.iter().copied())
-            .filter(|(x, y)| x.is_finite() && y.is_finite() && (!self.log_x || *x > 0.0))
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
     }
 
-    fn ranges(&self) -> ((f64, f64), (f64, f64)) {
-        let fx = |x: f64| if self.log_x { x.log10() } else { x };
-        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, 0.0f64, f64::MIN);
-        for (x, y) in self.finite_points() {
-            x0 = x0.min(fx(x));
-            x1 = x1.max(fx(x));
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-        if x0 > x1 {
-            (x0, x1, y1) = (0.0, 1.0, 1.0);
-        }
-        if x1 - x0 < 1e-12 {
-            x0 -= 0.5;
-            x1 += 0.5;
-        }
-        if y1 - y0 < 1e-12 {
-            y1 = y0 + 1.0;
-        }
-        let (px, py) = (0.05 * (x1 - x0), 0.05 * (y1 - y0));
-        ((x0 - px, x1 + px), (y0, y1 + py))
+    /// The axes the data gets.
+    pub fn axes(&self) -> (Axis, Axis) {
+        (
+            Axis::fit(self.finite().map(|p| p.0), false),
+            Axis::fit(self.finite().map(|p| p.1), self.y_from_zero),
+        )
     }
 
-    /// Maps data coordinates to image coordinates.
-    fn mapper(&self) -> impl Fn(f64, f64) -> (f64, f64) + '_ {
-        let ((x0, x1), (y0, y1)) = self.ranges();
-        move |x, y| {
-            let x = if self.log_x { x.max(1e-300).log10() } else { x };
-            (
-                LEFT + (x - x0) / (x1 - x0) * (W - LEFT - RIGHT),
-                H - BOTTOM - (y - y0) / (y1 - y0) * (H - TOP - BOTTOM),
-            )
-        }
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: DrawingArea<DB, plotters::coord::Shift>,
+    ) -> DrawResult {
+        register_font();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let (x, y) = self.axes();
+        let lin = |a: &Axis| -> RangedCoordf64 { a.range.clone().into() };
+        match (x.log, y.log) {
+            (false, false) => self.draw_in(&root, lin(&x), lin(&y), &x, &y),
+            (true, false) => self.draw_in(&root, x.range.clone().log_scale(), lin(&y), &x, &y),
+            (false, true) => self.draw_in(&root, lin(&x), y.range.clone().log_scale(), &x, &y),
+            (true, true) => self.draw_in(
+                &root,
+                x.range.clone().log_scale(),
+                y.range.clone().log_scale(),
+                &x,
+                &y,
+            ),
+        }?;
+        root.present().map_err(|e| e.to_string())
     }
 
-    pub fn to_svg(&self) -> String {
-        let map = self.mapper();
-        let ((x0, x1), (y0, y1)) = self.ranges();
-        let mut s = String::new();
-        let _ = writeln!(
-            s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" font-family="sans-serif" font-size="12">"#
-        );
-        let _ = writeln!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="22" font-size="15" text-anchor="middle">{}</text>"#,
-            (W - RIGHT + LEFT) / 2.0,
-            escape(&self.title)
-        );
-        // Axes and ticks.
-        let (ax0, ay0) = (LEFT, H - BOTTOM);
-        let _ = writeln!(
-            s,
-            r#"<path d="M{ax0} {TOP} L{ax0} {ay0} L{} {ay0}" stroke="black" fill="none"/>"#,
-            W - RIGHT
-        );
-        for i in 0..=5 {
-            let t = i as f64 / 5.0;
-            let xv = x0 + t * (x1 - x0);
-            let label = if self.log_x {
-                format_number(10f64.powf(xv))
+    fn draw_in<DB, X, Y>(
+        &self,
+        root: &DrawingArea<DB, plotters::coord::Shift>,
+        x_spec: X,
+        y_spec: Y,
+        x: &Axis,
+        y: &Axis,
+    ) -> DrawResult
+    where
+        DB: DrawingBackend,
+        X: AsRangedCoord<Value = f64>,
+        Y: AsRangedCoord<Value = f64>,
+        X::CoordDescType: ValueFormatter<f64>,
+        Y::CoordDescType: ValueFormatter<f64>,
+    {
+        let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        let mut chart = ChartBuilder::on(root)
+            .caption(&self.title, (FONT, 22))
+            .margin(16)
+            .x_label_area_size(52)
+            .y_label_area_size(76)
+            .build_cartesian_2d(x_spec, y_spec)
+            .map_err(err)?;
+        let log = |a: &Axis| if a.log { " (log)" } else { "" };
+        chart
+            .configure_mesh()
+            .x_desc(format!("{}{}", self.x_label, log(x)))
+            .y_desc(format!("{}{}", self.y_label, log(y)))
+            .x_label_formatter(&|v| format_tick(*v))
+            .y_label_formatter(&|v| format_tick(*v))
+            .label_style((FONT, 15))
+            .axis_desc_style((FONT, 17))
+            .light_line_style(BLACK.mix(0.05))
+            .bold_line_style(BLACK.mix(0.15))
+            .draw()
+            .map_err(err)?;
+        let inside = |(px, py): (f64, f64)| {
+            px.is_finite() && py.is_finite() && x.range.contains(&px) && y.range.contains(&py)
+        };
+        for (i, s) in self.series.iter().enumerate() {
+            let colour = PALETTE[i % PALETTE.len()];
+            let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|&p| inside(p)).collect();
+            let line_style = colour.mix(0.8).stroke_width(2);
+            let legend_colour = colour;
+            let shape = i;
+            let anno = if s.line {
+                chart
+                    .draw_series(LineSeries::new(pts.clone(), line_style))
+                    .map_err(err)?
             } else {
-                format_number(xv)
+                chart
+                    .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+                    .map_err(err)?
             };
-            let px = LEFT + t * (W - LEFT - RIGHT);
-            let _ = writeln!(
-                s,
-                r#"<line x1="{px}" y1="{ay0}" x2="{px}" y2="{}" stroke="black"/><text x="{px}" y="{}" text-anchor="middle">{label}</text>"#,
-                ay0 + 5.0,
-                ay0 + 18.0
-            );
-            let yv = y0 + t * (y1 - y0);
-            let py = H - BOTTOM - t * (H - TOP - BOTTOM);
-            let _ = writeln!(
-                s,
-                r##"<line x1="{}" y1="{py}" x2="{ax0}" y2="{py}" stroke="black"/><line x1="{ax0}" y1="{py}" x2="{}" y2="{py}" stroke="#ddd"/><text x="{}" y="{}" text-anchor="end">{}</text>"##,
-                ax0 - 5.0,
-                W - RIGHT,
-                ax0 - 8.0,
-                py + 4.0,
-                format_number(yv)
-            );
-        }
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#,
-            (W - RIGHT + LEFT) / 2.0,
-            H - 10.0,
-            escape(&self.x_label)
-        );
-        let _ = writeln!(
-            s,
-            r#"<text x="16" y="{}" text-anchor="middle" transform="rotate(-90 16 {})">{}</text>"#,
-            (H - BOTTOM + TOP) / 2.0,
-            (H - BOTTOM + TOP) / 2.0,
-            escape(&self.y_label)
-        );
-        for (i, series) in self.series.iter().enumerate() {
-            let [r, g, b] = PALETTE[i % PALETTE.len()];
-            let colour = format!("rgb({r},{g},{b})");
-            let pts: Vec<(f64, f64)> = series
-                .points
-                .iter()
-                .copied()
-                .filter(|(x, y)| x.is_finite() && y.is_finite() && (!self.log_x || *x > 0.0))
-                .map(|(x, y)| map(x, y))
-                .collect();
-            if series.line && pts.len() > 1 {
-                let d: Vec<String> = pts.iter().map(|(x, y)| format!("{x:.1},{y:.1}")).collect();
-                let _ = writeln!(
-                    s,
-                    r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="1.5"/>"#,
-                    d.join(" ")
-                );
+            anno.label(&s.name).legend(move |(lx, ly)| {
+                EmptyElement::at((lx, ly))
+                    + PathElement::new(vec![(0, 0), (20, 0)], legend_colour.stroke_width(2))
+                    + marker((10, 0), shape, legend_colour)
+            });
+            if s.markers {
+                chart
+                    .draw_series(
+                        pts.iter()
+                            .map(|&p| EmptyElement::at(p) + marker((0, 0), shape, colour)),
+                    )
+                    .map_err(err)?;
             }
-            if series.markers {
-                for (x, y) in &pts {
-                    let _ = writeln!(
-                        s,
-                        r#"<circle cx="{x:.1}" cy="{y:.1}" r="3.5" fill="{colour}"/>"#
-                    );
-                }
-            }
-            let ly = TOP + 18.0 * i as f64;
-            let _ = writeln!(
-                s,
-                r#"<rect x="{}" y="{}" width="12" height="12" fill="{colour}"/><text x="{}" y="{}">{}</text>"#,
-                W - RIGHT + 12.0,
-                ly,
-                W - RIGHT + 30.0,
-                ly + 10.0,
-                escape(&series.name)
-            );
-        }
-        for &(x, y) in &self.highlight {
-            let (px, py) = map(x, y);
-            let _ = writeln!(
-                s,
-                r#"<circle cx="{px:.1}" cy="{py:.1}" r="7" fill="none" stroke="black" stroke-width="1.5"/>"#
-            );
+            let labelled = s.points.iter().zip(&s.labels).filter(|(p, _)| inside(**p));
+            chart
+                .draw_series(labelled.map(|(&p, text)| {
+                    // Labels of points near the right edge end at the point (else clipped).
+                    let (dx, h) = if x.fraction(p.0) > 0.8 {
+                        (-7, HPos::Right)
+                    } else {
+                        (7, HPos::Left)
+                    };
+                    let style = (FONT, 13)
+                        .into_font()
+                        .color(&colour)
+                        .pos(Pos::new(h, VPos::Top));
+                    EmptyElement::at(p) + Text::new(text.clone(), (dx, -16), style)
+                }))
+                .map_err(err)?;
         }
         if !self.highlight.is_empty() {
-            let ly = TOP + 18.0 * self.series.len() as f64;
-            let _ = writeln!(
-                s,
-                r#"<circle cx="{}" cy="{}" r="6" fill="none" stroke="black"/><text x="{}" y="{}">Pareto front</text>"#,
-                W - RIGHT + 18.0,
-                ly + 6.0,
-                W - RIGHT + 30.0,
-                ly + 10.0
-            );
-        }
-        s.push_str("</svg>\n");
-        s
-    }
-
-    /// The plot rasterized (axes, grid, series, highlights, legend swatches), RGBA8.
-    pub fn to_rgba(&self) -> (u32, u32, Vec<u8>) {
-        let (w, h) = (W as u32, H as u32);
-        let mut img = vec![255u8; (w * h * 4) as usize];
-        let mut put = |x: i64, y: i64, c: [u8; 3]| {
-            if x >= 0 && y >= 0 && (x as u32) < w && (y as u32) < h {
-                let i = ((y as u32 * w + x as u32) * 4) as usize;
-                img[i..i + 3].copy_from_slice(&c);
-            }
-        };
-        let line =
-            |a: (f64, f64), b: (f64, f64), c: [u8; 3], put: &mut dyn FnMut(i64, i64, [u8; 3])| {
-                let n = ((b.0 - a.0).abs().max((b.1 - a.1).abs()).ceil() as usize).max(1);
-                for k in 0..=n {
-                    let t = k as f64 / n as f64;
-                    put(
-                        (a.0 + (b.0 - a.0) * t).round() as i64,
-                        (a.1 + (b.1 - a.1) * t).round() as i64,
-                        c,
-                    );
-                }
-            };
-        let map = self.mapper();
-        let grey = [221, 221, 221];
-        for i in 0..=5 {
-            let py = H - BOTTOM - i as f64 / 5.0 * (H - TOP - BOTTOM);
-            line((LEFT, py), (W - RIGHT, py), grey, &mut put);
-        }
-        line((LEFT, TOP), (LEFT, H - BOTTOM), [0; 3], &mut put);
-        line(
-            (LEFT, H - BOTTOM),
-            (W - RIGHT, H - BOTTOM),
-            [0; 3],
-            &mut put,
-        );
-        for (i, series) in self.series.iter().enumerate() {
-            let c = PALETTE[i % PALETTE.len()];
-            let pts: Vec<(f64, f64)> = series
-                .points
+            let front: Vec<(f64, f64)> = self
+                .highlight
                 .iter()
                 .copied()
-                .filter(|(x, y)| x.is_finite() && y.is_finite() && (!self.log_x || *x > 0.0))
-                .map(|(x, y)| map(x, y))
+                .filter(|&p| inside(p))
                 .collect();
-            if series.line {
-                for pair in pts.windows(2) {
-                    line(pair[0], pair[1], c, &mut put);
-                }
-            }
-            if series.markers {
-                for &(x, y) in &pts {
-                    for dy in -3i64..=3 {
-                        for dx in -3i64..=3 {
-                            if dx * dx + dy * dy <= 10 {
-                                put(x.round() as i64 + dx, y.round() as i64 + dy, c);
-                            }
-                        }
-                    }
-                }
-            }
-            let ly = (TOP + 18.0 * i as f64) as i64;
-            for dy in 0..12 {
-                for dx in 0..12 {
-                    put((W - RIGHT + 12.0) as i64 + dx, ly + dy, c);
-                }
-            }
+            chart
+                .draw_series(LineSeries::new(
+                    front.clone(),
+                    BLACK.mix(0.5).stroke_width(1),
+                ))
+                .map_err(err)?
+                .label("Pareto front")
+                .legend(|(lx, ly)| Circle::new((lx + 10, ly), 7, BLACK.stroke_width(2)));
+            chart
+                .draw_series(
+                    front
+                        .iter()
+                        .map(|&p| Circle::new(p, 9, BLACK.stroke_width(2))),
+                )
+                .map_err(err)?;
         }
-        for &(x, y) in &self.highlight {
-            let (px, py) = map(x, y);
-            for k in 0..48 {
-                let a = k as f64 / 48.0 * std::f64::consts::TAU;
-                put(
-                    (px + 7.0 * a.cos()).round() as i64,
-                    (py + 7.0 * a.sin()).round() as i64,
-                    [0; 3],
-                );
-            }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font((FONT, 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.5))
+            .draw()
+            .map_err(err)
+    }
+
+    /// The chart as SVG text.
+    pub fn to_svg(&self) -> Result<String> {
+        let mut svg = String::new();
+        {
+            let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+            self.draw(root).map_err(|e| Error::invalid("chart", e))?;
         }
-        (w, h, img)
+        Ok(svg)
+    }
+
+    /// The chart rasterized, RGBA8.
+    pub fn to_rgba(&self) -> Result<(u32, u32, Vec<u8>)> {
+        let (w, h) = SIZE;
+        let mut rgb = vec![255u8; (w * h * 3) as usize];
+        {
+            let root = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
+            self.draw(root).map_err(|e| Error::invalid("chart", e))?;
+        }
+        let rgba = rgb
+            .chunks_exact(3)
+            .flat_map(|p| [p[0], p[1], p[2], 255])
+            .collect();
+        Ok((w, h, rgba))
     }
 
     /// Writes `<stem>.svg` and `<stem>.png` (atomically each).
     pub fn write(&self, dir: &Path, stem: &str) -> Result<()> {
-        crate::output::write_atomic(&dir.join(format!("{stem}.svg")), self.to_svg().as_bytes())?;
-        let (w, h, rgba) = self.to_rgba();
+        crate::output::write_atomic(&dir.join(format!("{stem}.svg")), self.to_svg()?.as_bytes())?;
+        let (w, h, rgba) = self.to_rgba()?;
         crate::output::png::write_png(&dir.join(format!("{stem}.png")), w, h, &rgba)
     }
+}
+
+/// Marker `shape` (circle, triangle, square, diamond, in turn) centred at `at` (pixels).
+fn marker(at: (i32, i32), shape: usize, colour: RGBColor) -> Polygon<(i32, i32)> {
+    let (corners, turn) = match shape % 4 {
+        0 => (16, 0.0),
+        1 => (3, -90.0f64),
+        2 => (4, 45.0),
+        _ => (4, 0.0),
+    };
+    let r = if corners == 4 { 6.0 } else { 5.5 };
+    let vertices = (0..corners)
+        .map(|k| {
+            let a = (turn + 360.0 * k as f64 / corners as f64).to_radians();
+            (
+                at.0 + (r * a.cos()).round() as i32,
+                at.1 + (r * a.sin()).round() as i32,
+            )
+        })
+        .collect::<Vec<_>>();
+    Polygon::new(vertices, colour.filled())
 }
 
 /// Indices of the Pareto-optimal points (smaller x and smaller y are better): no other point is
@@ -317,23 +364,6 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
         .collect()
 }
 
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
-
-fn format_number(v: f64) -> String {
-    let a = v.abs();
-    if a != 0.0 && !(0.01..100_000.0).contains(&a) {
-        format!("{v:.1e}")
-    } else if a >= 100.0 {
-        format!("{v:.0}")
-    } else {
-        format!("{v:.2}")
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -345,24 +375,96 @@ mod tests {
     }
 
     #[test]
-    fn charts_draw_their_series() {
-        let chart = Chart {
-            title: "t <1>".into(),
-            x_label: "x".into(),
-            y_label: "y".into(),
-            series: vec![Series {
-                name: "a".into(),
-                points: vec![(0.5, 1.0), (1.0, 2.0), (f64::NAN, 3.0)],
-                markers: true,
-                line: true,
-            }],
-            highlight: vec![(1.0, 2.0)],
-            log_x: true,
+    fn axes_go_logarithmic_over_decades_only() {
+        let log = Axis::fit([0.02, 0.5, 3.0].into_iter(), false);
+        assert!(log.log && log.range == (0.01..10.0), "{log:?}");
+        let lin = Axis::fit([2.0, 3.0, f64::NAN].into_iter(), true);
+        assert!(
+            !lin.log && lin.range.start == 0.0 && lin.range.end > 3.0,
+            "{lin:?}"
+        );
+        // Linear from the data's minimum (never below 0 for non-negative data).
+        let lin = Axis::fit([0.1, 0.9].into_iter(), false);
+        assert!(
+            !lin.log && lin.range.start >= 0.0 && lin.range.start < 0.1,
+            "{lin:?}"
+        );
+        assert_eq!(format_tick(0.25), "0.25");
+        assert_eq!(format_tick(2.0), "2");
+        assert_eq!(format_tick(1500.0), "1500");
+        assert_eq!(format_tick(0.0001), "1e-4");
+    }
+
+    fn chart(x_label: &str) -> Chart {
+        Chart {
+            title: "Frame time vs error <test>".into(),
+            x_label: x_label.into(),
+            y_label: "frame time (ms)".into(),
+            series: vec![
+                Series {
+                    name: "udlod".into(),
+                    points: vec![(0.4, 3.0), (1.1, 2.0), (3.9, 1.5)],
+                    labels: vec!["tau_px=0.5".into(), "tau_px=1".into(), "tau_px=4".into()],
+                    markers: true,
+                    line: true,
+                },
+                Series {
+                    name: "pgm".into(),
+                    points: vec![(8.0, 1.0), (f64::NAN, 2.0)],
+                    labels: vec!["120x525".into()],
+                    markers: true,
+                    line: false,
+                },
+            ],
+            highlight: vec![(0.4, 3.0), (1.1, 2.0), (3.9, 1.5), (8.0, 1.0)],
+            y_from_zero: true,
+        }
+    }
+
+    /// Dark pixels (text, lines) in a region of an RGBA image.
+    fn dark(rgba: &[u8], w: u32, (x0, y0, x1, y1): (u32, u32, u32, u32)) -> usize {
+        (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| ((y * w + x) * 4) as usize))
+            .filter(|&i| rgba[i] < 128 && rgba[i + 1] < 128 && rgba[i + 2] < 128)
+            .count()
+    }
+
+    #[test]
+    fn charts_carry_their_titles_labels_and_legend() {
+        let c = chart("screen-space error (px)");
+        let svg = c.to_svg().unwrap();
+        for text in [
+            "Frame time vs error &lt;test&gt;",
+            "screen-space error (px) (log)",
+            "frame time (ms)",
+            "tau_px=0.5",
+            "120x525",
+            "udlod",
+            "pgm",
+            "Pareto front",
+        ] {
+            assert!(svg.contains(text), "SVG lacks {text:?}");
+        }
+        assert!(svg.contains("<text"), "labels are SVG text");
+        // The label of the point near the right edge ends at it (not clipped); the others start
+        // at theirs.
+        let element = |label: &str| {
+            let end = svg.find(label).expect("label drawn");
+            svg[..end].rsplit("<text").next().unwrap().to_string()
         };
-        let svg = chart.to_svg();
-        assert!(svg.contains("<polyline") && svg.contains("t &lt;1&gt;") && svg.contains("Pareto"));
-        let (w, h, rgba) = chart.to_rgba();
-        let coloured = rgba.chunks(4).filter(|p| p[..3] == PALETTE[0]).count();
-        assert!(coloured > 50, "{coloured} series pixels in {w}x{h}");
+        assert!(element("120x525").contains("text-anchor=\"end\""));
+        assert!(!element("tau_px=0.5").contains("text-anchor=\"end\""));
+        // The PNG has text in the label areas: the x-axis title band below the plot, the
+        // y-axis band on the left, the title above; an unlabelled x axis leaves its band
+        // emptier (negative control).
+        let (w, h, rgba) = c.to_rgba().unwrap();
+        let below = (w / 3, h - 30, 2 * w / 3, h);
+        let left = (0, h / 4, 30, 3 * h / 4);
+        let top = (w / 4, 0, 3 * w / 4, 36);
+        for band in [below, left, top] {
+            assert!(dark(&rgba, w, band) > 40, "no text in {band:?}");
+        }
+        let (_, _, bare) = chart("").to_rgba().unwrap();
+        assert!(dark(&bare, w, below) * 2 < dark(&rgba, w, below));
     }
 }

@@ -11,9 +11,96 @@
 //! independent of any LOD parameter and of rasterization differences along silhouettes.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
-use crate::dataset::Heightmap;
+use crate::dataset::{Heightmap, Level0, Terrain};
+use crate::gpu_constants::{EVAL_EDGE_BAND, EVAL_HIST_BINS, EVAL_HIST_MIN, EVAL_HIST_STEP};
 use crate::scene::Camera;
+
+/// Swimming: every this many frames, the points a grid of the reference frame's pixels sees
+/// join the tracked set.
+pub const SWIM_SEED_EVERY: u64 = 8;
+/// Swimming: the seed grid (columns, rows) over the frame.
+pub const SWIM_GRID: (u32, u32) = (12, 8);
+
+/// The exact surface the metrics measure against: the full-resolution triangle mesh of the
+/// data's level 0 (what brute force draws).
+pub trait ExactSurface: Sync {
+    /// Height (m) of the mesh at world `(x, y)`, clamped to the data.
+    fn mesh_height(&self, x: f64, y: f64) -> f64;
+    /// World extent `(x_max, y_max)` (m); the data starts at the origin.
+    fn extent(&self) -> (f64, f64);
+    /// Metres between samples.
+    fn spacing(&self) -> f64;
+}
+
+impl ExactSurface for Heightmap {
+    fn mesh_height(&self, x: f64, y: f64) -> f64 {
+        self.mesh_height_at(x, y)
+    }
+    fn extent(&self) -> (f64, f64) {
+        Heightmap::extent(self)
+    }
+    fn spacing(&self) -> f64 {
+        self.spacing
+    }
+}
+
+/// Level 0 read through [`Terrain`] (for a tile pyramid: node by node, serialized by its
+/// cache; a sample that cannot be read is NaN, which the summaries then show).
+impl ExactSurface for Terrain {
+    fn mesh_height(&self, x: f64, y: f64) -> f64 {
+        match self {
+            Terrain::Grid(h) => h.mesh_height_at(x, y),
+            Terrain::Pyramid(_) => Level0::mesh_height(self, x, y).unwrap_or(f64::NAN),
+        }
+    }
+    fn extent(&self) -> (f64, f64) {
+        Level0::extent(self)
+    }
+    fn spacing(&self) -> f64 {
+        Level0::spacing(self)
+    }
+}
+
+/// One camera of a frame and the columns `(first, count)` it is drawn into.
+#[derive(Clone, Copy, Debug)]
+pub struct ViewColumns {
+    pub camera: Camera,
+    pub first: u32,
+    pub count: u32,
+}
+
+impl ViewColumns {
+    /// The whole frame of `width` columns through one camera.
+    pub fn whole(camera: Camera, width: u32) -> [ViewColumns; 1] {
+        [ViewColumns {
+            camera,
+            first: 0,
+            count: width,
+        }]
+    }
+}
+
+/// Whether world `(x, y)` lies on the data, at least `EVAL_EDGE_BAND` samples inside its
+/// border (methods collapse geometry that leaves the data onto the border, and whether such a
+/// point lies in or out is rounding noise).
+pub fn on_data<S: ExactSurface + ?Sized>(data: &S, x: f64, y: f64) -> bool {
+    let band = EVAL_EDGE_BAND as f64;
+    let spacing = data.spacing();
+    let (x_max, y_max) = data.extent();
+    let (gx, gy) = (x / spacing, y / spacing);
+    (band..=x_max / spacing - band).contains(&gx) && (band..=y_max / spacing - band).contains(&gy)
+}
+
+/// The view holding frame column `x`.
+fn view_of(views: &[ViewColumns], x: u32) -> &ViewColumns {
+    views
+        .iter()
+        .rev()
+        .find(|v| x >= v.first)
+        .unwrap_or(&views[0])
+}
 
 /// The error at one pixel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -59,7 +146,8 @@ impl Summary {
 /// A streaming summary for very many non-negative values (every pixel of every frame of a
 /// run): exact count, mean and maximum; percentiles from log-spaced bins 1.2% wide between
 /// 1e-6 and 1e5 (values below land in the first bin, reported as 1e-6), each reported as its
-/// bin's upper edge, so a percentile is never understated by more than one bin.
+/// bin's upper edge, so a percentile is never understated by more than one bin. The GPU
+/// accumulates the same bins (`src/gpu_constants.rs`: `EVAL_HIST_*`).
 #[derive(Clone, Debug)]
 pub struct Histogram {
     bins: Vec<u64>,
@@ -68,9 +156,9 @@ pub struct Histogram {
     max: f64,
 }
 
-const HIST_MIN: f64 = 1e-6;
-const HIST_BINS: usize = 2200;
-const HIST_STEP: f64 = 1.012;
+const HIST_MIN: f64 = EVAL_HIST_MIN as f64;
+const HIST_BINS: usize = EVAL_HIST_BINS as usize;
+const HIST_STEP: f64 = EVAL_HIST_STEP as f64;
 
 impl Default for Histogram {
     fn default() -> Self {
@@ -86,22 +174,63 @@ impl Default for Histogram {
 impl Histogram {
     pub fn add(&mut self, v: f64) {
         let v = v.max(0.0);
-        let bin = if v <= HIST_MIN {
-            0
-        } else {
-            ((v / HIST_MIN).ln() / HIST_STEP.ln()).ceil() as usize
-        };
-        self.bins[bin.min(HIST_BINS - 1)] += 1;
+        self.bins[Self::bin(v)] += 1;
         self.count += 1;
         self.sum += v;
         self.max = self.max.max(v);
     }
 
-    fn upper_edge(bin: usize) -> f64 {
+    /// The bin of a non-negative value.
+    pub fn bin(v: f64) -> usize {
+        if v <= HIST_MIN {
+            0
+        } else {
+            (((v / HIST_MIN).ln() / HIST_STEP.ln()).ceil() as usize).min(HIST_BINS - 1)
+        }
+    }
+
+    /// A histogram accumulated elsewhere (the GPU): its bins, count and sum, and its maximum
+    /// when known (else the upper edge of the last non-empty bin).
+    pub fn from_bins(bins: &[u32], count: u64, sum: f64, max: Option<f64>) -> Histogram {
+        let mut h = Histogram::default();
+        for (dst, &n) in h.bins.iter_mut().zip(bins) {
+            *dst = n as u64;
+        }
+        h.count = count;
+        h.sum = sum;
+        h.max = max.unwrap_or_else(|| {
+            h.bins
+                .iter()
+                .rposition(|&n| n > 0)
+                .map_or(0.0, Self::upper_edge)
+        });
+        h
+    }
+
+    /// Adds `other`'s values.
+    pub fn merge(&mut self, other: &Histogram) {
+        for (a, b) in self.bins.iter_mut().zip(&other.bins) {
+            *a += b;
+        }
+        self.count += other.count;
+        self.sum += other.sum;
+        self.max = self.max.max(other.max);
+    }
+
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// The count of each bin.
+    pub fn bins(&self) -> &[u64] {
+        &self.bins
+    }
+
+    pub fn upper_edge(bin: usize) -> f64 {
         HIST_MIN * HIST_STEP.powi(bin as i32)
     }
 
-    fn quantile(&self, q: f64) -> f64 {
+    pub fn quantile(&self, q: f64) -> f64 {
         let rank = ((q * self.count as f64).ceil() as u64).clamp(1, self.count);
         let mut seen = 0;
         for (i, &n) in self.bins.iter().enumerate() {
@@ -151,7 +280,8 @@ impl ErrorHistogram {
     }
 }
 
-/// World position of the surface seen at pixel `(x, y)` with reversed-Z `depth` (> 0).
+/// World position of the surface seen at pixel `(x, y)` with reversed-Z `depth` (> 0), for a
+/// camera drawn into `width` x `height` pixels (`x` counted from the view's first column).
 pub fn world_point(camera: &Camera, x: u32, y: u32, width: u32, height: u32, depth: f32) -> DVec3 {
     let ray = camera.pixel_ray(x as f64 + 0.5, y as f64 + 0.5, width, height);
     let (_, _, forward) = camera.basis();
@@ -159,38 +289,66 @@ pub fn world_point(camera: &Camera, x: u32, y: u32, width: u32, height: u32, dep
     camera.position + ray * (along_forward / ray.dot(forward))
 }
 
-/// Error of every terrain pixel (depth > 0) whose surface point lies over the data.
-pub fn pixel_errors(
+/// Error of every terrain pixel (depth > 0) whose surface point lies over the data, one camera
+/// for the whole frame.
+pub fn pixel_errors<S: ExactSurface + ?Sized>(
     camera: &Camera,
     width: u32,
     height: u32,
     depth: &[f32],
-    data: &Heightmap,
+    data: &S,
 ) -> Vec<PixelError> {
-    let focal = camera.focal_px(height);
-    let (x_max, y_max) = data.extent();
-    let mut out = Vec::new();
-    for y in 0..height {
-        for x in 0..width {
-            let d = depth[(y * width + x) as usize];
-            if d <= 0.0 {
-                continue;
-            }
-            let p = world_point(camera, x, y, width, height, d);
-            if !(0.0..=x_max).contains(&p.x) || !(0.0..=y_max).contains(&p.y) {
-                continue;
-            }
-            let metres = p.z - data.mesh_height_at(p.x, p.y);
-            let distance = (p - camera.position).length();
-            out.push(PixelError {
-                x,
-                y,
-                metres,
-                pixels: metres.abs() * focal / distance,
-            });
-        }
+    pixel_errors_views(
+        &ViewColumns::whole(*camera, width),
+        width,
+        height,
+        depth,
+        data,
+    )
+}
+
+/// The error of pixel `(x, y)` (frame columns) with depth `d`, if it shows terrain over the data.
+fn pixel_error<S: ExactSurface + ?Sized>(
+    views: &[ViewColumns],
+    (x, y): (u32, u32),
+    height: u32,
+    d: f32,
+    data: &S,
+) -> Option<PixelError> {
+    if d <= 0.0 {
+        return None;
     }
-    out
+    let v = view_of(views, x);
+    let p = world_point(&v.camera, x - v.first, y, v.count, height, d);
+    if !on_data(data, p.x, p.y) {
+        return None;
+    }
+    let metres = p.z - data.mesh_height(p.x, p.y);
+    let distance = (p - v.camera.position).length();
+    Some(PixelError {
+        x,
+        y,
+        metres,
+        pixels: metres.abs() * v.camera.focal_px(height) / distance,
+    })
+}
+
+/// [`pixel_errors`] of a frame of several views side by side (rows in parallel).
+pub fn pixel_errors_views<S: ExactSurface + ?Sized>(
+    views: &[ViewColumns],
+    width: u32,
+    height: u32,
+    depth: &[f32],
+    data: &S,
+) -> Vec<PixelError> {
+    (0..height)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            (0..width).filter_map(move |x| {
+                pixel_error(views, (x, y), height, depth[(y * width + x) as usize], data)
+            })
+        })
+        .collect()
 }
 
 /// Summaries of the height error (|metres|) and the screen-space error (pixels).
@@ -216,30 +374,45 @@ impl GeometricError {
 /// rasterization difference along a skyline is not counted).
 pub fn holes(reference_depth: &[f32], method_depth: &[f32], width: u32, height: u32) -> usize {
     let (w, h) = (width as usize, height as usize);
-    let mut n = 0;
-    for y in 1..h.saturating_sub(1) {
-        for x in 1..w.saturating_sub(1) {
-            let inside = (y - 1..=y + 1)
-                .all(|yy| (x - 1..=x + 1).all(|xx| reference_depth[yy * w + xx] > 0.0));
-            if inside && method_depth[y * w + x] <= 0.0 {
-                n += 1;
-            }
-        }
-    }
-    n
+    (1..h.saturating_sub(1))
+        .into_par_iter()
+        .map(|y| {
+            (1..w.saturating_sub(1))
+                .filter(|&x| {
+                    method_depth[y * w + x] <= 0.0
+                        && (y - 1..=y + 1)
+                            .all(|yy| (x - 1..=x + 1).all(|xx| reference_depth[yy * w + xx] > 0.0))
+                })
+                .count()
+        })
+        .sum()
 }
 
 /// PSNR in dB over the RGB channels of two RGBA8 images (infinite when identical).
 pub fn psnr(a: &[u8], b: &[u8]) -> f64 {
-    let (mut sum, mut n) = (0.0f64, 0usize);
-    for (pa, pb) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
-        for c in 0..3 {
-            let d = pa[c] as f64 - pb[c] as f64;
-            sum += d * d;
-        }
-        n += 3;
-    }
-    let mse = sum / n.max(1) as f64;
+    let sum: u64 = a
+        .par_chunks(4 * 4096)
+        .zip(b.par_chunks(4 * 4096))
+        .map(|(ca, cb)| {
+            ca.chunks_exact(4)
+                .zip(cb.chunks_exact(4))
+                .map(|(pa, pb)| {
+                    (0..3)
+                        .map(|c| {
+                            let d = pa[c] as i64 - pb[c] as i64;
+                            (d * d) as u64
+                        })
+                        .sum::<u64>()
+                })
+                .sum::<u64>()
+        })
+        .sum();
+    psnr_of(sum as f64, 3 * (a.len().min(b.len()) / 4) as u64)
+}
+
+/// PSNR in dB of a sum of squared 8-bit differences over `channels` values.
+pub fn psnr_of(squared_sum: f64, channels: u64) -> f64 {
+    let mse = squared_sum / channels.max(1) as f64;
     if mse == 0.0 {
         f64::INFINITY
     } else {
@@ -256,29 +429,33 @@ pub fn ssim(a: &[u8], b: &[u8], width: u32, height: u32) -> f64 {
         0.299 * p[4 * i] as f64 + 0.587 * p[4 * i + 1] as f64 + 0.114 * p[4 * i + 2] as f64
     };
     let (c1, c2) = ((0.01f64 * 255.0).powi(2), (0.03f64 * 255.0).powi(2));
-    let (mut total, mut windows) = (0.0, 0usize);
-    for wy in (0..height.saturating_sub(7)).step_by(8) {
-        for wx in (0..width.saturating_sub(7)).step_by(8) {
-            let (mut ma, mut mb, mut va, mut vb, mut cov) = (0.0, 0.0, 0.0, 0.0, 0.0);
-            for y in wy..wy + 8 {
-                for x in wx..wx + 8 {
-                    let i = (y * width + x) as usize;
-                    let (la, lb) = (luma(a, i), luma(b, i));
-                    ma += la;
-                    mb += lb;
-                    va += la * la;
-                    vb += lb * lb;
-                    cov += la * lb;
-                }
+    let window = |wx: u32, wy: u32| {
+        let (mut ma, mut mb, mut va, mut vb, mut cov) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for y in wy..wy + 8 {
+            for x in wx..wx + 8 {
+                let i = (y * width + x) as usize;
+                let (la, lb) = (luma(a, i), luma(b, i));
+                ma += la;
+                mb += lb;
+                va += la * la;
+                vb += lb * lb;
+                cov += la * lb;
             }
-            let n = 64.0;
-            let (ma, mb) = (ma / n, mb / n);
-            let (va, vb, cov) = (va / n - ma * ma, vb / n - mb * mb, cov / n - ma * mb);
-            total += ((2.0 * ma * mb + c1) * (2.0 * cov + c2))
-                / ((ma * ma + mb * mb + c1) * (va + vb + c2));
-            windows += 1;
         }
-    }
+        let n = 64.0;
+        let (ma, mb) = (ma / n, mb / n);
+        let (va, vb, cov) = (va / n - ma * ma, vb / n - mb * mb, cov / n - ma * mb);
+        ((2.0 * ma * mb + c1) * (2.0 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2))
+    };
+    let rows: Vec<u32> = (0..height.saturating_sub(7)).step_by(8).collect();
+    let (total, windows) = rows
+        .par_iter()
+        .map(|&wy| {
+            (0..width.saturating_sub(7))
+                .step_by(8)
+                .fold((0.0, 0usize), |(t, n), wx| (t + window(wx, wy), n + 1))
+        })
+        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     if windows == 0 {
         1.0
     } else {
@@ -287,15 +464,32 @@ pub fn ssim(a: &[u8], b: &[u8], width: u32, height: u32) -> f64 {
 }
 
 /// Signed screen-space error per pixel (`None`: sky or off the data), row-major.
-pub fn error_image(
+pub fn error_image<S: ExactSurface + ?Sized>(
     camera: &Camera,
     width: u32,
     height: u32,
     depth: &[f32],
-    data: &Heightmap,
+    data: &S,
+) -> Vec<Option<f64>> {
+    error_image_views(
+        &ViewColumns::whole(*camera, width),
+        width,
+        height,
+        depth,
+        data,
+    )
+}
+
+/// [`error_image`] of a frame of several views side by side.
+pub fn error_image_views<S: ExactSurface + ?Sized>(
+    views: &[ViewColumns],
+    width: u32,
+    height: u32,
+    depth: &[f32],
+    data: &S,
 ) -> Vec<Option<f64>> {
     let mut img = vec![None; (width * height) as usize];
-    for e in pixel_errors(camera, width, height, depth, data) {
+    for e in pixel_errors_views(views, width, height, depth, data) {
         img[(e.y * width + e.x) as usize] = Some(e.pixels.copysign(e.metres));
     }
     img
@@ -314,24 +508,23 @@ pub fn popping(
     width: u32,
     height: u32,
 ) -> Vec<f64> {
-    let mut out = Vec::new();
     let (w, h) = (width as usize, height as usize);
-    for y in 1..h.saturating_sub(1) {
-        for x in 1..w.saturating_sub(1) {
-            let i = y * w + x;
-            let (Some(a), Some(b)) = (previous[i], current[i]) else {
-                continue;
-            };
-            let d = depth[i];
-            let continuous = [i - 1, i + 1, i - w, i + w]
-                .iter()
-                .all(|&j| depth[j] > 0.0 && (depth[j] - d).abs() <= 0.05 * d);
-            if continuous {
-                out.push((b - a).abs());
-            }
-        }
-    }
-    out
+    (1..h.saturating_sub(1))
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            (1..w.saturating_sub(1)).filter_map(move |x| {
+                let i = y * w + x;
+                let (Some(a), Some(b)) = (previous[i], current[i]) else {
+                    return None;
+                };
+                let d = depth[i];
+                let continuous = [i - 1, i + 1, i - w, i + w]
+                    .iter()
+                    .all(|&j| depth[j] > 0.0 && (depth[j] - d).abs() <= 0.05 * d);
+                continuous.then(|| (b - a).abs())
+            })
+        })
+        .collect()
 }
 
 /// Swimming: fixed world points on the exact surface, and for each the method's height error
@@ -340,12 +533,26 @@ pub fn popping(
 /// moves; one whose grid follows the camera (PGM) resamples the surface every frame, so the
 /// error of a fixed point wanders: the swimming of a point is the range (max - min) of its
 /// height error over the frames that see it.
+///
+/// Points are indexed by seed (grid position, in seeding order), including seeds that saw sky
+/// (never observed), so the CPU and GPU trackers number them alike.
 #[derive(Default)]
 pub struct SwimTracker {
-    points: Vec<DVec3>,
+    points: Vec<Option<DVec3>>,
     observed: Vec<Vec<f64>>,
     /// Distance at which each point was seen (for the pixel conversion).
     distance: Vec<Vec<f64>>,
+}
+
+/// Pixel `(x, y)` of seed `k` of a [`SWIM_GRID`] over a `width` x `height` frame: the centres
+/// of the grid's cells, `floor((i + 0.5) / columns * width)`, in integers.
+pub fn seed_pixel(k: u32, width: u32, height: u32) -> (u32, u32) {
+    let (nx, ny) = SWIM_GRID;
+    let (i, j) = (k % nx, k / nx);
+    (
+        ((2 * i + 1) as u64 * width as u64 / (2 * nx) as u64) as u32,
+        ((2 * j + 1) as u64 * height as u64 / (2 * ny) as u64) as u32,
+    )
 }
 
 impl SwimTracker {
@@ -354,78 +561,72 @@ impl SwimTracker {
         Self::default()
     }
 
-    /// Adds the exact-surface points seen by an `nx` x `ny` grid of pixels of a reference
-    /// frame (brute force: its depth gives points on the exact mesh), so that every method is
+    /// Adds the exact-surface points seen by the [`SWIM_GRID`] pixels of a reference frame
+    /// (brute force: its depth gives points on the exact mesh), so that every method is
     /// tracked at the same world points, ones a flight actually sees.
-    #[allow(clippy::too_many_arguments)]
-    pub fn seed(
+    pub fn seed<S: ExactSurface + ?Sized>(
         &mut self,
-        camera: &Camera,
+        views: &[ViewColumns],
         width: u32,
         height: u32,
         reference_depth: &[f32],
-        data: &Heightmap,
-        nx: u32,
-        ny: u32,
+        data: &S,
     ) {
-        for j in 0..ny {
-            for i in 0..nx {
-                let x = ((i as f64 + 0.5) / nx as f64 * width as f64) as u32;
-                let y = ((j as f64 + 0.5) / ny as f64 * height as f64) as u32;
-                let d = reference_depth[(y * width + x) as usize];
-                if d <= 0.0 {
-                    continue;
-                }
-                let p = world_point(camera, x, y, width, height, d);
-                self.points
-                    .push(DVec3::new(p.x, p.y, data.mesh_height_at(p.x, p.y)));
-                self.observed.push(Vec::new());
-                self.distance.push(Vec::new());
+        for k in 0..SWIM_GRID.0 * SWIM_GRID.1 {
+            let (x, y) = seed_pixel(k, width, height);
+            let d = reference_depth[(y * width + x) as usize];
+            let point = (d > 0.0).then(|| {
+                let v = view_of(views, x);
+                let p = world_point(&v.camera, x - v.first, y, v.count, height, d);
+                DVec3::new(p.x, p.y, data.mesh_height(p.x, p.y))
+            });
+            self.points.push(point);
+            self.observed.push(Vec::new());
+            self.distance.push(Vec::new());
+        }
+    }
+
+    /// Points tracked (seeds that saw terrain).
+    pub fn points(&self) -> usize {
+        self.points.iter().flatten().count()
+    }
+
+    /// Records the frame: each point that projects into a view (the first it projects into),
+    /// where the depth-derived surface point lies within two pixel footprints of it
+    /// horizontally (the point is seen, not hidden), contributes the method's height error
+    /// there.
+    pub fn observe<S: ExactSurface + ?Sized>(
+        &mut self,
+        views: &[ViewColumns],
+        width: u32,
+        height: u32,
+        depth: &[f32],
+        data: &S,
+    ) {
+        let seen: Vec<Option<(f64, f64)>> = self
+            .points
+            .par_iter()
+            .map(|p| p.and_then(|p| observe_point(views, width, height, depth, data, p)))
+            .collect();
+        self.record(&seen);
+    }
+
+    /// Records one frame's observations, per point in seed order (the GPU's).
+    pub fn record(&mut self, seen: &[Option<(f64, f64)>]) {
+        for (k, o) in seen.iter().enumerate().take(self.observed.len()) {
+            if let Some((error, distance)) = *o {
+                self.observed[k].push(error);
+                self.distance[k].push(distance);
             }
         }
     }
 
-    pub fn points(&self) -> usize {
-        self.points.len()
-    }
-
-    /// Records the frame: each point that projects into the image, where the depth-derived
-    /// surface point lies within two pixel footprints of it horizontally (the point is seen,
-    /// not hidden), contributes the method's height error there.
-    pub fn observe(
-        &mut self,
-        camera: &Camera,
-        width: u32,
-        height: u32,
-        depth: &[f32],
-        data: &Heightmap,
-    ) {
-        let (right, up, forward) = camera.basis();
-        let focal = camera.focal_px(height);
-        for (k, p) in self.points.iter().enumerate() {
-            let rel = *p - camera.position;
-            let z = rel.dot(forward);
-            if z <= camera.near {
-                continue;
-            }
-            let px = width as f64 / 2.0 + rel.dot(right) * focal / z - 0.5;
-            let py = height as f64 / 2.0 - rel.dot(up) * focal / z - 0.5;
-            let (x, y) = (px.round(), py.round());
-            if x < 0.0 || y < 0.0 || x >= width as f64 || y >= height as f64 {
-                continue;
-            }
-            let (x, y) = (x as u32, y as u32);
-            let d = depth[(y * width + x) as usize];
-            if d <= 0.0 {
-                continue;
-            }
-            let q = world_point(camera, x, y, width, height, d);
-            let footprint = rel.length() / focal;
-            if (q.truncate() - p.truncate()).length() > 2.0 * footprint + 1e-6 {
-                continue;
-            }
-            self.observed[k].push(q.z - data.mesh_height_at(q.x, q.y));
-            self.distance[k].push((q - camera.position).length());
+    /// Extends the point list to `n` seeds whose positions live elsewhere (the GPU's).
+    pub fn extend_to(&mut self, n: usize) {
+        while self.observed.len() < n {
+            self.points.push(None);
+            self.observed.push(Vec::new());
+            self.distance.push(Vec::new());
         }
     }
 
@@ -448,6 +649,49 @@ impl SwimTracker {
         }
         (Summary::of(&mut metres), Summary::of(&mut pixels))
     }
+}
+
+/// Where a frame shows world point `p`: the method's height error there and the distance.
+fn observe_point<S: ExactSurface + ?Sized>(
+    views: &[ViewColumns],
+    width: u32,
+    height: u32,
+    depth: &[f32],
+    data: &S,
+    p: DVec3,
+) -> Option<(f64, f64)> {
+    for v in views {
+        let camera = &v.camera;
+        let (right, up, forward) = camera.basis();
+        let focal = camera.focal_px(height);
+        let rel = p - camera.position;
+        let z = rel.dot(forward);
+        if z <= camera.near {
+            continue;
+        }
+        let px = v.count as f64 / 2.0 + rel.dot(right) * focal / z - 0.5;
+        let py = height as f64 / 2.0 - rel.dot(up) * focal / z - 0.5;
+        let (x, y) = ((px + 0.5).floor(), (py + 0.5).floor());
+        if x < 0.0 || y < 0.0 || x >= v.count as f64 || y >= height as f64 {
+            continue;
+        }
+        // The first view the point projects into decides.
+        let (x, y) = (x as u32, y as u32);
+        let d = depth[(y * width + v.first + x) as usize];
+        if d <= 0.0 {
+            return None;
+        }
+        let q = world_point(camera, x, y, v.count, height, d);
+        let footprint = rel.length() / focal;
+        if (q.truncate() - p.truncate()).length() > 2.0 * footprint + 1e-6 {
+            return None;
+        }
+        return Some((
+            q.z - data.mesh_height(q.x, q.y),
+            (q - camera.position).length(),
+        ));
+    }
+    None
 }
 
 #[cfg(test)]

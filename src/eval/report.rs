@@ -1,14 +1,15 @@
-//! Writes an [`Evaluation`]: `results.json`, `frames.csv`, `summary.csv`, charts (SVG + PNG),
-//! side-by-side images (reference | method | error heat map) and `report.md`, into a
+//! Writes an [`Evaluation`]: `results.json`, `frames.csv`, `summary.csv`, charts (SVG + PNG,
+//! both with text), side-by-side images (reference | method | error heat map | FLIP map) and
+//! `report.md` (device, resolution, data set, frames, the command that regenerates it), into a
 //! directory that appears only when complete (`<dir>.partial` renamed at the end).
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use super::chart::{Chart, Series, pareto_front};
-use super::run::Evaluation;
-use crate::dataset::Heightmap;
+use super::run::{Evaluation, RunSummary};
 use crate::error::{Error, Result};
+use crate::gpu_constants::EVAL_NO_ERROR_PX;
 use crate::output::png::write_png;
 use crate::output::write_atomic;
 
@@ -30,7 +31,7 @@ fn heat(error_px: Option<f64>, full_px: f64) -> [u8; 3] {
 }
 
 /// Writes everything for `eval` into `dir` (must not exist unless `force`).
-pub fn write(eval: &Evaluation, data: &Heightmap, dir: &Path, force: bool) -> Result<()> {
+pub fn write(eval: &Evaluation, dir: &Path, force: bool) -> Result<()> {
     if dir.exists() && !force {
         return Err(Error::invalid(
             dir.display().to_string(),
@@ -42,7 +43,7 @@ pub fn write(eval: &Evaluation, data: &Heightmap, dir: &Path, force: bool) -> Re
         std::fs::remove_dir_all(&partial).map_err(|e| io(&partial, e))?;
     }
     std::fs::create_dir_all(partial.join("images")).map_err(|e| io(&partial, e))?;
-    let result = write_into(eval, data, &partial);
+    let result = write_into(eval, &partial);
     if let Err(e) = result {
         let _ = std::fs::remove_dir_all(&partial);
         return Err(e);
@@ -53,22 +54,36 @@ pub fn write(eval: &Evaluation, data: &Heightmap, dir: &Path, force: bool) -> Re
     std::fs::rename(&partial, dir).map_err(|e| io(dir, e))
 }
 
-fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
+fn write_into(eval: &Evaluation, dir: &Path) -> Result<()> {
     let json = serde_json::to_string_pretty(eval)
         .map_err(|e| Error::invalid("results.json", e.to_string()))?;
     write_atomic(&dir.join("results.json"), json.as_bytes())?;
+    write_atomic(&dir.join("frames.csv"), frames_csv(eval).as_bytes())?;
+    write_atomic(&dir.join("summary.csv"), summary_csv(eval).as_bytes())?;
+    let front = write_charts(eval, dir)?;
+    let images = write_images(eval, dir)?;
+    write_atomic(
+        &dir.join("report.md"),
+        report_md(eval, &front, &images).as_bytes(),
+    )
+}
 
+fn opt(v: Option<f64>) -> String {
+    v.map_or(String::new(), |v| format!("{v:.5}"))
+}
+
+fn frames_csv(eval: &Evaluation) -> String {
     let mut csv = String::from(
-        "variant,method,frame,frame_ms,gpu_prepass_ms,gpu_terrain_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px\n",
+        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99\n",
     );
     for r in &eval.rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5},{},{}",
             r.variant,
             r.method,
             r.frame,
-            r.frame_ms,
+            r.gpu_ms,
             r.gpu_prepass_ms,
             r.gpu_terrain_ms,
             r.cpu_record_ms,
@@ -83,25 +98,29 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
             r.holes,
             r.psnr_db,
             r.ssim,
-            r.popping_p99_px
+            r.popping_p99_px,
+            opt(r.flip.map(|f| f.mean)),
+            opt(r.flip.map(|f| f.p99)),
         );
     }
-    write_atomic(&dir.join("frames.csv"), csv.as_bytes())?;
+    csv
+}
 
+fn summary_csv(eval: &Evaluation) -> String {
     let mut sum = String::from(
-        "variant,method,frames,frame_ms_median,frame_ms_p90,frame_ms_p99,frame_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p90,swimming_m_mean\n",
+        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean\n",
     );
     for s in &eval.summaries {
         let _ = writeln!(
             sum,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.4}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4}",
             s.variant,
             s.method,
             s.frames,
-            s.frame_ms.median,
-            s.frame_ms.p90,
-            s.frame_ms.p99,
-            s.frame_ms.max,
+            s.gpu_ms.median,
+            s.gpu_ms.p90,
+            s.gpu_ms.p99,
+            s.gpu_ms.max,
             s.triangles_median,
             s.error.pixels.mean,
             s.error.pixels.p99,
@@ -111,6 +130,9 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
             s.holes_total,
             s.psnr_db_mean,
             s.ssim_mean,
+            opt(s.flip_mean),
+            opt(s.flip_p99_mean),
+            s.flip_frames,
             s.popping_px.median,
             s.popping_px.max,
             s.swimming_px.mean,
@@ -118,55 +140,78 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
             s.swimming_m.mean
         );
     }
-    write_atomic(&dir.join("summary.csv"), sum.as_bytes())?;
+    sum
+}
 
-    // Charts: one series per method over its parameter sweep.
+/// A sweep point's label: its parameter values (`pgm COLSxROWS` keeps its grid).
+fn point_label(s: &RunSummary) -> String {
+    if s.params.is_empty() {
+        return String::new();
+    }
+    if s.method == "pgm" && s.params.iter().any(|(k, _)| k == "grid_scale") {
+        return s.variant.trim_start_matches("pgm ").to_string();
+    }
+    s.params
+        .iter()
+        .map(|(k, v)| format!("{k}={v}"))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// One series per method over its sweep (points in parameter order), labelled.
+fn series_of(eval: &Evaluation, f: &dyn Fn(&RunSummary) -> (f64, f64)) -> Vec<Series> {
     let mut methods: Vec<&str> = eval.summaries.iter().map(|s| s.method.as_str()).collect();
     methods.dedup();
-    let series_of = |f: &dyn Fn(&super::run::RunSummary) -> (f64, f64)| -> Vec<Series> {
-        methods
-            .iter()
-            .map(|m| Series {
+    methods
+        .iter()
+        .map(|m| {
+            let mut runs: Vec<&RunSummary> =
+                eval.summaries.iter().filter(|s| s.method == *m).collect();
+            runs.sort_by(|a, b| {
+                let key = |s: &RunSummary| s.params.first().map_or(0.0, |p| p.1);
+                key(a).total_cmp(&key(b))
+            });
+            Series {
                 name: m.to_string(),
-                points: eval
-                    .summaries
-                    .iter()
-                    .filter(|s| s.method == *m)
-                    .map(f)
-                    .collect(),
+                points: runs.iter().map(|s| f(s)).collect(),
+                labels: runs.iter().map(|s| point_label(s)).collect(),
                 markers: true,
                 line: true,
-            })
-            .collect()
-    };
-    let time_vs_error: Vec<(f64, f64)> = eval
-        .summaries
-        .iter()
-        .map(|s| (s.error.pixels.p999, s.frame_ms.median))
-        .collect();
+            }
+        })
+        .collect()
+}
+
+/// The charts; returns the Pareto front (indices into the summaries).
+fn write_charts(eval: &Evaluation, dir: &Path) -> Result<Vec<usize>> {
+    let speed = |s: &RunSummary| (s.error.pixels.p999, s.gpu_ms.median);
+    let time_vs_error: Vec<(f64, f64)> = eval.summaries.iter().map(speed).collect();
     let front = pareto_front(&time_vs_error);
+    let mut highlight: Vec<(f64, f64)> = front.iter().map(|&i| time_vs_error[i]).collect();
+    highlight.sort_by(|a, b| a.0.total_cmp(&b.0));
     Chart {
         title: format!(
-            "Frame time vs error ({}, {}x{})",
+            "GPU time vs error: {} ({}x{})",
             eval.scenario, eval.width, eval.height
         ),
         x_label: "screen-space error, 99.9th percentile (px)".into(),
-        y_label: "frame time, median (ms)".into(),
-        series: series_of(&|s| (s.error.pixels.p999, s.frame_ms.median)),
-        highlight: front.iter().map(|&i| time_vs_error[i]).collect(),
-        log_x: false,
+        y_label: "GPU time per frame, prepass + terrain (ms, median)".into(),
+        series: series_of(eval, &speed),
+        highlight,
+        y_from_zero: true,
     }
     .write(dir, "frame_time_vs_error")?;
     Chart {
-        title: "Triangles vs error".into(),
+        title: format!("Triangles vs error: {}", eval.scenario),
         x_label: "screen-space error, 99.9th percentile (px)".into(),
         y_label: "triangles per frame (median)".into(),
-        series: series_of(&|s| (s.error.pixels.p999, s.triangles_median)),
+        series: series_of(eval, &|s| (s.error.pixels.p999, s.triangles_median)),
+        y_from_zero: true,
         ..Default::default()
     }
     .write(dir, "triangles_vs_error")?;
     Chart {
-        title: "Error over time".into(),
+        title: format!("Error over time: {}", eval.scenario),
         x_label: "frame".into(),
         y_label: "screen-space error, 99th percentile (px)".into(),
         series: eval
@@ -180,59 +225,101 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
                     .filter(|r| r.variant == s.variant)
                     .map(|r| (r.frame as f64, r.error.pixels.p99))
                     .collect(),
-                markers: false,
                 line: true,
+                ..Default::default()
             })
             .collect(),
         ..Default::default()
     }
     .write(dir, "error_over_time")?;
+    Ok(front)
+}
 
-    // Side-by-side images.
-    let mut image_links = Vec::new();
-    for (variant, frame, reference, method) in &eval.images {
-        let (w, h) = (method.width, method.height);
-        let errors =
-            super::metrics::error_image(&method.camera, w, h, method.depth.as_ref().unwrap(), data);
-        let mut out = vec![0u8; (3 * w * h * 4) as usize];
+/// Side-by-side images: reference | method | screen-space error | FLIP error map.
+fn write_images(eval: &Evaluation, dir: &Path) -> Result<Vec<(String, u64, String)>> {
+    let mut links = Vec::new();
+    for img in &eval.images {
+        let (w, h) = (img.width, img.height);
+        let n = (w * h) as usize;
+        let flip = img
+            .flip
+            .clone()
+            .unwrap_or_else(|| super::flip::magma_rgba(&vec![0.0; n], w, h));
+        let panels = 4u32;
+        let mut out = vec![0u8; n * 4 * panels as usize];
         for y in 0..h {
             for x in 0..w {
-                let src = ((y * w + x) * 4) as usize;
+                let i = (y * w + x) as usize;
+                let src = i * 4;
+                let e = img.error_px[i];
+                let error = (e < EVAL_NO_ERROR_PX).then_some(e as f64);
                 for (panel, px) in [
                     (
                         0,
                         [
-                            reference.rgba[src],
-                            reference.rgba[src + 1],
-                            reference.rgba[src + 2],
+                            img.reference[src],
+                            img.reference[src + 1],
+                            img.reference[src + 2],
                         ],
                     ),
                     (
                         1,
-                        [method.rgba[src], method.rgba[src + 1], method.rgba[src + 2]],
+                        [img.method[src], img.method[src + 1], img.method[src + 2]],
                     ),
-                    (2, heat(errors[(y * w + x) as usize], 2.0)),
+                    (2, heat(error, 2.0)),
+                    (3, [flip[src], flip[src + 1], flip[src + 2]]),
                 ] {
-                    let dst = ((y * 3 * w + panel * w + x) * 4) as usize;
+                    let dst = ((y * panels * w + panel * w + x) * 4) as usize;
                     out[dst..dst + 3].copy_from_slice(&px);
                     out[dst + 3] = 255;
                 }
             }
         }
         let name = format!(
-            "images/{}_f{frame:04}.png",
-            variant.replace([' ', '=', ','], "_")
+            "images/{}_f{:04}.png",
+            img.variant.replace([' ', '=', ','], "_"),
+            img.frame
         );
-        write_png(&dir.join(&name), 3 * w, h, &out)?;
-        image_links.push((variant.clone(), *frame, name));
+        write_png(&dir.join(&name), panels * w, h, &out)?;
+        links.push((img.variant.clone(), img.frame, name));
     }
+    Ok(links)
+}
 
+fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)]) -> String {
     let mut md = String::new();
     let _ = writeln!(md, "# Evaluation: {} on {}\n", eval.scenario, eval.dataset);
     let _ = writeln!(
         md,
-        "{}x{}, {} frames ({} warm-up excluded from summaries), device {}.\nReference: {}.\nDefinitions of every metric: `docs/metrics.md`.\n",
-        eval.width, eval.height, eval.frames, eval.warmup, eval.device, eval.reference
+        "- Device: {}\n- Resolution: {}x{}, {} view(s){}\n- Data set: {}\n- Frames: {} ({} warm-up excluded from the summaries)\n- Speed: {}\n- Reference: {}\n- FLIP: {}\n- Evaluation wall time: {:.1} s\n",
+        eval.device,
+        eval.width,
+        eval.height,
+        eval.views,
+        if eval.clipmap {
+            ", heights through the clipmap"
+        } else {
+            ""
+        },
+        eval.dataset,
+        eval.frames,
+        eval.warmup,
+        eval.timing,
+        eval.reference,
+        if eval.flip_every > 0 {
+            format!(
+                "every {} measured frame(s) and the image frames",
+                eval.flip_every
+            )
+        } else {
+            "the image frames only".into()
+        },
+        eval.wall_s,
+    );
+    let _ = writeln!(
+        md,
+        "Regenerate with:\n\n```sh\n{}\n```\n\nDefinitions of every metric: `docs/metrics.md`; how the evaluation works: `docs/eval.md`.\n",
+        eval.command
     );
     md.push_str(&super::table::markdown(
         super::table::SUMMARY_COLUMNS,
@@ -244,22 +331,38 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
         .collect();
     let _ = writeln!(
         md,
-        "\nPareto front (frame time vs 99.9th-percentile error): {}.\n",
+        "\nPareto front (GPU time vs 99.9th-percentile error): {}.\n",
         pareto.join(", ")
     );
+    if let Some(check) = &eval.cross_check {
+        let _ = writeln!(
+            md,
+            "Cross-check (GPU metrics against the CPU path on the same {} frames): {}.\n",
+            check.frames,
+            if check.problems.is_empty() {
+                "equal within the tolerances".to_string()
+            } else {
+                format!(
+                    "{} difference(s), first: {}",
+                    check.problems.len(),
+                    check.problems[0]
+                )
+            }
+        );
+    }
     let _ = writeln!(
         md,
-        "Charts: ![frame time vs error](frame_time_vs_error.svg) ![triangles vs error](triangles_vs_error.svg) ![error over time](error_over_time.svg)\n(PNG versions beside them, without labels.)\n"
+        "## Charts\n\n![GPU time vs error](frame_time_vs_error.png) ![triangles vs error](triangles_vs_error.png) ![error over time](error_over_time.png)\n\n(SVG versions beside them.)\n"
     );
     let _ = writeln!(
         md,
-        "## Images (reference | method | screen-space error, black 0 to yellow >= 2 px, grey sky)\n"
+        "## Images\n\nReference | method | screen-space error (black 0 to yellow >= 2 px, grey: sky) | FLIP error map (magma: black 0 to white 1).\n"
     );
-    for (variant, frame, link) in image_links {
+    for (variant, frame, link) in images {
         let _ = writeln!(
             md,
             "- {variant}, frame {frame}: ![{variant} {frame}]({link})"
         );
     }
-    write_atomic(&dir.join("report.md"), md.as_bytes())
+    md
 }

@@ -1,24 +1,34 @@
 //! One evaluation: a scenario rendered by several methods and parameter values, every frame
-//! measured against the exact surface and against the brute-force reference image, plus the
-//! temporal metrics (popping, swimming). `vkterrain eval` and `benches/eval.rs` drive it.
+//! measured on the GPU against the exact level-0 surface and against the brute-force reference
+//! frame of the same cameras, plus the temporal metrics (popping, swimming) and FLIP.
+//! `vkterrain eval` and `benches/eval.rs` drive it.
+//!
+//! The reference and every variant render side by side, frame by frame (frame `k` of the
+//! reference, then frame `k` of each variant), one frame in flight each: the GPU metrics
+//! ([`super::gpu`]) compare each variant's frame with the reference frame still on the GPU,
+//! nothing waits for a whole run to be stored, and every frame's pass timestamps contain only
+//! its own work (the speed axis: the method's GPU time, prepass + terrain pass).
 
 use std::sync::Arc;
+use std::time::Instant;
 
+use crossbeam_channel::{Receiver, Sender, unbounded};
 use serde::Serialize;
 
-use super::metrics::{self, ErrorHistogram, GeometricError, Summary, SwimTracker};
-use crate::dataset::Heightmap;
+use super::check::{CpuFrame, CrossCheck};
+use super::flip::{self, FlipStats};
+use super::gpu::reference::ViewCone;
+use super::gpu::{EvalShared, FrameShape, GpuAnalysis, GpuFrameMetrics, Role};
+use super::metrics::{ErrorHistogram, GeometricError, Summary, SwimTracker};
+use crate::config::Config;
+use crate::dataset::Terrain;
 use crate::driver::Gpu;
 use crate::error::{Error, Result};
 use crate::lod::{MethodConfig, MethodKind};
-use crate::readback::{FrameView, OwnedFrame};
+use crate::readback::FrameView;
 use crate::render::stats::Percentiles;
-use crate::render::{RenderOptions, Renderer};
+use crate::render::{FrameRequest, RenderOptions, Renderer};
 use crate::scene::Scenario;
-
-/// Every this many frames, swimming starts tracking the points a 12 x 8 pixel grid of the
-/// reference frame sees.
-const SWIM_SEED_EVERY: usize = 8;
 
 /// One method with one parameter setting.
 #[derive(Clone, Debug)]
@@ -110,18 +120,23 @@ pub struct FrameRow {
     pub variant: String,
     pub method: String,
     pub frame: u64,
-    /// Interval between this frame's delivery and the previous one (ms; 0 for the first).
-    pub frame_ms: f64,
+    /// GPU time of the method's own passes, prepass + terrain pass (ms, timestamps).
+    pub gpu_ms: f64,
     pub gpu_prepass_ms: f64,
     pub gpu_terrain_ms: f64,
+    /// GPU time after the terrain pass: the frame analysis and the readback copy (ms).
+    pub gpu_eval_ms: f64,
     pub cpu_record_ms: f64,
     pub triangles: u64,
+    /// Percentiles to one histogram bin (1.2%, never understated); count, mean, max exact.
     pub error: GeometricError,
     pub holes: usize,
     pub psnr_db: f64,
     pub ssim: f64,
     /// 99th percentile of the per-pixel change of the error image since the previous frame.
     pub popping_p99_px: f64,
+    /// FLIP against the reference frame (sampled frames only).
+    pub flip: Option<FlipStats>,
 }
 
 /// Summary of one variant over the frames after warm-up.
@@ -131,15 +146,22 @@ pub struct RunSummary {
     pub method: String,
     pub params: Vec<(String, f64)>,
     pub frames: usize,
-    pub frame_ms: Percentiles,
+    /// The speed axis: GPU time of the method's passes per frame (prepass + terrain, ms).
+    pub gpu_ms: Percentiles,
     pub gpu_prepass_ms_median: f64,
     pub gpu_terrain_ms_median: f64,
+    /// GPU time of the frame analysis and the readback copy per frame (median, ms).
+    pub gpu_eval_ms_median: f64,
     pub triangles_median: f64,
     /// Over all pixels of all measured frames (percentiles to 1.2%, never understated).
     pub error: GeometricError,
     pub holes_total: usize,
     pub psnr_db_mean: f64,
     pub ssim_mean: f64,
+    /// Means over the measured frames FLIP was computed for (`flip_frames`; None: none).
+    pub flip_mean: Option<f64>,
+    pub flip_p99_mean: Option<f64>,
+    pub flip_frames: usize,
     /// Of the per-frame 99th percentiles.
     pub popping_px: Summary,
     /// Per fixed world point: range of its height error (metres) and that range in pixels.
@@ -147,21 +169,48 @@ pub struct RunSummary {
     pub swimming_px: Summary,
 }
 
-#[derive(Clone, Debug, Serialize)]
+/// A frame kept for the side-by-side images.
+pub struct ImageFrame {
+    pub variant: String,
+    pub frame: u64,
+    pub width: u32,
+    pub height: u32,
+    pub reference: Arc<Vec<u8>>,
+    pub method: Vec<u8>,
+    /// Signed screen-space error per pixel (`EVAL_NO_ERROR_PX`: none).
+    pub error_px: Vec<f32>,
+    /// FLIP error map, magma-coloured RGBA8.
+    pub flip: Option<Vec<u8>>,
+}
+
+#[derive(Serialize)]
 pub struct Evaluation {
     pub dataset: String,
     pub scenario: String,
     pub device: String,
     pub width: u32,
     pub height: u32,
+    pub views: usize,
     pub frames: u32,
     pub warmup: usize,
+    pub clipmap: bool,
     pub reference: String,
+    /// How the speed axis was measured.
+    pub timing: String,
+    /// FLIP of every this many measured frames (0: image frames only).
+    pub flip_every: u32,
+    /// The command that regenerates this evaluation.
+    pub command: String,
+    /// Wall time of the whole evaluation and of its frame loop (s).
+    pub wall_s: f64,
+    /// Level-0 reference tiles read.
+    pub reference_tiles_loaded: u64,
     pub summaries: Vec<RunSummary>,
     pub rows: Vec<FrameRow>,
-    /// Frames kept for images: (variant, frame index, reference, method) — not serialized.
+    /// GPU metrics against the CPU path on the same frames (`--cross-check`).
+    pub cross_check: Option<CrossCheck>,
     #[serde(skip)]
-    pub images: Vec<(String, u64, Arc<OwnedFrame>, Arc<OwnedFrame>)>,
+    pub images: Vec<ImageFrame>,
 }
 
 /// What the runner reports while it works (progress bars in the CLI).
@@ -180,42 +229,73 @@ impl Progress for () {
 /// Settings of one evaluation run.
 pub struct EvalSetup<'a> {
     pub gpu: &'a Arc<Gpu>,
-    /// Shared with every renderer of the run (never copied).
-    pub data: &'a Arc<Heightmap>,
+    /// The configuration renderers are opened from (data set, clipmap, `[render]`, extra
+    /// views); each variant brings its own `[method]`.
+    pub config: &'a Config,
+    pub data: &'a Terrain,
     pub scenario: &'a Scenario,
     pub frames: u32,
     pub warmup: usize,
+    /// Resolution and views (frames in flight are 1 while evaluating).
     pub options: RenderOptions,
-    /// Frames to keep for side-by-side images.
+    /// Frames written as side-by-side images (FLIP is computed for them too).
     pub image_frames: Vec<u64>,
+    /// FLIP of every this many measured frames (0: the image frames only).
+    pub flip_every: u32,
+    /// Also measure every frame on the CPU from read-back depth and compare (slow).
+    pub cross_check: bool,
+    /// Most memory for the level-0 reference tiles (MiB).
+    pub reference_mib: u64,
+    /// The command that regenerates this evaluation (written into report.md).
+    pub command: String,
 }
 
-fn render_all(
-    setup: &EvalSetup<'_>,
-    method: &MethodConfig,
-    progress: &mut dyn Progress,
-    label: &str,
-) -> Result<(Vec<OwnedFrame>, Vec<crate::render::stats::FrameRecord>)> {
-    let mut options = setup.options.clone();
-    options.readback_depth = true;
-    let mut frames = Vec::with_capacity(setup.frames as usize);
-    let records;
-    {
-        let mut renderer = Renderer::new(setup.gpu, setup.data, method.clone(), options)?;
-        progress.start(label, setup.frames as u64);
-        let mut sink = |f: &FrameView<'_>| {
-            frames.push(OwnedFrame::copy_of(f));
-            Ok(())
-        };
-        for k in 0..setup.frames as u64 {
-            renderer.render(setup.scenario.camera(k), &mut sink)?;
-            progress.advance();
-        }
-        renderer.finish(&mut sink)?;
-        records = renderer.stats.frames.clone();
-        progress.finish();
+impl EvalSetup<'_> {
+    fn flip_frame(&self, k: u64) -> bool {
+        self.image_frames.contains(&k)
+            || (self.flip_every > 0
+                && k >= self.warmup as u64
+                && (k - self.warmup as u64) % self.flip_every as u64 == 0)
     }
-    Ok((frames, records))
+
+    fn requests(&self, k: u64) -> Vec<FrameRequest> {
+        FrameRequest::with_extra_views(self.scenario.camera(k), &self.config.render.extra_views)
+    }
+}
+
+/// A delivered frame as the evaluator keeps it: RGBA (sampled frames only), depth (with
+/// `--cross-check`), timings, triangles.
+type Delivered = (
+    Vec<u8>,
+    Option<Vec<f32>>,
+    crate::readback::FrameTimings,
+    u64,
+);
+
+/// A finished FLIP computation: run, frame, statistics, coloured map (image frames).
+type FlipDone = (usize, u64, FlipStats, Option<Vec<u8>>);
+
+/// One renderer of the evaluation and what it accumulates.
+struct Run {
+    label: String,
+    method: MethodConfig,
+    params: Vec<(String, f64)>,
+    /// Listed among the summaries (the reference is only when brute force is a variant).
+    reported: bool,
+    renderer: Renderer,
+    results: Receiver<GpuFrameMetrics>,
+    rows: Vec<FrameRow>,
+    errors: ErrorHistogram,
+    swim: SwimTracker,
+    images: Vec<ImageFrame>,
+    cpu: Option<super::check::CpuRun>,
+}
+
+/// The reference frame of the current iteration, as far as the variants need it on the host.
+#[derive(Default)]
+struct ReferenceFrame {
+    rgba: Option<Arc<Vec<u8>>>,
+    depth: Option<Arc<Vec<f32>>>,
 }
 
 /// Renders the reference (brute force) and every variant, and measures them.
@@ -224,78 +304,303 @@ pub fn evaluate(
     variants: &[Variant],
     progress: &mut dyn Progress,
 ) -> Result<Evaluation> {
-    let (reference, _) = render_all(
-        setup,
-        &MethodConfig::Brute {},
-        progress,
-        "reference (brute force)",
+    let started = Instant::now();
+    let gpu = setup.gpu;
+    let shape = FrameShape {
+        width: setup.options.width,
+        height: setup.options.height,
+        views: setup.options.views,
+    };
+    let brute = MethodConfig::Brute {};
+    let others: Vec<&Variant> = variants.iter().filter(|v| v.method != brute).collect();
+    let shared = EvalShared::new(
+        gpu,
+        setup.data,
+        shape,
+        setup.frames as u64,
+        1 + others.len(),
+        setup.reference_mib << 20,
     )?;
-    let reference: Vec<Arc<OwnedFrame>> = reference.into_iter().map(Arc::new).collect();
-    let (w, h) = (setup.options.width, setup.options.height);
-    let focal = setup.scenario.camera(0).focal_px(h);
+    let (flip_tx, flip_rx) = unbounded::<FlipDone>();
+    let mut runs = Vec::with_capacity(1 + others.len());
+    let reference = variants.iter().find(|v| v.method == brute);
+    runs.push(open_run(
+        setup,
+        &shared,
+        Role::Reference,
+        reference.map_or("reference (brute force)", |v| v.label.as_str()),
+        &brute,
+        &[],
+        reference.is_some(),
+    )?);
+    for v in &others {
+        runs.push(open_run(
+            setup,
+            &shared,
+            Role::Variant,
+            &v.label,
+            &v.method,
+            &v.params,
+            true,
+        )?);
+    }
+    progress.start(
+        &format!("{} renderers", runs.len()),
+        setup.frames as u64 * runs.len() as u64,
+    );
+    let mut flips_pending = 0usize;
+    for k in 0..setup.frames as u64 {
+        let requests = setup.requests(k);
+        let cones: Vec<ViewCone> = requests
+            .iter()
+            .enumerate()
+            .map(|(v, r)| ViewCone {
+                camera: r.camera,
+                aspect: crate::render::view_columns(shape.width, shape.views, v).1 as f64
+                    / shape.height as f64,
+            })
+            .collect();
+        shared.prepare(k, &cones)?;
+        let mut reference = ReferenceFrame::default();
+        for (i, run) in runs.iter_mut().enumerate() {
+            let spawned = run.frame(setup, k, &requests, &mut reference, i, &flip_tx)?;
+            flips_pending += spawned;
+            progress.advance();
+        }
+        // Bound the frames waiting for FLIP (each holds two images).
+        while flips_pending > 2 * rayon::current_num_threads() {
+            let done = flip_rx
+                .recv()
+                .map_err(|_| Error::invalid("flip", "worker lost"))?;
+            apply_flip(&mut runs, done);
+            flips_pending -= 1;
+        }
+    }
+    progress.finish();
+    drop(flip_tx);
+    for done in flip_rx.iter() {
+        apply_flip(&mut runs, done);
+    }
+    let wall_s = started.elapsed().as_secs_f64();
+    let tiles_loaded = shared
+        .surface
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .tiles_loaded;
+    finish(setup, runs, wall_s, tiles_loaded)
+}
+
+fn open_run(
+    setup: &EvalSetup<'_>,
+    shared: &Arc<EvalShared>,
+    role: Role,
+    label: &str,
+    method: &MethodConfig,
+    params: &[(String, f64)],
+    reported: bool,
+) -> Result<Run> {
+    let mut config = setup.config.clone();
+    config.method = method.clone();
+    let mut options = setup.options.clone();
+    options.frames_in_flight = 1;
+    options.readback_depth = setup.cross_check;
+    let mut renderer = config.open_renderer(setup.gpu, setup.data, options)?;
+    let (analysis, rx) = GpuAnalysis::new(shared, role, setup.image_frames.clone())?;
+    renderer.set_analysis(Box::new(analysis))?;
+    Ok(Run {
+        label: label.to_string(),
+        method: method.clone(),
+        params: params.to_vec(),
+        reported,
+        renderer,
+        results: rx,
+        rows: Vec::new(),
+        errors: ErrorHistogram::default(),
+        swim: SwimTracker::new(),
+        images: Vec::new(),
+        cpu: setup
+            .cross_check
+            .then(|| super::check::CpuRun::new(shape_of(setup))),
+    })
+}
+
+fn shape_of(setup: &EvalSetup<'_>) -> FrameShape {
+    FrameShape {
+        width: setup.options.width,
+        height: setup.options.height,
+        views: setup.options.views,
+    }
+}
+
+impl Run {
+    /// Renders and measures frame `k`; returns how many FLIP computations it started.
+    fn frame(
+        &mut self,
+        setup: &EvalSetup<'_>,
+        k: u64,
+        requests: &[FrameRequest],
+        reference: &mut ReferenceFrame,
+        index: usize,
+        flip_tx: &Sender<FlipDone>,
+    ) -> Result<usize> {
+        let is_reference = index == 0;
+        let flip_frame = setup.flip_frame(k);
+        let keep_rgba = flip_frame || setup.cross_check;
+        let mut delivered: Option<Delivered> = None;
+        let mut sink = |f: &FrameView<'_>| {
+            delivered = Some((
+                if keep_rgba {
+                    f.rgba.to_vec()
+                } else {
+                    Vec::new()
+                },
+                f.depth.map(<[f32]>::to_vec),
+                f.timings,
+                f.triangles,
+            ));
+            Ok(())
+        };
+        self.renderer.render_views(requests, &mut sink)?;
+        let (rgba, depth, timings, triangles) = delivered
+            .ok_or_else(|| Error::invalid("eval", format!("frame {k} was not delivered")))?;
+        let gpu = self
+            .results
+            .try_recv()
+            .map_err(|_| Error::invalid("eval", format!("frame {k} has no GPU metrics")))?;
+        if gpu.index != k || gpu.missing_reference > 0 {
+            return Err(Error::invalid(
+                "eval",
+                format!(
+                    "frame {k}: GPU metrics of frame {} with {} pixels off the reference tiles",
+                    gpu.index, gpu.missing_reference
+                ),
+            ));
+        }
+        let rgba = Arc::new(rgba);
+        let depth = depth.map(Arc::new);
+        if is_reference {
+            reference.rgba = keep_rgba.then(|| rgba.clone());
+            reference.depth = depth.clone();
+        }
+        if let Some(cpu) = &mut self.cpu {
+            let views = super::check::views_of(setup, requests);
+            cpu.measure(
+                setup.data,
+                &views,
+                k,
+                &CpuFrame {
+                    rgba: &rgba,
+                    depth: depth.as_deref().map(Vec::as_slice),
+                    reference_rgba: reference.rgba.as_deref().map(Vec::as_slice),
+                    reference_depth: reference.depth.as_deref().map(Vec::as_slice),
+                },
+                &gpu,
+            )?;
+        }
+        self.swim.extend_to(gpu.swim.len());
+        self.swim.record(&gpu.swim);
+        let mut spawned = 0;
+        let flip = if is_reference && flip_frame {
+            // The reference against itself: identical images.
+            Some(FlipStats::default())
+        } else if flip_frame {
+            let (r, m) = (reference.rgba.clone(), rgba.clone());
+            let (w, h) = (setup.options.width, setup.options.height);
+            let with_map = setup.image_frames.contains(&k);
+            let tx = flip_tx.clone();
+            if let Some(r) = r {
+                rayon::spawn(move || {
+                    let map = flip::error_map(&r, &m, w, h);
+                    let stats = FlipStats::of(&map);
+                    let colours = with_map.then(|| flip::magma_rgba(&map, w, h));
+                    let _ = tx.send((index, k, stats, colours));
+                });
+                spawned = 1;
+            }
+            None
+        } else {
+            None
+        };
+        if let Some(error_px) = gpu.error_image.clone()
+            && let Some(r) = &reference.rgba
+        {
+            self.images.push(ImageFrame {
+                variant: self.label.clone(),
+                frame: k,
+                width: setup.options.width,
+                height: setup.options.height,
+                reference: r.clone(),
+                method: rgba.to_vec(),
+                error_px,
+                flip: None,
+            });
+        }
+        if k >= setup.warmup as u64 {
+            self.errors.metres.merge(&gpu.metres);
+            self.errors.pixels.merge(&gpu.pixels);
+        }
+        self.rows.push(FrameRow {
+            variant: self.label.clone(),
+            method: self.method.kind().name().to_string(),
+            frame: k,
+            gpu_ms: timings.gpu_prepass_ms + timings.gpu_terrain_ms,
+            gpu_prepass_ms: timings.gpu_prepass_ms,
+            gpu_terrain_ms: timings.gpu_terrain_ms,
+            gpu_eval_ms: timings.gpu_readback_ms,
+            cpu_record_ms: timings.cpu_record_ms,
+            triangles,
+            error: GeometricError {
+                metres: gpu.metres.summary(),
+                pixels: gpu.pixels.summary(),
+            },
+            holes: gpu.holes,
+            psnr_db: gpu.psnr_db(),
+            ssim: gpu.ssim(),
+            popping_p99_px: gpu.popping.summary().p99,
+            flip,
+        });
+        Ok(spawned)
+    }
+}
+
+fn apply_flip(runs: &mut [Run], (run, frame, stats, colours): FlipDone) {
+    let r = &mut runs[run];
+    if let Some(row) = r.rows.iter_mut().find(|row| row.frame == frame) {
+        row.flip = Some(stats);
+    }
+    if let Some(img) = r.images.iter_mut().find(|i| i.frame == frame) {
+        img.flip = colours;
+    }
+}
+
+/// Summaries, rows and images of every run.
+fn finish(
+    setup: &EvalSetup<'_>,
+    runs: Vec<Run>,
+    wall_s: f64,
+    reference_tiles_loaded: u64,
+) -> Result<Evaluation> {
+    let focal = setup.scenario.camera(0).focal_px(setup.options.height);
     let mut summaries = Vec::new();
     let mut rows = Vec::new();
     let mut images = Vec::new();
-    for v in variants {
-        let (frames, records) = render_all(setup, &v.method, progress, &v.label)?;
-        let mut swim = SwimTracker::new();
-        let mut previous_error: Option<Vec<Option<f64>>> = None;
-        let mut all_errors = ErrorHistogram::default();
-        let mut my_rows = Vec::new();
-        for (k, f) in frames.into_iter().enumerate() {
-            let depth = f.depth.as_ref().expect("depth read back");
-            let r = &reference[k];
-            let errors = metrics::pixel_errors(&f.camera, w, h, depth, setup.data);
-            let image = metrics::error_image(&f.camera, w, h, depth, setup.data);
-            let popping = match &previous_error {
-                Some(prev) => {
-                    let mut p = metrics::popping(prev, &image, depth, w, h);
-                    Summary::of(&mut p).p99
-                }
-                None => 0.0,
-            };
-            previous_error = Some(image);
-            if k % SWIM_SEED_EVERY == 0 {
-                swim.seed(
-                    &r.camera,
-                    w,
-                    h,
-                    r.depth.as_ref().unwrap(),
-                    setup.data,
-                    12,
-                    8,
-                );
-            }
-            swim.observe(&f.camera, w, h, depth, setup.data);
-            let rec = records.get(k);
-            let row = FrameRow {
-                variant: v.label.clone(),
-                method: v.kind().name().to_string(),
-                frame: f.index,
-                frame_ms: rec.map_or(0.0, |r| r.interval_ms),
-                gpu_prepass_ms: f.timings.gpu_prepass_ms,
-                gpu_terrain_ms: f.timings.gpu_terrain_ms,
-                cpu_record_ms: f.timings.cpu_record_ms,
-                triangles: f.triangles,
-                error: GeometricError::of(&errors),
-                holes: metrics::holes(r.depth.as_ref().unwrap(), depth, w, h),
-                psnr_db: metrics::psnr(&r.rgba, &f.rgba),
-                ssim: metrics::ssim(&r.rgba, &f.rgba, w, h),
-                popping_p99_px: popping,
-            };
-            if k >= setup.warmup {
-                all_errors.add(&errors);
-            }
-            if setup.image_frames.contains(&f.index) {
-                images.push((v.label.clone(), f.index, r.clone(), Arc::new(f)));
-            }
-            my_rows.push(row);
+    let mut check = setup.cross_check.then(CrossCheck::default);
+    for mut run in runs {
+        let (swimming_m, swimming_px) = run.swim.summary(focal);
+        if let (Some(check), Some(cpu)) = (&mut check, run.cpu.take()) {
+            check.add_run(&run.label, cpu, swimming_px, focal);
         }
-        let measured: Vec<&FrameRow> = my_rows.iter().skip(setup.warmup).collect();
+        if !run.reported {
+            continue;
+        }
+        let measured: Vec<&FrameRow> = run.rows.iter().skip(setup.warmup).collect();
         let pick =
             |g: fn(&FrameRow) -> f64| Percentiles::of(measured.iter().map(|r| g(r)).collect());
         let mut popping: Vec<f64> = measured.iter().skip(1).map(|r| r.popping_p99_px).collect();
-        let (swimming_m, swimming_px) = swim.summary(focal);
+        let flips: Vec<FlipStats> = measured.iter().filter_map(|r| r.flip).collect();
+        let mean_of = |f: fn(&FlipStats) -> f64| {
+            (!flips.is_empty()).then(|| flips.iter().map(f).sum::<f64>() / flips.len() as f64)
+        };
         let finite_mean = |g: fn(&FrameRow) -> f64| {
             let v: Vec<f64> = measured
                 .iter()
@@ -309,41 +614,61 @@ pub fn evaluate(
             }
         };
         summaries.push(RunSummary {
-            variant: v.label.clone(),
-            method: v.kind().name().to_string(),
-            params: v.params.clone(),
+            variant: run.label.clone(),
+            method: run.method.kind().name().to_string(),
+            params: run.params.clone(),
             frames: measured.len(),
-            frame_ms: Percentiles::of(
-                measured
-                    .iter()
-                    .map(|r| r.frame_ms)
-                    .filter(|&x| x > 0.0)
-                    .collect(),
-            ),
+            gpu_ms: pick(|r| r.gpu_ms),
             gpu_prepass_ms_median: pick(|r| r.gpu_prepass_ms).median,
             gpu_terrain_ms_median: pick(|r| r.gpu_terrain_ms).median,
+            gpu_eval_ms_median: pick(|r| r.gpu_eval_ms).median,
             triangles_median: pick(|r| r.triangles as f64).median,
-            error: all_errors.summary(),
+            error: run.errors.summary(),
             holes_total: measured.iter().map(|r| r.holes).sum(),
             psnr_db_mean: finite_mean(|r| r.psnr_db),
             ssim_mean: finite_mean(|r| r.ssim),
+            flip_mean: mean_of(|f| f.mean),
+            flip_p99_mean: mean_of(|f| f.p99),
+            flip_frames: flips.len(),
             popping_px: Summary::of(&mut popping),
             swimming_m,
             swimming_px,
         });
-        rows.extend(my_rows);
+        rows.append(&mut run.rows);
+        images.append(&mut run.images);
     }
+    let clipmap = setup.config.clipmap.enabled;
     Ok(Evaluation {
-        dataset: setup.data.name.clone(),
+        dataset: setup.data.name().to_string(),
         scenario: setup.scenario.name.clone(),
         device: setup.gpu.info.name.clone(),
-        width: w,
-        height: h,
+        width: setup.options.width,
+        height: setup.options.height,
+        views: setup.options.views,
         frames: setup.frames,
         warmup: setup.warmup,
-        reference: "brute force: the full-resolution mesh (every sample a vertex); errors are measured against the same mesh evaluated exactly on the CPU".into(),
+        clipmap,
+        reference: format!(
+            "geometric errors against level 0 of the data, exactly: the full-resolution mesh brute force draws (every sample a vertex), evaluated on the GPU from reference tiles read from level 0{}; images (PSNR, SSIM, FLIP, holes) against brute force rendered with the same cameras{}",
+            if clipmap {
+                " (the pyramid's, never a clipmap level)"
+            } else {
+                ""
+            },
+            if clipmap {
+                " through the same clipmap"
+            } else {
+                ""
+            }
+        ),
+        timing: "GPU time of each method's own passes (prepass + terrain pass) from timestamps; frames are measured one at a time, so no other work is inside them".into(),
+        flip_every: setup.flip_every,
+        command: setup.command.clone(),
+        wall_s,
+        reference_tiles_loaded,
         summaries,
         rows,
+        cross_check: check,
         images,
     })
 }

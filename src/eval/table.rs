@@ -16,8 +16,12 @@ pub const SUMMARY_COLUMNS: &[Column<RunSummary>] = &[
         cell: |s| s.variant.clone(),
     },
     Column {
-        header: "frame ms (median / p99)",
-        cell: |s| format!("{:.1} / {:.1}", s.frame_ms.median, s.frame_ms.p99),
+        header: "GPU ms (median / p99)",
+        cell: |s| format!("{:.2} / {:.2}", s.gpu_ms.median, s.gpu_ms.p99),
+    },
+    Column {
+        header: "eval GPU ms",
+        cell: |s| format!("{:.2}", s.gpu_eval_ms_median),
     },
     Column {
         header: "triangles",
@@ -45,6 +49,13 @@ pub const SUMMARY_COLUMNS: &[Column<RunSummary>] = &[
     Column {
         header: "SSIM",
         cell: |s| format!("{:.4}", s.ssim_mean),
+    },
+    Column {
+        header: "FLIP (mean / p99)",
+        cell: |s| match (s.flip_mean, s.flip_p99_mean) {
+            (Some(m), Some(p)) => format!("{m:.4} / {p:.4}"),
+            _ => "-".into(),
+        },
     },
     Column {
         header: "popping px (median / max)",

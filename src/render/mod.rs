@@ -9,8 +9,10 @@
 //! method's buffers, the clipmap's quadtree) lives in view slots ([`crate::slots`]).
 //!
 //! Files: [`targets`] (the terrain pass and its images), [`delivery`] (readback and
-//! timestamps), `slot` (what a frame slot owns), `record` (one frame's commands), [`stats`].
+//! timestamps), `slot` (what a frame slot owns), `record` (one frame's commands), [`stats`],
+//! [`analysis`] (an optional stage after the terrain pass: the evaluator's GPU metrics).
 
+pub mod analysis;
 pub mod delivery;
 #[cfg(feature = "test-support")]
 mod probe;
@@ -190,6 +192,9 @@ pub struct Renderer {
     in_flight: VecDeque<FrameSlot>,
     pub readback_path: ReadbackPath,
     pub stats: RunStats,
+    /// Recorded after the terrain pass of every frame when set (dropped after the GPU idles:
+    /// `Drop` waits first).
+    analysis: Option<Box<dyn analysis::FrameAnalysis>>,
 }
 
 impl Renderer {
@@ -252,7 +257,21 @@ impl Renderer {
             in_flight: VecDeque::new(),
             readback_path,
             stats: RunStats::default(),
+            analysis: None,
         })
+    }
+
+    /// Records `stage` after the terrain pass of every later frame and lets it collect its
+    /// results when each frame is delivered. Only between frames (none in flight).
+    pub fn set_analysis(&mut self, stage: Box<dyn analysis::FrameAnalysis>) -> Result<()> {
+        if !self.in_flight.is_empty() {
+            return Err(Error::invalid(
+                "frame analysis",
+                "set while frames are in flight",
+            ));
+        }
+        self.analysis = Some(stage);
+        Ok(())
     }
 
     pub fn gpu(&self) -> &Arc<Gpu> {
@@ -327,8 +346,7 @@ impl Renderer {
         let started = Instant::now();
         self.update_views(frame, requests)?;
         let direct = self.direct_target(index, sink);
-        let sky = requests[0].sky.unwrap_or(self.options.light.sky);
-        self.record(frame, sky, direct.map(|d| d.buffer))?;
+        self.record(frame, index, requests, direct.map(|d| d.buffer))?;
         self.submit(frame, index)?;
         self.slots[frame.index()].pending = Some(Pending {
             index,
@@ -427,6 +445,9 @@ impl Renderer {
             .view_slots_of(frame)
             .map(|view| self.method.triangles(view))
             .sum();
+        if let Some(stage) = &mut self.analysis {
+            stage.complete(frame, pending.index)?;
+        }
         let slot = &self.slots[frame.index()];
         let passes = slot.timestamps.read()?;
         let timings = FrameTimings {

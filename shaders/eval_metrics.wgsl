@@ -1,0 +1,558 @@
+// The evaluator's frame analysis (src/eval/gpu/): every metric of docs/metrics.md that is a
+// sum over pixels, computed where the frame is. Per pixel of a rendered frame: the world point
+// its depth gives, the exact level-0 surface there (the reference tiles: the full-resolution
+// triangle mesh brute force draws), the height and screen-space errors, popping against the
+// previous frame, holes against the reference frame, the PSNR and SSIM terms; per tracked
+// world point the swimming observation; for the reference frame the swim seeds. Histograms
+// are accumulated with atomics, sums per workgroup then in one reducing workgroup: the host
+// reads kilobytes. Mirrors src/eval/metrics.rs; tests/eval_gpu.rs proves both equal.
+
+struct EvalView {
+    // xyz: camera right (world); w: focal length (px).
+    right: vec4<f32>,
+    // xyz: camera up; w: near plane (m).
+    up: vec4<f32>,
+    // xyz: camera forward; w: far plane (m).
+    forward: vec4<f32>,
+    // xy: the sample cell the camera is in; z: the view's first column; w: its columns.
+    cell: vec4<i32>,
+    // xy: camera xy - cell * spacing (m); z + w: camera z (m) as f32 high and low parts.
+    offset: vec4<f32>,
+}
+
+struct EvalFrame {
+    views: array<EvalView, EVAL_MAX_VIEWS>,
+    // x, y: frame width and height (px); z: views; w: 1 when the error image holds the
+    // previous frame (popping is measured).
+    size: vec4<u32>,
+    // x, y: level-0 samples per side; z, w: reference tiles per side.
+    data: vec4<u32>,
+    // x: sample spacing (m).
+    params: vec4<f32>,
+    // x: tracked points; y: first seed written this frame; z: seeds written this frame (0:
+    // none); w: pixel workgroups (partials to sum).
+    points: vec4<u32>,
+    // x, y: the seed grid (columns, rows); z: pixel workgroups per row.
+    grid: vec4<u32>,
+}
+
+// A tracked world point: sample cell + fraction (x, y) and the exact surface's height there.
+struct Seed {
+    cell: vec2<i32>,
+    valid: u32,
+    pad0: u32,
+    frac: vec2<f32>,
+    z: f32,
+    pad1: f32,
+}
+
+// One workgroup's sums.
+struct Partial {
+    // height error |m|, screen-space error px, SSIM of the window, 1 when the window counts.
+    sums: vec4<f32>,
+    // maximum height error, maximum screen-space error.
+    maxes: vec4<f32>,
+    // pixels with an error, holes, squared RGB differences, pixels with a popping value.
+    counts: vec4<u32>,
+}
+
+struct Totals {
+    metres_sum: f32,
+    pixels_sum: f32,
+    metres_max: f32,
+    pixels_max: f32,
+    ssim_sum: f32,
+    pad0: f32,
+    error_count: u32,
+    holes: u32,
+    sq_lo: u32,
+    sq_hi: u32,
+    ssim_windows: u32,
+    popping_count: u32,
+    // Pixels or points whose surface point had no reference tile (a bug if not 0).
+    missing: atomic<u32>,
+    pad1: u32,
+    pad2: u32,
+    pad3: u32,
+}
+
+struct Stats {
+    totals: Totals,
+    // EVAL_HIST_BINS each: |height error| (m), screen-space error (px), popping (px).
+    hist: array<atomic<u32>, EVAL_HIST_TOTAL>,
+    // Per tracked point: (height error m, distance m); distance < 0: not seen this frame.
+    swim: array<vec2<f32>>,
+}
+
+const EVAL_HIST_TOTAL: u32 = 3u * EVAL_HIST_BINS;
+// Error-image value of a pixel without an error (sky, or off the data); the host fills the
+// buffer with it (EVAL_NO_ERROR_PX) before the first frame.
+const NO_ERROR: f32 = EVAL_NO_ERROR_PX;
+const NO_TILE: u32 = 0xffffffffu;
+const TILE_SIDE: u32 = EVAL_REF_TILE + 1u;
+
+@group(0) @binding(0) var<uniform> frame: EvalFrame;
+// Reference tiles: TILE_SIDE^2 level-0 heights each (rows from the south).
+@group(0) @binding(1) var<storage, read> ref_tiles: array<f32>;
+// Per reference tile (row-major over the data): its slot in ref_tiles, or NO_TILE.
+@group(0) @binding(2) var<storage, read> ref_table: array<u32>;
+// The analysed frame: reversed-Z depth and RGBA8 colour, row 0 at the top.
+@group(0) @binding(3) var<storage, read> depth: array<f32>;
+@group(0) @binding(4) var<storage, read> color: array<u32>;
+// The reference (brute-force) frame of the same cameras.
+@group(0) @binding(5) var<storage, read> ref_depth: array<f32>;
+@group(0) @binding(6) var<storage, read> ref_color: array<u32>;
+@group(0) @binding(7) var<storage, read_write> seeds: array<Seed>;
+// Signed screen-space error per pixel of the previous frame, then of this one (NO_ERROR).
+@group(0) @binding(8) var<storage, read_write> error_image: array<f32>;
+@group(0) @binding(9) var<storage, read_write> partials: array<Partial>;
+@group(0) @binding(10) var<storage, read_write> stats: Stats;
+
+// Level-0 height of sample s (inside the data) from its reference tile, or a negative tile.
+struct Sample4 {
+    h00: f32,
+    h10: f32,
+    h01: f32,
+    h11: f32,
+    ok: bool,
+}
+
+// The four samples of the quad whose lower corner is c0 (0 <= c0 <= size - 2).
+fn quad_samples(c0: vec2<i32>) -> Sample4 {
+    var out = Sample4(0.0, 0.0, 0.0, 0.0, false);
+    let t = vec2<u32>(c0) / EVAL_REF_TILE;
+    let entry = ref_table[t.y * frame.data.z + t.x];
+    if entry == NO_TILE {
+        return out;
+    }
+    let local = vec2<u32>(c0) - t * EVAL_REF_TILE;
+    let base = entry * TILE_SIDE * TILE_SIDE + local.y * TILE_SIDE + local.x;
+    out.h00 = ref_tiles[base];
+    out.h10 = ref_tiles[base + 1u];
+    out.h01 = ref_tiles[base + TILE_SIDE];
+    out.h11 = ref_tiles[base + TILE_SIDE + 1u];
+    out.ok = true;
+    return out;
+}
+
+struct Height {
+    h: f32,
+    ok: bool,
+}
+
+// The exact surface at sample position cell + frac (clamped to the data): the full-resolution
+// mesh, quads split from (c + 1, r) to (c, r + 1) (Heightmap::mesh_height_at).
+fn exact_height(cell: vec2<i32>, frac: vec2<f32>) -> Height {
+    let hi = vec2<i32>(frame.data.xy) - vec2<i32>(1);
+    var c0 = cell;
+    var f = frac;
+    if c0.x < 0 {
+        c0.x = 0;
+        f.x = 0.0;
+    }
+    if c0.y < 0 {
+        c0.y = 0;
+        f.y = 0.0;
+    }
+    if c0.x >= hi.x {
+        c0.x = hi.x - 1;
+        f.x = 1.0;
+    }
+    if c0.y >= hi.y {
+        c0.y = hi.y - 1;
+        f.y = 1.0;
+    }
+    let q = quad_samples(c0);
+    if !q.ok {
+        atomicAdd(&stats.totals.missing, 1u);
+        return Height(0.0, false);
+    }
+    if f.x + f.y <= 1.0 {
+        return Height(q.h00 + (q.h10 - q.h00) * f.x + (q.h01 - q.h00) * f.y, true);
+    }
+    return Height(q.h11 + (q.h01 - q.h11) * (1.0 - f.x) + (q.h10 - q.h11) * (1.0 - f.y), true);
+}
+
+// The view whose columns hold frame column x.
+fn view_of(x: u32) -> u32 {
+    var v = 0u;
+    for (var i = 1u; i < frame.size.z; i += 1u) {
+        if x >= u32(frame.views[i].cell.z) {
+            v = i;
+        }
+    }
+    return v;
+}
+
+// Camera-relative world point of the surface at pixel (x, y) (x within the view) with
+// reversed-Z depth d > 0 (metrics::world_point).
+fn world_rel(v: u32, x: u32, y: u32, d: f32) -> vec3<f32> {
+    let view = frame.views[v];
+    let focal = view.right.w;
+    let near = view.up.w;
+    let far = view.forward.w;
+    let along = near * far / (d * (far - near) + near);
+    let sx = f32(x) + 0.5 - f32(view.cell.w) * 0.5;
+    let sy = f32(frame.size.y) * 0.5 - (f32(y) + 0.5);
+    let r = view.forward.xyz * focal + view.right.xyz * sx + view.up.xyz * sy;
+    return r * (along / focal);
+}
+
+struct GridPos {
+    cell: vec2<i32>,
+    frac: vec2<f32>,
+}
+
+fn grid_pos(v: u32, rel: vec3<f32>) -> GridPos {
+    let view = frame.views[v];
+    let q = (view.offset.xy + rel.xy) / frame.params.x;
+    let fl = floor(q);
+    return GridPos(view.cell.xy + vec2<i32>(fl), q - fl);
+}
+
+// Whether a sample position lies on the data, at least EVAL_EDGE_BAND samples inside its
+// border (metrics::on_data).
+fn on_data(p: GridPos) -> bool {
+    let hi = vec2<i32>(frame.data.xy) - vec2<i32>(1);
+    let low_ok = p.cell > vec2<i32>(0) | (p.cell == vec2<i32>(0) & p.frac >= vec2<f32>(EVAL_EDGE_BAND));
+    let high_ok = p.cell < hi - vec2<i32>(1)
+        | (p.cell == hi - vec2<i32>(1) & p.frac <= vec2<f32>(1.0 - EVAL_EDGE_BAND));
+    return all(low_ok) && all(high_ok);
+}
+
+// Height of a camera-relative point above the exact surface at `p` (metres).
+fn height_error(v: u32, rel_z: f32, h: f32) -> f32 {
+    let off = frame.views[v].offset;
+    return ((off.z - h) + rel_z) + off.w;
+}
+
+fn hist_bin(value: f32) -> u32 {
+    if !(value > EVAL_HIST_MIN) {
+        return 0u;
+    }
+    let b = ceil(log(value / EVAL_HIST_MIN) / log(EVAL_HIST_STEP));
+    return u32(min(b, f32(EVAL_HIST_BINS - 1u)));
+}
+
+fn count_in(hist: u32, value: f32) {
+    atomicAdd(&stats.hist[hist * EVAL_HIST_BINS + hist_bin(value)], 1u);
+}
+
+fn luma(c: u32) -> f32 {
+    let p = unpack4x8unorm(c) * 255.0;
+    return 0.299 * p.x + 0.587 * p.y + 0.114 * p.z;
+}
+
+fn sq_diff(a: u32, b: u32) -> u32 {
+    let d = vec3<i32>(vec3<u32>(a & 255u, (a >> 8u) & 255u, (a >> 16u) & 255u))
+        - vec3<i32>(vec3<u32>(b & 255u, (b >> 8u) & 255u, (b >> 16u) & 255u));
+    return u32(dot(d, d));
+}
+
+var<workgroup> red_sum: array<vec4<f32>, 64>;
+var<workgroup> red_max: array<vec4<f32>, 64>;
+var<workgroup> red_cnt: array<vec4<u32>, 64>;
+
+// Sums (and maxima) of the workgroup's 64 entries into entry 0.
+fn reduce_workgroup(li: u32) {
+    for (var stride = 32u; stride > 0u; stride >>= 1u) {
+        workgroupBarrier();
+        if li < stride {
+            red_sum[li] += red_sum[li + stride];
+            red_max[li] = max(red_max[li], red_max[li + stride]);
+            red_cnt[li] += red_cnt[li + stride];
+        }
+    }
+    workgroupBarrier();
+}
+
+struct PixelResult {
+    // |height error| m, screen-space error px (valid when counted).
+    metres: f32,
+    pixels: f32,
+    counted: bool,
+    // Signed screen-space error for the error image (NO_ERROR when none).
+    signed_px: f32,
+}
+
+fn pixel_error(x: u32, y: u32, d: f32) -> PixelResult {
+    var out = PixelResult(0.0, 0.0, false, NO_ERROR);
+    if !(d > 0.0) {
+        return out;
+    }
+    let v = view_of(x);
+    let view = frame.views[v];
+    let rel = world_rel(v, x - u32(view.cell.z), y, d);
+    let p = grid_pos(v, rel);
+    if !on_data(p) {
+        return out;
+    }
+    let h = exact_height(p.cell, p.frac);
+    if !h.ok {
+        return out;
+    }
+    let dh = height_error(v, rel.z, h.h);
+    out.metres = abs(dh);
+    out.pixels = abs(dh) * view.right.w / length(rel);
+    out.counted = true;
+    out.signed_px = select(out.pixels, -out.pixels, dh < 0.0);
+    return out;
+}
+
+// Whether the depth around interior pixel i is continuous (no occlusion edge): every
+// 4-neighbour shows terrain within 5% of the pixel's depth (metrics::popping).
+fn continuous(i: u32, d: f32) -> bool {
+    let w = frame.size.x;
+    var n = array<u32, 4>(i - 1u, i + 1u, i - w, i + w);
+    for (var k = 0u; k < 4u; k += 1u) {
+        let dn = depth[n[k]];
+        if !(dn > 0.0) || abs(dn - d) > 0.05 * d {
+            return false;
+        }
+    }
+    return true;
+}
+
+// Holes (metrics::holes): sky here although the reference and its 8 neighbours show terrain.
+fn is_hole(x: u32, y: u32, d: f32) -> bool {
+    if d > 0.0 {
+        return false;
+    }
+    let w = frame.size.x;
+    for (var yy = y - 1u; yy <= y + 1u; yy += 1u) {
+        for (var xx = x - 1u; xx <= x + 1u; xx += 1u) {
+            if !(ref_depth[yy * w + xx] > 0.0) {
+                return false;
+            }
+        }
+    }
+    return true;
+}
+
+// Per pixel: errors, popping, holes, PSNR terms; per 8x8 workgroup: one SSIM window.
+@compute @workgroup_size(EVAL_TILE_PX, EVAL_TILE_PX)
+fn pixels_main(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
+) {
+    let w = frame.size.x;
+    let hgt = frame.size.y;
+    let x = gid.x;
+    let y = gid.y;
+    let inside = x < w && y < hgt;
+    var sums = vec4<f32>(0.0);
+    var maxes = vec4<f32>(0.0);
+    var counts = vec4<u32>(0u);
+    var la = 0.0;
+    var lb = 0.0;
+    if inside {
+        let i = y * w + x;
+        let d = depth[i];
+        let e = pixel_error(x, y, d);
+        if e.counted {
+            sums.x = e.metres;
+            sums.y = e.pixels;
+            maxes.x = e.metres;
+            maxes.y = e.pixels;
+            counts.x = 1u;
+            count_in(0u, e.metres);
+            count_in(1u, e.pixels);
+        }
+        let interior = x >= 1u && y >= 1u && x + 1u < w && y + 1u < hgt;
+        let previous = error_image[i];
+        error_image[i] = e.signed_px;
+        if frame.size.w == 1u && interior && e.counted && previous != NO_ERROR
+            && continuous(i, d) {
+            count_in(2u, abs(e.signed_px - previous));
+            counts.w = 1u;
+        }
+        if interior && is_hole(x, y, d) {
+            counts.y = 1u;
+        }
+        let c = color[i];
+        let r = ref_color[i];
+        counts.z = sq_diff(r, c);
+        la = luma(r);
+        lb = luma(c);
+    }
+    // SSIM of the workgroup's window (metrics::ssim): means first, then centred moments.
+    red_sum[li] = vec4<f32>(sums.xy, la, lb);
+    red_max[li] = maxes;
+    red_cnt[li] = counts;
+    reduce_workgroup(li);
+    let total_sum = red_sum[0];
+    let total_max = red_max[0];
+    let total_cnt = red_cnt[0];
+    let ma = total_sum.z / 64.0;
+    let mb = total_sum.w / 64.0;
+    workgroupBarrier();
+    red_sum[li] = vec4<f32>((la - ma) * (la - ma), (lb - mb) * (lb - mb), (la - ma) * (lb - mb), 0.0);
+    red_max[li] = vec4<f32>(0.0);
+    red_cnt[li] = vec4<u32>(0u);
+    reduce_workgroup(li);
+    if li == 0u {
+        let origin = wg.xy * EVAL_TILE_PX;
+        let window = origin.x + EVAL_TILE_PX <= w && origin.y + EVAL_TILE_PX <= hgt;
+        var ssim = 0.0;
+        if window {
+            let m = red_sum[0] / 64.0;
+            let c1 = (0.01 * 255.0) * (0.01 * 255.0);
+            let c2 = (0.03 * 255.0) * (0.03 * 255.0);
+            ssim = ((2.0 * ma * mb + c1) * (2.0 * m.z + c2)) / ((ma * ma + mb * mb + c1) * (m.x + m.y + c2));
+        }
+        partials[wg.y * frame.grid.z + wg.x] = Partial(
+            vec4<f32>(total_sum.xy, ssim, select(0.0, 1.0, window)),
+            total_max,
+            total_cnt,
+        );
+    }
+}
+
+// Sums the pixel pass's partials into stats.totals (one workgroup).
+var<workgroup> red_sq: array<vec2<u32>, EVAL_REDUCE_WORKGROUP>;
+var<workgroup> red_sum2: array<vec4<f32>, EVAL_REDUCE_WORKGROUP>;
+var<workgroup> red_max2: array<vec4<f32>, EVAL_REDUCE_WORKGROUP>;
+var<workgroup> red_cnt2: array<vec4<u32>, EVAL_REDUCE_WORKGROUP>;
+
+// a + b for 64-bit values as (low, high) u32 pairs.
+fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let lo = a.x + b.x;
+    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
+}
+
+@compute @workgroup_size(EVAL_REDUCE_WORKGROUP)
+fn reduce_main(@builtin(local_invocation_index) li: u32) {
+    var sums = vec4<f32>(0.0);
+    var maxes = vec4<f32>(0.0);
+    var counts = vec4<u32>(0u);
+    var sq = vec2<u32>(0u);
+    for (var i = li; i < frame.points.w; i += EVAL_REDUCE_WORKGROUP) {
+        let p = partials[i];
+        sums += p.sums;
+        maxes = max(maxes, p.maxes);
+        counts += vec4<u32>(p.counts.xy, 0u, p.counts.w);
+        sq = add64(sq, vec2<u32>(p.counts.z, 0u));
+    }
+    red_sum2[li] = sums;
+    red_max2[li] = maxes;
+    red_cnt2[li] = counts;
+    red_sq[li] = sq;
+    for (var stride = EVAL_REDUCE_WORKGROUP / 2u; stride > 0u; stride >>= 1u) {
+        workgroupBarrier();
+        if li < stride {
+            red_sum2[li] += red_sum2[li + stride];
+            red_max2[li] = max(red_max2[li], red_max2[li + stride]);
+            red_cnt2[li] += red_cnt2[li + stride];
+            red_sq[li] = add64(red_sq[li], red_sq[li + stride]);
+        }
+    }
+    workgroupBarrier();
+    if li == 0u {
+        let s = red_sum2[0];
+        let m = red_max2[0];
+        let c = red_cnt2[0];
+        stats.totals.metres_sum = s.x;
+        stats.totals.pixels_sum = s.y;
+        stats.totals.ssim_sum = s.z;
+        stats.totals.ssim_windows = u32(s.w);
+        stats.totals.metres_max = m.x;
+        stats.totals.pixels_max = m.y;
+        stats.totals.error_count = c.x;
+        stats.totals.holes = c.y;
+        stats.totals.popping_count = c.w;
+        stats.totals.sq_lo = red_sq[0].x;
+        stats.totals.sq_hi = red_sq[0].y;
+    }
+}
+
+// Reference frames: the exact-surface points a grid of pixels sees join the tracked set
+// (metrics::SwimTracker::seed).
+@compute @workgroup_size(EVAL_POINT_WORKGROUP)
+fn seed_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = gid.x;
+    if k >= frame.points.z {
+        return;
+    }
+    let nx = frame.grid.x;
+    let ny = frame.grid.y;
+    let i = k % nx;
+    let j = k / nx;
+    // (i + 0.5) / nx of the width, in integers (the CPU side computes the same).
+    let x = ((2u * i + 1u) * frame.size.x) / (2u * nx);
+    let y = ((2u * j + 1u) * frame.size.y) / (2u * ny);
+    var s = Seed(vec2<i32>(0), 0u, 0u, vec2<f32>(0.0), 0.0, 0.0);
+    let d = ref_depth[y * frame.size.x + x];
+    if d > 0.0 {
+        let v = view_of(x);
+        let rel = world_rel(v, x - u32(frame.views[v].cell.z), y, d);
+        let p = grid_pos(v, rel);
+        let h = exact_height(p.cell, p.frac);
+        if h.ok {
+            s = Seed(p.cell, 1u, 0u, p.frac, h.h, 0.0);
+        }
+    }
+    seeds[frame.points.y + k] = s;
+}
+
+// Camera-relative position of a seed for view v.
+fn seed_rel(s: Seed, v: u32) -> vec3<f32> {
+    let view = frame.views[v];
+    let spacing = frame.params.x;
+    let xy = vec2<f32>(s.cell - view.cell.xy) * spacing + s.frac * spacing - view.offset.xy;
+    return vec3<f32>(xy, (s.z - view.offset.z) - view.offset.w);
+}
+
+// Each tracked point: where this frame shows it, the method's height error there
+// (metrics::SwimTracker::observe).
+@compute @workgroup_size(EVAL_POINT_WORKGROUP)
+fn swim_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = gid.x;
+    if k >= frame.points.x {
+        return;
+    }
+    var obs = vec2<f32>(0.0, -1.0);
+    let s = seeds[k];
+    if s.valid == 1u {
+        obs = observe(s);
+    }
+    stats.swim[k] = obs;
+}
+
+fn observe(s: Seed) -> vec2<f32> {
+    let none = vec2<f32>(0.0, -1.0);
+    for (var v = 0u; v < frame.size.z; v += 1u) {
+        let view = frame.views[v];
+        let rel = seed_rel(s, v);
+        let z = dot(rel, view.forward.xyz);
+        if z <= view.up.w {
+            continue;
+        }
+        let focal = view.right.w;
+        let wv = f32(view.cell.w);
+        let px = floor(wv * 0.5 + dot(rel, view.right.xyz) * focal / z - 0.5 + 0.5);
+        let py = floor(f32(frame.size.y) * 0.5 - dot(rel, view.up.xyz) * focal / z - 0.5 + 0.5);
+        if px < 0.0 || py < 0.0 || px >= wv || py >= f32(frame.size.y) {
+            continue;
+        }
+        // The first view the point projects into decides.
+        let x = u32(px);
+        let y = u32(py);
+        let d = depth[y * frame.size.x + u32(view.cell.z) + x];
+        if !(d > 0.0) {
+            return none;
+        }
+        let q = world_rel(v, x, y, d);
+        let footprint = length(rel) / focal;
+        if length(q.xy - rel.xy) > 2.0 * footprint + 1e-6 {
+            return none;
+        }
+        let p = grid_pos(v, q);
+        let h = exact_height(p.cell, p.frac);
+        if !h.ok {
+            return none;
+        }
+        return vec2<f32>(height_error(v, q.z, h.h), length(q));
+    }
+    return none;
+}

@@ -1,0 +1,99 @@
+//! The host side of `shaders/eval_metrics.wgsl`'s structs, byte for byte (naga reflection
+//! proves the layouts equal: `tests/shader_interface.rs`).
+
+use crate::gpu_constants::EVAL_MAX_VIEWS;
+use crate::scene::Camera;
+
+const _: () = assert!(EVAL_MAX_VIEWS as usize == crate::render::MAX_VIEWS);
+
+/// `EvalView`: one camera of the frame, camera-relative like the renderer's uniforms (an
+/// integer sample cell plus a small metric offset; the height as f32 high and low parts).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct EvalView {
+    pub right: [f32; 4],
+    pub up: [f32; 4],
+    pub forward: [f32; 4],
+    pub cell: [i32; 4],
+    pub offset: [f32; 4],
+}
+
+impl EvalView {
+    /// `camera` drawn into columns `(first, count)` of a frame `height` pixels tall, over data
+    /// of `spacing` metres.
+    pub fn new(camera: &Camera, (first, count): (u32, u32), height: u32, spacing: f64) -> Self {
+        let (right, up, forward) = camera.basis();
+        let p = camera.position;
+        let cell = ((p.x / spacing).floor(), (p.y / spacing).floor());
+        let z_hi = p.z as f32;
+        let z_lo = (p.z - z_hi as f64) as f32;
+        let v4 = |v: glam::DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+        EvalView {
+            right: v4(right, camera.focal_px(height)),
+            up: v4(up, camera.near),
+            forward: v4(forward, camera.far),
+            cell: [cell.0 as i32, cell.1 as i32, first as i32, count as i32],
+            offset: [
+                (p.x - cell.0 * spacing) as f32,
+                (p.y - cell.1 * spacing) as f32,
+                z_hi,
+                z_lo,
+            ],
+        }
+    }
+}
+
+/// `EvalFrame`: the uniforms of one analysed frame.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct EvalFrame {
+    pub views: [EvalView; EVAL_MAX_VIEWS as usize],
+    /// Frame width, height (px), views, 1 when popping has a previous frame.
+    pub size: [u32; 4],
+    /// Level-0 samples per side, reference tiles per side.
+    pub data: [u32; 4],
+    /// Sample spacing (m).
+    pub params: [f32; 4],
+    /// Tracked points, first seed written this frame, seeds written this frame, pixel
+    /// workgroups.
+    pub points: [u32; 4],
+    /// Seed grid columns and rows, pixel workgroups per row.
+    pub grid: [u32; 4],
+}
+
+/// `Totals`: the sums the reducing workgroup writes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Totals {
+    pub metres_sum: f32,
+    pub pixels_sum: f32,
+    pub metres_max: f32,
+    pub pixels_max: f32,
+    pub ssim_sum: f32,
+    pub pad0: f32,
+    pub error_count: u32,
+    pub holes: u32,
+    pub sq_lo: u32,
+    pub sq_hi: u32,
+    pub ssim_windows: u32,
+    pub popping_count: u32,
+    pub missing: u32,
+    pub pad1: u32,
+    pub pad2: u32,
+    pub pad3: u32,
+}
+
+/// `Seed`: a tracked world point (sample cell + fraction) and the exact height there.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Seed {
+    pub cell: [i32; 2],
+    pub valid: u32,
+    pub pad0: u32,
+    pub frac: [f32; 2],
+    pub z: f32,
+    pub pad1: f32,
+}
+
+/// Bytes of one `Partial` (three vec4s).
+pub const PARTIAL_BYTES: u64 = 48;

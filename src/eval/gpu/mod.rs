@@ -1,0 +1,635 @@
+//! The evaluator's metrics on the GPU (`shaders/eval_metrics.wgsl`): a frame analysis stage
+//! ([`GpuAnalysis`], a [`FrameAnalysis`]) recorded after each evaluated frame's terrain pass.
+//! It copies the frame's colour and depth targets into storage buffers and measures every
+//! pixel against the exact level-0 surface ([`reference::ReferenceSurface`]) and against the
+//! reference frame of the same cameras; the host reads back histograms, sums and the swimming
+//! observations: kilobytes per frame, never the frame.
+//!
+//! [`EvalShared`] is what every analysed renderer of one evaluation shares: the reference
+//! surface, the reference frame's colour and depth (written by the reference renderer's
+//! analysis, read by the variants' in the same frame), the tracked swim points, pipelines and
+//! descriptor sets. The evaluator renders one frame at a time (frames in flight = 1) and frame
+//! `k` of the reference before frame `k` of every variant; each analysis starts with a barrier
+//! after all earlier work of the queue, so the shared buffers need no more synchronization.
+
+pub mod layout;
+pub mod reference;
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+use ash::vk;
+use crossbeam_channel::{Receiver, Sender, unbounded};
+use gpu_allocator::MemoryLocation;
+
+use self::layout::{EvalFrame, EvalView, PARTIAL_BYTES, Seed, Totals};
+use self::reference::ReferenceSurface;
+use super::metrics::{Histogram, SWIM_GRID, SWIM_SEED_EVERY};
+use crate::dataset::{Level0, Terrain};
+use crate::driver::Gpu;
+use crate::driver::barrier::{Barriers, MemoryAccess};
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource};
+use crate::driver::memory::Buffer;
+use crate::driver::pipeline::{Pipeline, compute_pipeline};
+use crate::error::{Error, Result};
+use crate::gpu_constants::{EVAL_HIST_BINS, EVAL_NO_ERROR_PX, EVAL_POINT_WORKGROUP, EVAL_TILE_PX};
+use crate::render::analysis::{AnalysisFrame, FrameAnalysis};
+use crate::slots::FrameSlot;
+
+/// The analysis' one descriptor set (`shaders/eval_metrics.wgsl`, every pass reads it).
+pub const EVAL_SET: &[Binding] = {
+    use vk::DescriptorType as T;
+    const C: vk::ShaderStageFlags = vk::ShaderStageFlags::COMPUTE;
+    &[
+        Binding::new(0, T::UNIFORM_BUFFER, C, "frame"),
+        // Level-0 reference tiles and the table of their slots.
+        Binding::new(1, T::STORAGE_BUFFER, C, "ref_tiles"),
+        Binding::new(2, T::STORAGE_BUFFER, C, "ref_table"),
+        // The analysed frame and the reference frame of the same cameras.
+        Binding::new(3, T::STORAGE_BUFFER, C, "depth"),
+        Binding::new(4, T::STORAGE_BUFFER, C, "color"),
+        Binding::new(5, T::STORAGE_BUFFER, C, "ref_depth"),
+        Binding::new(6, T::STORAGE_BUFFER, C, "ref_color"),
+        Binding::new(7, T::STORAGE_BUFFER, C, "seeds"),
+        Binding::new(8, T::STORAGE_BUFFER, C, "error_image"),
+        Binding::new(9, T::STORAGE_BUFFER, C, "partials"),
+        Binding::new(10, T::STORAGE_BUFFER, C, "stats"),
+    ]
+};
+
+const TOTALS_BYTES: u64 = size_of::<Totals>() as u64;
+const HIST_BYTES: u64 = 3 * EVAL_HIST_BINS as u64 * 4;
+
+/// Frame size and views of an evaluation.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameShape {
+    pub width: u32,
+    pub height: u32,
+    pub views: usize,
+}
+
+/// What every analysed renderer of one evaluation shares (see the module docs).
+pub struct EvalShared {
+    gpu: Arc<Gpu>,
+    /// Level 0 around the views; [`ReferenceSurface::prepare`] before each frame.
+    pub surface: Mutex<ReferenceSurface>,
+    atlas: vk::Buffer,
+    table: vk::Buffer,
+    ref_depth: Buffer,
+    ref_color: Buffer,
+    seeds: Buffer,
+    /// Zeros copied over a run's statistics at the start of each frame.
+    zeros: Buffer,
+    sets: DescriptorSets,
+    next_set: AtomicUsize,
+    pixels: Pipeline,
+    reduce: Pipeline,
+    seed: Pipeline,
+    swim: Pipeline,
+    pub shape: FrameShape,
+    /// Frames of the evaluation (bounds the tracked points).
+    pub frames: u64,
+    spacing: f64,
+    data_size: (u32, u32),
+}
+
+impl EvalShared {
+    /// Shared state for `runs` analysed renderers of `frames` frames of `shape` over `data`,
+    /// with a reference atlas of at most `reference_bytes`.
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        data: &Terrain,
+        shape: FrameShape,
+        frames: u64,
+        runs: usize,
+        reference_bytes: u64,
+    ) -> Result<Arc<Self>> {
+        let surface = ReferenceSurface::new(gpu, data, reference_bytes)?;
+        let pixels = shape.width as u64 * shape.height as u64;
+        let storage = |name: &str, bytes: u64| {
+            Buffer::new(
+                gpu,
+                name,
+                bytes,
+                vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuOnly,
+            )
+        };
+        let max_points = max_points(frames);
+        let stats = stats_bytes(max_points);
+        let mut zeros = Buffer::new(
+            gpu,
+            "eval zeros",
+            TOTALS_BYTES + HIST_BYTES,
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::CpuToGpu,
+        )?;
+        zeros.write(&vec![0u8; (TOTALS_BYTES + HIST_BYTES) as usize])?;
+        debug_assert!(stats >= TOTALS_BYTES + HIST_BYTES);
+        let sets = DescriptorSets::new(gpu, EVAL_SET, runs.max(1))?;
+        let spv = crate::driver::shaders::EVAL_METRICS_SPV;
+        let layouts = [sets.layout];
+        Ok(Arc::new(EvalShared {
+            gpu: gpu.clone(),
+            atlas: surface.atlas.raw,
+            table: surface.table.raw,
+            surface: Mutex::new(surface),
+            ref_depth: storage("eval reference depth", pixels * 4)?,
+            ref_color: storage("eval reference colour", pixels * 4)?,
+            seeds: storage(
+                "eval swim points",
+                max_points as u64 * size_of::<Seed>() as u64,
+            )?,
+            zeros,
+            pixels: compute_pipeline(gpu, spv, c"pixels_main", &layouts)?,
+            reduce: compute_pipeline(gpu, spv, c"reduce_main", &layouts)?,
+            seed: compute_pipeline(gpu, spv, c"seed_main", &layouts)?,
+            swim: compute_pipeline(gpu, spv, c"swim_main", &layouts)?,
+            sets,
+            next_set: AtomicUsize::new(0),
+            shape,
+            frames,
+            spacing: data.spacing(),
+            data_size: (data.width(), data.height()),
+        }))
+    }
+
+    /// Readies the reference surface for frame `frame` of `views` (no frame in flight).
+    pub fn prepare(&self, frame: u64, views: &[reference::ViewCone]) -> Result<()> {
+        self.surface
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .prepare(frame, views)
+    }
+}
+
+/// Tracked swim points of an evaluation of `frames` frames (a grid of seeds every
+/// [`SWIM_SEED_EVERY`] frames).
+fn max_points(frames: u64) -> u32 {
+    (frames.div_ceil(SWIM_SEED_EVERY) * (SWIM_GRID.0 * SWIM_GRID.1) as u64) as u32
+}
+
+fn stats_bytes(points: u32) -> u64 {
+    TOTALS_BYTES + HIST_BYTES + points.max(1) as u64 * 8
+}
+
+/// Whether an analysed renderer draws the reference (its frame is what the others compare
+/// their images with, and it seeds the swim points) or a variant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    Reference,
+    Variant,
+}
+
+/// The measurements of one frame, read back from the GPU.
+#[derive(Clone, Debug)]
+pub struct GpuFrameMetrics {
+    pub index: u64,
+    /// |height error| (m) and screen-space error (px) of every pixel measured.
+    pub metres: Histogram,
+    pub pixels: Histogram,
+    /// Popping against the previous frame (px; empty for the first frame).
+    pub popping: Histogram,
+    pub holes: usize,
+    /// Sum of squared RGB differences to the reference frame, over `3 * pixels` channels.
+    pub squared_error_sum: u64,
+    pub channels: u64,
+    pub ssim_sum: f64,
+    pub ssim_windows: u64,
+    /// Per tracked point (seed order): the height error (m) and distance (m) where this frame
+    /// shows it.
+    pub swim: Vec<Option<(f64, f64)>>,
+    /// Pixels and points without a reference tile (0 unless the tile selection is wrong).
+    pub missing_reference: u32,
+    /// The signed screen-space error per pixel (image frames only).
+    pub error_image: Option<Vec<f32>>,
+}
+
+impl GpuFrameMetrics {
+    /// PSNR in dB over RGB (infinite when identical), as [`super::metrics::psnr`].
+    pub fn psnr_db(&self) -> f64 {
+        super::metrics::psnr_of(self.squared_error_sum as f64, self.channels)
+    }
+
+    /// Mean SSIM over the 8x8 windows, as [`super::metrics::ssim`].
+    pub fn ssim(&self) -> f64 {
+        if self.ssim_windows == 0 {
+            1.0
+        } else {
+            self.ssim_sum / self.ssim_windows as f64
+        }
+    }
+}
+
+/// One renderer's frame analysis (see the module docs).
+pub struct GpuAnalysis {
+    shared: Arc<EvalShared>,
+    role: Role,
+    set: vk::DescriptorSet,
+    uniform: Buffer,
+    /// The variant's own copies of its targets (the reference writes the shared ones).
+    _own: Option<(Buffer, Buffer)>,
+    depth: vk::Buffer,
+    color: vk::Buffer,
+    error_image: Buffer,
+    _partials: Buffer,
+    stats: Buffer,
+    stats_host: Buffer,
+    export: Option<Buffer>,
+    image_frames: Vec<u64>,
+    groups: (u32, u32),
+    recorded: u64,
+    results: Sender<GpuFrameMetrics>,
+}
+
+impl GpuAnalysis {
+    /// The analysis of one renderer of `shared`'s evaluation; the error images of
+    /// `image_frames` are read back too. Each frame's results arrive on the returned receiver
+    /// when the renderer delivers the frame.
+    pub fn new(
+        shared: &Arc<EvalShared>,
+        role: Role,
+        image_frames: Vec<u64>,
+    ) -> Result<(Self, Receiver<GpuFrameMetrics>)> {
+        let (results, receiver) = unbounded();
+        let gpu = &shared.gpu;
+        let index = shared.next_set.fetch_add(1, Ordering::Relaxed);
+        let set = *shared.sets.sets.get(index).ok_or_else(|| {
+            Error::invalid(
+                "eval",
+                "more analysed renderers than the evaluation planned",
+            )
+        })?;
+        let shape = shared.shape;
+        let pixels = shape.width as u64 * shape.height as u64;
+        let groups = (
+            shape.width.div_ceil(EVAL_TILE_PX),
+            shape.height.div_ceil(EVAL_TILE_PX),
+        );
+        let device = |name: &str, bytes: u64, usage: vk::BufferUsageFlags| {
+            Buffer::new(
+                gpu,
+                name,
+                bytes,
+                vk::BufferUsageFlags::STORAGE_BUFFER | usage,
+                MemoryLocation::GpuOnly,
+            )
+        };
+        let own = match role {
+            Role::Reference => None,
+            Role::Variant => Some((
+                device("eval depth", pixels * 4, vk::BufferUsageFlags::TRANSFER_DST)?,
+                device(
+                    "eval colour",
+                    pixels * 4,
+                    vk::BufferUsageFlags::TRANSFER_DST,
+                )?,
+            )),
+        };
+        let (depth, color) = match &own {
+            Some((d, c)) => (d.raw, c.raw),
+            None => (shared.ref_depth.raw, shared.ref_color.raw),
+        };
+        let copy_usage = vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::TRANSFER_SRC;
+        let error_image = device("eval error image", pixels * 4, copy_usage)?;
+        let partials = device(
+            "eval partials",
+            groups.0 as u64 * groups.1 as u64 * PARTIAL_BYTES,
+            vk::BufferUsageFlags::empty(),
+        )?;
+        let stats_size = stats_bytes(max_points(shared.frames));
+        let stats = device("eval statistics", stats_size, copy_usage)?;
+        let host = |name: &str, bytes: u64| {
+            Buffer::new(
+                gpu,
+                name,
+                bytes,
+                vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuToCpu,
+            )
+        };
+        let stats_host = host("eval statistics (host)", stats_size)?;
+        let export = if image_frames.is_empty() {
+            None
+        } else {
+            Some(host("eval error image (host)", pixels * 4)?)
+        };
+        let uniform = Buffer::new(
+            gpu,
+            "eval frame uniforms",
+            size_of::<EvalFrame>() as u64,
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        let no_error = EVAL_NO_ERROR_PX.to_bits();
+        let image = error_image.raw;
+        gpu.one_shot(|cmd| unsafe {
+            gpu.device
+                .cmd_fill_buffer(cmd, image, 0, vk::WHOLE_SIZE, no_error)
+        })?;
+        let buffer = Resource::Buffer;
+        shared.sets.write(
+            index,
+            &[
+                ("frame", buffer(uniform.raw)),
+                ("ref_tiles", buffer(shared.atlas)),
+                ("ref_table", buffer(shared.table)),
+                ("depth", buffer(depth)),
+                ("color", buffer(color)),
+                ("ref_depth", buffer(shared.ref_depth.raw)),
+                ("ref_color", buffer(shared.ref_color.raw)),
+                ("seeds", buffer(shared.seeds.raw)),
+                ("error_image", buffer(error_image.raw)),
+                ("partials", buffer(partials.raw)),
+                ("stats", buffer(stats.raw)),
+            ],
+        )?;
+        let analysis = GpuAnalysis {
+            shared: shared.clone(),
+            role,
+            set,
+            uniform,
+            _own: own,
+            depth,
+            color,
+            error_image,
+            _partials: partials,
+            stats,
+            stats_host,
+            export,
+            image_frames,
+            groups,
+            recorded: 0,
+            results,
+        };
+        Ok((analysis, receiver))
+    }
+
+    /// The uniforms of frame `frame`.
+    fn uniforms(&self, frame: &AnalysisFrame<'_>) -> Result<EvalFrame> {
+        let shape = self.shared.shape;
+        if frame.cameras.len() != shape.views || frame.columns.len() != shape.views {
+            return Err(Error::invalid(
+                "eval",
+                format!(
+                    "{} cameras for an analysis of {} views",
+                    frame.cameras.len(),
+                    shape.views
+                ),
+            ));
+        }
+        if frame.index >= self.shared.frames {
+            return Err(Error::invalid(
+                "eval",
+                format!(
+                    "frame {} of an evaluation of {} frames",
+                    frame.index, self.shared.frames
+                ),
+            ));
+        }
+        let mut views = [EvalView::default(); crate::gpu_constants::EVAL_MAX_VIEWS as usize];
+        for (v, (camera, &columns)) in frame.cameras.iter().zip(frame.columns).enumerate() {
+            views[v] = EvalView::new(camera, columns, shape.height, self.shared.spacing);
+        }
+        let grid = SWIM_GRID.0 * SWIM_GRID.1;
+        let round = (frame.index / SWIM_SEED_EVERY) as u32;
+        let seeding = self.role == Role::Reference && frame.index % SWIM_SEED_EVERY == 0;
+        let (tx, ty) = self
+            .shared
+            .surface
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .tiles();
+        Ok(EvalFrame {
+            views,
+            size: [
+                shape.width,
+                shape.height,
+                shape.views as u32,
+                u32::from(self.recorded > 0),
+            ],
+            data: [self.shared.data_size.0, self.shared.data_size.1, tx, ty],
+            params: [self.shared.spacing as f32, 0.0, 0.0, 0.0],
+            points: [
+                (round + 1) * grid,
+                round * grid,
+                if seeding { grid } else { 0 },
+                self.groups.0 * self.groups.1,
+            ],
+            grid: [SWIM_GRID.0, SWIM_GRID.1, self.groups.0, 0],
+        })
+    }
+
+    /// Copies the frame's targets into the storage buffers the shader reads.
+    fn record_copies(&self, cmd: vk::CommandBuffer, frame: &AnalysisFrame<'_>) {
+        let t = frame.targets;
+        let region = |aspect| {
+            [vk::BufferImageCopy::default()
+                .image_subresource(vk::ImageSubresourceLayers {
+                    aspect_mask: aspect,
+                    mip_level: 0,
+                    base_array_layer: 0,
+                    layer_count: 1,
+                })
+                .image_extent(vk::Extent3D {
+                    width: t.extent.width,
+                    height: t.extent.height,
+                    depth: 1,
+                })]
+        };
+        let d = &self.shared.gpu.device;
+        let layout = vk::ImageLayout::TRANSFER_SRC_OPTIMAL;
+        unsafe {
+            d.cmd_copy_image_to_buffer(
+                cmd,
+                t.color.raw,
+                layout,
+                self.color,
+                &region(vk::ImageAspectFlags::COLOR),
+            );
+            d.cmd_copy_image_to_buffer(
+                cmd,
+                t.depth.raw,
+                layout,
+                self.depth,
+                &region(vk::ImageAspectFlags::DEPTH),
+            );
+            d.cmd_copy_buffer(
+                cmd,
+                self.shared.zeros.raw,
+                self.stats.raw,
+                &[vk::BufferCopy {
+                    src_offset: 0,
+                    dst_offset: 0,
+                    size: TOTALS_BYTES + HIST_BYTES,
+                }],
+            );
+        }
+    }
+
+    fn dispatch(&self, cmd: vk::CommandBuffer, pipeline: &Pipeline, groups: (u32, u32)) {
+        let d = &self.shared.gpu.device;
+        unsafe {
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
+            d.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                pipeline.layout,
+                0,
+                &[self.set],
+                &[],
+            );
+            d.cmd_dispatch(cmd, groups.0, groups.1, 1);
+        }
+    }
+}
+
+impl FrameAnalysis for GpuAnalysis {
+    fn record(&mut self, cmd: vk::CommandBuffer, frame: &AnalysisFrame<'_>) -> Result<()> {
+        let shape = self.shared.shape;
+        let extent = frame.targets.extent;
+        if (extent.width, extent.height) != (shape.width, shape.height) {
+            return Err(Error::invalid(
+                "eval",
+                format!(
+                    "a {}x{} frame for an analysis of {}x{}",
+                    extent.width, extent.height, shape.width, shape.height
+                ),
+            ));
+        }
+        let uniforms = self.uniforms(frame)?;
+        self.uniform.write(bytemuck::bytes_of(&uniforms))?;
+        let gpu = &self.shared.gpu;
+        let b = Barriers::new(gpu);
+        // After everything earlier in the queue: other renderers' analyses read and write the
+        // shared buffers, this renderer's previous frame its own.
+        b.memory(
+            cmd,
+            MemoryAccess::PreviousFrame,
+            MemoryAccess::TransferWrite,
+        );
+        b.memory(
+            cmd,
+            MemoryAccess::PreviousFrame,
+            MemoryAccess::ComputeReadWrite,
+        );
+        self.record_copies(cmd, frame);
+        b.memory(
+            cmd,
+            MemoryAccess::TransferWrite,
+            MemoryAccess::ComputeReadWrite,
+        );
+        let s = &self.shared;
+        let seeds = uniforms.points[2];
+        if seeds > 0 {
+            self.dispatch(cmd, &s.seed, (seeds.div_ceil(EVAL_POINT_WORKGROUP), 1));
+            b.memory(
+                cmd,
+                MemoryAccess::ComputeWrite,
+                MemoryAccess::ComputeReadWrite,
+            );
+        }
+        self.dispatch(cmd, &s.pixels, self.groups);
+        let points = uniforms.points[0];
+        self.dispatch(cmd, &s.swim, (points.div_ceil(EVAL_POINT_WORKGROUP), 1));
+        b.memory(
+            cmd,
+            MemoryAccess::ComputeWrite,
+            MemoryAccess::ComputeReadWrite,
+        );
+        self.dispatch(cmd, &s.reduce, (1, 1));
+        b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
+        let d = &gpu.device;
+        let bytes = TOTALS_BYTES + HIST_BYTES + points as u64 * 8;
+        unsafe {
+            d.cmd_copy_buffer(
+                cmd,
+                self.stats.raw,
+                self.stats_host.raw,
+                &[vk::BufferCopy {
+                    src_offset: 0,
+                    dst_offset: 0,
+                    size: bytes,
+                }],
+            );
+            if let Some(export) = &self.export
+                && self.image_frames.contains(&frame.index)
+            {
+                d.cmd_copy_buffer(
+                    cmd,
+                    self.error_image.raw,
+                    export.raw,
+                    &[vk::BufferCopy {
+                        src_offset: 0,
+                        dst_offset: 0,
+                        size: export.size,
+                    }],
+                );
+            }
+        }
+        b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+        self.recorded += 1;
+        Ok(())
+    }
+
+    fn complete(&mut self, _slot: FrameSlot, index: u64) -> Result<()> {
+        let bytes = self
+            .stats_host
+            .mapped()
+            .ok_or_else(|| Error::invalid("eval", "statistics buffer not mapped"))?;
+        let totals: Totals = bytemuck::pod_read_unaligned(&bytes[..TOTALS_BYTES as usize]);
+        let words: &[u32] = bytemuck::cast_slice(
+            &bytes[TOTALS_BYTES as usize..(TOTALS_BYTES + HIST_BYTES) as usize],
+        );
+        let bins = EVAL_HIST_BINS as usize;
+        let points = ((index / SWIM_SEED_EVERY + 1) * (SWIM_GRID.0 * SWIM_GRID.1) as u64) as usize;
+        let start = (TOTALS_BYTES + HIST_BYTES) as usize;
+        let swim: &[f32] = bytemuck::cast_slice(&bytes[start..start + points * 8]);
+        let shape = self.shared.shape;
+        let count = totals.error_count as u64;
+        let metrics = GpuFrameMetrics {
+            index,
+            metres: Histogram::from_bins(
+                &words[..bins],
+                count,
+                totals.metres_sum as f64,
+                Some(totals.metres_max as f64),
+            ),
+            pixels: Histogram::from_bins(
+                &words[bins..2 * bins],
+                count,
+                totals.pixels_sum as f64,
+                Some(totals.pixels_max as f64),
+            ),
+            popping: Histogram::from_bins(
+                &words[2 * bins..],
+                totals.popping_count as u64,
+                0.0,
+                None,
+            ),
+            holes: totals.holes as usize,
+            squared_error_sum: totals.sq_lo as u64 | (totals.sq_hi as u64) << 32,
+            channels: 3 * shape.width as u64 * shape.height as u64,
+            ssim_sum: totals.ssim_sum as f64,
+            ssim_windows: totals.ssim_windows as u64,
+            swim: swim
+                .chunks_exact(2)
+                .map(|o| (o[1] >= 0.0).then_some((o[0] as f64, o[1] as f64)))
+                .collect(),
+            missing_reference: totals.missing,
+            error_image: match &self.export {
+                Some(e) if self.image_frames.contains(&index) => Some(
+                    bytemuck::cast_slice(
+                        e.mapped()
+                            .ok_or_else(|| Error::invalid("eval", "error image not mapped"))?,
+                    )
+                    .to_vec(),
+                ),
+                _ => None,
+            },
+        };
+        // The receiver outlives the renderer; a closed channel only drops this frame.
+        let _ = self.results.send(metrics);
+        Ok(())
+    }
+}
