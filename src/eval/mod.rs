@@ -5,6 +5,7 @@
 
 pub mod chart;
 pub mod metrics;
+pub mod oracle;
 pub mod report;
 pub mod run;
 pub mod table;

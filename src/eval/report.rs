@@ -59,12 +59,12 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
     write_atomic(&dir.join("results.json"), json.as_bytes())?;
 
     let mut csv = String::from(
-        "variant,method,frame,frame_ms,gpu_prepass_ms,gpu_terrain_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px\n",
+        "variant,method,frame,frame_ms,gpu_prepass_ms,gpu_terrain_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px,oracle_triangles\n",
     );
     for r in &eval.rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5},{}",
             r.variant,
             r.method,
             r.frame,
@@ -83,18 +83,19 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
             r.holes,
             r.psnr_db,
             r.ssim,
-            r.popping_p99_px
+            r.popping_p99_px,
+            optional(r.oracle_triangles.map(|v| v as f64), 0)
         );
     }
     write_atomic(&dir.join("frames.csv"), csv.as_bytes())?;
 
     let mut sum = String::from(
-        "variant,method,frames,frame_ms_median,frame_ms_p90,frame_ms_p99,frame_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p90,swimming_m_mean\n",
+        "variant,method,frames,frame_ms_median,frame_ms_p90,frame_ms_p99,frame_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p90,swimming_m_mean,oracle_triangles_median,oracle_ratio_median\n",
     );
     for s in &eval.summaries {
         let _ = writeln!(
             sum,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.4}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.4},{},{}",
             s.variant,
             s.method,
             s.frames,
@@ -115,7 +116,9 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
             s.popping_px.max,
             s.swimming_px.mean,
             s.swimming_px.p99,
-            s.swimming_m.mean
+            s.swimming_m.mean,
+            optional(s.oracle_triangles_median, 0),
+            optional(s.oracle_ratio_median, 3)
         );
     }
     write_atomic(&dir.join("summary.csv"), sum.as_bytes())?;
@@ -262,4 +265,9 @@ fn write_into(eval: &Evaluation, data: &Heightmap, dir: &Path) -> Result<()> {
         );
     }
     write_atomic(&dir.join("report.md"), md.as_bytes())
+}
+
+/// A CSV cell for an optional number: empty when absent.
+fn optional(v: Option<f64>, decimals: usize) -> String {
+    v.map(|v| format!("{v:.decimals$}")).unwrap_or_default()
 }

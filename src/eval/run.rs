@@ -7,6 +7,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use super::metrics::{self, ErrorHistogram, GeometricError, Summary, SwimTracker};
+use super::oracle::Oracle;
 use crate::dataset::Heightmap;
 use crate::driver::Gpu;
 use crate::error::{Error, Result};
@@ -19,6 +20,10 @@ use crate::scene::Scenario;
 /// Every this many frames, swimming starts tracking the points a 12 x 8 pixel grid of the
 /// reference frame sees.
 const SWIM_SEED_EVERY: usize = 8;
+
+/// At most this many measured frames (evenly spaced) get the triangle oracle (seconds per
+/// frame on large data sets).
+const ORACLE_FRAMES: usize = 12;
 
 /// One method with one parameter setting.
 #[derive(Clone, Debug)]
@@ -122,6 +127,9 @@ pub struct FrameRow {
     pub ssim: f64,
     /// 99th percentile of the per-pixel change of the error image since the previous frame.
     pub popping_p99_px: f64,
+    /// The triangle oracle's count for this frame at the variant's tau (UDLOD variants, on
+    /// the frames the oracle runs on: `eval::oracle`).
+    pub oracle_triangles: Option<u64>,
 }
 
 /// Summary of one variant over the frames after warm-up.
@@ -145,6 +153,10 @@ pub struct RunSummary {
     /// Per fixed world point: range of its height error (metres) and that range in pixels.
     pub swimming_m: Summary,
     pub swimming_px: Summary,
+    /// Median over the oracle's frames of the oracle's triangle count, and of this variant's
+    /// triangles divided by it (UDLOD variants only).
+    pub oracle_triangles_median: Option<f64>,
+    pub oracle_ratio_median: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -234,6 +246,9 @@ pub fn evaluate(
     let (w, h) = (setup.options.width, setup.options.height);
     let focal = setup.scenario.camera(0).focal_px(h);
     let mut summaries = Vec::new();
+    let mut oracle: Option<Oracle> = None;
+    let measured_frames = (setup.frames as usize).saturating_sub(setup.warmup);
+    let oracle_stride = measured_frames.div_ceil(ORACLE_FRAMES).max(1);
     let mut rows = Vec::new();
     let mut images = Vec::new();
     for v in variants {
@@ -268,6 +283,15 @@ pub fn evaluate(
             }
             swim.observe(&f.camera, w, h, depth, setup.data);
             let rec = records.get(k);
+            let oracle_triangles = match &v.method {
+                MethodConfig::Udlod(s)
+                    if k >= setup.warmup && (k - setup.warmup) % oracle_stride == 0 =>
+                {
+                    let o = oracle.get_or_insert_with(|| Oracle::new(setup.data));
+                    Some(o.count(setup.data, &f.camera, w, h, s.tau_px).triangles)
+                }
+                _ => None,
+            };
             let row = FrameRow {
                 variant: v.label.clone(),
                 method: v.kind().name().to_string(),
@@ -282,6 +306,7 @@ pub fn evaluate(
                 psnr_db: metrics::psnr(&r.rgba, &f.rgba),
                 ssim: metrics::ssim(&r.rgba, &f.rgba, w, h),
                 popping_p99_px: popping,
+                oracle_triangles,
             };
             if k >= setup.warmup {
                 all_errors.add(&errors);
@@ -330,6 +355,8 @@ pub fn evaluate(
             popping_px: Summary::of(&mut popping),
             swimming_m,
             swimming_px,
+            oracle_triangles_median: oracle_median(&measured, |_, o| o as f64),
+            oracle_ratio_median: oracle_median(&measured, |r, o| r.triangles as f64 / o.max(1) as f64),
         });
         rows.extend(my_rows);
     }
@@ -346,4 +373,14 @@ pub fn evaluate(
         rows,
         images,
     })
+}
+
+/// Median of `value(row, oracle triangles)` over the rows the oracle ran on (`None` when it
+/// ran on none: not a UDLOD variant).
+fn oracle_median(rows: &[&FrameRow], value: impl Fn(&FrameRow, u64) -> f64) -> Option<f64> {
+    let v: Vec<f64> = rows
+        .iter()
+        .filter_map(|r| r.oracle_triangles.map(|o| value(r, o)))
+        .collect();
+    (!v.is_empty()).then(|| Percentiles::of(v).median)
 }
