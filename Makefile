@@ -52,7 +52,7 @@ data-proc4k: target/data/proc4k/manifest.json
 data-default: target/data/default/manifest.json
 
 target/data/default/manifest.json:
-	$(CARGO) run --release --locked -- preprocess --procedural --size 4097 --spacing 30 --node-size 64 --out target/data/default
+	$(CARGO) run --release --locked -- preprocess --procedural --style alpine --size 4097 --spacing 30 --max-height 3500 --feature-size 16000 --node-size 64 --out target/data/default
 
 target/data/proc4k/manifest.json:
 	$(CARGO) run --release --locked -- preprocess --procedural --size 4097 --node-size 64 --out target/data/proc4k

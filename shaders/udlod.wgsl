@@ -39,5 +39,5 @@ fn tile_vertex(tile: Tile, local: vec2<u32>) -> TerrainVertex {
 
 @fragment
 fn fs_main(v: TerrainVertex) -> @location(0) vec4<f32> {
-    return shade(v.grid_pos);
+    return shade(v.grid_pos, v.clip);
 }

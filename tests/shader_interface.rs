@@ -111,6 +111,7 @@ fn frame_uniforms_match_the_wgsl_struct() {
         ("camera_offset", offset_of!(FrameUniforms, camera_offset)),
         ("sun_dir", offset_of!(FrameUniforms, sun_dir)),
         ("data_size", offset_of!(FrameUniforms, data_size)),
+        ("haze", offset_of!(FrameUniforms, haze)),
     ];
     assert_struct_layout(
         &composed_shaders(),

@@ -12,6 +12,8 @@ struct Frame {
     sun_dir: vec4<f32>,
     // xy: height samples per side.
     data_size: vec4<u32>,
+    // rgb: haze (sky) colour, linear; w: 1 / haze distance in metres (0: no haze).
+    haze: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -73,9 +75,11 @@ fn project(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec4<f32> {
     return frame.view_proj * vec4<f32>(rel, 1.0);
 }
 
-// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map.
-// Through the clipmap both come from the atlas (`clipmap_surface`).
-fn shade(grid_pos: vec2<f32>) -> vec4<f32> {
+// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map,
+// faded towards the sky with view depth (aerial perspective; the fragment position's w is
+// 1 / clip w, and clip w is the view depth). Through the clipmap albedo and normal come from
+// the atlas (`clipmap_surface`).
+fn shade(grid_pos: vec2<f32>, frag_position: vec4<f32>) -> vec4<f32> {
     let gx = dpdx(grid_pos);
     let gy = dpdy(grid_pos);
     var n: vec3<f32>;
@@ -90,5 +94,6 @@ fn shade(grid_pos: vec2<f32>) -> vec4<f32> {
         albedo = textureSampleGrad(albedo_tex, linear_sampler, grid_pos / (size - 1.0), gx / (size - 1.0), gy / (size - 1.0)).rgb;
     }
     let light = LIGHT_AMBIENT + LIGHT_DIFFUSE * max(dot(n, frame.sun_dir.xyz), 0.0);
-    return vec4<f32>(albedo * light, 1.0);
+    let haze = 1.0 - exp(-frame.haze.w / frag_position.w);
+    return vec4<f32>(mix(albedo * light, frame.haze.rgb, haze), 1.0);
 }

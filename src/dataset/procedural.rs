@@ -117,7 +117,13 @@ fn alpine(params: &ProceduralParams, x: f64, y: f64) -> f64 {
     // Even the first octave off the lattice axes (the rotation of `next_octave`, unscaled).
     let (mut u, mut v) = ((0.8 * x - 0.6 * y) * f, (0.6 * x + 0.8 * y) * f);
     let (mut sum, mut amplitude, mut weight, mut norm) = (0.0, 0.5, 1.0, 0.0);
-    for octave in 0..11u64 {
+    // Band-limited to the samples: octaves down to a wavelength of 2.5 samples. Finer ones
+    // would only alias into sample-to-sample noise that no renderer can show.
+    let octaves = (params.feature_size / (2.5 * params.spacing))
+        .log2()
+        .floor()
+        .clamp(1.0, 11.0) as u64;
+    for octave in 0..octaves {
         let n = value_noise(seed.wrapping_add(100 + octave), u, v);
         let ridge = (1.0 - (2.0 * n - 1.0).abs()).powi(2);
         sum += amplitude * ridge * weight;

@@ -7,5 +7,5 @@ pub mod uniforms;
 pub mod view;
 
 pub use terrain::{TerrainGpu, TerrainInfo};
-pub use uniforms::FrameUniforms;
+pub use uniforms::{FrameUniforms, Lighting};
 pub use view::ViewState;

@@ -3,6 +3,18 @@
 use super::TerrainInfo;
 use crate::scene::Camera;
 
+/// The light of a scene: the sun, and the sky that distant terrain fades into.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lighting {
+    /// Unit vector towards the sun.
+    pub sun_dir: [f32; 3],
+    /// Linear RGB of the sky (the clear colour and the haze colour).
+    pub sky: [f32; 3],
+    /// View depth over which terrain fades to `1 - 1/e` haze (aerial perspective), metres;
+    /// 0: no haze.
+    pub haze_distance_m: f32,
+}
+
 /// `Frame` in `terrain_common.wgsl`, byte for byte (std140: every member 16-byte aligned).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -12,12 +24,14 @@ pub struct FrameUniforms {
     pub camera_offset: [f32; 4],
     pub sun_dir: [f32; 4],
     pub data_size: [u32; 4],
+    /// rgb: the haze colour (linear); w: 1 / haze distance in metres (0: no haze).
+    pub haze: [f32; 4],
 }
 
 impl FrameUniforms {
     /// Splits the camera position into an integer sample cell and a small metric offset, so the
     /// shader works with camera-relative coordinates at full f32 precision anywhere.
-    pub fn new(camera: &Camera, aspect: f64, data: &TerrainInfo, sun_dir: [f32; 3]) -> Self {
+    pub fn new(camera: &Camera, aspect: f64, data: &TerrainInfo, light: &Lighting) -> Self {
         let spacing = data.spacing;
         let cell_x = (camera.position.x / spacing).floor();
         let cell_y = (camera.position.y / spacing).floor();
@@ -31,8 +45,18 @@ impl FrameUniforms {
                 camera.position.z as f32,
                 spacing as f32,
             ],
-            sun_dir: [sun_dir[0], sun_dir[1], sun_dir[2], 0.0],
+            sun_dir: [light.sun_dir[0], light.sun_dir[1], light.sun_dir[2], 0.0],
             data_size: [data.width, data.height, 0, 0],
+            haze: [
+                light.sky[0],
+                light.sky[1],
+                light.sky[2],
+                if light.haze_distance_m > 0.0 {
+                    1.0 / light.haze_distance_m
+                } else {
+                    0.0
+                },
+            ],
         }
     }
 }

@@ -32,7 +32,7 @@ use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::sync::Timeline;
 use crate::error::{Error, Result};
-use crate::frame::{FrameUniforms, TerrainGpu, TerrainInfo, ViewState};
+use crate::frame::{FrameUniforms, Lighting, TerrainGpu, TerrainInfo, ViewState};
 use crate::lod::{LodMethod, MethodConfig, MethodContext};
 use crate::readback::{FrameSink, FrameTimings, FrameView};
 use crate::scene::Camera;
@@ -84,10 +84,8 @@ pub struct RenderOptions {
     pub height: u32,
     pub frames_in_flight: usize,
     pub readback_depth: bool,
-    /// Linear RGB of the sky (clear colour).
-    pub sky: [f32; 3],
-    /// Unit vector towards the sun.
-    pub sun_dir: [f32; 3],
+    /// The sun and the sky (the clear colour; a frame may override it, the haze keeps it).
+    pub light: Lighting,
     /// Cameras per frame (1..=[`MAX_VIEWS`]), side by side: view `v` covers columns
     /// [`view_columns`]`(width, views, v)`.
     pub views: usize,
@@ -326,7 +324,7 @@ impl Renderer {
         debug_assert!(self.slots[frame.index()].pending.is_none());
         let started = Instant::now();
         self.update_views(frame, requests)?;
-        self.record(frame, requests[0].sky.unwrap_or(self.options.sky))?;
+        self.record(frame, requests[0].sky.unwrap_or(self.options.light.sky))?;
         self.submit(frame, index)?;
         self.slots[frame.index()].pending = Some(Pending {
             index,
@@ -361,7 +359,7 @@ impl Renderer {
                 &state.camera,
                 state.width as f64 / state.height as f64,
                 &self.terrain.info,
-                self.options.sun_dir,
+                &self.options.light,
             );
             self.terrain.write_uniforms(view, &uniforms)?;
             self.method.update(view, &state)?;

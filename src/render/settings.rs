@@ -5,6 +5,7 @@ use serde::Deserialize;
 
 use super::{MAX_VIEWS, RenderOptions, check_frames_in_flight};
 use crate::error::{Error, Result};
+use crate::frame::Lighting;
 use crate::scene::ViewOffset;
 
 /// Largest render target side accepted before the device is known (its limit is checked too).
@@ -23,6 +24,9 @@ pub struct RenderSettings {
     /// Direction *towards* the sun: azimuth clockwise from north and elevation, degrees.
     pub sun_azimuth_deg: f32,
     pub sun_elevation_deg: f32,
+    /// Aerial perspective: the view depth over which terrain fades `1 - 1/e` of the way to the
+    /// sky colour, metres; 0 turns it off.
+    pub haze_distance_m: f32,
     /// Further cameras drawn into the same frame, side by side right of the main one (each
     /// view gets `width / views` columns); they share the clipmap's atlas.
     pub extra_views: Vec<ViewOffset>,
@@ -38,6 +42,7 @@ impl Default for RenderSettings {
             sky: [0.45, 0.62, 0.85],
             sun_azimuth_deg: 135.0,
             sun_elevation_deg: 35.0,
+            haze_distance_m: 0.0,
             extra_views: Vec::new(),
         }
     }
@@ -60,8 +65,11 @@ impl RenderSettings {
             height: self.height,
             frames_in_flight: self.frames_in_flight as usize,
             readback_depth: self.readback_depth,
-            sky: self.sky,
-            sun_dir: [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()],
+            light: Lighting {
+                sun_dir: [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()],
+                sky: self.sky,
+                haze_distance_m: self.haze_distance_m,
+            },
             views: self.views(),
         }
     }
@@ -114,6 +122,12 @@ impl RenderSettings {
             return Err(Error::invalid(
                 "render",
                 "sky colour and sun angles must be finite",
+            ));
+        }
+        if !(self.haze_distance_m.is_finite() && self.haze_distance_m >= 0.0) {
+            return Err(Error::invalid(
+                "render.haze_distance_m",
+                format!("{} must be finite and >= 0", self.haze_distance_m),
             ));
         }
         Ok(())

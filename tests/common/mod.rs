@@ -37,8 +37,11 @@ pub fn options(width: u32, height: u32, frames_in_flight: usize) -> RenderOption
         height,
         frames_in_flight,
         readback_depth: true,
-        sky: [0.2, 0.4, 0.8],
-        sun_dir: [0.0, 0.0, 1.0],
+        light: vkterrain::frame::Lighting {
+            sun_dir: [0.0, 0.0, 1.0],
+            sky: [0.2, 0.4, 0.8],
+            haze_distance_m: 0.0,
+        },
         views: 1,
     }
 }
