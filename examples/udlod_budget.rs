@@ -106,15 +106,59 @@ fn main() -> anyhow::Result<()> {
         }
         let g2 = 2 * (settings.grid_size as u64).pow(2);
         let keep = 1.0 - s.morph_range;
-        let base = Cf { beta: 1.0 / keep, chain: true, per_tile: true, cap: 1e9, morph_range: s.morph_range, box_dist: false, diam3d: false };
+        let base = Cf {
+            beta: 1.0 / keep,
+            chain: true,
+            per_tile: true,
+            cap: 1e9,
+            morph_range: s.morph_range,
+            box_dist: false,
+            diam3d: false,
+        };
         let variants: Vec<(&str, Cf)> = vec![
-            ("level error, chain, ref height", Cf { per_tile: false, ..base }),
+            (
+                "level error, chain, ref height",
+                Cf {
+                    per_tile: false,
+                    ..base
+                },
+            ),
             ("per-tile error, chain, beta 1/(1-r)", base),
             ("per-tile error, chain, beta 1", Cf { beta: 1.0, ..base }),
-            ("per-tile, chain, beta 1, r 0.1", Cf { beta: 1.0, morph_range: 0.1, ..base }),
-            ("per-tile, chain, beta 1, box dist, 3d diam", Cf { beta: 1.0, box_dist: true, diam3d: true, ..base }),
-            ("per-tile, no chain, beta 1", Cf { beta: 1.0, chain: false, ..base }),
-            ("per-tile, no chain, beta 1, box", Cf { beta: 1.0, chain: false, box_dist: true, ..base }),
+            (
+                "per-tile, chain, beta 1, r 0.1",
+                Cf {
+                    beta: 1.0,
+                    morph_range: 0.1,
+                    ..base
+                },
+            ),
+            (
+                "per-tile, chain, beta 1, box dist, 3d diam",
+                Cf {
+                    beta: 1.0,
+                    box_dist: true,
+                    diam3d: true,
+                    ..base
+                },
+            ),
+            (
+                "per-tile, no chain, beta 1",
+                Cf {
+                    beta: 1.0,
+                    chain: false,
+                    ..base
+                },
+            ),
+            (
+                "per-tile, no chain, beta 1, box",
+                Cf {
+                    beta: 1.0,
+                    chain: false,
+                    box_dist: true,
+                    ..base
+                },
+            ),
         ];
         for (name, cf) in &variants {
             let f = sfield(&levels, focal, tau, *cf);
@@ -124,16 +168,28 @@ fn main() -> anyhow::Result<()> {
                 let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
                 n += select_cf(&levels, &sp, &cam, &f, *cf).len();
             }
-            println!("  cf {name:48}: tiles {n:6} triangles {:9} ratio {:.2}", n as u64 * g2, (n as u64 * g2) as f64 / tris_o.max(1) as f64);
+            println!(
+                "  cf {name:48}: tiles {n:6} triangles {:9} ratio {:.2}",
+                n as u64 * g2,
+                (n as u64 * g2) as f64 / tris_o.max(1) as f64
+            );
         }
         {
             let mut n = 0usize;
             for &k in &picks {
                 let cam = p.scenario.camera(k);
                 let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
-                n += select_generic(&levels, &sp, |t| tile_exact_splits(&levels, &data, &cam, focal, tau, t)).len();
+                n += select_generic(&levels, &sp, |t| {
+                    tile_exact_splits(&levels, &data, &cam, focal, tau, t)
+                })
+                .len();
             }
-            println!("  cf {:48}: tiles {n:6} triangles {:9} ratio {:.2}", "tile oracle (exact per-sample, no chain/morph)", n as u64 * g2, (n as u64 * g2) as f64 / tris_o.max(1) as f64);
+            println!(
+                "  cf {:48}: tiles {n:6} triangles {:9} ratio {:.2}",
+                "tile oracle (exact per-sample, no chain/morph)",
+                n as u64 * g2,
+                (n as u64 * g2) as f64 / tris_o.max(1) as f64
+            );
         }
         slack.sort_by(f64::total_cmp);
         let q = |f: f64| slack[((slack.len() - 1) as f64 * f) as usize];
@@ -168,7 +224,10 @@ fn tile_slack(
 ) -> f64 {
     let span = levels.grid_size << t.lod;
     let (c0, r0) = (t.x * span, t.y * span);
-    let (c1, r1) = ((c0 + span).min(data.width - 1), (r0 + span).min(data.height - 1));
+    let (c1, r1) = (
+        (c0 + span).min(data.width - 1),
+        (r0 + span).min(data.height - 1),
+    );
     let step = (1u32 << t.lod).max(1);
     let mut d = f64::INFINITY;
     let mut r = r0;
@@ -196,13 +255,13 @@ struct SField {
 
 #[derive(Clone, Copy)]
 struct Cf {
-    beta: f64,        // screen factor (1/(1-r) conservative, 1 linear blend)
-    chain: bool,      // per-tile chain
-    per_tile: bool,   // per-tile error (else level max)
-    cap: f64,         // s >= max/cap
+    beta: f64,      // screen factor (1/(1-r) conservative, 1 linear blend)
+    chain: bool,    // per-tile chain
+    per_tile: bool, // per-tile error (else level max)
+    cap: f64,       // s >= max/cap
     morph_range: f64,
-    box_dist: bool,   // tile box distance (else reference height)
-    diam3d: bool,     // chain diameter includes the tile's height range
+    box_dist: bool, // tile box distance (else reference height)
+    diam3d: bool,   // chain diameter includes the tile's height range
 }
 
 fn corner_idx(levels: &Levels, l: usize, i: u32, j: u32) -> usize {
@@ -219,13 +278,27 @@ fn sfield(levels: &Levels, focal: f64, tau: f64, cf: Cf) -> SField {
         if l >= 1 {
             for ty in 0..ny {
                 for tx in 0..nx {
-                    let t = Tile { x: tx, y: ty, lod: l as u32 };
-                    let e = if cf.per_tile { levels.tile_error(t) as f64 } else { levels.level_error[l] };
+                    let t = Tile {
+                        x: tx,
+                        y: ty,
+                        lod: l as u32,
+                    };
+                    let e = if cf.per_tile {
+                        levels.tile_error(t) as f64
+                    } else {
+                        levels.level_error[l]
+                    };
                     let mut req = cf.beta * e * focal / tau;
                     if cf.chain && l >= 2 {
                         for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                            let c = Tile { x: tx * 2 + dx, y: ty * 2 + dy, lod: l as u32 - 1 };
-                            if !levels.inside(c) { continue; }
+                            let c = Tile {
+                                x: tx * 2 + dx,
+                                y: ty * 2 + dy,
+                                lod: l as u32 - 1,
+                            };
+                            if !levels.inside(c) {
+                                continue;
+                            }
                             let fine = &s[l - 1];
                             let mx = [(0, 0), (1, 0), (0, 1), (1, 1)]
                                 .iter()
@@ -269,21 +342,39 @@ fn box_distance(levels: &Levels, cam: &vkterrain::scene::Camera, t: Tile) -> f64
     (cam.position.clamp(mn, mx) - cam.position).length()
 }
 
-fn select_cf(levels: &Levels, p: &SelectionParams, cam: &vkterrain::scene::Camera, f: &SField, cf: Cf) -> Vec<Tile> {
+fn select_cf(
+    levels: &Levels,
+    p: &SelectionParams,
+    cam: &vkterrain::scene::Camera,
+    f: &SField,
+    cf: Cf,
+) -> Vec<Tile> {
     select_generic(levels, p, |t| {
         let l = t.lod as usize;
         let mx = [(0, 0), (1, 0), (0, 1), (1, 1)]
             .iter()
             .map(|&(i, j)| f.s[l][corner_idx(levels, l, t.x + i, t.y + j)])
             .fold(0.0, f64::max);
-        let d = if cf.box_dist { box_distance(levels, cam, t) } else { select::tile_distance(levels, p, t) as f64 };
+        let d = if cf.box_dist {
+            box_distance(levels, cam, t)
+        } else {
+            select::tile_distance(levels, p, t) as f64
+        };
         d < mx
     })
 }
 
-fn select_generic(levels: &Levels, p: &SelectionParams, splits: impl Fn(Tile) -> bool) -> Vec<Tile> {
+fn select_generic(
+    levels: &Levels,
+    p: &SelectionParams,
+    splits: impl Fn(Tile) -> bool,
+) -> Vec<Tile> {
     let mut out = Vec::new();
-    let mut layer = vec![Tile { x: 0, y: 0, lod: levels.root_lod }];
+    let mut layer = vec![Tile {
+        x: 0,
+        y: 0,
+        lod: levels.root_lod,
+    }];
     while !layer.is_empty() {
         let mut next = Vec::new();
         for t in layer {
@@ -292,7 +383,11 @@ fn select_generic(levels: &Levels, p: &SelectionParams, splits: impl Fn(Tile) ->
             }
             if t.lod > 0 && splits(t) {
                 for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                    next.push(Tile { x: t.x * 2 + dx, y: t.y * 2 + dy, lod: t.lod - 1 });
+                    next.push(Tile {
+                        x: t.x * 2 + dx,
+                        y: t.y * 2 + dy,
+                        lod: t.lod - 1,
+                    });
                 }
             } else {
                 out.push(t);
@@ -305,10 +400,20 @@ fn select_generic(levels: &Levels, p: &SelectionParams, splits: impl Fn(Tile) ->
 
 /// Tile granularity limit: a tile splits iff some sample's projected error of the tile's
 /// level grid exceeds tau (no chain, no morph, no restriction).
-fn tile_exact_splits(levels: &Levels, data: &vkterrain::dataset::Heightmap, cam: &vkterrain::scene::Camera, focal: f64, tau: f64, t: Tile) -> bool {
+fn tile_exact_splits(
+    levels: &Levels,
+    data: &vkterrain::dataset::Heightmap,
+    cam: &vkterrain::scene::Camera,
+    focal: f64,
+    tau: f64,
+    t: Tile,
+) -> bool {
     let span = levels.grid_size << t.lod;
     let (c0, r0) = (t.x * span, t.y * span);
-    let (c1, r1) = ((c0 + span).min(data.width - 1), (r0 + span).min(data.height - 1));
+    let (c1, r1) = (
+        (c0 + span).min(data.width - 1),
+        (r0 + span).min(data.height - 1),
+    );
     for r in r0..=r1 {
         for c in c0..=c1 {
             let lh = select::level_height(data, t.lod, c, r).unwrap();

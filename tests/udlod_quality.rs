@@ -140,7 +140,7 @@ fn screen_space_error_is_within_tau() {
         let udlod = summary(&render(
             &data,
             MethodKind::Udlod,
-            lod(tau, true, 8.0),
+            lod(tau, true, UdlodSettings::default().error_field_max),
             &requests,
         ));
         println!("udlod tau {tau}: {udlod:?}");

@@ -89,7 +89,10 @@ impl Oracle {
 
     fn cells(&self, k: u32) -> (u32, u32) {
         let span = 1u32 << k;
-        ((self.width - 1).div_ceil(span), (self.height - 1).div_ceil(span))
+        (
+            (self.width - 1).div_ceil(span),
+            (self.height - 1).div_ceil(span),
+        )
     }
 
     /// Sample bounds `(c0, c1, r0, r1)` of cell `(x, y)` of level `k`.
@@ -140,8 +143,8 @@ impl Oracle {
         height: u32,
         tau_px: f64,
     ) -> OracleCount {
-        let planes = frustum_planes(camera, width as f64 / height as f64)
-            .map(|p| p.map(|v| v as f64));
+        let planes =
+            frustum_planes(camera, width as f64 / height as f64).map(|p| p.map(|v| v as f64));
         let view = View {
             eye: camera.position,
             focal: camera.focal_px(height),
@@ -338,11 +341,7 @@ fn cell_level(data: &Heightmap, k: u32) -> CellLevel {
             min_max[i] = [lo, hi];
         }
     }
-    CellLevel {
-        nx,
-        error,
-        min_max,
-    }
+    CellLevel { nx, error, min_max }
 }
 
 /// The smallest f32 not below `v` (v >= 0).
@@ -426,7 +425,11 @@ mod tests {
             .map(|i| {
                 let f = i as f64 / 8.0;
                 Camera {
-                    position: DVec3::new(ex * (0.2 + 0.6 * f), ey * (0.7 - 0.5 * f), 40.0 + 400.0 * f),
+                    position: DVec3::new(
+                        ex * (0.2 + 0.6 * f),
+                        ey * (0.7 - 0.5 * f),
+                        40.0 + 400.0 * f,
+                    ),
                     yaw_deg: 360.0 * f,
                     pitch_deg: -10.0 - 70.0 * f,
                     near: 0.5,
@@ -502,13 +505,15 @@ mod tests {
                 let adjacent = |a: (u32, u32, u32), b: (u32, u32, u32)| {
                     let (a0, a1, a2, a3) = leaf_bounds(&data, a);
                     let (b0, b1, b2, b3) = leaf_bounds(&data, b);
-                    let overlap = |lo1: u32, hi1: u32, lo2: u32, hi2: u32| lo1.max(lo2) < hi1.min(hi2);
+                    let overlap =
+                        |lo1: u32, hi1: u32, lo2: u32, hi2: u32| lo1.max(lo2) < hi1.min(hi2);
                     ((a1 == b0 || b1 == a0) && overlap(a2, a3, b2, b3))
                         || ((a3 == b2 || b3 == a2) && overlap(a0, a1, b0, b1))
                 };
                 let mut unrestricted = None;
                 loop {
-                    let mut to_split: Vec<_> = leaves.iter().copied().filter(|&l| over(l)).collect();
+                    let mut to_split: Vec<_> =
+                        leaves.iter().copied().filter(|&l| over(l)).collect();
                     if to_split.is_empty() && unrestricted.is_none() {
                         unrestricted = Some(leaves.iter().filter(|&&l| visible(l)).count());
                     }
@@ -544,6 +549,9 @@ mod tests {
                 unrestricted_smaller += (unrestricted.unwrap() < want.leaves as usize) as usize;
             }
         }
-        assert!(unrestricted_smaller * 2 > frames, "restriction never mattered");
+        assert!(
+            unrestricted_smaller * 2 > frames,
+            "restriction never mattered"
+        );
     }
 }

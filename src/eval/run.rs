@@ -356,7 +356,9 @@ pub fn evaluate(
             swimming_m,
             swimming_px,
             oracle_triangles_median: oracle_median(&measured, |_, o| o as f64),
-            oracle_ratio_median: oracle_median(&measured, |r, o| r.triangles as f64 / o.max(1) as f64),
+            oracle_ratio_median: oracle_median(&measured, |r, o| {
+                r.triangles as f64 / o.max(1) as f64
+            }),
         });
         rows.extend(my_rows);
     }

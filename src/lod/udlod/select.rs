@@ -126,7 +126,6 @@ impl Levels {
         let (nx, ny) = self.tiles_per_side[t.lod as usize];
         t.x < nx && t.y < ny
     }
-
 }
 
 /// Row buffers reused across tiles: the tile's current row and the level's rows below and
@@ -488,7 +487,9 @@ impl SelectionParams {
         let z_ref = data.height_at(lod_viewer.x, lod_viewer.y);
         let key = FieldKey::new(settings, camera.focal_px(height));
         let field = Arc::new(SplitField::new(levels, key));
-        Self::with_reference(levels, field, z_ref, settings, camera, lod_viewer, width, height)
+        Self::with_reference(
+            levels, field, z_ref, settings, camera, lod_viewer, width, height,
+        )
     }
 
     /// [`SelectionParams::new`] with the split field (built for this camera's focal length
