@@ -17,7 +17,7 @@ use vkterrain::clipmap::{
 use vkterrain::dataset::{Heightmap, Level0, PyramidReader, Terrain, tiles};
 use vkterrain::gpu_constants::CLIPMAP_LOD_SHIFT;
 use vkterrain::lod::MethodKind;
-use vkterrain::lod::udlod::select::Levels;
+use vkterrain::lod::udlod::select::{FieldKey, Levels, SplitField};
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer};
 use vkterrain::scene::Camera;
@@ -893,7 +893,8 @@ fn ring_edges_blend_shading_without_steps() {
     common::assert_no_validation_messages(&gpu);
 }
 
-/// UDLOD's levels (per-tile min/max and errors, per-level errors, error field) built from the
+/// UDLOD's levels (per-tile min/max and errors, per-level errors, and the split field derived
+/// from them) built from the
 /// pyramid's level-0 nodes through the bounded reader equal those from the whole height map,
 /// bit for bit; the reader loads each node about once per level sweep and never holds more
 /// than its bound; bad positions and corrupt nodes are one-line errors.
@@ -905,9 +906,9 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
     assert_eq!(reader.spacing(), data.spacing);
     // Bit patterns (short `Debug`: the vectors hold thousands of entries).
     let bits = |v: &[f32]| Bits(v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
-    for (grid, field_max) in [(16, 8.0), (8, 1.0), (4, 8.0)] {
-        let a = Levels::new(&data, grid, field_max).unwrap();
-        let b = Levels::new(&reader.sweep(), grid, field_max).unwrap();
+    for (grid, field_max) in [(16, 1024.0), (8, 1.0), (4, 8.0)] {
+        let a = Levels::new(&data, grid).unwrap();
+        let b = Levels::new(&reader.sweep(), grid).unwrap();
         // Both equal the statistics as computed before `Level0` (sample by sample).
         let (mm, te, le) = reference_statistics(&data, &a);
         assert_eq!(
@@ -934,13 +935,15 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
         let e64 = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(e64(&a.level_error), e64(&b.level_error));
         assert!(a.level_error.iter().any(|&e| e > 0.0));
-        assert_eq!(
-            bits(&a.field.corners),
-            bits(&b.field.corners),
-            "error field"
-        );
-        assert_eq!(e64(&a.field.sigma), e64(&b.field.sigma));
-        assert_eq!(e64(&a.field.mu), e64(&b.field.mu));
+        let key = FieldKey {
+            focal_px: 623.5,
+            tau_px: 1.0,
+            morph_range: 0.2,
+            field_max,
+        };
+        let (fa, fb) = (SplitField::new(&a, key), SplitField::new(&b, key));
+        assert_eq!(bits(&fa.corners), bits(&fb.corners), "split field");
+        assert_eq!(bits(&fa.split), bits(&fb.split), "split distances");
         assert!(reader.cached_bytes() <= reader.max_cached_bytes());
     }
     // 17x17 level-0 nodes, cache 3 x 17 + 8 = 59: the three builds sweep 6 + 7 + 8 levels and
@@ -985,7 +988,7 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
         f.write_all(&f32::NAN.to_le_bytes()).unwrap();
     }
     let bad = PyramidReader::open(&broken).unwrap();
-    let e = Levels::new(&bad.sweep(), 16, 8.0).unwrap_err().to_string();
+    let e = Levels::new(&bad.sweep(), 16).unwrap_err().to_string();
     assert!(e.contains("node 0/1/0") && !e.contains('\n'), "{e}");
 }
 

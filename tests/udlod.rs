@@ -86,7 +86,7 @@ fn gpu_and_cpu_tiles(
     let mut out = Vec::new();
     {
         let mut r = Renderer::new(&gpu, data, lod.clone(), options).unwrap();
-        let levels = Levels::new(data, lod.grid_size, lod.error_field_max).unwrap();
+        let levels = Levels::new(data, lod.grid_size).unwrap();
         let mut sink = CollectSink::default();
         for cam in cameras {
             r.render(*cam, &mut sink).unwrap();
@@ -166,7 +166,7 @@ struct MorphComparison {
 /// with) at every vertex of every tile the GPU drew, against `select::morphed_vertex`.
 fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> MorphComparison {
     let gpu = common::gpu(false);
-    let levels = Levels::new(data, lod.grid_size, lod.error_field_max).unwrap();
+    let levels = Levels::new(data, lod.grid_size).unwrap();
     let g = lod.grid_size;
     let mut out = MorphComparison::default();
     {
@@ -293,7 +293,7 @@ fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
         cull: false,
         ..settings()
     };
-    let levels = Levels::new(&data, lod.grid_size, lod.error_field_max).unwrap();
+    let levels = Levels::new(&data, lod.grid_size).unwrap();
     let mut checked_edges = 0;
     for cam in poses(&data, 200) {
         let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
@@ -354,7 +354,7 @@ fn pure_rotation_keeps_the_tile_set_without_culling() {
         cull: false,
         ..settings()
     };
-    let levels = Levels::new(&data, lod.grid_size, lod.error_field_max).unwrap();
+    let levels = Levels::new(&data, lod.grid_size).unwrap();
     for base in poses(&data, 20) {
         let sel = |c: &Camera| {
             let p = SelectionParams::new(&levels, &data, &lod, c, c.position, W, H);
@@ -376,7 +376,7 @@ fn pure_rotation_keeps_the_tile_set_without_culling() {
 fn culling_keeps_every_tile_a_brute_force_box_test_keeps() {
     let data = terrain(257, 30.0);
     let lod = settings();
-    let levels = Levels::new(&data, lod.grid_size, lod.error_field_max).unwrap();
+    let levels = Levels::new(&data, lod.grid_size).unwrap();
     for cam in poses(&data, 60) {
         let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
         let mut no_cull = p.clone();

@@ -10,7 +10,7 @@ use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::eval::metrics::{self, GeometricError, PixelError};
-use vkterrain::lod::udlod::select::Levels;
+use vkterrain::lod::udlod::select::{FieldKey, Levels, SplitField};
 use vkterrain::lod::{MethodKind, UdlodSettings};
 use vkterrain::readback::OwnedFrame;
 use vkterrain::render::FrameRequest;
@@ -140,7 +140,7 @@ fn screen_space_error_is_within_tau() {
         let udlod = summary(&render(
             &data,
             MethodKind::Udlod,
-            lod(tau, true, 8.0),
+            lod(tau, true, UdlodSettings::default().error_field_max),
             &requests,
         ));
         println!("udlod tau {tau}: {udlod:?}");
@@ -172,18 +172,12 @@ fn error_field_saves_triangles() {
             .map(|f| f.triangles)
             .sum()
     };
-    let (distance_only, with_field) = (tris(1.0), tris(8.0));
+    let (distance_only, with_field) = (tris(1.0), tris(UdlodSettings::default().error_field_max));
     println!("triangles: distance-only {distance_only}, error field {with_field}");
     assert!(
         (with_field as f64) < 0.9 * distance_only as f64,
         "field {with_field} vs distance-only {distance_only}"
     );
-    // The field's construction invariants (property 3 of ErrorField) on this data.
-    let levels = Levels::new(&data, 8, 8.0).unwrap();
-    for l in 1..levels.root_lod as usize {
-        assert!(levels.field.sigma[l] <= vkterrain::lod::udlod::select::FIELD_LEVEL_RATIO + 1e-6);
-        assert!(levels.field.mu[l] <= 8.0);
-    }
 }
 
 /// World points of a frame's terrain pixels (`None`: sky).
@@ -299,9 +293,9 @@ fn effective_step(data: &Heightmap, start: DVec3, step: DVec3, frames: usize) ->
 /// `max_l 2 * S * 2^l * spacing * s * focal / (r * (1 - r) * D[l + 1]^2)` pixels.
 /// Without morphing a level switch moves the surface by a level's whole error at once.
 fn pop_bound(data: &Heightmap, settings: &UdlodSettings, step: f64) -> f64 {
-    let levels = Levels::new(data, settings.grid_size, settings.error_field_max).unwrap();
+    let levels = Levels::new(data, settings.grid_size).unwrap();
     let focal = Camera::default().focal_px(H);
-    let split = levels.split_distances(focal, settings.tau_px, settings.morph_range);
+    let split = SplitField::new(&levels, FieldKey::new(settings, focal)).split;
     let mut slope = 0.0f64;
     for r in 0..data.height - 1 {
         for c in 0..data.width - 1 {

@@ -7,7 +7,7 @@ struct Udlod {
     // x: split distance D of each level in metres (UDLOD_NO_SPLIT past the root).
     split: array<vec4<f32>, UDLOD_MAX_LEVELS>,
     // x: offset of the level's min/max entries, y/z: tiles per side of the level, w: offset
-    // of the level's error-field corners ((y + 1) x (z + 1) values).
+    // of the level's split-field corners ((y + 1) x (z + 1) values).
     levels: array<vec4<u32>, UDLOD_MAX_LEVELS>,
     // x: quads per tile side, y: root level, z: final list capacity, w: temporary list capacity.
     sizes: vec4<u32>,
@@ -28,9 +28,9 @@ struct Tile {
 }
 
 @group(1) @binding(0) var<uniform> udlod: Udlod;
-// Per-region error field: corner values of every level's tiles (see `ErrorField` in
-// src/lod/udlod/select.rs).
-@group(1) @binding(5) var<storage, read> error_field: array<f32>;
+// The split field: per level, values m >= 1 at the corners of the level's tiles; a point's
+// split distance is split[lod] / m (see `SplitField` in src/lod/udlod/select.rs).
+@group(1) @binding(5) var<storage, read> split_field: array<f32>;
 
 // Camera-relative metres of an integer sample position (integers subtracted first: exact).
 fn relative_xy(sample: vec2<i32>) -> vec2<f32> {
@@ -44,10 +44,10 @@ fn viewer_xy(sample: vec2<i32>) -> vec2<f32> {
 
 fn field_corner(lod: u32, i: u32, j: u32) -> f32 {
     let level = udlod.levels[lod];
-    return error_field[level.w + j * (level.y + 1u) + i];
+    return split_field[level.w + j * (level.y + 1u) + i];
 }
 
-// (min, max) of the error field over a tile of level `lod` at (x, y): its corners.
+// (min, max) of the split field over a tile of level `lod` at (x, y): its corners.
 fn field_range(x: u32, y: u32, lod: u32) -> vec2<f32> {
     let c00 = field_corner(lod, x, y);
     let c10 = field_corner(lod, x + 1u, y);
@@ -56,8 +56,8 @@ fn field_range(x: u32, y: u32, lod: u32) -> vec2<f32> {
     return vec2<f32>(min(min(c00, c10), min(c01, c11)), max(max(c00, c10), max(c01, c11)));
 }
 
-// The error field of level `lod` at an integer sample position: bilinear in the level's tile
-// cell, clamped to the cell's corner range; 1 past the root (mirrors `ErrorField::at`).
+// The split field of level `lod` at an integer sample position: bilinear in the level's tile
+// cell, clamped to the cell's corner range; 1 past the root (mirrors `SplitField::at`).
 fn field_at(sample: vec2<i32>, lod: u32) -> f32 {
     if lod > udlod.sizes.y {
         return 1.0;

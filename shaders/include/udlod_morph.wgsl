@@ -5,7 +5,7 @@
 
 // 0 = the tile's own grid, 1 = fully on the parent's grid (times the on/off switch
 // `udlod.params.z`). `d` is the distance from the LOD viewer to the un-morphed vertex at the
-// reference height, scaled by the parent level's error field; `parent_split` the parent
+// reference height, scaled by the parent level's split field; `parent_split` the parent
 // level's split distance; the morph runs over the last `morph_range` of it.
 fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
     let d = length(vec3<f32>(viewer_xy(sample), udlod.viewer.z));

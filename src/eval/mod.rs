@@ -10,6 +10,7 @@ pub mod check;
 pub mod flip;
 pub mod gpu;
 pub mod metrics;
+pub mod oracle;
 pub mod report;
 pub mod run;
 pub mod table;

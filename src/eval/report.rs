@@ -74,12 +74,12 @@ fn opt(v: Option<f64>) -> String {
 
 fn frames_csv(eval: &Evaluation) -> String {
     let mut csv = String::from(
-        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99\n",
+        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles\n",
     );
     for r in &eval.rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5},{},{},{}",
             r.variant,
             r.method,
             r.frame,
@@ -101,6 +101,7 @@ fn frames_csv(eval: &Evaluation) -> String {
             r.popping_p99_px,
             opt(r.flip.map(|f| f.mean)),
             opt(r.flip.map(|f| f.p99)),
+            optional(r.oracle_triangles.map(|v| v as f64), 0)
         );
     }
     csv
@@ -108,12 +109,12 @@ fn frames_csv(eval: &Evaluation) -> String {
 
 fn summary_csv(eval: &Evaluation) -> String {
     let mut sum = String::from(
-        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean\n",
+        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median\n",
     );
     for s in &eval.summaries {
         let _ = writeln!(
             sum,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{}",
             s.variant,
             s.method,
             s.frames,
@@ -137,7 +138,9 @@ fn summary_csv(eval: &Evaluation) -> String {
             s.popping_px.max,
             s.swimming_px.mean,
             s.swimming_px.p99,
-            s.swimming_m.mean
+            s.swimming_m.mean,
+            optional(s.oracle_triangles_median, 0),
+            optional(s.oracle_ratio_median, 3)
         );
     }
     sum
@@ -365,4 +368,9 @@ fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)
         );
     }
     md
+}
+
+/// A CSV cell for an optional number: empty when absent.
+fn optional(v: Option<f64>, decimals: usize) -> String {
+    v.map(|v| format!("{v:.decimals$}")).unwrap_or_default()
 }

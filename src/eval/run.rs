@@ -22,6 +22,7 @@ use super::gpu::{EvalShared, FrameShape, GpuAnalysis, GpuFrameMetrics, Role};
 use super::metrics::{ErrorHistogram, GeometricError, Summary, SwimTracker};
 use crate::config::Config;
 use crate::dataset::Terrain;
+use super::oracle::Oracle;
 use crate::driver::Gpu;
 use crate::error::{Error, Result};
 use crate::lod::{MethodConfig, MethodKind};
@@ -29,6 +30,10 @@ use crate::readback::FrameView;
 use crate::render::stats::Percentiles;
 use crate::render::{FrameRequest, RenderOptions, Renderer};
 use crate::scene::Scenario;
+
+/// At most this many measured frames (evenly spaced) get the triangle oracle (seconds per
+/// frame on large data sets).
+const ORACLE_FRAMES: usize = 12;
 
 /// One method with one parameter setting.
 #[derive(Clone, Debug)]
@@ -137,6 +142,9 @@ pub struct FrameRow {
     pub popping_p99_px: f64,
     /// FLIP against the reference frame (sampled frames only).
     pub flip: Option<FlipStats>,
+    /// The triangle oracle's count for this frame at the variant's tau (UDLOD variants, on
+    /// the frames the oracle runs on: `eval::oracle`).
+    pub oracle_triangles: Option<u64>,
 }
 
 /// Summary of one variant over the frames after warm-up.
@@ -167,6 +175,10 @@ pub struct RunSummary {
     /// Per fixed world point: range of its height error (metres) and that range in pixels.
     pub swimming_m: Summary,
     pub swimming_px: Summary,
+    /// Median over the oracle's frames of the oracle's triangle count, and of this variant's
+    /// triangles divided by it (UDLOD variants only).
+    pub oracle_triangles_median: Option<f64>,
+    pub oracle_ratio_median: Option<f64>,
 }
 
 /// A frame kept for the side-by-side images.
@@ -349,6 +361,7 @@ pub fn evaluate(
         setup.frames as u64 * runs.len() as u64,
     );
     let mut flips_pending = 0usize;
+    let mut oracle: Option<Oracle> = None;
     for k in 0..setup.frames as u64 {
         let requests = setup.requests(k);
         let cones: Vec<ViewCone> = requests
@@ -364,6 +377,11 @@ pub fn evaluate(
         let mut reference = ReferenceFrame::default();
         for (i, run) in runs.iter_mut().enumerate() {
             let spawned = run.frame(setup, k, &requests, &mut reference, i, &flip_tx)?;
+            if let Some(count) = oracle_count(setup, &mut oracle, &run.method, k, &requests)
+                && let Some(row) = run.rows.last_mut()
+            {
+                row.oracle_triangles = Some(count);
+            }
             flips_pending += spawned;
             progress.advance();
         }
@@ -558,9 +576,35 @@ impl Run {
             ssim: gpu.ssim(),
             popping_p99_px: gpu.popping.summary().p99,
             flip,
+            oracle_triangles: None,
         });
         Ok(spawned)
     }
+}
+
+/// The triangle oracle's count for frame `k` of a UDLOD run at its tau (`eval::oracle`): on at
+/// most [`ORACLE_FRAMES`] evenly spaced measured frames, for one view over a height map held in
+/// memory (the oracle needs level 0 whole; clipmap evaluations get no oracle column).
+fn oracle_count(
+    setup: &EvalSetup<'_>,
+    oracle: &mut Option<Oracle>,
+    method: &MethodConfig,
+    k: u64,
+    requests: &[FrameRequest],
+) -> Option<u64> {
+    let (MethodConfig::Udlod(s), Terrain::Grid(data), [request]) = (method, setup.data, requests)
+    else {
+        return None;
+    };
+    let warmup = setup.warmup as u64;
+    let measured = (setup.frames as u64).saturating_sub(warmup);
+    let stride = measured.div_ceil(ORACLE_FRAMES as u64).max(1);
+    if k < warmup || (k - warmup) % stride != 0 {
+        return None;
+    }
+    let o = oracle.get_or_insert_with(|| Oracle::new(data));
+    let (w, h) = (setup.options.width, setup.options.height);
+    Some(o.count(data, &request.camera, w, h, s.tau_px).triangles)
 }
 
 fn apply_flip(runs: &mut [Run], (run, frame, stats, colours): FlipDone) {
@@ -633,6 +677,10 @@ fn finish(
             popping_px: Summary::of(&mut popping),
             swimming_m,
             swimming_px,
+            oracle_triangles_median: oracle_median(&measured, |_, o| o as f64),
+            oracle_ratio_median: oracle_median(&measured, |r, o| {
+                r.triangles as f64 / o.max(1) as f64
+            }),
         });
         rows.append(&mut run.rows);
         images.append(&mut run.images);
@@ -671,4 +719,14 @@ fn finish(
         cross_check: check,
         images,
     })
+}
+
+/// Median of `value(row, oracle triangles)` over the rows the oracle ran on (`None` when it
+/// ran on none: not a UDLOD variant).
+fn oracle_median(rows: &[&FrameRow], value: impl Fn(&FrameRow, u64) -> f64) -> Option<f64> {
+    let v: Vec<f64> = rows
+        .iter()
+        .filter_map(|r| r.oracle_triangles.map(|o| value(r, o)))
+        .collect();
+    (!v.is_empty()).then(|| Percentiles::of(v).median)
 }

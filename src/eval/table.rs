@@ -28,6 +28,13 @@ pub const SUMMARY_COLUMNS: &[Column<RunSummary>] = &[
         cell: |s| format!("{:.0}", s.triangles_median),
     },
     Column {
+        header: "UDLOD/oracle",
+        cell: |s| match s.oracle_ratio_median {
+            Some(r) => format!("{r:.2}"),
+            None => "-".into(),
+        },
+    },
+    Column {
         header: "error px (mean / p99.9 / max)",
         cell: |s| {
             let p = &s.error.pixels;

@@ -29,7 +29,7 @@ use crate::error::{Error, Result};
 use crate::frame::ViewState;
 use crate::gpu_constants::UDLOD_MAX_LEVELS;
 use crate::slots::ViewSlot;
-use select::{Levels, SelectionParams};
+use select::{FieldKey, Levels, SelectionParams, SplitField};
 use settings::UdlodSettings;
 
 /// Per-frame uniforms of set 1 (`Udlod` in `shaders/include/udlod_common.wgsl`).
@@ -73,7 +73,7 @@ pub const UDLOD_SET: &[Binding] = {
         Binding::new(2, T::STORAGE_BUFFER, CV, "temp_tiles"),
         Binding::new(3, T::STORAGE_BUFFER, CV, "final_tiles"),
         Binding::new(4, T::STORAGE_BUFFER, CV, "min_max"),
-        Binding::new(5, T::STORAGE_BUFFER, CV, "error_field"),
+        Binding::new(5, T::STORAGE_BUFFER, CV, "split_field"),
     ]
 };
 
@@ -92,6 +92,10 @@ struct SlotBuffers {
     final_tiles: Buffer,
     /// Host-readable copy of `state` (counters for statistics).
     counters: Buffer,
+    /// The split field's corner values this slot draws with, and what they were built for
+    /// (rewritten only when that changes: a frame in flight keeps its own copy).
+    field: Buffer,
+    field_key: Option<FieldKey>,
     set: vk::DescriptorSet,
 }
 
@@ -102,10 +106,10 @@ pub struct Udlod {
     /// Level-0 heights for the reference height under the LOD viewer (shared with the
     /// caller: the grid's `Arc`, or the pyramid reader with its bounded node cache).
     heights: Terrain,
-    /// GPU mirrors of `levels.min_max` and `levels.field.corners` (kept alive for the
-    /// descriptor sets).
+    /// The split field of the last key asked for (per-tile split distances).
+    field: Option<Arc<SplitField>>,
+    /// GPU mirror of `levels.min_max` (kept alive for the descriptor sets).
     _min_max: Buffer,
-    _error_field: Buffer,
     indices: Buffer,
     index_count: u32,
     slots: Vec<SlotBuffers>,
@@ -133,7 +137,7 @@ impl Udlod {
             ),
             Terrain::Pyramid(p) => (p.tile_stats(settings.grid_size)?, p.spacing()),
         };
-        let levels = Levels::from_stats(stats, spacing, settings.error_field_max);
+        let levels = Levels::from_stats(stats, spacing);
         // The morph reads the split distance one level past the root (never morphs).
         if levels.levels() >= UDLOD_MAX_LEVELS {
             return Err(Error::invalid(
@@ -155,15 +159,12 @@ impl Udlod {
             MemoryLocation::CpuToGpu,
         )?;
         min_max.write(mm_bytes)?;
-        let field_bytes: &[u8] = bytemuck::cast_slice(&levels.field.corners);
-        let mut error_field = Buffer::new(
-            gpu,
-            "udlod error field",
-            field_bytes.len() as u64,
-            vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::CpuToGpu,
-        )?;
-        error_field.write(field_bytes)?;
+        // Corner values per level: (nx + 1) x (ny + 1) floats.
+        let field_bytes: u64 = levels
+            .tiles_per_side
+            .iter()
+            .map(|&(nx, ny)| (nx as u64 + 1) * (ny as u64 + 1) * 4)
+            .sum();
         let grid = super::brute::grid_indices(settings.grid_size);
         let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
         let mut indices = Buffer::new(
@@ -220,6 +221,13 @@ impl Udlod {
                 vk::BufferUsageFlags::TRANSFER_DST,
                 MemoryLocation::GpuToCpu,
             )?;
+            let field = Buffer::new(
+                gpu,
+                &format!("udlod split field {i}"),
+                field_bytes,
+                storage,
+                MemoryLocation::CpuToGpu,
+            )?;
             sets.write(
                 i,
                 &[
@@ -228,7 +236,7 @@ impl Udlod {
                     ("temp_tiles", Resource::Buffer(temp_tiles.raw)),
                     ("final_tiles", Resource::Buffer(final_tiles.raw)),
                     ("min_max", Resource::Buffer(min_max.raw)),
-                    ("error_field", Resource::Buffer(error_field.raw)),
+                    ("split_field", Resource::Buffer(field.raw)),
                 ],
             )?;
             slots.push(SlotBuffers {
@@ -237,6 +245,8 @@ impl Udlod {
                 _temp_tiles: temp_tiles,
                 final_tiles,
                 counters,
+                field,
+                field_key: None,
                 set,
             });
         }
@@ -266,8 +276,8 @@ impl Udlod {
             settings,
             heights: ctx.data.clone(),
             levels,
+            field: None,
             _min_max: min_max,
-            _error_field: error_field,
             indices,
             index_count: grid.len() as u32,
             slots,
@@ -284,9 +294,24 @@ impl Udlod {
         &self.levels
     }
 
+    /// The split field for `key`, built when the key changes (once per renderer and view
+    /// size in practice).
+    fn split_field(&mut self, key: FieldKey) -> Arc<SplitField> {
+        match &self.field {
+            Some(f) if f.key == key => f.clone(),
+            _ => {
+                let f = Arc::new(SplitField::new(&self.levels, key));
+                self.field = Some(f.clone());
+                f
+            }
+        }
+    }
+
     /// The selection inputs for a view, exactly as uploaded (tests use them for the CPU
     /// reference).
-    pub fn selection_params(&self, view: &ViewState) -> Result<SelectionParams> {
+    pub fn selection_params(&mut self, view: &ViewState) -> Result<SelectionParams> {
+        let key = FieldKey::new(&self.settings, view.camera.focal_px(view.height));
+        let field = self.split_field(key);
         let z_ref = match view.ground_m {
             Some(z) => z,
             None => self
@@ -295,6 +320,7 @@ impl Udlod {
         };
         Ok(SelectionParams::with_reference(
             &self.levels,
+            field,
             z_ref,
             &self.settings,
             &view.camera,
@@ -325,7 +351,7 @@ impl LodMethod for Udlod {
             frustum: p.frustum,
             ..Default::default()
         };
-        for (i, d) in p.split.iter().enumerate() {
+        for (i, d) in p.field.split.iter().enumerate() {
             u.split[i] = [*d, 0.0, 0.0, 0.0];
         }
         for lod in 0..self.levels.levels() as usize {
@@ -334,7 +360,7 @@ impl LodMethod for Udlod {
                 self.levels.level_offsets[lod],
                 nx,
                 ny,
-                self.levels.field.corner_offsets[lod],
+                p.field.corner_offsets[lod],
             ];
         }
         u.sizes = [
@@ -351,9 +377,14 @@ impl LodMethod for Udlod {
             if p.cull { 1.0 } else { 0.0 },
         ];
         u.counts = [self.index_count, 0, 0, 0];
-        self.slots[slot.index()]
-            .uniforms
-            .write(bytemuck::bytes_of(&u))
+        let s = &mut self.slots[slot.index()];
+        if s.field_key != Some(p.field.key) {
+            // This slot's previous frame has completed (the renderer waits for a slot before
+            // reusing it), so its copy may change.
+            s.field.write(bytemuck::cast_slice(&p.field.corners))?;
+            s.field_key = Some(p.field.key);
+        }
+        s.uniforms.write(bytemuck::bytes_of(&u))
     }
 
     fn record_prepass(

@@ -1,12 +1,14 @@
 //! UDLOD on the CPU: the level structure, per-tile min/max heights and geometric errors, the
-//! per-region error field, the split-distance table derived from the screen-space error
-//! target, the frustum, the vertex morph, and a reference implementation of the GPU's tile
+//! per-tile split distances derived from the screen-space error target and the crack-free
+//! chain (the split field), the frustum, the vertex morph, and a reference implementation of the GPU's tile
 //! selection (tests compare the GPU's final tile list against it).
 //!
 //! Arithmetic that must agree with the shaders (`select_tiles`, `morph_factor`,
 //! `morphed_vertex`, `field_at`) is written in f32 in the same order as
 //! `shaders/udlod_tiling.wgsl`, `shaders/include/udlod_morph.wgsl` and
 //! `shaders/include/udlod_common.wgsl`.
+
+use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
 
@@ -16,11 +18,6 @@ use crate::dataset::{Heightmap, Level0};
 use crate::error::Result;
 use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
 use crate::scene::Camera;
-
-/// Largest ratio between the error field of level `l + 1` anywhere over a level-`l` tile and
-/// the field's minimum on that tile (`sigma` in `split_distances`). Bounding it keeps the
-/// crack-free chain of split distances close to the distance-only one.
-pub const FIELD_LEVEL_RATIO: f64 = 1.25;
 
 /// A quadtree tile: `(x, y)` in tiles of its level, `lod` 0 = full resolution.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -52,23 +49,21 @@ pub struct Levels {
     pub tile_error: Vec<f32>,
     /// Geometric error of each level (the largest of its tiles'; 0 for level 0).
     pub level_error: Vec<f64>,
-    /// The per-region error field (all ones: distance-only selection).
-    pub field: ErrorField,
 }
 
 impl Levels {
-    /// Builds the levels; `field_max` (>= 1) caps the error field (1: distance-only).
+    /// Builds the levels' statistics (per tile: min/max height and geometric error).
     /// `data` is any source of level-0 samples (the grid in memory, or a tile pyramid read
     /// node by node); the result depends only on the sample values. Errors are the source's
     /// (a pyramid node that cannot be read). Computes the tile statistics on this thread; a
     /// data set's stored statistics go through [`Levels::from_stats`].
-    pub fn new<D: Level0 + ?Sized>(data: &D, grid_size: u32, field_max: f64) -> Result<Self> {
+    pub fn new<D: Level0 + ?Sized>(data: &D, grid_size: u32) -> Result<Self> {
         let stats = TileStats::compute_serial(data, grid_size)?;
-        Ok(Self::from_stats(stats, data.spacing(), field_max))
+        Ok(Self::from_stats(stats, data.spacing()))
     }
 
     /// The levels from per-tile statistics (computed, or stored by `vkterrain preprocess`).
-    pub fn from_stats(stats: TileStats, spacing: f64, field_max: f64) -> Self {
+    pub fn from_stats(stats: TileStats, spacing: f64) -> Self {
         let root_lod = stats.root_lod();
         let mut tiles_per_side = Vec::new();
         let mut level_offsets = Vec::new();
@@ -82,7 +77,7 @@ impl Levels {
             tile_error.extend(level.error);
             level_error.push(level.max_error);
         }
-        let mut levels = Levels {
+        Levels {
             grid_size: stats.grid_size,
             root_lod,
             width: stats.width,
@@ -93,10 +88,7 @@ impl Levels {
             min_max,
             tile_error,
             level_error,
-            field: ErrorField::default(),
-        };
-        levels.field = ErrorField::new(&levels, field_max);
-        levels
+        }
     }
 
     pub fn levels(&self) -> u32 {
@@ -125,16 +117,6 @@ impl Levels {
     pub fn inside(&self, t: Tile) -> bool {
         let (nx, ny) = self.tiles_per_side[t.lod as usize];
         t.x < nx && t.y < ny
-    }
-
-    /// Split distance of each level (metres), see [`split_distances`].
-    pub fn split_distances(&self, focal_px: f64, tau_px: f64, morph_range: f64) -> Vec<f32> {
-        split_distances(self, focal_px, tau_px, morph_range)
-    }
-
-    /// The error field of level `lod` at integer sample `sample` (1 past the root level).
-    pub fn field_at(&self, sample: [i32; 2], lod: u32) -> f32 {
-        self.field.at(self, sample, lod)
     }
 }
 
@@ -166,132 +148,134 @@ fn level_corners<D: Level0 + ?Sized>(data: &D, lod: u32, c: u32, r: u32) -> Resu
     ])
 }
 
-/// The per-region error field `m_l(p) >= 1`: how much farther than the level's global error
-/// requires a region may keep level `l`, because its own error is smaller. Selection uses the
-/// scaled distance `g_l(p) = m_l(p) * d(p)` instead of `d(p)`; see `docs/udlod.md` for the
-/// three properties that keep the error bound, crack-freedom and the one-level rule:
-/// 1. `m_l(p) * e_local_l(p) <= e_l` (the level's global error): the pixel target still holds;
-/// 2. a tile's split test uses the minimum of `m_l` over the tile (bilinear: its corners), so
-///    an unsplit tile has `g_l >= D[l]` everywhere on it;
-/// 3. the chain of split distances uses `sigma[l]` (largest `m_{l+1}` over a level-`l` tile /
-///    that tile's minimum of `m_l`, <= [`FIELD_LEVEL_RATIO`]) and `mu[l]` (largest `m_{l+1}`).
+fn level_interpolate(lod: u32, corners: [f64; 4], c: u32, r: u32) -> f64 {
+    let step = 1u32 << lod;
+    let (c0, r0) = (c / step * step, r / step * step);
+    let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
+    interp::triangulated(corners, fx, fy)
+}
+
+/// What a [`SplitField`] depends on besides the data: it is rebuilt when one of these changes
+/// (in practice once per renderer and view size).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FieldKey {
+    /// Focal length in pixels (`Camera::focal_px`).
+    pub focal_px: f64,
+    pub tau_px: f64,
+    pub morph_range: f64,
+    /// Largest ratio between a level's largest and a tile's split distance (1: one distance
+    /// per level, the distance-only selection).
+    pub field_max: f64,
+}
+
+impl FieldKey {
+    pub fn new(settings: &UdlodSettings, focal_px: f64) -> Self {
+        FieldKey {
+            focal_px,
+            tau_px: settings.tau_px,
+            morph_range: settings.morph_range,
+            field_max: settings.error_field_max,
+        }
+    }
+}
+
+/// The share of a tile's worst-case projected error that the split rule spends on `tau`:
+/// `tau` is the 99.9th percentile of the screen-space error, not its maximum. The worst case
+/// (the tile's largest error, seen from its nearest point) overstates that percentile about
+/// 2-3x (measured: `docs/udlod.md`, "What set the triangle count"): the largest error sits at
+/// one sample, rarely the nearest, and a tile stays drawn until it is about twice as far as
+/// where it split. With this share the measured 99.9th percentile lands at 0.5-1.15 tau
+/// where the pixel target (not the crack-free chain) sets the distances; single pixels may
+/// exceed tau.
+pub const WORST_CASE_SHARE: f64 = 0.5;
+
+/// Relative margin on the crack-free chain: covers the f32 rounding of `m`, `D` and the
+/// `m * d < D` test on the GPU (~1e-7 each).
+const CHAIN_MARGIN: f64 = 1e-5;
+
+/// Per-tile split distances: how near the LOD viewer may come to each tile before it splits,
+/// derived per tile from its own geometric error and the pixel target, and tied between
+/// levels by the crack-free chain tile by tile (`docs/udlod.md`, "Split field").
 ///
-/// Values live at the corners of each level's tiles and are interpolated bilinearly.
-#[derive(Clone, Debug, Default)]
-pub struct ErrorField {
-    /// Corner values of every level, `(nx + 1) x (ny + 1)` row-major per level.
+/// Stored as the GPU reads it: per level a split distance `D[l]` (the level's largest) and a
+/// field `m_l >= 1` at the corners of the level's tiles, interpolated bilinearly; a point's
+/// split distance is `s_l(p) = D[l] / m_l(p)`. A tile splits when its nearest point (at the
+/// reference height) is nearer than the largest `s` of its corners (`m_min * d < D`);
+/// vertices of level `l - 1` morph over the last `morph_range` of `s_l(p)`. With `s_Q` the
+/// smallest and `S_Q` the largest corner value of tile `Q`, for every tile `Q` of level `l`:
+/// 1. pixel target: `s_Q >= k e_Q f / tau` (`e_Q`: the tile's own error, `k`:
+///    [`WORST_CASE_SHARE`]), so wherever `Q`'s geometry is drawn, unmorphed or blended into
+///    its children's morph zone, it is at least that far away;
+/// 2. crack-free chain, for each child `P` (level `l - 1 >= 1`, which may split):
+///    `(1 - r) s_Q >= S_P + sqrt(2) extent(l - 1)`: where `P` split, every point of `P` is
+///    nearer than `S_P + sqrt(2) extent`, so a neighbour of `P`'s children at level `l - 1`
+///    is unmorphed there, and (with the split rule) neighbours differ by at most one level.
+///
+/// Level 0 never splits, so level 1 has no chain term. Each corner takes the largest
+/// requirement of the tiles around it; `field_max` then raises small values to the level's
+/// largest / `field_max`.
+#[derive(Clone, Debug)]
+pub struct SplitField {
+    pub key: FieldKey,
+    /// `D[l]` in metres: the largest split distance of each level (0 for level 0, which never
+    /// splits; [`UDLOD_NO_SPLIT`] past the root), `UDLOD_MAX_LEVELS` entries as uploaded.
+    pub split: Vec<f32>,
+    /// Field values `m >= 1` at every level's tile corners, `(nx + 1) x (ny + 1)` row-major
+    /// per level (all ones at level 0).
     pub corners: Vec<f32>,
     /// Offset of each level's corners in `corners`.
     pub corner_offsets: Vec<u32>,
-    /// Per level `l`: largest `m_{l+1}` over a level-`l` tile / that tile's minimum of `m_l`.
-    pub sigma: Vec<f64>,
-    /// Per level `l`: largest value of `m_{l+1}`.
-    pub mu: Vec<f64>,
 }
 
-impl ErrorField {
-    pub fn new(levels: &Levels, field_max: f64) -> Self {
-        let field_max = field_max.max(1.0);
-        let levels_n = levels.levels() as usize;
-        let dims: Vec<(usize, usize)> = levels
-            .tiles_per_side
-            .iter()
-            .map(|&(nx, ny)| (nx as usize + 1, ny as usize + 1))
-            .collect();
-        let mut per_level: Vec<Vec<f64>> = Vec::with_capacity(levels_n);
-        for lod in 0..levels_n {
-            let (cw, ch) = dims[lod];
-            let (nx, ny) = levels.tiles_per_side[lod];
-            let global = levels.level_error[lod];
-            let mut v = vec![field_max; cw * ch];
-            if lod > 0 && field_max > 1.0 {
-                // Property 1: a corner is bounded by every tile it belongs to.
-                for ty in 0..ny {
-                    for tx in 0..nx {
-                        let e = levels.tile_error(Tile {
-                            x: tx,
-                            y: ty,
-                            lod: lod as u32,
-                        }) as f64;
-                        let limit = if e > 0.0 {
-                            (global / e).clamp(1.0, field_max)
-                        } else {
-                            field_max
-                        };
-                        for (i, j) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                            let k = (ty as usize + j) * cw + tx as usize + i;
-                            v[k] = v[k].min(limit);
-                        }
-                    }
-                }
-            } else {
-                v.fill(1.0);
-            }
-            if lod >= 2 {
-                // Property 3: over each level-(lod-1) tile, m_lod <= ratio * min m_(lod-1).
-                let (fw, _) = dims[lod - 1];
-                let (fnx, fny) = levels.tiles_per_side[lod - 1];
-                let fine = &per_level[lod - 1];
-                for ty in 0..fny as usize {
-                    for tx in 0..fnx as usize {
-                        let fine_min = [(0, 0), (1, 0), (0, 1), (1, 1)]
-                            .iter()
-                            .map(|&(i, j)| fine[(ty + j) * fw + tx + i])
-                            .fold(f64::INFINITY, f64::min);
-                        let bound = FIELD_LEVEL_RATIO * fine_min;
-                        for (i, j) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                            let k = (ty / 2 + j) * cw + tx / 2 + i;
-                            v[k] = v[k].min(bound).max(1.0);
-                        }
-                    }
-                }
-            }
-            per_level.push(v);
-        }
-        // f32 as uploaded; sigma and mu from the f32 values.
+const QUAD: [(u32, u32); 4] = [(0, 0), (1, 0), (0, 1), (1, 1)];
+
+impl SplitField {
+    pub fn new(levels: &Levels, key: FieldKey) -> Self {
+        let keep = 1.0 - key.morph_range;
+        let cap = key.field_max.max(1.0);
+        let mut split = vec![UDLOD_NO_SPLIT; UDLOD_MAX_LEVELS as usize];
         let mut corners = Vec::new();
         let mut corner_offsets = Vec::new();
-        for v in &per_level {
+        // Split distances of the previous level's corners as the GPU evaluates them (D / m).
+        let mut finer: Vec<f64> = Vec::new();
+        for lod in 0..=levels.root_lod {
+            let (nx, ny) = levels.tiles_per_side[lod as usize];
+            let cw = nx as usize + 1;
             corner_offsets.push(corners.len() as u32);
-            corners.extend(v.iter().map(|&x| x as f32));
-        }
-        let mut field = ErrorField {
-            corners,
-            corner_offsets,
-            sigma: vec![1.0; levels_n],
-            mu: vec![1.0; levels_n],
-        };
-        for lod in 0..levels_n.saturating_sub(1) {
-            let (nx, ny) = levels.tiles_per_side[lod];
-            let (mut sigma, mut mu) = (1.0f64, 1.0f64);
+            if lod == 0 {
+                split[0] = 0.0;
+                corners.extend(std::iter::repeat_n(1.0f32, cw * (ny as usize + 1)));
+                finer = vec![0.0; cw * (ny as usize + 1)];
+                continue;
+            }
+            let mut s = vec![0.0f64; cw * (ny as usize + 1)];
             for ty in 0..ny {
                 for tx in 0..nx {
-                    let own = field.tile_range(
-                        levels,
-                        Tile {
-                            x: tx,
-                            y: ty,
-                            lod: lod as u32,
-                        },
-                    );
-                    let parent = field.tile_range(
-                        levels,
-                        Tile {
-                            x: tx / 2,
-                            y: ty / 2,
-                            lod: lod as u32 + 1,
-                        },
-                    );
-                    mu = mu.max(parent[1] as f64);
-                    if lod > 0 {
-                        sigma = sigma.max(parent[1] as f64 / own[0] as f64);
+                    let t = Tile { x: tx, y: ty, lod };
+                    let need = tile_requirement(levels, &key, keep, t, &finer);
+                    for (i, j) in QUAD {
+                        let k = (ty + j) as usize * cw + (tx + i) as usize;
+                        s[k] = s[k].max(need);
                     }
                 }
             }
-            field.sigma[lod] = sigma;
-            field.mu[lod] = mu;
+            // A level whose tiles need nothing (flat data) keeps a tiny positive distance.
+            let largest = s.iter().copied().fold(1e-3 * levels.spacing, f64::max) as f32;
+            split[lod as usize] = largest;
+            let floor = largest as f64 / cap;
+            finer = Vec::with_capacity(s.len());
+            for v in s {
+                let m = ((largest as f64 / v.max(floor)) as f32).clamp(1.0, cap as f32);
+                corners.push(m);
+                finer.push(largest as f64 / m as f64);
+            }
         }
-        field
+        SplitField {
+            key,
+            split,
+            corners,
+            corner_offsets,
+        }
     }
 
     fn corner(&self, levels: &Levels, lod: u32, i: u32, j: u32) -> f32 {
@@ -301,12 +285,16 @@ impl ErrorField {
 
     /// (min, max) of the field over a tile: its corners (bilinear interpolation).
     pub fn tile_range(&self, levels: &Levels, t: Tile) -> [f32; 2] {
-        let c = [(0, 0), (1, 0), (0, 1), (1, 1)]
-            .map(|(i, j)| self.corner(levels, t.lod, t.x + i, t.y + j));
+        let c = QUAD.map(|(i, j)| self.corner(levels, t.lod, t.x + i, t.y + j));
         [
             c[0].min(c[1]).min(c[2].min(c[3])),
             c[0].max(c[1]).max(c[2].max(c[3])),
         ]
+    }
+
+    /// A tile's split distance: the largest of its corners' (`D / m_min`).
+    pub fn tile_split(&self, levels: &Levels, t: Tile) -> f64 {
+        self.split[t.lod as usize] as f64 / self.tile_range(levels, t)[0] as f64
     }
 
     /// The field of level `lod` at integer sample `sample` (mirrors `field_at` in
@@ -327,8 +315,7 @@ impl ErrorField {
             y: cy as u32,
             lod,
         };
-        let c = [(0, 0), (1, 0), (0, 1), (1, 1)]
-            .map(|(i, j)| self.corner(levels, lod, t.x + i, t.y + j));
+        let c = QUAD.map(|(i, j)| self.corner(levels, lod, t.x + i, t.y + j));
         let south = c[0] * (1.0 - fx) + c[1] * fx;
         let north = c[2] * (1.0 - fx) + c[3] * fx;
         let v = south * (1.0 - fy) + north * fy;
@@ -337,41 +324,34 @@ impl ErrorField {
     }
 }
 
-/// Split distance `D[lod]` (metres of scaled distance `g = m * d`): a tile of level `lod`
-/// splits when `min(m) * d_min` over it is below that. Three constraints, all from the morph
-/// construction:
-/// 1. screen error: a level-`l` tile is drawn at scaled distances >= `(1 - morph_range) * D[l]`
-///    at the least (inside its morph zone), where its geometric error `e[l]` (divided by the
-///    field, property 1 of [`ErrorField`]) must project to at most `tau` pixels:
-///    `D[l] >= e[l] * focal / (tau * (1 - morph_range))`;
-/// 2. crack-free: where a level-`l` tile meets a level `l - 1` tile it must not have started
-///    morphing: `sigma[l] * D[l] + mu[l] * sqrt(2) * extent(l) <= (1 - morph_range) * D[l + 1]`,
-///    which also implies that neighbours differ by at most one level (with a field of ones,
-///    `sigma = mu = 1`: the distance-only chain);
-/// 3. `D[root + 1]` is infinite: the root level never morphs.
-///
-/// Entry `l` holds `D[l]`; entries past the root hold [`UDLOD_NO_SPLIT`].
-pub fn split_distances(levels: &Levels, focal_px: f64, tau_px: f64, morph_range: f64) -> Vec<f32> {
-    let keep = 1.0 - morph_range;
-    let mut d = vec![UDLOD_NO_SPLIT as f64; UDLOD_MAX_LEVELS as usize];
-    let mut prev: Option<f64> = None;
-    for lod in 0..=levels.root_lod {
-        let screen = levels.level_error[lod as usize] * focal_px / (tau_px * keep);
-        let chain = match prev {
-            Some(p) => {
-                let below = lod as usize - 1;
-                let (sigma, mu) = (levels.field.sigma[below], levels.field.mu[below]);
-                (sigma * p + mu * std::f64::consts::SQRT_2 * levels.tile_extent(lod - 1)) / keep
-            }
-            None => 0.0,
-        };
-        // Level 0 never splits, but its D anchors the chain (a floor of one tile extent keeps
-        // level-1 tiles from being tiny when the data is smooth).
-        let v = screen.max(chain).max(levels.tile_extent(lod));
-        d[lod as usize] = v;
-        prev = Some(v);
+/// The smallest split distance tile `t` (level >= 1) allows at its corners: its own error at
+/// the pixel target, and the crack-free chain over its children (`finer`: the previous
+/// level's corner split distances as evaluated on the GPU).
+fn tile_requirement(levels: &Levels, key: &FieldKey, keep: f64, t: Tile, finer: &[f64]) -> f64 {
+    let screen = WORST_CASE_SHARE * levels.tile_error(t) as f64 * key.focal_px / key.tau_px;
+    if t.lod < 2 {
+        return screen;
     }
-    d.iter().map(|&v| v as f32).collect()
+    let child_lod = t.lod - 1;
+    let (cnx, _) = levels.tiles_per_side[child_lod as usize];
+    let diagonal = std::f64::consts::SQRT_2 * levels.tile_extent(child_lod);
+    let mut need = screen;
+    for (dx, dy) in QUAD {
+        let c = Tile {
+            x: t.x * 2 + dx,
+            y: t.y * 2 + dy,
+            lod: child_lod,
+        };
+        if !levels.inside(c) {
+            continue;
+        }
+        let largest = QUAD
+            .iter()
+            .map(|&(i, j)| finer[((c.y + j) * (cnx + 1) + c.x + i) as usize])
+            .fold(0.0, f64::max);
+        need = need.max((largest + diagonal) / keep * (1.0 + CHAIN_MARGIN));
+    }
+    need
 }
 
 /// Frustum planes in camera-relative world space (metres), `(normal, offset)` with
@@ -414,7 +394,8 @@ pub struct SelectionParams {
     /// LOD viewer) minus the LOD viewer's height.
     pub viewer: [f32; 3],
     pub spacing: f32,
-    pub split: Vec<f32>,
+    /// Per-tile split distances (split table and field as uploaded).
+    pub field: Arc<SplitField>,
     pub frustum: [[f32; 4]; 6],
     pub cull: bool,
     /// Fraction of each level's range over which vertices morph.
@@ -436,13 +417,20 @@ impl SelectionParams {
         height: u32,
     ) -> Self {
         let z_ref = data.height_at(lod_viewer.x, lod_viewer.y);
-        Self::with_reference(levels, z_ref, settings, camera, lod_viewer, width, height)
+        let key = FieldKey::new(settings, camera.focal_px(height));
+        let field = Arc::new(SplitField::new(levels, key));
+        Self::with_reference(
+            levels, field, z_ref, settings, camera, lod_viewer, width, height,
+        )
     }
 
-    /// [`SelectionParams::new`] with the reference height `z_ref` (terrain under the LOD
-    /// viewer, metres) given.
+    /// [`SelectionParams::new`] with the split field (built for this camera's focal length
+    /// and `settings`) and the reference height `z_ref` (terrain under the LOD viewer, metres)
+    /// given.
+    #[allow(clippy::too_many_arguments)]
     pub fn with_reference(
         levels: &Levels,
+        field: Arc<SplitField>,
         z_ref: f64,
         settings: &UdlodSettings,
         camera: &Camera,
@@ -454,11 +442,6 @@ impl SelectionParams {
         let (cx, cy) = (
             (camera.position.x / s).floor(),
             (camera.position.y / s).floor(),
-        );
-        let split = levels.split_distances(
-            camera.focal_px(height),
-            settings.tau_px,
-            settings.morph_range,
         );
         SelectionParams {
             camera_cell: [cx as i32, cy as i32],
@@ -473,7 +456,7 @@ impl SelectionParams {
                 (z_ref - lod_viewer.z) as f32,
             ],
             spacing: s as f32,
-            split,
+            field,
             frustum: frustum_planes(camera, width as f64 / height as f64),
             cull: settings.cull,
             morph_range: settings.morph_range as f32,
@@ -508,10 +491,11 @@ pub fn tile_distance(levels: &Levels, p: &SelectionParams, t: Tile) -> f32 {
 }
 
 /// Does the tile split? Its smallest scaled distance (field minimum x distance) against the
-/// level's split distance (`refine` in `udlod_tiling.wgsl`).
+/// level's split distance, i.e. its nearest point against the largest split distance of its
+/// corners (`refine` in `udlod_tiling.wgsl`).
 pub fn tile_splits(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
-    let field_min = levels.field.tile_range(levels, t)[0];
-    t.lod > 0 && field_min * tile_distance(levels, p, t) < p.split[t.lod as usize]
+    let field_min = p.field.tile_range(levels, t)[0];
+    t.lod > 0 && field_min * tile_distance(levels, p, t) < p.field.split[t.lod as usize]
 }
 
 /// Is the tile's box (rectangle clamped to the data x min/max height) outside the frustum?
@@ -574,8 +558,8 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
 pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
     let rel = p.from_viewer(sample);
     let d = Vec3::new(rel[0], rel[1], p.viewer[2]).length();
-    let scaled = d * levels.field_at(sample, lod + 1);
-    let parent_split = p.split[lod as usize + 1];
+    let scaled = d * p.field.at(levels, sample, lod + 1);
+    let parent_split = p.field.split[lod as usize + 1];
     let on = if p.morph { 1.0 } else { 0.0 };
     (1.0 - (1.0 - scaled / parent_split) / p.morph_range).clamp(0.0, 1.0) * on
 }

@@ -20,8 +20,9 @@ pub struct UdlodSettings {
     pub morph: bool,
     /// Frustum culling of tiles.
     pub cull: bool,
-    /// Cap of the per-region error field (1 = distance-only selection: every region refined
-    /// for the level's worst error). Larger lets smooth regions keep coarser levels.
+    /// Largest ratio between a level's largest split distance and a tile's own (the split
+    /// field's cap; 1 = distance-only selection: every tile refined for the level's worst
+    /// error and the chain). Larger lets smooth tiles keep coarser levels.
     pub error_field_max: f64,
     /// Draw without an index buffer (six vertex-shader runs per quad) instead of the shared
     /// indexed grid; kept for measurement (`benches/udlod.rs` compares the two).
@@ -31,13 +32,13 @@ pub struct UdlodSettings {
 impl Default for UdlodSettings {
     fn default() -> Self {
         UdlodSettings {
-            grid_size: 16,
+            grid_size: 8,
             tau_px: 1.0,
             morph_range: 0.2,
             max_tiles: 16384,
             morph: true,
             cull: true,
-            error_field_max: 8.0,
+            error_field_max: 1024.0,
             vertex_pulling: false,
         }
     }
@@ -53,7 +54,7 @@ impl UdlodSettings {
         },
         Sweep {
             key: "error_field_max",
-            help: "error-field cap (1 = distance-only)",
+            help: "split-field cap (1 = distance-only)",
             apply: |s, v| s.error_field_max = v,
         },
         Sweep {

@@ -1,0 +1,428 @@
+//! Where UDLOD's triangles go: per data set and tau, the split-distance table (which term sets
+//! each level), the drawn tiles' projected-error slack, counterfactual selections and the
+//! oracle's count. CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
+//!
+//!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
+
+use std::path::PathBuf;
+
+use vkterrain::cli::render::{RenderArgs, prepare};
+use vkterrain::eval::oracle::Oracle;
+use vkterrain::lod::udlod::select::{self, FieldKey, Levels, SelectionParams, SplitField, Tile};
+use vkterrain::lod::{MethodConfig, UdlodSettings};
+
+fn main() -> anyhow::Result<()> {
+    let mut args = std::env::args().skip(1);
+    let mut config = None;
+    let mut scenario = None;
+    let mut frames = 6usize;
+    let mut taus = vec![0.5, 1.0, 2.0, 4.0];
+    let mut grid = None;
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--config" => config = args.next().map(PathBuf::from),
+            "--scenario" => scenario = args.next().map(PathBuf::from),
+            "--grid" => grid = Some(args.next().unwrap().parse()?),
+            "--frames" => frames = args.next().unwrap().parse()?,
+            "--tau" => {
+                taus = args
+                    .next()
+                    .unwrap()
+                    .split(',')
+                    .map(|s| s.parse().unwrap())
+                    .collect()
+            }
+            _ => anyhow::bail!("unknown argument {a}"),
+        }
+    }
+    let p = prepare(&RenderArgs {
+        config,
+        scenario,
+        ..Default::default()
+    })?;
+    let data = p.data.require_grid("udlod_budget")?.clone();
+    let mut settings = match &p.config.method {
+        MethodConfig::Udlod(s) => s.clone(),
+        _ => UdlodSettings::default(),
+    };
+    if let Some(g) = grid {
+        settings.grid_size = g;
+    }
+    let (w, h) = (p.config.render.width, p.config.render.height);
+    let t0 = std::time::Instant::now();
+    let levels = Levels::new(&*data, settings.grid_size)?;
+    let t1 = std::time::Instant::now();
+    let oracle = Oracle::new(&data);
+    println!(
+        "{} {}x{} spacing {} m; levels {:.2}s oracle {:.2}s; grid {} field_max {} morph_range {}; {}x{} frames {}",
+        data.name,
+        data.width,
+        data.height,
+        data.spacing,
+        (t1 - t0).as_secs_f64(),
+        t1.elapsed().as_secs_f64(),
+        settings.grid_size,
+        settings.error_field_max,
+        settings.morph_range,
+        w,
+        h,
+        p.frames
+    );
+    let focal = p.scenario.camera(0).focal_px(h);
+    let picks: Vec<u64> = (0..frames)
+        .map(|i| (i as u64 * p.frames as u64) / frames as u64)
+        .collect();
+    for &tau in &taus {
+        let s = UdlodSettings {
+            tau_px: tau,
+            ..settings.clone()
+        };
+        println!("\n== tau {tau} px (focal {focal:.1} px)");
+        let field = SplitField::new(&levels, FieldKey::new(&s, focal));
+        for l in 0..=levels.root_lod as usize {
+            let screen = levels.level_error[l] * focal / tau;
+            let (nx, ny) = levels.tiles_per_side[l];
+            let off = field.corner_offsets[l] as usize;
+            let m = &field.corners[off..off + ((nx + 1) * (ny + 1)) as usize];
+            println!(
+                "  level {l}: e {:8.3} m  D {:9.1}  screen {:9.1}  extent {:8.1}  field max {:.1}",
+                levels.level_error[l],
+                field.split[l],
+                screen,
+                levels.tile_extent(l as u32),
+                m.iter().copied().fold(1.0, f32::max),
+            );
+        }
+        let (mut tiles_n, mut tris_o, mut slack) = (0usize, 0u64, Vec::new());
+        for &k in &picks {
+            let cam = p.scenario.camera(k);
+            let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+            let tiles = select::select_tiles(&levels, &sp);
+            tiles_n += tiles.len();
+            for t in &tiles {
+                slack.push(tile_slack(&levels, &data, &cam, focal, tau, *t));
+            }
+            tris_o += oracle.count(&data, &cam, w, h, tau).triangles;
+        }
+        let g2 = 2 * (settings.grid_size as u64).pow(2);
+        let keep = 1.0 - s.morph_range;
+        let base = Cf {
+            beta: 1.0 / keep,
+            chain: true,
+            per_tile: true,
+            cap: 1e9,
+            morph_range: s.morph_range,
+            box_dist: false,
+            diam3d: false,
+        };
+        let variants: Vec<(&str, Cf)> = vec![
+            (
+                "level error, chain, ref height",
+                Cf {
+                    per_tile: false,
+                    ..base
+                },
+            ),
+            ("per-tile error, chain, beta 1/(1-r)", base),
+            ("per-tile error, chain, beta 1", Cf { beta: 1.0, ..base }),
+            (
+                "per-tile, chain, beta 1, r 0.1",
+                Cf {
+                    beta: 1.0,
+                    morph_range: 0.1,
+                    ..base
+                },
+            ),
+            (
+                "per-tile, chain, beta 1, box dist, 3d diam",
+                Cf {
+                    beta: 1.0,
+                    box_dist: true,
+                    diam3d: true,
+                    ..base
+                },
+            ),
+            (
+                "per-tile, no chain, beta 1",
+                Cf {
+                    beta: 1.0,
+                    chain: false,
+                    ..base
+                },
+            ),
+            (
+                "per-tile, no chain, beta 1, box",
+                Cf {
+                    beta: 1.0,
+                    chain: false,
+                    box_dist: true,
+                    ..base
+                },
+            ),
+        ];
+        for (name, cf) in &variants {
+            let f = sfield(&levels, focal, tau, *cf);
+            let mut n = 0usize;
+            for &k in &picks {
+                let cam = p.scenario.camera(k);
+                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                n += select_cf(&levels, &sp, &cam, &f, *cf).len();
+            }
+            println!(
+                "  cf {name:48}: tiles {n:6} triangles {:9} ratio {:.2}",
+                n as u64 * g2,
+                (n as u64 * g2) as f64 / tris_o.max(1) as f64
+            );
+        }
+        {
+            let mut n = 0usize;
+            for &k in &picks {
+                let cam = p.scenario.camera(k);
+                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                n += select_generic(&levels, &sp, |t| {
+                    tile_exact_splits(&levels, &data, &cam, focal, tau, t)
+                })
+                .len();
+            }
+            println!(
+                "  cf {:48}: tiles {n:6} triangles {:9} ratio {:.2}",
+                "tile oracle (exact per-sample, no chain/morph)",
+                n as u64 * g2,
+                (n as u64 * g2) as f64 / tris_o.max(1) as f64
+            );
+        }
+        slack.sort_by(f64::total_cmp);
+        let q = |f: f64| slack[((slack.len() - 1) as f64 * f) as usize];
+        println!(
+            "  frames {:?}: tiles {} triangles {} oracle {} ratio {:.2}",
+            picks,
+            tiles_n,
+            tiles_n as u64 * g2,
+            tris_o,
+            (tiles_n as u64 * g2) as f64 / tris_o as f64
+        );
+        println!(
+            "  per-tile projected error / tau (tile error at its nearest sample): p10 {:.3} p50 {:.3} p90 {:.3} max {:.3}",
+            q(0.1),
+            q(0.5),
+            q(0.9),
+            q(1.0)
+        );
+    }
+    Ok(())
+}
+
+/// Largest projected error of a drawn tile (its own geometric error at the nearest of its
+/// samples) over tau.
+fn tile_slack(
+    levels: &Levels,
+    data: &vkterrain::dataset::Heightmap,
+    cam: &vkterrain::scene::Camera,
+    focal: f64,
+    tau: f64,
+    t: Tile,
+) -> f64 {
+    let span = levels.grid_size << t.lod;
+    let (c0, r0) = (t.x * span, t.y * span);
+    let (c1, r1) = (
+        (c0 + span).min(data.width - 1),
+        (r0 + span).min(data.height - 1),
+    );
+    let step = (1u32 << t.lod).max(1);
+    let mut d = f64::INFINITY;
+    let mut r = r0;
+    while r <= r1 {
+        let mut c = c0;
+        while c <= c1 {
+            let p = glam::DVec3::new(
+                c as f64 * data.spacing,
+                r as f64 * data.spacing,
+                data.sample(c, r) as f64,
+            );
+            d = d.min((p - cam.position).length());
+            c += step.min(span);
+        }
+        r += step.min(span);
+    }
+    levels.tile_error(t) as f64 * focal / d / tau
+}
+
+/// Counterfactual split rule: per-level corner values `s` (metres); a tile splits when its
+/// nearest distance is below the largest of its corners.
+struct SField {
+    s: Vec<Vec<f64>>, // per level, (nx+1)*(ny+1)
+}
+
+#[derive(Clone, Copy)]
+struct Cf {
+    beta: f64,      // screen factor (1/(1-r) conservative, 1 linear blend)
+    chain: bool,    // per-tile chain
+    per_tile: bool, // per-tile error (else level max)
+    cap: f64,       // s >= max/cap
+    morph_range: f64,
+    box_dist: bool, // tile box distance (else reference height)
+    diam3d: bool,   // chain diameter includes the tile's height range
+}
+
+fn corner_idx(levels: &Levels, l: usize, i: u32, j: u32) -> usize {
+    let (nx, _) = levels.tiles_per_side[l];
+    (j * (nx + 1) + i) as usize
+}
+
+fn sfield(levels: &Levels, focal: f64, tau: f64, cf: Cf) -> SField {
+    let keep = 1.0 - cf.morph_range;
+    let mut s: Vec<Vec<f64>> = Vec::new();
+    for l in 0..=levels.root_lod as usize {
+        let (nx, ny) = levels.tiles_per_side[l];
+        let mut v = vec![1e-3f64; ((nx + 1) * (ny + 1)) as usize];
+        if l >= 1 {
+            for ty in 0..ny {
+                for tx in 0..nx {
+                    let t = Tile {
+                        x: tx,
+                        y: ty,
+                        lod: l as u32,
+                    };
+                    let e = if cf.per_tile {
+                        levels.tile_error(t) as f64
+                    } else {
+                        levels.level_error[l]
+                    };
+                    let mut req = cf.beta * e * focal / tau;
+                    if cf.chain && l >= 2 {
+                        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                            let c = Tile {
+                                x: tx * 2 + dx,
+                                y: ty * 2 + dy,
+                                lod: l as u32 - 1,
+                            };
+                            if !levels.inside(c) {
+                                continue;
+                            }
+                            let fine = &s[l - 1];
+                            let mx = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                                .iter()
+                                .map(|&(i, j)| fine[corner_idx(levels, l - 1, c.x + i, c.y + j)])
+                                .fold(0.0, f64::max);
+                            let ext = levels.tile_extent(l as u32 - 1);
+                            let diam = if cf.diam3d {
+                                let [lo, hi] = levels.tile_min_max(c);
+                                (2.0 * ext * ext + ((hi - lo) as f64).powi(2)).sqrt()
+                            } else {
+                                std::f64::consts::SQRT_2 * ext
+                            };
+                            req = req.max((mx + diam) / keep);
+                        }
+                    }
+                    for (i, j) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let k = corner_idx(levels, l, tx + i, ty + j);
+                        v[k] = v[k].max(req);
+                    }
+                }
+            }
+            let mx = v.iter().copied().fold(0.0, f64::max);
+            for x in v.iter_mut() {
+                *x = x.max(mx / cf.cap);
+            }
+        }
+        s.push(v);
+    }
+    SField { s }
+}
+
+fn box_distance(levels: &Levels, cam: &vkterrain::scene::Camera, t: Tile) -> f64 {
+    let span = (levels.grid_size << t.lod) as f64 * levels.spacing;
+    let [lo, hi] = levels.tile_min_max(t);
+    let mn = glam::DVec3::new(t.x as f64 * span, t.y as f64 * span, lo as f64);
+    let mx = glam::DVec3::new(
+        ((t.x + 1) as f64 * span).min((levels.width - 1) as f64 * levels.spacing),
+        ((t.y + 1) as f64 * span).min((levels.height - 1) as f64 * levels.spacing),
+        hi as f64,
+    );
+    (cam.position.clamp(mn, mx) - cam.position).length()
+}
+
+fn select_cf(
+    levels: &Levels,
+    p: &SelectionParams,
+    cam: &vkterrain::scene::Camera,
+    f: &SField,
+    cf: Cf,
+) -> Vec<Tile> {
+    select_generic(levels, p, |t| {
+        let l = t.lod as usize;
+        let mx = [(0, 0), (1, 0), (0, 1), (1, 1)]
+            .iter()
+            .map(|&(i, j)| f.s[l][corner_idx(levels, l, t.x + i, t.y + j)])
+            .fold(0.0, f64::max);
+        let d = if cf.box_dist {
+            box_distance(levels, cam, t)
+        } else {
+            select::tile_distance(levels, p, t) as f64
+        };
+        d < mx
+    })
+}
+
+fn select_generic(
+    levels: &Levels,
+    p: &SelectionParams,
+    splits: impl Fn(Tile) -> bool,
+) -> Vec<Tile> {
+    let mut out = Vec::new();
+    let mut layer = vec![Tile {
+        x: 0,
+        y: 0,
+        lod: levels.root_lod,
+    }];
+    while !layer.is_empty() {
+        let mut next = Vec::new();
+        for t in layer {
+            if !levels.inside(t) || (p.cull && select::tile_culled(levels, p, t)) {
+                continue;
+            }
+            if t.lod > 0 && splits(t) {
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    next.push(Tile {
+                        x: t.x * 2 + dx,
+                        y: t.y * 2 + dy,
+                        lod: t.lod - 1,
+                    });
+                }
+            } else {
+                out.push(t);
+            }
+        }
+        layer = next;
+    }
+    out
+}
+
+/// Tile granularity limit: a tile splits iff some sample's projected error of the tile's
+/// level grid exceeds tau (no chain, no morph, no restriction).
+fn tile_exact_splits(
+    levels: &Levels,
+    data: &vkterrain::dataset::Heightmap,
+    cam: &vkterrain::scene::Camera,
+    focal: f64,
+    tau: f64,
+    t: Tile,
+) -> bool {
+    let span = levels.grid_size << t.lod;
+    let (c0, r0) = (t.x * span, t.y * span);
+    let (c1, r1) = (
+        (c0 + span).min(data.width - 1),
+        (r0 + span).min(data.height - 1),
+    );
+    for r in r0..=r1 {
+        for c in c0..=c1 {
+            let lh = select::level_height(data, t.lod, c, r).unwrap();
+            let h = data.sample(c, r) as f64;
+            let pnt = glam::DVec3::new(c as f64 * data.spacing, r as f64 * data.spacing, h);
+            if (lh - h).abs() * focal > tau * (pnt - cam.position).length() {
+                return true;
+            }
+        }
+    }
+    false
+}
