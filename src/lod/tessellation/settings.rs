@@ -1,0 +1,103 @@
+//! Hardware tessellation's settings (config `[method] name = "tessellation"`,
+//! `docs/tessellation.md`).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::lod::sweep::Sweep;
+
+/// How the tessellator spaces the vertices of an edge (the evaluation stage's spacing mode).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Spacing {
+    /// Levels rounded up to whole numbers: vertices jump when a level changes (pops).
+    Equal,
+    /// Fractional levels, odd segment counts: new vertices grow out of existing ones.
+    #[default]
+    FractionalOdd,
+    /// Fractional levels, even segment counts.
+    FractionalEven,
+}
+
+impl Spacing {
+    pub fn name(self) -> &'static str {
+        match self {
+            Spacing::Equal => "equal",
+            Spacing::FractionalOdd => "fractional_odd",
+            Spacing::FractionalEven => "fractional_even",
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TessellationSettings {
+    /// Height samples per side of a patch quad (two triangle patches); at the highest level
+    /// (64) an edge of 64 samples gets one vertex per sample.
+    pub patch_samples: u32,
+    /// Target on-screen length of a generated edge in pixels (Fischer's
+    /// `tessellatedEdgeSize`, in true pixels: see docs/tessellation.md).
+    pub edge_px: f64,
+    /// Multiplies every level (Fischer's `tessellationFactor`).
+    pub factor: f64,
+    /// Vertex spacing of the tessellator.
+    pub spacing: Spacing,
+    /// Frustum culling of patches in the control stage (per-patch height bounds).
+    pub cull: bool,
+}
+
+impl Default for TessellationSettings {
+    fn default() -> Self {
+        TessellationSettings {
+            patch_samples: 64,
+            edge_px: 8.0,
+            factor: 1.0,
+            spacing: Spacing::FractionalOdd,
+            cull: true,
+        }
+    }
+}
+
+/// Highest tessellation level Vulkan guarantees (`maxTessellationGenerationLevel` >= 64).
+pub const MAX_LEVEL: f32 = 64.0;
+
+impl TessellationSettings {
+    /// What `vkterrain eval --sweep KEY=...` varies for tessellation.
+    pub const SWEEP: &[Sweep<Self>] = &[
+        Sweep {
+            key: "edge_px",
+            help: "target on-screen edge length (px)",
+            apply: |s, v| s.edge_px = v,
+        },
+        Sweep {
+            key: "factor",
+            help: "tessellation factor (multiplies every level)",
+            apply: |s, v| s.factor = v,
+        },
+        Sweep {
+            key: "patch_samples",
+            help: "samples per patch side",
+            apply: |s, v| s.patch_samples = v as u32,
+        },
+    ];
+
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid("tessellation settings", m));
+        if !(1..=1024).contains(&self.patch_samples) {
+            return bad(format!(
+                "patch_samples {} must be within 1..=1024",
+                self.patch_samples
+            ));
+        }
+        if !(self.edge_px.is_finite() && (0.25..=10_000.0).contains(&self.edge_px)) {
+            return bad(format!(
+                "edge_px {} must be within 0.25..=10000 pixels",
+                self.edge_px
+            ));
+        }
+        if !(self.factor.is_finite() && self.factor > 0.0 && self.factor <= 1000.0) {
+            return bad(format!("factor {} must be within (0, 1000]", self.factor));
+        }
+        Ok(())
+    }
+}
