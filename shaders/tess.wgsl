@@ -17,7 +17,8 @@ struct Tess {
     params: vec4<f32>,
     // x: samples per patch side, y: patch quads per chunk side, zw: patch quads per data side.
     grid: vec4<u32>,
-    // x: frustum culling on (1) or off (0).
+    // x: frustum culling on (1) or off (0); y: edge levels from the patch centroid (1, the
+    // crack-prone ablation) or from each edge's own endpoints (0).
     flags: vec4<u32>,
 }
 

@@ -489,3 +489,20 @@ fn a_wrong_descriptor_table_is_reported() {
         "{problems:#?}"
     );
 }
+
+#[test]
+fn tessellation_uniforms_match_the_wgsl_struct() {
+    use vkterrain::driver::shaders::TESS_WGSL;
+    use vkterrain::lod::tessellation::TessUniforms;
+    let rust = [
+        ("params", offset_of!(TessUniforms, params)),
+        ("grid", offset_of!(TessUniforms, grid)),
+        ("flags", offset_of!(TessUniforms, flags)),
+    ];
+    assert_struct_layout(
+        &[("tess", TESS_WGSL)],
+        "Tess",
+        &rust,
+        size_of::<TessUniforms>(),
+    );
+}

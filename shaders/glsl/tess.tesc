@@ -23,8 +23,12 @@ float edge_level(int a, int b) {
     // World-space edge: integer sample offsets times the spacing (exact), height difference.
     vec3 d = vec3((in_grid[a] - in_grid[b]) * frame.camera_offset.w, in_height[a] - in_height[b]);
     float diameter = length(d);
-    // View depth of the edge's midpoint (clip w is the view depth, and linear).
-    float depth = 0.5 * (in_clip[a].w + in_clip[b].w);
+    // View depth of the edge's midpoint (clip w is the view depth, and linear). The ablation
+    // `edge_levels = "patch"` (tess.flags.y) uses the patch's centroid instead: the two patches
+    // on an edge then disagree on its level, the T-junctions the edge rule avoids.
+    float depth = tess.flags.y != 0u
+        ? (in_clip[0].w + in_clip[1].w + in_clip[2].w) / 3.0
+        : 0.5 * (in_clip[a].w + in_clip[b].w);
     // A sphere reaching the eye plane (or behind it) gets the highest level.
     float px = depth > 0.5 * diameter ? diameter * tess.params.z / depth : 1.0e30;
     return clamp(px / tess.params.x * tess.params.y, 1.0, tess.params.w);

@@ -9,7 +9,10 @@ layout(location = 0) in vec2 in_grid[];
 layout(location = 0) out vec2 out_grid_pos;
 
 void main() {
-    vec2 g = gl_TessCoord.x * in_grid[0] + gl_TessCoord.y * in_grid[1] + gl_TessCoord.z * in_grid[2];
+    // `precise`: no fused multiply-add, so a vertex on an edge shared by two patches (one
+    // barycentric weight exactly 0, the other two exact complements by Vulkan's tessellation
+    // invariance) gets the same bits from both patches, in whatever corner order they list it.
+    precise vec2 g = gl_TessCoord.x * in_grid[0] + gl_TessCoord.y * in_grid[1] + gl_TessCoord.z * in_grid[2];
     float h = height_at(g);
     vec2 base = floor(g);
     gl_Position = vulkan_clip(project(ivec2(base), g - base, h));

@@ -35,7 +35,7 @@ use crate::driver::{Feature, Gpu};
 use crate::error::{Result, VkResultExt};
 use crate::frame::ViewState;
 use crate::slots::ViewSlot;
-use settings::{MAX_LEVEL, Spacing, TessellationSettings};
+use settings::{EdgeLevels, MAX_LEVEL, Spacing, TessellationSettings};
 
 /// Patch quads per side of the instanced index grid (17² corners: 16-bit indices, 512
 /// triangle patches per instance).
@@ -50,7 +50,8 @@ pub struct TessUniforms {
     pub params: [f32; 4],
     /// x: samples per patch side, y: quads per chunk side, zw: quads per data side.
     pub grid: [u32; 4],
-    /// x: frustum culling on (1) or off (0).
+    /// x: frustum culling on (1) or off (0); y: edge levels from the patch centroid (1, an
+    /// ablation) or each edge's endpoints (0).
     pub flags: [u32; 4],
 }
 
@@ -238,7 +239,12 @@ impl Tessellation {
                 self.quads[0],
                 self.quads[1],
             ],
-            flags: [self.settings.cull as u32, 0, 0, 0],
+            flags: [
+                self.settings.cull as u32,
+                (self.settings.edge_levels == EdgeLevels::Patch) as u32,
+                0,
+                0,
+            ],
         }
     }
 

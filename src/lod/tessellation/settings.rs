@@ -29,6 +29,18 @@ impl Spacing {
     }
 }
 
+/// Where an outer level's view depth comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EdgeLevels {
+    /// The edge's own midpoint (Fischer's rule): the two patches on an edge agree, no cracks.
+    #[default]
+    Edge,
+    /// The patch's centroid, for all three edges: an ablation that shows the T-junction
+    /// cracks the edge rule avoids (tests use it as the watertightness check's control).
+    Patch,
+}
+
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TessellationSettings {
@@ -44,6 +56,8 @@ pub struct TessellationSettings {
     pub spacing: Spacing,
     /// Frustum culling of patches in the control stage (per-patch height bounds).
     pub cull: bool,
+    /// Edge levels from each edge's endpoints (default) or, as an ablation, the patch centroid.
+    pub edge_levels: EdgeLevels,
 }
 
 impl Default for TessellationSettings {
@@ -54,6 +68,7 @@ impl Default for TessellationSettings {
             factor: 1.0,
             spacing: Spacing::FractionalOdd,
             cull: true,
+            edge_levels: EdgeLevels::Edge,
         }
     }
 }
@@ -99,5 +114,50 @@ impl TessellationSettings {
             return bad(format!("factor {} must be within (0, 1000]", self.factor));
         }
         Ok(())
+    }
+}
+
+impl From<TessellationSettings> for crate::lod::MethodConfig {
+    fn from(s: TessellationSettings) -> Self {
+        crate::lod::MethodConfig::Tessellation(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lod::MethodConfig;
+
+    #[test]
+    fn config_section_selects_tessellation_with_its_settings() {
+        let m: MethodConfig = toml::from_str(
+            "name = \"tessellation\"\nedge_px = 4.0\nspacing = \"fractional_even\"\nedge_levels = \"patch\"",
+        )
+        .unwrap();
+        let MethodConfig::Tessellation(s) = &m else {
+            panic!("{m:?}")
+        };
+        assert_eq!(s.edge_px, 4.0);
+        assert_eq!(s.spacing, Spacing::FractionalEven);
+        assert_eq!(s.edge_levels, EdgeLevels::Patch);
+        assert_eq!(
+            s.patch_samples,
+            TessellationSettings::default().patch_samples
+        );
+        // A stray key and a bad value are errors, not ignored.
+        assert!(toml::from_str::<MethodConfig>("name = \"tessellation\"\ntau_px = 2.0").is_err());
+        let bad = TessellationSettings {
+            edge_px: 0.0,
+            ..Default::default()
+        };
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("edge_px"), "{e}");
+        // The sweep key sets the edge size.
+        let mut m = MethodConfig::from(TessellationSettings::default());
+        m.apply_sweep("edge_px", 2.5).unwrap();
+        let MethodConfig::Tessellation(s) = m else {
+            panic!()
+        };
+        assert_eq!(s.edge_px, 2.5);
     }
 }
