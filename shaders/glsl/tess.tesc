@@ -29,8 +29,11 @@ float edge_level(int a, int b) {
     float depth = tess.flags.y != 0u
         ? (in_clip[0].w + in_clip[1].w + in_clip[2].w) / 3.0
         : 0.5 * (in_clip[a].w + in_clip[b].w);
-    // A sphere reaching the eye plane (or behind it) gets the highest level.
-    float px = depth > 0.5 * diameter ? diameter * tess.params.z / depth : 1.0e30;
+    // A sphere reaching the eye plane gets the highest level, one wholly behind it the lowest
+    // (it is invisible; at 64, lavapipe dropped visible terrain when such patches were drawn
+    // with culling off: docs/tessellation.md).
+    float radius = 0.5 * diameter;
+    float px = depth > radius ? diameter * tess.params.z / depth : (depth < -radius ? 0.0 : 1.0e30);
     return clamp(px / tess.params.x * tess.params.y, 1.0, tess.params.w);
 }
 
