@@ -8,7 +8,8 @@ use std::mem::{offset_of, size_of};
 use ash::vk;
 use vkterrain::driver::descriptors::{Binding, PROBE_SET};
 use vkterrain::driver::shaders::{
-    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL,
+    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, GEOMIPMAP_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL,
+    UDLOD_WGSL,
 };
 use vkterrain::frame::FrameUniforms;
 use vkterrain::frame::terrain::TERRAIN_SET;
@@ -40,6 +41,7 @@ fn shader_sets() -> ShaderSets {
     let probe = ("PROBE_SET", PROBE_SET);
     vec![
         ("brute", BRUTE_WGSL, vec![(0, terrain)]),
+        ("geomipmap", GEOMIPMAP_WGSL, vec![(0, terrain)]),
         ("udlod", UDLOD_WGSL, vec![(0, terrain), (1, udlod)]),
         (
             "udlod_tiling",

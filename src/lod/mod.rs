@@ -3,11 +3,13 @@
 
 pub mod blocks;
 pub mod brute;
+pub mod geomipmap;
 pub mod pgm;
 pub mod sweep;
 pub mod tessellation;
 pub mod udlod;
 
+pub use geomipmap::settings::GeomipmapSettings;
 pub use pgm::settings::PgmSettings;
 pub use tessellation::settings::TessellationSettings;
 pub use udlod::settings::UdlodSettings;
@@ -36,6 +38,9 @@ pub enum MethodKind {
     /// Hardware tessellation of flat triangle patches, levels from on-screen edge length
     /// (Fischer 2024); needs the device feature `tessellationShader`.
     Tessellation,
+    /// GeoMipMapping: blocks of 2^n + 1 samples, per-block level from the 3D distance, border
+    /// permutations against cracks, no morphing (Tabakovic's ATLOD).
+    Geomipmap,
 }
 
 impl MethodKind {
@@ -44,6 +49,7 @@ impl MethodKind {
         MethodKind::Udlod,
         MethodKind::Pgm,
         MethodKind::Tessellation,
+        MethodKind::Geomipmap,
     ];
 
     pub fn parse(name: &str) -> Result<Self> {
@@ -65,6 +71,7 @@ impl MethodKind {
             MethodKind::Udlod => "udlod",
             MethodKind::Pgm => "pgm",
             MethodKind::Tessellation => "tessellation",
+            MethodKind::Geomipmap => "geomipmap",
         }
     }
 }
@@ -79,6 +86,7 @@ pub enum MethodConfig {
     Udlod(UdlodSettings),
     Pgm(PgmSettings),
     Tessellation(TessellationSettings),
+    Geomipmap(GeomipmapSettings),
 }
 
 impl Default for MethodConfig {
@@ -112,6 +120,7 @@ impl MethodConfig {
             MethodConfig::Udlod(_) => MethodKind::Udlod,
             MethodConfig::Pgm(_) => MethodKind::Pgm,
             MethodConfig::Tessellation(_) => MethodKind::Tessellation,
+            MethodConfig::Geomipmap(_) => MethodKind::Geomipmap,
         }
     }
 
@@ -122,6 +131,7 @@ impl MethodConfig {
             MethodKind::Udlod => MethodConfig::Udlod(UdlodSettings::default()),
             MethodKind::Pgm => MethodConfig::Pgm(PgmSettings::default()),
             MethodKind::Tessellation => MethodConfig::Tessellation(TessellationSettings::default()),
+            MethodKind::Geomipmap => MethodConfig::Geomipmap(GeomipmapSettings::default()),
         }
     }
 
@@ -140,6 +150,7 @@ impl MethodConfig {
             MethodConfig::Udlod(s) => s.validate(),
             MethodConfig::Pgm(s) => s.validate(),
             MethodConfig::Tessellation(s) => s.validate(),
+            MethodConfig::Geomipmap(s) => s.validate(),
         }
     }
 
@@ -167,6 +178,7 @@ impl MethodConfig {
             MethodKind::Udlod => keys(UdlodSettings::SWEEP),
             MethodKind::Pgm => keys(PgmSettings::SWEEP),
             MethodKind::Tessellation => keys(TessellationSettings::SWEEP),
+            MethodKind::Geomipmap => keys(GeomipmapSettings::SWEEP),
         }
     }
 
@@ -179,6 +191,7 @@ impl MethodConfig {
             MethodConfig::Tessellation(s) => {
                 sweep::apply(TessellationSettings::SWEEP, s, key, value)
             }
+            MethodConfig::Geomipmap(s) => sweep::apply(GeomipmapSettings::SWEEP, s, key, value),
         }
     }
 }
@@ -259,5 +272,6 @@ pub fn create(config: &MethodConfig, ctx: &MethodContext<'_>) -> Result<Box<dyn 
         MethodConfig::Udlod(s) => Box::new(udlod::Udlod::new(ctx, s)?),
         MethodConfig::Pgm(s) => Box::new(pgm::Pgm::new(ctx, s)?),
         MethodConfig::Tessellation(s) => Box::new(tessellation::Tessellation::new(ctx, s)?),
+        MethodConfig::Geomipmap(s) => Box::new(geomipmap::Geomipmap::new(ctx, s)?),
     })
 }
