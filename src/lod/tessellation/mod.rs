@@ -310,7 +310,18 @@ impl LodMethod for Tessellation {
             if let Some((pool, i)) = query {
                 d.cmd_begin_query(cmd, pool, i, vk::QueryControlFlags::empty());
             }
-            d.cmd_draw_indexed(cmd, self.index_count, self.instances, 0, 0, 0);
+            // One draw per row of patch quads: lavapipe (Mesa 22.3) dropped the later patches
+            // of one draw when it tessellated hundreds of thousands of triangles
+            // (docs/tessellation.md); rows past the data are not drawn.
+            let row_indices = self.index_count / CHUNK_QUADS;
+            let chunks_x = self.quads[0].div_ceil(CHUNK_QUADS);
+            for instance in 0..self.instances {
+                let chunk_y = instance / chunks_x;
+                let rows = (self.quads[1] - chunk_y * CHUNK_QUADS).min(CHUNK_QUADS);
+                for row in 0..rows {
+                    d.cmd_draw_indexed(cmd, row_indices, 1, row * row_indices, 0, instance);
+                }
+            }
             if let Some((pool, i)) = query {
                 d.cmd_end_query(cmd, pool, i);
             }
