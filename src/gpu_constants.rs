@@ -40,6 +40,8 @@ shared_constants! {
     /// 128 keeps the index buffer small (~400 KB) while an instance still covers 16k triangles,
     /// so per-instance overhead is negligible.
     BRUTE_CHUNK_QUADS: u32 = 128;
+    /// Quads per side of a GeoMipMapping block (blocks of 2^5 + 1 = 33 samples, 6 levels).
+    GEOMIPMAP_BLOCK_QUADS: u32 = 32;
     /// Ambient term of the directional light, so slopes facing away from the sun stay readable.
     LIGHT_AMBIENT: f32 = 0.25;
     /// Scale applied to the diffuse term (ambient + diffuse <= 1 keeps albedo unsaturated).

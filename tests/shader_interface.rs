@@ -8,7 +8,7 @@ use std::mem::{offset_of, size_of};
 use ash::vk;
 use vkterrain::driver::descriptors::{Binding, PROBE_SET};
 use vkterrain::driver::shaders::{
-    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL,
+    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL, GEOMIPMAP_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL,
     UDLOD_TILING_WGSL, UDLOD_WGSL,
 };
 use vkterrain::eval::gpu::EVAL_SET;
@@ -42,6 +42,7 @@ fn shader_sets() -> ShaderSets {
     let probe = ("PROBE_SET", PROBE_SET);
     vec![
         ("brute", BRUTE_WGSL, vec![(0, terrain)]),
+        ("geomipmap", GEOMIPMAP_WGSL, vec![(0, terrain)]),
         ("udlod", UDLOD_WGSL, vec![(0, terrain), (1, udlod)]),
         (
             "udlod_tiling",
@@ -494,5 +495,22 @@ fn a_wrong_descriptor_table_is_reported() {
     assert!(
         problems.iter().any(|p| p.contains("no table for group 1")),
         "{problems:#?}"
+    );
+}
+
+#[test]
+fn tessellation_uniforms_match_the_wgsl_struct() {
+    use vkterrain::driver::shaders::TESS_WGSL;
+    use vkterrain::lod::tessellation::TessUniforms;
+    let rust = [
+        ("params", offset_of!(TessUniforms, params)),
+        ("grid", offset_of!(TessUniforms, grid)),
+        ("flags", offset_of!(TessUniforms, flags)),
+    ];
+    assert_struct_layout(
+        &[("tess", TESS_WGSL)],
+        "Tess",
+        &rust,
+        size_of::<TessUniforms>(),
     );
 }

@@ -94,6 +94,15 @@ pub struct TerrainPipelineDesc<'a> {
     pub cull_back_faces: bool,
 }
 
+/// The tessellation stages of a terrain pipeline (GLSL: `shaders/glsl/`), between the vertex
+/// and fragment stages of [`TerrainPipelineDesc::spv`]; the topology must be a patch list.
+pub struct TessellationStages<'a> {
+    pub control_spv: &'a [u8],
+    pub evaluation_spv: &'a [u8],
+    /// Control points per patch.
+    pub control_points: u32,
+}
+
 /// Builds a terrain pipeline: no vertex buffers (vertices come from indices), reversed-Z depth
 /// (GREATER), back faces culled unless the method says otherwise, viewport and scissor dynamic.
 pub fn terrain_pipeline(
@@ -101,23 +110,55 @@ pub fn terrain_pipeline(
     formats: &TargetFormats,
     desc: &TerrainPipelineDesc<'_>,
 ) -> Result<Pipeline> {
-    let d = &gpu.device;
-    let module = crate::driver::shaders::module(gpu, desc.spv)?;
-    let layout = unsafe {
-        d.create_pipeline_layout(
-            &vk::PipelineLayoutCreateInfo::default().set_layouts(desc.set_layouts),
-            None,
-        )
+    build_terrain_pipeline(gpu, formats, desc, None)
+}
+
+/// [`terrain_pipeline`] with tessellation control and evaluation stages (entry points `main`).
+/// The device must have `tessellationShader` enabled (check with `Gpu::require` first).
+pub fn tessellated_terrain_pipeline(
+    gpu: &Arc<Gpu>,
+    formats: &TargetFormats,
+    desc: &TerrainPipelineDesc<'_>,
+    tessellation: &TessellationStages<'_>,
+) -> Result<Pipeline> {
+    build_terrain_pipeline(gpu, formats, desc, Some(tessellation))
+}
+
+/// Shader modules destroyed on drop (pipeline creation copies what it needs).
+struct Modules<'a> {
+    gpu: &'a Gpu,
+    raw: Vec<vk::ShaderModule>,
+}
+
+impl Modules<'_> {
+    fn add(&mut self, spv: &[u8]) -> Result<vk::ShaderModule> {
+        let m = crate::driver::shaders::module(self.gpu, spv)?;
+        self.raw.push(m);
+        Ok(m)
     }
-    .vk("vkCreatePipelineLayout");
-    let layout = match layout {
-        Ok(l) => l,
-        Err(e) => {
-            unsafe { d.destroy_shader_module(module, None) };
-            return Err(e);
+}
+
+impl Drop for Modules<'_> {
+    fn drop(&mut self) {
+        for m in self.raw.drain(..) {
+            unsafe { self.gpu.device.destroy_shader_module(m, None) };
         }
+    }
+}
+
+fn build_terrain_pipeline(
+    gpu: &Arc<Gpu>,
+    formats: &TargetFormats,
+    desc: &TerrainPipelineDesc<'_>,
+    tessellation: Option<&TessellationStages<'_>>,
+) -> Result<Pipeline> {
+    let d = &gpu.device;
+    let mut modules = Modules {
+        gpu,
+        raw: Vec::new(),
     };
-    let stages = [
+    let module = modules.add(desc.spv)?;
+    let mut stages = vec![
         vk::PipelineShaderStageCreateInfo::default()
             .stage(vk::ShaderStageFlags::VERTEX)
             .module(module)
@@ -127,8 +168,34 @@ pub fn terrain_pipeline(
             .module(module)
             .name(desc.fragment_entry),
     ];
+    if let Some(t) = tessellation {
+        for (stage, spv) in [
+            (vk::ShaderStageFlags::TESSELLATION_CONTROL, t.control_spv),
+            (
+                vk::ShaderStageFlags::TESSELLATION_EVALUATION,
+                t.evaluation_spv,
+            ),
+        ] {
+            let m = modules.add(spv)?;
+            stages.push(
+                vk::PipelineShaderStageCreateInfo::default()
+                    .stage(stage)
+                    .module(m)
+                    .name(c"main"),
+            );
+        }
+    }
+    let layout = unsafe {
+        d.create_pipeline_layout(
+            &vk::PipelineLayoutCreateInfo::default().set_layouts(desc.set_layouts),
+            None,
+        )
+    }
+    .vk("vkCreatePipelineLayout")?;
     let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
     let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(desc.topology);
+    let tessellation_state = vk::PipelineTessellationStateCreateInfo::default()
+        .patch_control_points(tessellation.map_or(0, |t| t.control_points));
     let viewport = vk::PipelineViewportStateCreateInfo::default()
         .viewport_count(1)
         .scissor_count(1);
@@ -168,13 +235,16 @@ pub fn terrain_pipeline(
         .color_blend_state(&blend)
         .dynamic_state(&dynamic)
         .layout(layout);
+    if tessellation.is_some() {
+        info = info.tessellation_state(&tessellation_state);
+    }
     if gpu.modern {
         info = info.push_next(&mut rendering);
     } else {
         info = info.render_pass(formats.render_pass).subpass(0);
     }
     let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
-    unsafe { d.destroy_shader_module(module, None) };
+    drop(modules);
     match result {
         Ok(p) => Ok(Pipeline {
             gpu: gpu.clone(),

@@ -19,8 +19,9 @@ use crate::slots::ViewSlot;
 /// `shaders/include/clipmap.wgsl`); every stage may read every binding.
 pub const TERRAIN_SET: &[Binding] = {
     use vk::DescriptorType as T;
+    // Tessellation stages too (hardware tessellation's GLSL stages read the heights).
     const ALL: vk::ShaderStageFlags = stages(
-        stages(vk::ShaderStageFlags::VERTEX, vk::ShaderStageFlags::FRAGMENT),
+        vk::ShaderStageFlags::ALL_GRAPHICS,
         vk::ShaderStageFlags::COMPUTE,
     );
     &[

@@ -1,12 +1,17 @@
 //! LOD methods behind one seam: the renderer, the evaluator and the benchmarks only see
 //! [`LodMethod`], so brute force and later methods are interchangeable.
 
+pub mod blocks;
 pub mod brute;
+pub mod geomipmap;
 pub mod pgm;
 pub mod sweep;
+pub mod tessellation;
 pub mod udlod;
 
+pub use geomipmap::settings::GeomipmapSettings;
 pub use pgm::settings::PgmSettings;
+pub use tessellation::settings::TessellationSettings;
 pub use udlod::settings::UdlodSettings;
 
 use ash::vk;
@@ -30,10 +35,22 @@ pub enum MethodKind {
     /// Persistent grid mapping: a fixed screen-space grid projected onto the ground through an
     /// auxiliary camera (a baseline that is known to swim).
     Pgm,
+    /// Hardware tessellation of flat triangle patches, levels from on-screen edge length
+    /// (Fischer 2024); needs the device feature `tessellationShader`.
+    Tessellation,
+    /// GeoMipMapping: blocks of 2^n + 1 samples, per-block level from the 3D distance, border
+    /// permutations against cracks, no morphing (Tabakovic's ATLOD).
+    Geomipmap,
 }
 
 impl MethodKind {
-    pub const ALL: &[MethodKind] = &[MethodKind::Brute, MethodKind::Udlod, MethodKind::Pgm];
+    pub const ALL: &[MethodKind] = &[
+        MethodKind::Brute,
+        MethodKind::Udlod,
+        MethodKind::Pgm,
+        MethodKind::Tessellation,
+        MethodKind::Geomipmap,
+    ];
 
     pub fn parse(name: &str) -> Result<Self> {
         <Self as clap::ValueEnum>::from_str(name, false).map_err(|_| {
@@ -53,6 +70,8 @@ impl MethodKind {
             MethodKind::Brute => "brute",
             MethodKind::Udlod => "udlod",
             MethodKind::Pgm => "pgm",
+            MethodKind::Tessellation => "tessellation",
+            MethodKind::Geomipmap => "geomipmap",
         }
     }
 }
@@ -66,6 +85,8 @@ pub enum MethodConfig {
     Brute {},
     Udlod(UdlodSettings),
     Pgm(PgmSettings),
+    Tessellation(TessellationSettings),
+    Geomipmap(GeomipmapSettings),
 }
 
 impl Default for MethodConfig {
@@ -98,6 +119,8 @@ impl MethodConfig {
             MethodConfig::Brute {} => MethodKind::Brute,
             MethodConfig::Udlod(_) => MethodKind::Udlod,
             MethodConfig::Pgm(_) => MethodKind::Pgm,
+            MethodConfig::Tessellation(_) => MethodKind::Tessellation,
+            MethodConfig::Geomipmap(_) => MethodKind::Geomipmap,
         }
     }
 
@@ -107,6 +130,8 @@ impl MethodConfig {
             MethodKind::Brute => MethodConfig::Brute {},
             MethodKind::Udlod => MethodConfig::Udlod(UdlodSettings::default()),
             MethodKind::Pgm => MethodConfig::Pgm(PgmSettings::default()),
+            MethodKind::Tessellation => MethodConfig::Tessellation(TessellationSettings::default()),
+            MethodKind::Geomipmap => MethodConfig::Geomipmap(GeomipmapSettings::default()),
         }
     }
 
@@ -124,6 +149,8 @@ impl MethodConfig {
             MethodConfig::Brute {} => Ok(()),
             MethodConfig::Udlod(s) => s.validate(),
             MethodConfig::Pgm(s) => s.validate(),
+            MethodConfig::Tessellation(s) => s.validate(),
+            MethodConfig::Geomipmap(s) => s.validate(),
         }
     }
 
@@ -150,6 +177,8 @@ impl MethodConfig {
             MethodKind::Brute => Vec::new(),
             MethodKind::Udlod => keys(UdlodSettings::SWEEP),
             MethodKind::Pgm => keys(PgmSettings::SWEEP),
+            MethodKind::Tessellation => keys(TessellationSettings::SWEEP),
+            MethodKind::Geomipmap => keys(GeomipmapSettings::SWEEP),
         }
     }
 
@@ -159,6 +188,10 @@ impl MethodConfig {
             MethodConfig::Brute {} => sweep::apply::<()>(&[], &mut (), key, value),
             MethodConfig::Udlod(s) => sweep::apply(UdlodSettings::SWEEP, s, key, value),
             MethodConfig::Pgm(s) => sweep::apply(PgmSettings::SWEEP, s, key, value),
+            MethodConfig::Tessellation(s) => {
+                sweep::apply(TessellationSettings::SWEEP, s, key, value)
+            }
+            MethodConfig::Geomipmap(s) => sweep::apply(GeomipmapSettings::SWEEP, s, key, value),
         }
     }
 }
@@ -238,5 +271,7 @@ pub fn create(config: &MethodConfig, ctx: &MethodContext<'_>) -> Result<Box<dyn 
         MethodConfig::Brute {} => Box::new(brute::BruteForce::new(ctx)?),
         MethodConfig::Udlod(s) => Box::new(udlod::Udlod::new(ctx, s)?),
         MethodConfig::Pgm(s) => Box::new(pgm::Pgm::new(ctx, s)?),
+        MethodConfig::Tessellation(s) => Box::new(tessellation::Tessellation::new(ctx, s)?),
+        MethodConfig::Geomipmap(s) => Box::new(geomipmap::Geomipmap::new(ctx, s)?),
     })
 }
