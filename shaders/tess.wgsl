@@ -18,7 +18,8 @@ struct Tess {
     // x: samples per patch side, y: patch quads per chunk side, zw: patch quads per data side.
     grid: vec4<u32>,
     // x: frustum culling on (1) or off (0); y: edge levels from the patch centroid (1, the
-    // crack-prone ablation) or from each edge's own endpoints (0).
+    // crack-prone ablation) or from each edge's own endpoints (0); z: displace onto brute force's
+    // triangles (1) or the bilinear field (0).
     flags: vec4<u32>,
 }
 

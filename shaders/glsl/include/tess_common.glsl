@@ -8,7 +8,8 @@ layout(set = 1, binding = 0, std140) uniform Tess {
     // x: samples per patch side, y: patch quads per chunk side, zw: patch quads per data side.
     uvec4 grid;
     // x: frustum culling on (1) or off (0); y: edge levels from the patch centroid (1, the
-    // crack-prone ablation) or from each edge's own endpoints (0).
+    // crack-prone ablation) or from each edge's own endpoints (0); z: displace onto brute force's
+    // triangles (1) or the bilinear field (0).
     uvec4 flags;
 } tess;
 

@@ -35,7 +35,7 @@ use crate::driver::{Feature, Gpu};
 use crate::error::{Result, VkResultExt};
 use crate::frame::ViewState;
 use crate::slots::ViewSlot;
-use settings::{EdgeLevels, MAX_LEVEL, Spacing, TessellationSettings};
+use settings::{EdgeLevels, MAX_LEVEL, Spacing, Surface, TessellationSettings};
 
 /// Patch quads per side of the instanced index grid (17² corners: 16-bit indices, 512
 /// triangle patches per instance).
@@ -51,7 +51,8 @@ pub struct TessUniforms {
     /// x: samples per patch side, y: quads per chunk side, zw: quads per data side.
     pub grid: [u32; 4],
     /// x: frustum culling on (1) or off (0); y: edge levels from the patch centroid (1, an
-    /// ablation) or each edge's endpoints (0).
+    /// ablation) or each edge's endpoints (0); z: surface from brute force's triangles (1) or
+    /// the bilinear field (0).
     pub flags: [u32; 4],
 }
 
@@ -59,15 +60,19 @@ pub struct TessUniforms {
 /// and the per-quad height bounds (control stage: culling).
 pub const TESS_SET: &[Binding] = {
     use vk::DescriptorType as T;
-    const TCS: vk::ShaderStageFlags = vk::ShaderStageFlags::TESSELLATION_CONTROL;
+    // The evaluation stage declares both (one include) and reads the uniforms.
+    const TESS: vk::ShaderStageFlags = stages(
+        vk::ShaderStageFlags::TESSELLATION_CONTROL,
+        vk::ShaderStageFlags::TESSELLATION_EVALUATION,
+    );
     &[
         Binding::new(
             0,
             T::UNIFORM_BUFFER,
-            stages(vk::ShaderStageFlags::VERTEX, TCS),
+            stages(vk::ShaderStageFlags::VERTEX, TESS),
             "tess",
         ),
-        Binding::new(1, T::STORAGE_BUFFER, TCS, "patch_bounds"),
+        Binding::new(1, T::STORAGE_BUFFER, TESS, "patch_bounds"),
     ]
 };
 
@@ -242,7 +247,7 @@ impl Tessellation {
             flags: [
                 self.settings.cull as u32,
                 (self.settings.edge_levels == EdgeLevels::Patch) as u32,
-                0,
+                (self.settings.surface == Surface::Mesh) as u32,
                 0,
             ],
         }

@@ -41,6 +41,18 @@ pub enum EdgeLevels {
     Patch,
 }
 
+/// The surface the evaluation stage displaces onto.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Surface {
+    /// The height map's bilinear field (Fischer: the height map sampled at the vertex).
+    #[default]
+    Bilinear,
+    /// Brute force's triangles (the exact surface eval measures against); not through the
+    /// clipmap, which falls back to the bilinear field.
+    Mesh,
+}
+
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TessellationSettings {
@@ -58,6 +70,8 @@ pub struct TessellationSettings {
     pub cull: bool,
     /// Edge levels from each edge's endpoints (default) or, as an ablation, the patch centroid.
     pub edge_levels: EdgeLevels,
+    /// The displaced surface: bilinear (default) or brute force's triangles.
+    pub surface: Surface,
 }
 
 impl Default for TessellationSettings {
@@ -69,6 +83,7 @@ impl Default for TessellationSettings {
             spacing: Spacing::FractionalOdd,
             cull: true,
             edge_levels: EdgeLevels::Edge,
+            surface: Surface::Bilinear,
         }
     }
 }
@@ -131,7 +146,7 @@ mod tests {
     #[test]
     fn config_section_selects_tessellation_with_its_settings() {
         let m: MethodConfig = toml::from_str(
-            "name = \"tessellation\"\nedge_px = 4.0\nspacing = \"fractional_even\"\nedge_levels = \"patch\"",
+            "name = \"tessellation\"\nedge_px = 4.0\nspacing = \"fractional_even\"\nedge_levels = \"patch\"\nsurface = \"mesh\"",
         )
         .unwrap();
         let MethodConfig::Tessellation(s) = &m else {
@@ -140,6 +155,7 @@ mod tests {
         assert_eq!(s.edge_px, 4.0);
         assert_eq!(s.spacing, Spacing::FractionalEven);
         assert_eq!(s.edge_levels, EdgeLevels::Patch);
+        assert_eq!(s.surface, Surface::Mesh);
         assert_eq!(
             s.patch_samples,
             TessellationSettings::default().patch_samples
