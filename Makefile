@@ -4,10 +4,10 @@
 # Both install the system packages they need when they are missing (apt-get, as root or via
 # sudo); otherwise they print the exact command to run.
 
-# glslang-tools: glslangValidator, the build-time compiler of the GLSL shader stages naga lacks
-# (tessellation, task/mesh; build.rs runs it).
 # libgdal-dev: GDAL 3.6 (reading DEMs; the gdal crate links it, found through pkg-config),
 # libproj-dev + proj-data: PROJ 9.1 and its EPSG database (coordinate transformations).
+# glslang-tools: glslangValidator, the build-time compiler of the GLSL shader stages naga lacks
+# (tessellation, task/mesh; build.rs runs it).
 RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers glslang-tools libgdal-dev libproj-dev proj-data pkg-config
 TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
 CARGO ?= cargo

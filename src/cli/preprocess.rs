@@ -212,10 +212,16 @@ pub fn run(args: &PreprocessArgs) -> anyhow::Result<()> {
     );
     println!("voids      {} filled", s.voids_filled);
     println!("warnings   {}", s.warnings.len());
+    // Procedural data has no source bytes: its rate is output samples per second.
+    let secs = s.seconds.max(1e-9);
+    let rate = if s.source_bytes > 0 {
+        format!("{:.1} source MB/s", s.source_bytes as f64 / 1e6 / secs)
+    } else {
+        format!("{:.1} Msamples/s", (s.width * s.height) as f64 / 1e6 / secs)
+    };
     println!(
-        "time       {:.2} s ({:.1} source MB/s, {} threads)",
+        "time       {:.2} s ({rate}, {} threads)",
         s.seconds,
-        s.source_bytes as f64 / 1e6 / s.seconds.max(1e-9),
         rayon::current_num_threads().min(args.threads.unwrap_or(usize::MAX))
     );
     println!(
