@@ -23,8 +23,10 @@ use vkterrain::render::FrameRequest;
 use vkterrain::render::stats::Percentiles;
 
 /// The evaluator's GPU time may differ from the benchmark loop's by this factor either way
-/// (the machines are noisy: the same command runs up to 1.7x apart).
-const AGREEMENT_BAND: f64 = 1.6;
+/// (the machines are noisy: the same command runs up to 1.7x apart). On lavapipe at 320x180
+/// eval read 0.58-1.12 of the bench loop's time over four runs, usually below it (not
+/// explained yet, docs/eval.md); the band still fails the 5x the issue measured.
+const AGREEMENT_BAND: f64 = 2.0;
 
 #[derive(Parser)]
 struct Wrapper {
