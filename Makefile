@@ -4,7 +4,9 @@
 # Both install the system packages they need when they are missing (apt-get, as root or via
 # sudo); otherwise they print the exact command to run.
 
-RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers
+# glslang-tools: glslangValidator, the build-time compiler of the GLSL shader stages naga lacks
+# (tessellation, task/mesh; build.rs runs it).
+RUN_PACKAGES  := libvulkan1 mesa-vulkan-drivers glslang-tools
 TEST_PACKAGES := $(RUN_PACKAGES) vulkan-validationlayers gcc python3
 CARGO ?= cargo
 

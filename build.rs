@@ -4,9 +4,16 @@
 //! Shaders are composed before parsing: the shared constants of `src/gpu_constants.rs` come
 //! first, then each `//!include NAME.wgsl` line is replaced by `shaders/include/NAME.wgsl`.
 //! A line map turns naga's error position back into the original file and line.
+//!
+//! The stages naga cannot compile (tessellation, task, mesh) are GLSL under `shaders/glsl/`,
+//! composed the same way (a `#define` per shared constant) and compiled by glslangValidator:
+//! see `build/glsl.rs`.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+#[path = "build/glsl.rs"]
+mod glsl;
 
 #[allow(dead_code)]
 mod gpu_constants {
@@ -146,5 +153,64 @@ fn main() {
         )
         .unwrap();
     }
+    compile_glsl(&out_dir, &mut generated);
     std::fs::write(out_dir.join("shaders.rs"), generated).unwrap();
+}
+
+/// Compiles every `shaders/glsl/*.<stage>` with glslangValidator; appends `<STEM>_<STAGE>_SPV`
+/// and `<STEM>_<STAGE>_GLSL` (the composed source) to `generated`.
+fn compile_glsl(out_dir: &Path, generated: &mut String) {
+    let dir = Path::new("shaders/glsl");
+    let include_dir = dir.join("include");
+    println!("cargo:rerun-if-changed={}", dir.display());
+    println!("cargo:rerun-if-changed={}", include_dir.display());
+    println!("cargo:rerun-if-env-changed={}", glsl::GLSLANG_ENV);
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| fail(&format!("{}: {e}", dir.display())))
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return;
+    }
+    let glslang = glsl::Glslang::find().unwrap_or_else(|e| fail(&e));
+    let prelude = glsl::prelude(
+        gpu_constants::WGSL_CONSTANTS
+            .iter()
+            .map(|(name, value)| (*name, value.wgsl().1)),
+    );
+    let work = out_dir.join("glsl");
+    std::fs::create_dir_all(&work).unwrap();
+    let (major, minor, patch) = glslang.version;
+    writeln!(
+        generated,
+        "// GLSL compiled by {} (glslang {major}.{minor}.{patch}).",
+        glslang.exe.display()
+    )
+    .unwrap();
+    for path in &files {
+        let compiled = glsl::compile(&glslang, path, &include_dir, &prelude, &work)
+            .unwrap_or_else(|e| fail(&e));
+        for source in &compiled.sources {
+            println!("cargo:rerun-if-changed={}", source.display());
+        }
+        for w in &compiled.warnings {
+            println!("cargo:warning={}: {w}", path.display());
+        }
+        let name = path
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .replace('.', "_");
+        std::fs::write(out_dir.join(format!("{name}.spv")), &compiled.spv).unwrap();
+        std::fs::write(out_dir.join(format!("{name}.glsl")), &compiled.composed).unwrap();
+        let upper = name.to_uppercase();
+        let file = path.display();
+        writeln!(
+            generated,
+            "/// SPIR-V of `{file}` (glslangValidator).\npub static {upper}_SPV: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{name}.spv\"));\n/// `{file}` as compiled (constants and includes expanded).\npub static {upper}_GLSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{name}.glsl\"));"
+        )
+        .unwrap();
+    }
 }

@@ -20,6 +20,12 @@ pub enum Error {
     UnknownDevice { wanted: String, available: String },
     #[error("device {name:?} is unsuitable: {reason}")]
     UnsuitableDevice { name: String, reason: String },
+    #[error("{who} needs the Vulkan feature {feature}, which {reason}")]
+    MissingFeature {
+        who: String,
+        feature: &'static str,
+        reason: String,
+    },
     #[error("Vulkan call {call} failed: {result}")]
     Vulkan {
         call: &'static str,

@@ -1,7 +1,8 @@
 // Constants shared by the Rust code and the WGSL shaders: the single source of truth.
 //
 // `build.rs` includes this file and prepends a WGSL `const` for every entry of
-// [`WGSL_CONSTANTS`] to each shader, so the two sides cannot drift apart. Keep this file free of
+// [`WGSL_CONSTANTS`] to each WGSL shader and a `#define` with the same literal to each GLSL
+// shader (`shaders/glsl/`), so the sides cannot drift apart. Keep this file free of
 // `use` statements and crate paths: it is compiled twice (by the build script and the crate).
 
 /// A constant value as it is written into WGSL.
@@ -57,4 +58,6 @@ shared_constants! {
     CLIPMAP_PROBE_WORKGROUP: u32 = 64;
     /// Threads per workgroup of the UDLOD morph probe (tests: morphed vertices read back).
     UDLOD_PROBE_WORKGROUP: u32 = 64;
+    /// Threads per workgroup of the terrain-helper probes (tests: WGSL vs GLSL helpers).
+    TERRAIN_PROBE_WORKGROUP: u32 = 64;
 }

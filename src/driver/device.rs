@@ -57,6 +57,67 @@ pub struct Capabilities {
     pub unified_memory: bool,
 }
 
+/// Optional device features a method may need (and [`super::GpuOptions::mask_features`] may
+/// hide), by their Vulkan names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feature {
+    /// `VkPhysicalDeviceFeatures::tessellationShader`.
+    TessellationShader,
+    /// `VkPhysicalDeviceFeatures::geometryShader`.
+    GeometryShader,
+    /// `VkPhysicalDeviceMeshShaderFeaturesEXT::meshShader` (`VK_EXT_mesh_shader`).
+    MeshShader,
+}
+
+impl Feature {
+    pub const ALL: &[Feature] = &[
+        Feature::TessellationShader,
+        Feature::GeometryShader,
+        Feature::MeshShader,
+    ];
+
+    pub fn vulkan_name(self) -> &'static str {
+        match self {
+            Feature::TessellationShader => "tessellationShader",
+            Feature::GeometryShader => "geometryShader",
+            Feature::MeshShader => "meshShader",
+        }
+    }
+
+    /// The feature named `name` (its Vulkan name, case-insensitive).
+    pub fn parse(name: &str) -> Result<Feature> {
+        Self::ALL
+            .iter()
+            .copied()
+            .find(|f| f.vulkan_name().eq_ignore_ascii_case(name.trim()))
+            .ok_or_else(|| {
+                let names: Vec<_> = Self::ALL.iter().map(|f| f.vulkan_name()).collect();
+                Error::invalid(
+                    "feature mask",
+                    format!("unknown feature {name:?} (known: {})", names.join(", ")),
+                )
+            })
+    }
+
+    /// Whether `caps` has it.
+    pub fn get(self, caps: &Capabilities) -> bool {
+        match self {
+            Feature::TessellationShader => caps.tessellation_shader,
+            Feature::GeometryShader => caps.geometry_shader,
+            Feature::MeshShader => caps.mesh_shader,
+        }
+    }
+
+    /// Removes it from `caps`.
+    pub fn clear(self, caps: &mut Capabilities) {
+        match self {
+            Feature::TessellationShader => caps.tessellation_shader = false,
+            Feature::GeometryShader => caps.geometry_shader = false,
+            Feature::MeshShader => caps.mesh_shader = false,
+        }
+    }
+}
+
 impl DeviceInfo {
     pub fn type_name(&self) -> &'static str {
         match self.device_type {

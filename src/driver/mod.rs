@@ -20,13 +20,18 @@ use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
-pub use device::{Capabilities, DeviceInfo};
+pub use device::{Capabilities, DeviceInfo, Feature};
 pub use instance::ValidationLog;
 
 use crate::error::{Error, Result, VkResultExt};
 
 /// Environment variable that turns the validation layers on (`1`/`true`) for any command.
 pub const VALIDATION_ENV: &str = "VKTERRAIN_VALIDATION";
+
+/// Environment variable listing optional device features to treat as absent (comma-separated
+/// Vulkan names, e.g. `tessellationShader,meshShader`): tests of the one-line "missing
+/// feature" errors, and a desktop GPU standing in for a board without them (TI TDA4VH).
+pub const MASK_FEATURES_ENV: &str = "VKTERRAIN_MASK_FEATURES";
 
 /// How to create the GPU context (config `[device]`).
 #[derive(Clone, Debug, Default, serde::Deserialize)]
@@ -39,6 +44,10 @@ pub struct GpuOptions {
     /// Use classic render passes and `vkCmdPipelineBarrier` even where Vulkan 1.3's dynamic
     /// rendering and synchronization2 exist (keeps the fallback path tested).
     pub force_legacy: bool,
+    /// Optional features to leave disabled as if the device lacked them (Vulkan names, see
+    /// [`MASK_FEATURES_ENV`]; set from the environment only).
+    #[serde(skip)]
+    pub mask_features: Vec<String>,
 }
 
 impl GpuOptions {
@@ -51,6 +60,14 @@ impl GpuOptions {
         }
         if let Ok(v) = std::env::var(VALIDATION_ENV) {
             self.validation |= matches!(v.trim(), "1" | "true" | "yes" | "on");
+        }
+        if let Ok(v) = std::env::var(MASK_FEATURES_ENV) {
+            self.mask_features.extend(
+                v.split(',')
+                    .map(str::trim)
+                    .filter(|f| !f.is_empty())
+                    .map(String::from),
+            );
         }
         self
     }
@@ -69,15 +86,26 @@ pub struct Gpu {
     allocator: ManuallyDrop<Mutex<gpu_allocator::vulkan::Allocator>>,
     /// Enabled optional features (a subset of `info.caps`).
     pub enabled: Capabilities,
+    /// Features the device offers but [`GpuOptions::mask_features`] left disabled.
+    pub masked: Vec<Feature>,
 }
 
 impl Gpu {
     pub fn new(options: &GpuOptions) -> Result<Arc<Gpu>> {
+        let mask = options
+            .mask_features
+            .iter()
+            .map(|name| Feature::parse(name))
+            .collect::<Result<Vec<_>>>()?;
         let instance = instance::Instance::new(options.validation)?;
         let candidates = device::enumerate(&instance.raw)?;
         let (physical, info) = device::choose(&candidates, options.select.as_deref())?;
         let queue_family = info.universal_queue_family().expect("checked by choose");
-        let offered = info.caps;
+        let mut offered = info.caps;
+        let masked: Vec<Feature> = mask.into_iter().filter(|f| f.get(&offered)).collect();
+        for f in &masked {
+            f.clear(&mut offered);
+        }
         let modern = offered.dynamic_rendering && offered.synchronization2 && !options.force_legacy;
 
         // Not on CPU devices: lavapipe (Mesa 22.3) filters anisotropically in software and some
@@ -89,7 +117,8 @@ impl Gpu {
             .sampler_anisotropy(anisotropy)
             .multi_draw_indirect(offered.multi_draw_indirect)
             .draw_indirect_first_instance(offered.draw_indirect_first_instance)
-            .pipeline_statistics_query(offered.pipeline_statistics_query);
+            .pipeline_statistics_query(offered.pipeline_statistics_query)
+            .tessellation_shader(offered.tessellation_shader);
         let mut f12 = vk::PhysicalDeviceVulkan12Features::default()
             .timeline_semaphore(true)
             .draw_indirect_count(offered.draw_indirect_count);
@@ -142,6 +171,8 @@ impl Gpu {
             synchronization2: modern,
             sampler_anisotropy: anisotropy,
             external_memory_host,
+            // Enabled only when a method needs it (none does yet).
+            geometry_shader: false,
             ..offered
         };
         Ok(Arc::new(Gpu {
@@ -154,7 +185,26 @@ impl Gpu {
             modern,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             enabled,
+            masked,
         }))
+    }
+
+    /// `Ok` when `feature` is enabled, else the one-line error saying that `who` needs it and
+    /// whether the device lacks it or it was masked.
+    pub fn require(&self, feature: Feature, who: &str) -> Result<()> {
+        if feature.get(&self.enabled) {
+            return Ok(());
+        }
+        let reason = if self.masked.contains(&feature) {
+            format!("is masked by {MASK_FEATURES_ENV}")
+        } else {
+            format!("is not offered by {}", self.info.name)
+        };
+        Err(Error::MissingFeature {
+            who: who.to_string(),
+            feature: feature.vulkan_name(),
+            reason,
+        })
     }
 
     /// Validation messages so far, when validation is on.

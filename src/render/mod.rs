@@ -14,6 +14,8 @@
 pub mod delivery;
 #[cfg(feature = "test-support")]
 mod probe;
+#[cfg(feature = "test-support")]
+pub use probe::TerrainProbePoint;
 mod record;
 pub mod settings;
 mod slot;

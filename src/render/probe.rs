@@ -1,6 +1,8 @@
 //! Test support (feature `test-support`): evaluate the shaders' shared functions through the
 //! exact set-0 state a view had in the last rendered frame, and read the results back.
 
+use std::ffi::CStr;
+
 use super::Renderer;
 use crate::clipmap::probe::ProbeKind;
 use crate::error::{Error, Result};
@@ -8,7 +10,49 @@ use crate::lod::udlod::probe::ProbedVertex;
 use crate::lod::udlod::select::Tile;
 use crate::slots::ViewSlot;
 
+/// One point of the terrain-helper probes (`ProbePoint` in `shaders/terrain_probe.wgsl` and
+/// its GLSL twin `shaders/glsl/terrain_probe.comp`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TerrainProbePoint {
+    /// In: xy the integer sample for `sample_height` and `project`'s cell.
+    pub cell: [i32; 4],
+    /// In: xy a position (samples) for `height_at`, zw the fraction `project` adds.
+    pub pos: [f32; 4],
+    /// Out: x `sample_height(cell)`, y `height_at(pos.xy)`.
+    pub heights: [f32; 4],
+    /// Out: `project(cell, pos.zw, height_at(pos.xy))`.
+    pub clip: [f32; 4],
+}
+
 impl Renderer {
+    /// Tests: runs the terrain-helper probe `entry` of `spv` (WGSL's `terrain_probe` or the
+    /// GLSL port's `terrain_probe.comp`) over `points` through the set 0 view `view` had in
+    /// the last rendered frame. Call after [`Renderer::finish`]; waits for the GPU.
+    pub fn probe_terrain_helpers(
+        &self,
+        view: usize,
+        spv: &[u8],
+        entry: &CStr,
+        points: &[TerrainProbePoint],
+    ) -> Result<Vec<TerrainProbePoint>> {
+        let slot = self.last_view_slot("probe_terrain_helpers", view)?;
+        let header = [points.len() as u32, 0, 0, 0];
+        let io = [bytemuck::bytes_of(&header), bytemuck::cast_slice(points)].concat();
+        let groups = (points.len() as u32)
+            .div_ceil(crate::gpu_constants::TERRAIN_PROBE_WORKGROUP)
+            .max(1);
+        let out = crate::driver::probe::run(
+            &self.gpu,
+            spv,
+            entry,
+            &[(self.terrain.descriptors.layout, self.terrain.set(slot))],
+            &io,
+            groups,
+        )?;
+        Ok(bytemuck::pod_collect_to_vec(&out[size_of_val(&header)..]))
+    }
+
     /// Tests and tools: GPU heights at level-0 sample positions for the state of the last
     /// rendered frame, `[clipmap_height, single-texture bilinear]` each. Call after
     /// [`Renderer::finish`]; waits for the GPU.

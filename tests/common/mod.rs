@@ -18,6 +18,7 @@ pub fn gpu(force_legacy: bool) -> Arc<Gpu> {
         select: None,
         validation: true,
         force_legacy,
+        ..Default::default()
     }
     .with_env();
     Gpu::new(&options).unwrap_or_else(|e| {
