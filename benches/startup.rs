@@ -38,7 +38,7 @@ fn main() {
                 let t = Instant::now();
                 let r = PyramidReader::open(&dir).expect("data set");
                 let s = r.tile_stats(16).expect("stats");
-                let levels = Levels::from_stats(s, r.spacing(), 8.0);
+                let levels = Levels::from_stats(s, r.spacing());
                 assert_eq!(r.node_loads(), 0, "start-up read level 0");
                 std::hint::black_box(levels);
                 t.elapsed().as_secs_f64()
@@ -47,7 +47,7 @@ fn main() {
         let bytes = std::fs::metadata(dir.join("stats-g16.bin")).map_or(0, |m| m.len());
         let old = if before {
             let t = Instant::now();
-            let l = Levels::new(&reader.sweep(), 16, 8.0).expect("levels");
+            let l = Levels::new(&reader.sweep(), 16).expect("levels");
             std::hint::black_box(l);
             format!("{:.2}", t.elapsed().as_secs_f64())
         } else {
@@ -58,7 +58,7 @@ fn main() {
                 let t = Instant::now();
                 let rows = reader.store().level0_rows().expect("disk").expect("rows");
                 let s = TileStats::compute(&rows, 16, &|_| {}).expect("stats");
-                std::hint::black_box(Levels::from_stats(s, reader.spacing(), 8.0));
+                std::hint::black_box(Levels::from_stats(s, reader.spacing()));
                 t.elapsed().as_secs_f64()
             })
             .collect::<Vec<_>>();

@@ -148,13 +148,6 @@ fn level_corners<D: Level0 + ?Sized>(data: &D, lod: u32, c: u32, r: u32) -> Resu
     ])
 }
 
-fn level_interpolate(lod: u32, corners: [f64; 4], c: u32, r: u32) -> f64 {
-    let step = 1u32 << lod;
-    let (c0, r0) = (c / step * step, r / step * step);
-    let (fx, fy) = ((c - c0) as f64 / step as f64, (r - r0) as f64 / step as f64);
-    interp::triangulated(corners, fx, fy)
-}
-
 /// What a [`SplitField`] depends on besides the data: it is rebuilt when one of these changes
 /// (in practice once per renderer and view size).
 #[derive(Clone, Copy, Debug, PartialEq)]
