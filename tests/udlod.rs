@@ -30,43 +30,7 @@ fn terrain(size: u32, spacing: f64) -> Heightmap {
     .unwrap()
 }
 
-/// Poses over a data set: high and straight down, grazing, at ground level, outside looking
-/// in, turning; `n` of them, deterministic.
-fn poses(data: &Heightmap, n: usize) -> Vec<Camera> {
-    let (ex, ey) = data.extent();
-    let (_, hi) = data.height_range();
-    (0..n)
-        .map(|i| {
-            let f = i as f64 / n as f64;
-            let u = (f * 7.31).fract();
-            let v = (f * 3.17 + 0.13).fract();
-            let (x, y) = match i % 5 {
-                3 => (-0.3 * ex, -0.2 * ey + v * ey), // outside, looking in
-                _ => (u * ex, v * ey),
-            };
-            let ground = data.height_at(x, y);
-            let (z, pitch) = match i % 5 {
-                0 => (hi as f64 + 8.0 * ex.max(ey), -90.0), // straight down from high up
-                1 => (ground + 2.0, -1.0 + 2.0 * v),        // grazing, near the ground
-                2 => (ground + 0.5, -10.0),                 // at ground level
-                3 => (hi as f64 + 200.0, -15.0),            // outside
-                _ => (ground + 50.0 + 2000.0 * u, -5.0 - 60.0 * v), // ordinary flight
-            };
-            let yaw = if i % 5 == 3 {
-                60.0 + 60.0 * u
-            } else {
-                360.0 * ((f * 11.7).fract())
-            };
-            Camera {
-                position: DVec3::new(x, y, z),
-                yaw_deg: yaw,
-                pitch_deg: pitch,
-                near: 0.25,
-                ..Camera::default()
-            }
-        })
-        .collect()
-}
+use common::poses::poses;
 
 fn settings() -> UdlodSettings {
     UdlodSettings {
