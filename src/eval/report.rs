@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::chart::{Chart, Series, pareto_front};
-use super::run::{Evaluation, RunSummary};
+use super::run::{Evaluation, FrameRow, RunSummary};
 use crate::error::{Error, Result};
 use crate::gpu_constants::EVAL_NO_ERROR_PX;
 use crate::output::png::write_png;
@@ -72,16 +72,30 @@ fn opt(v: Option<f64>) -> String {
     v.map_or(String::new(), |v| format!("{v:.5}"))
 }
 
+/// One CSV field (RFC 4180): quoted, with its quotes doubled, when it holds a comma, a quote
+/// or a line break (a variant label of several sweeps is `udlod tau_px=1,morph_range=0.5`).
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
 fn frames_csv(eval: &Evaluation) -> String {
+    frames_csv_of(&eval.rows)
+}
+
+fn frames_csv_of(rows: &[FrameRow]) -> String {
     let mut csv = String::from(
         "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles\n",
     );
-    for r in &eval.rows {
+    for r in rows {
         let _ = writeln!(
             csv,
             "{},{},{},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5},{},{},{}",
-            r.variant,
-            r.method,
+            csv_field(&r.variant),
+            csv_field(&r.method),
             r.frame,
             r.gpu_ms,
             r.gpu_prepass_ms,
@@ -108,15 +122,19 @@ fn frames_csv(eval: &Evaluation) -> String {
 }
 
 fn summary_csv(eval: &Evaluation) -> String {
+    summary_csv_of(&eval.summaries)
+}
+
+fn summary_csv_of(summaries: &[RunSummary]) -> String {
     let mut sum = String::from(
         "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median\n",
     );
-    for s in &eval.summaries {
+    for s in summaries {
         let _ = writeln!(
             sum,
             "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{}",
-            s.variant,
-            s.method,
+            csv_field(&s.variant),
+            csv_field(&s.method),
             s.frames,
             s.gpu_ms.median,
             s.gpu_ms.p90,
@@ -373,4 +391,105 @@ fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)
 /// A CSV cell for an optional number: empty when absent.
 fn optional(v: Option<f64>, decimals: usize) -> String {
     v.map(|v| format!("{v:.decimals$}")).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::metrics::{GeometricError, Summary};
+    use crate::render::stats::Percentiles;
+
+    /// The fields of one CSV line (RFC 4180: quoted fields, doubled quotes inside them).
+    fn parse_line(line: &str) -> Vec<String> {
+        let mut fields = vec![String::new()];
+        let mut quoted = false;
+        let mut chars = line.chars().peekable();
+        while let Some(c) = chars.next() {
+            match (c, quoted) {
+                ('"', true) if chars.peek() == Some(&'"') => {
+                    chars.next();
+                    fields.last_mut().unwrap().push('"');
+                }
+                ('"', _) => quoted = !quoted,
+                (',', false) => fields.push(String::new()),
+                (c, _) => fields.last_mut().unwrap().push(c),
+            }
+        }
+        fields
+    }
+
+    const LABEL: &str = "udlod tau_px=1,morph_range=0.5";
+
+    fn row(variant: &str) -> FrameRow {
+        FrameRow {
+            variant: variant.into(),
+            method: "udlod".into(),
+            frame: 3,
+            gpu_ms: 1.0,
+            gpu_prepass_ms: 0.25,
+            gpu_terrain_ms: 0.75,
+            gpu_eval_ms: 2.0,
+            cpu_record_ms: 0.1,
+            triangles: 1000,
+            error: GeometricError::default(),
+            holes: 0,
+            psnr_db: 40.0,
+            ssim: 0.99,
+            popping_p99_px: 0.1,
+            flip: None,
+            oracle_triangles: None,
+        }
+    }
+
+    fn summary(variant: &str) -> RunSummary {
+        RunSummary {
+            variant: variant.into(),
+            method: "udlod".into(),
+            params: vec![("tau_px".into(), 1.0), ("morph_range".into(), 0.5)],
+            frames: 4,
+            gpu_ms: Percentiles::default(),
+            gpu_prepass_ms_median: 0.0,
+            gpu_terrain_ms_median: 0.0,
+            gpu_eval_ms_median: 0.0,
+            triangles_median: 0.0,
+            error: GeometricError::default(),
+            holes_total: 0,
+            psnr_db_mean: 40.0,
+            ssim_mean: 0.99,
+            flip_mean: None,
+            flip_p99_mean: None,
+            flip_frames: 0,
+            popping_px: Summary::default(),
+            swimming_m: Summary::default(),
+            swimming_px: Summary::default(),
+            oracle_triangles_median: None,
+            oracle_ratio_median: None,
+        }
+    }
+
+    /// Every line has the header's columns and the label comes back whole; the old writer's
+    /// line (the label unquoted) has one column too many.
+    fn check(csv: &str) {
+        let mut lines = csv.lines();
+        let header = parse_line(lines.next().unwrap());
+        let mut n = 0;
+        for line in lines {
+            let fields = parse_line(line);
+            assert_eq!(fields.len(), header.len(), "{line}");
+            assert_eq!(fields[0], LABEL);
+            // Negative control: what the writer wrote before quoting does not parse.
+            let old = line.replace(&format!("\"{LABEL}\""), LABEL);
+            assert_ne!(parse_line(&old).len(), header.len(), "{old}");
+            n += 1;
+        }
+        assert!(n > 0);
+    }
+
+    #[test]
+    fn variant_labels_with_commas_are_quoted_in_csv() {
+        check(&frames_csv_of(&[row(LABEL), row(LABEL)]));
+        check(&summary_csv_of(&[summary(LABEL)]));
+        assert_eq!(csv_field("pgm 120x525"), "pgm 120x525");
+        assert_eq!(csv_field("a \"b\",c"), "\"a \"\"b\"\",c\"");
+    }
 }
