@@ -656,7 +656,10 @@ fn nothing_is_drawn_beyond_the_data_edge() {
         worst = worst.max(ph);
     }
     println!("beyond the edge: {phantom} terrain pixels of {sky} sky pixels, worst frame {worst}");
-    assert!(sky > n * 128 * 72 / 5, "the poses must see past the edge: {sky}");
+    assert!(
+        sky > n * 128 * 72 / 5,
+        "the poses must see past the edge: {sky}"
+    );
     assert!(
         phantom * 2000 <= sky,
         "{phantom} pixels of terrain beyond the data's edge ({sky} sky pixels)"
@@ -787,7 +790,10 @@ fn warped_rows_keep_a_constant_relative_spacing_to_the_horizon() {
     let worst_step = |t: &[f32]| {
         let mut worst = 0.0f64;
         for w in t.windows(2) {
-            let (a, b) = (row_distance(&aux, w[0] as f64), row_distance(&aux, w[1] as f64));
+            let (a, b) = (
+                row_distance(&aux, w[0] as f64),
+                row_distance(&aux, w[1] as f64),
+            );
             if a >= 100.0 {
                 worst = worst.max(b / a);
             }
@@ -800,7 +806,9 @@ fn warped_rows_keep_a_constant_relative_spacing_to_the_horizon() {
     assert!(warped.windows(2).all(|w| w[1] > w[0]), "not increasing");
     let plain = aux.row_fractions(rows, false);
     let (w, p) = (worst_step(&warped), worst_step(&plain));
-    println!("largest distance ratio of consecutive rows beyond 100 m: warped {w:.4}, plain {p:.1}");
+    println!(
+        "largest distance ratio of consecutive rows beyond 100 m: warped {w:.4}, plain {p:.1}"
+    );
     assert!(w <= 1.03, "warped rows {w}");
     assert!(p > 10.0, "plain rows {p}");
 }
