@@ -24,12 +24,27 @@ struct Pgm {
 // The heights (R32F, metres) with a 2x2-box mip chain; sampled trilinearly.
 @group(1) @binding(1) var height_mips: texture_2d<f32>;
 @group(1) @binding(2) var mip_sampler: sampler;
+// Each grid row's position in [0, 1] from the bottom of the auxiliary view to its top (rows
+// warped towards the horizon, `row_fractions` in src/lod/pgm/mod.rs).
+@group(1) @binding(3) var<storage, read> row_t: array<f32>;
+
+// Row fraction of row `r`, extrapolated linearly one row past either end.
+fn row_fraction(r: i32) -> f32 {
+    let last = i32(pgm.grid.y) - 1;
+    if r < 0 {
+        return 2.0 * row_t[0] - row_t[1];
+    }
+    if r > last {
+        return 2.0 * row_t[last] - row_t[last - 1];
+    }
+    return row_t[r];
+}
 
 // Camera-relative ground offset (metres) where the ray of grid vertex `g` meets the reference
 // plane; rays at or above the horizon, and hits beyond it, are cut at the largest distance.
 // `g` may lie one step outside the grid (neighbours for the edge length): it extrapolates.
 fn ground_offset(g: vec2<i32>) -> vec2<f32> {
-    let t = vec2<f32>(g) / vec2<f32>(pgm.grid.xy - vec2<u32>(1u));
+    let t = vec2<f32>(f32(g.x) / f32(pgm.grid.x - 1u), row_fraction(g.y));
     let dir = pgm.dir0.xyz + pgm.dcol.xyz * t.x + pgm.drow.xyz * t.y;
     let flat_len = length(dir.xy);
     if flat_len == 0.0 {
@@ -61,14 +76,15 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     // Sample position as integer cell + fraction (relative to the camera cell first).
     let t = frame.camera_offset.xy / spacing + p / spacing;
     let fl = floor(t);
-    var cell = frame.camera_cell.xy + vec2<i32>(fl);
-    var frac = t - fl;
-    // Outside the data: clamp onto its border (triangles there collapse onto the edge).
+    let cell = frame.camera_cell.xy + vec2<i32>(fl);
+    let frac = t - fl;
+    // Outside the data the vertex keeps its position and takes the border's height (clamped
+    // sample); the fragment stage cuts every triangle at the border, where brute force ends.
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
-    frac = select(frac, vec2<f32>(0.0), (cell < vec2<i32>(0)) | (cell >= last));
-    cell = clamp(cell, vec2<i32>(0), last);
+    let outside = (cell < vec2<i32>(0)) | (cell >= last);
     let grid_pos = vec2<f32>(cell) + frac;
-    let uv = (grid_pos + 0.5) / vec2<f32>(frame.data_size.xy);
+    let inside_pos = vec2<f32>(clamp(cell, vec2<i32>(0), last)) + select(frac, vec2<f32>(0.0), outside);
+    let uv = (inside_pos + 0.5) / vec2<f32>(frame.data_size.xy);
     let h = textureSampleLevel(height_mips, mip_sampler, uv, level).r;
     var out: TerrainVertex;
     out.clip = project(cell, frac, h);
@@ -78,5 +94,12 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
 
 @fragment
 fn fs_main(v: TerrainVertex) -> @location(0) vec4<f32> {
-    return shade(v.grid_pos, v.clip);
+    // Shaded first: its derivatives need every fragment of the quad.
+    let colour = shade(v.grid_pos, v.clip);
+    // Beyond the data's edge (grid positions 0..size-1 are the data's samples): nothing.
+    let last = vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0);
+    if any(v.grid_pos < vec2<f32>(0.0)) || any(v.grid_pos > last) {
+        discard;
+    }
+    return colour;
 }

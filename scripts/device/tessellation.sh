@@ -10,8 +10,11 @@ bin=.device-vk/vkterrain
 out=out/device/tessellation
 mkdir -p "$out"
 $bin info | head -20
-# All four methods in one run, with the sweeps: tessellation's target edge size in pixels
-# (fractional_odd, 64-sample patches), GeoMipMapping's distance factor.
+# Every method the harness has (brute, UDLOD, PGM, tessellation, GeoMipMapping) in one run,
+# with the sweeps: UDLOD's tau, PGM's grid scale and row warp (plain vs warped grid, issue 16),
+# tessellation's target edge size in pixels (fractional_odd, 64-sample patches),
+# GeoMipMapping's distance factor. (GPU chunked LOD, issue 16 item 2, is not in the harness yet.)
 $bin eval --config config/ci.toml --width 1920 --height 1080 --frames 240 --warmup 20 \
-  --methods brute,udlod,tessellation,geomipmap --sweep edge_px=1,2,4,8,16 \
+  --methods brute,udlod,pgm,tessellation,geomipmap --sweep tau_px=1,2,4 \
+  --sweep grid_scale=0.5,1 --sweep warp_rows=0,1 --sweep edge_px=1,2,4,8,16 \
   --sweep distance_factor=1,2,4,8 --out "$out/all" --force

@@ -162,6 +162,71 @@ impl AuxCamera {
         (self.tan_x[1].atan() - self.tan_x[0].atan()).to_degrees()
     }
 
+    /// Each grid row's position in `[0, 1]` from the bottom of the view (`tan_y[0]`) to its top
+    /// (`tan_y[1]`): half the rows uniform in the image plane (as Houska's plain grid), half
+    /// uniform in the logarithm of the ground distance along the heading (between the camera's
+    /// height and `max_distance`), so the far field keeps a constant relative row spacing
+    /// instead of ending in one band of rows kilometres apart (Houska's row warping; issue 16:
+    /// a grid uniform in the image plane put everything beyond ~10 km into one row when the
+    /// camera was 10 m above the ground). Row `r` sits where the sum of both normalised
+    /// coordinates is `2 r / (rows - 1)`.
+    pub fn row_fractions(&self, rows: u32, warp: bool) -> Vec<f32> {
+        let last = rows.max(2) - 1;
+        if !warp {
+            return (0..=last).map(|r| r as f32 / last as f32).collect();
+        }
+        let cam = Camera {
+            yaw_deg: self.yaw_deg,
+            pitch_deg: self.pitch_deg,
+            roll_deg: 0.0,
+            ..Camera::default()
+        };
+        let (_, up, fwd) = cam.basis();
+        let heading = DVec3::new(fwd.x, fwd.y, 0.0)
+            .try_normalize()
+            .unwrap_or_else(|| DVec3::new(up.x, up.y, 0.0).normalize_or_zero());
+        let (y0, y1) = (self.tan_y[0], self.tan_y[1]);
+        let near = self.height.min(self.max_distance);
+        let log_dist = |y: f64| {
+            let d = fwd + up * y;
+            let dist = if d.z < 0.0 {
+                self.height * d.dot(heading) / -d.z
+            } else {
+                self.max_distance
+            };
+            dist.clamp(near, self.max_distance).ln()
+        };
+        let (l0, l1) = (log_dist(y0), log_dist(y1));
+        let span = y1 - y0;
+        let coord = |y: f64| {
+            let u = (y - y0) / span;
+            if l1 - l0 > 1e-6 {
+                u + (log_dist(y) - l0) / (l1 - l0)
+            } else {
+                2.0 * u
+            }
+        };
+        (0..=last)
+            .map(|r| {
+                let target = 2.0 * r as f64 / last as f64;
+                let (mut lo, mut hi) = (y0, y1);
+                for _ in 0..48 {
+                    let mid = 0.5 * (lo + hi);
+                    if coord(mid) < target {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                match r {
+                    0 => 0.0,
+                    r if r == last => 1.0,
+                    _ => ((0.5 * (lo + hi) - y0) / span) as f32,
+                }
+            })
+            .collect()
+    }
+
     /// The shader's view of this camera: directions of the grid's corners and extents.
     pub fn uniforms(&self, grid: [u32; 2], band: u32, mips: u32) -> PgmUniforms {
         let cam = Camera {
@@ -315,6 +380,7 @@ pub const PGM_SET: &[Binding] = {
         Binding::new(0, T::UNIFORM_BUFFER, V, "pgm"),
         Binding::new(1, T::SAMPLED_IMAGE, V, "height_mips"),
         Binding::new(2, T::SAMPLER, V, "mip_sampler"),
+        Binding::new(3, T::STORAGE_BUFFER, V, "row_t"),
     ]
 };
 
@@ -327,6 +393,8 @@ pub struct Pgm {
     instances: u32,
     band: u32,
     uniforms: Vec<Buffer>,
+    /// Per slot: each row's fraction of the auxiliary view (`AuxCamera::row_fractions`).
+    row_t: Vec<Buffer>,
     sets: DescriptorSets,
     _heights: Image,
     mips: u32,
@@ -390,8 +458,17 @@ impl Pgm {
         }
         .vk("vkCreateSampler")?;
         let sets = DescriptorSets::new(gpu, PGM_SET, ctx.slots)?;
+        let [cols, rows] = settings.grid();
         let mut uniforms = Vec::with_capacity(ctx.slots);
+        let mut row_t = Vec::with_capacity(ctx.slots);
         for i in 0..ctx.slots {
+            let rows_buf = Buffer::new(
+                gpu,
+                &format!("pgm row fractions {i}"),
+                rows as u64 * 4,
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?;
             let ubo = Buffer::new(
                 gpu,
                 &format!("pgm uniforms {i}"),
@@ -405,11 +482,12 @@ impl Pgm {
                     ("pgm", Resource::Buffer(ubo.raw)),
                     ("height_mips", Resource::Image(heights.view)),
                     ("mip_sampler", Resource::Sampler(raw.sampler)),
+                    ("row_t", Resource::Buffer(rows_buf.raw)),
                 ],
             )?;
             uniforms.push(ubo);
+            row_t.push(rows_buf);
         }
-        let [cols, rows] = settings.grid();
         let band = band_rows(cols, rows);
         let grid = band_indices(cols, band);
         let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
@@ -441,6 +519,7 @@ impl Pgm {
             instances: (rows - 1).div_ceil(band),
             band,
             uniforms,
+            row_t,
             sets,
             _heights: heights,
             mips: levels.len() as u32,
@@ -481,7 +560,10 @@ impl LodMethod for Pgm {
 
     fn update(&mut self, slot: ViewSlot, view: &ViewState) -> Result<()> {
         let aux = self.aux_for(view);
-        let u = aux.uniforms(self.settings.grid(), self.band, self.mips);
+        let grid = self.settings.grid();
+        let u = aux.uniforms(grid, self.band, self.mips);
+        let rows = aux.row_fractions(grid[1], self.settings.warp_rows);
+        self.row_t[slot.index()].write(bytemuck::cast_slice(&rows))?;
         self.uniforms[slot.index()].write(bytemuck::bytes_of(&u))
     }
 

@@ -18,6 +18,10 @@ pub struct PgmSettings {
     /// Lowest height of the auxiliary camera above the reference plane (the terrain under the
     /// camera), metres.
     pub min_height_m: f64,
+    /// Rows warped towards the horizon (half uniform in the image plane, half uniform in the
+    /// logarithm of the ground distance; `AuxCamera::row_fractions`); `false`: every row
+    /// uniform in the image plane (the plain grid, which drops distant peaks seen from low).
+    pub warp_rows: bool,
 }
 
 impl Default for PgmSettings {
@@ -27,6 +31,7 @@ impl Default for PgmSettings {
             grid_rows: 1050,
             fov_deg: 90.0,
             min_height_m: 2.0,
+            warp_rows: true,
         }
     }
 }
@@ -57,6 +62,11 @@ impl PgmSettings {
             key: "fov_deg",
             help: "least field of view of the auxiliary camera",
             apply: |s, v| s.fov_deg = v,
+        },
+        Sweep {
+            key: "warp_rows",
+            help: "1: rows warped towards the horizon (default), 0: uniform in the image plane",
+            apply: |s, v| s.warp_rows = v != 0.0,
         },
     ];
 
