@@ -740,16 +740,24 @@ fn low_views_looking_up_keep_distant_peaks() {
         assert!(inside_total > n * 160 * 90 / 4, "{inside_total}");
         (holes_total, inside_total, drop_mean)
     };
+    // Bounds set between the two grids as measured at 160x90 on the procedural data (warped:
+    // 0.05 px and 3 holes of 157,637 inside pixels; plain: 0.42 px and 58): each bound is ~3x
+    // from the warped grid and ~2-3x from the plain one.
+    const DROP_PX: f64 = 0.15;
+    const HOLES_PER: usize = 5000; // at most one hole per this many inside pixels
     let (holes_total, inside_total, drop_mean) = measure(true);
-    assert!(drop_mean <= 1.0, "skyline {drop_mean} px lower on average");
     assert!(
-        holes_total * 100 <= inside_total,
+        drop_mean <= DROP_PX,
+        "skyline {drop_mean} px lower on average"
+    );
+    assert!(
+        holes_total * HOLES_PER <= inside_total,
         "{holes_total} of {inside_total}"
     );
     // Negative control: the plain grid fails both bounds.
     let (plain_holes, plain_inside, plain_drop) = measure(false);
     assert!(
-        plain_drop > 1.0 && plain_holes * 100 > plain_inside,
+        plain_drop > DROP_PX && plain_holes * HOLES_PER > plain_inside,
         "the plain grid passed: {plain_drop} px, {plain_holes} of {plain_inside}"
     );
 }
