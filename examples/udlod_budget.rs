@@ -94,16 +94,46 @@ fn main() -> anyhow::Result<()> {
             );
         }
         let (mut tiles_n, mut tris_o, mut slack) = (0usize, 0u64, Vec::new());
+        // Drawn tiles whose parent's exact per-sample projected error is within tau (the
+        // parent alone would do): split by the parent's own pixel term (rule looseness) or
+        // only by the crack-free chain.
+        let (mut over_rule, mut over_chain) = (0usize, 0usize);
+        let mut per_level = vec![0usize; levels.levels() as usize];
         for &k in &picks {
             let cam = p.scenario.camera(k);
             let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
             let tiles = select::select_tiles(&levels, &sp);
             tiles_n += tiles.len();
+            let mut parents = std::collections::HashMap::new();
             for t in &tiles {
                 slack.push(tile_slack(&levels, &data, &cam, focal, tau, *t));
+                per_level[t.lod as usize] += 1;
+                if t.lod < levels.root_lod {
+                    let q = Tile {
+                        x: t.x / 2,
+                        y: t.y / 2,
+                        lod: t.lod + 1,
+                    };
+                    let needed = *parents
+                        .entry(q)
+                        .or_insert_with(|| tile_exact_splits(&levels, &data, &cam, focal, tau, q));
+                    if !needed {
+                        let screen =
+                            select::WORST_CASE_SHARE * levels.tile_error(q) as f64 * focal / tau;
+                        if (select::tile_distance(&levels, &sp, q) as f64) < screen {
+                            over_rule += 1;
+                        } else {
+                            over_chain += 1;
+                        }
+                    }
+                }
             }
             tris_o += oracle.count(&data, &cam, w, h, tau).triangles;
         }
+        println!(
+            "  drawn tiles per level (0..root): {per_level:?}; whose parent meets tau exactly: {} by its pixel term, {} only by the chain (of {tiles_n})",
+            over_rule, over_chain
+        );
         let g2 = 2 * (settings.grid_size as u64).pow(2);
         let keep = 1.0 - s.morph_range;
         let base = Cf {

@@ -4,8 +4,13 @@
 #
 # Here, before carrying: a release build, `../shared/device-vulkan/prepare.sh
 # target/release/vkterrain`, optionally main's release binary copied to
-# .device-vk/vkterrain-before, and the Puget Sound heights copied into the carried folder:
+# .device-vk/vkterrain-before, the Puget Sound heights copied into the carried folder, and the
+# Fischer S1/S3 data sets (`make data-franconia data-pyrenees`: out/datasets/franconia and
+# out/datasets/pyrenees, each two SRTM1 tiles as a tile pyramid; carry both folders: the
+# GPU machine has no GDAL to build them from the .hgt.zip files):
 #   mkdir -p .device-vk/data && cp ../shared/data/puget_sound/ps_height_1k.png .device-vk/data/
+# Data sets that are absent are skipped with a line saying so (the CI terrain is procedural,
+# generated in memory).
 # Run there from the repository root: `bash scripts/device/udlod.sh > $OUT/udlod.txt 2>&1`.
 set -u
 . .device-vk/env.sh
@@ -14,9 +19,14 @@ log() { echo "### $*"; }
 PUGET=$(mktemp --suffix=.toml)
 printf '[dataset]\nkind = "png16"\npath = "%s"\nspacing = 160.0\nvertical_scale = 0.1\n[scenario]\npath = "%s"\n' \
   "$PWD/.device-vk/data/ps_height_1k.png" "$PWD/config/scenarios/default.toml" > "$PUGET"
+cfgs=(config/ci.toml)
+if [ -f .device-vk/data/ps_height_1k.png ]; then cfgs+=("$PUGET"); else log "Puget Sound heights absent: skipped"; fi
+for ds in franconia pyrenees; do
+  if [ -f "out/datasets/$ds/manifest.json" ]; then cfgs+=("config/$ds.toml"); else log "out/datasets/$ds absent: Fischer $ds skipped"; fi
+done
 for bin in .device-vk/vkterrain .device-vk/vkterrain-before; do
   [ -x "$bin" ] || { log "$bin absent: skipped"; continue; }
-  for cfg in config/ci.toml "$PUGET"; do
+  for cfg in "${cfgs[@]}"; do
     for tau in 0.5 1 2 4; do
       log "$bin bench $cfg udlod tau $tau 1920x1080"
       "$bin" bench --config "$cfg" --method udlod --tau-px "$tau" --resolutions 1920x1080 \

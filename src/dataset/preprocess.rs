@@ -354,10 +354,10 @@ fn check_options(opts: &Options) -> Result<()> {
         ));
     }
     for &g in &opts.stats_grid_sizes {
-        if !(4..=64).contains(&g) || g % 2 != 0 {
+        if !(2..=64).contains(&g) || g % 2 != 0 {
             return Err(Error::invalid(
                 "--stats-grid-sizes",
-                format!("{g} is not an even tile size within 4..=64 (UDLOD's grid_size)"),
+                format!("{g} is not an even tile size within 2..=64 (UDLOD's grid_size)"),
             ));
         }
     }

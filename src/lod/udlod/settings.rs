@@ -8,7 +8,7 @@ use crate::lod::sweep::Sweep;
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct UdlodSettings {
-    /// Quads per tile side (even, 4..=64).
+    /// Quads per tile side (even, 2..=64).
     pub grid_size: u32,
     /// Screen-space geometric error target in pixels.
     pub tau_px: f64,
@@ -71,9 +71,9 @@ impl UdlodSettings {
 
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::invalid("udlod settings", m));
-        if !(4..=64).contains(&self.grid_size) || self.grid_size % 2 != 0 {
+        if !(2..=64).contains(&self.grid_size) || self.grid_size % 2 != 0 {
             return bad(format!(
-                "grid_size {} must be even and within 4..=64",
+                "grid_size {} must be even and within 2..=64",
                 self.grid_size
             ));
         }
