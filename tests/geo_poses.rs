@@ -6,8 +6,8 @@
 use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::manifest::datum;
-use vkterrain::dataset::world::{Placement, world_frame};
 use vkterrain::dataset::settings::Anchor;
+use vkterrain::dataset::world::{Placement, world_frame};
 use vkterrain::geo::ellipsoid::Ellipsoid;
 use vkterrain::geo::{GeoPose, Geodetic, HeightRef, WGS84};
 use vkterrain::scene::scenario::ScenarioFile;
@@ -72,29 +72,45 @@ fn geodetic_to_ecef_equals_proj_within_a_millimetre() {
     };
     let mut wrong_seen = 0.0f64;
     let mut n = 0;
-    for lat in [-89.5, -60.0, -33.9, 0.0, 0.001, 27.98, 46.5, 70.0, 80.0, 89.9] {
+    for lat in [
+        -89.5, -60.0, -33.9, 0.0, 0.001, 27.98, 46.5, 70.0, 80.0, 89.9,
+    ] {
         for lon in [-179.9, -122.3, -0.5, 0.0, 8.0, 90.0, 179.9] {
             for h in [-430.0, 0.0, 4478.0, 8848.0, 35_000.0] {
                 let (mut x, mut y, mut z) = ([lon], [lat], [h]);
                 fwd.transform_coords(&mut x, &mut y, &mut z).unwrap();
                 let proj = DVec3::new(x[0], y[0], z[0]);
                 let ours = WGS84.to_ecef(Geodetic::new(lat, lon, h));
-                assert!(ours.distance(proj) < 1e-3, "{lat} {lon} {h}: {ours} vs {proj}");
-                wrong_seen = wrong_seen.max(wrong.to_ecef(Geodetic::new(lat, lon, h)).distance(proj));
+                assert!(
+                    ours.distance(proj) < 1e-3,
+                    "{lat} {lon} {h}: {ours} vs {proj}"
+                );
+                wrong_seen =
+                    wrong_seen.max(wrong.to_ecef(Geodetic::new(lat, lon, h)).distance(proj));
                 // And back: our inverse against PROJ's.
                 let (mut gx, mut gy, mut gz) = ([proj.x], [proj.y], [proj.z]);
                 inv.transform_coords(&mut gx, &mut gy, &mut gz).unwrap();
                 let back = WGS84.to_geodetic(proj);
                 let dlat = (back.lat_deg - gy[0]).to_radians() * WGS84.a;
                 let dlon = (back.lon_deg - gx[0]).to_radians() * WGS84.a * lat.to_radians().cos();
-                assert!(dlat.abs() < 1e-3 && dlon.abs() < 1e-3, "{lat} {lon} {h}: {back:?}");
-                assert!((back.height - gz[0]).abs() < 1e-3, "{lat} {lon} {h}: {back:?} vs {}", gz[0]);
+                assert!(
+                    dlat.abs() < 1e-3 && dlon.abs() < 1e-3,
+                    "{lat} {lon} {h}: {back:?}"
+                );
+                assert!(
+                    (back.height - gz[0]).abs() < 1e-3,
+                    "{lat} {lon} {h}: {back:?} vs {}",
+                    gz[0]
+                );
                 n += 1;
             }
         }
     }
     assert_eq!(n, 350);
-    assert!(wrong_seen > 10.0, "a wrong flattening went unnoticed ({wrong_seen} m)");
+    assert!(
+        wrong_seen > 10.0,
+        "a wrong flattening went unnoticed ({wrong_seen} m)"
+    );
 }
 
 #[cfg(feature = "gdal")]
@@ -106,14 +122,28 @@ fn msl_and_ellipsoidal_heights_differing_by_the_undulation_give_the_same_camera(
     for terrain_datum in [datum::LOCAL, datum::EGM96, datum::ELLIPSOID] {
         let earth = anchored(terrain_datum);
         let n = earth.msl_undulation(lat, lon).unwrap();
-        assert!((n - 50.7).abs() < 1.0, "EGM96 near 46.5 N 8 E is about +50.7 m: {n}");
+        assert!(
+            (n - 50.7).abs() < 1.0,
+            "EGM96 near 46.5 N 8 E is about +50.7 m: {n}"
+        );
         let by_ellipsoid = earth
-            .camera(&pose(lat, lon, 3000.0, HeightRef::Ellipsoid), &data, &template)
+            .camera(
+                &pose(lat, lon, 3000.0, HeightRef::Ellipsoid),
+                &data,
+                &template,
+            )
             .unwrap();
         let by_msl = earth
-            .camera(&pose(lat, lon, 3000.0 - n, HeightRef::Msl), &data, &template)
+            .camera(
+                &pose(lat, lon, 3000.0 - n, HeightRef::Msl),
+                &data,
+                &template,
+            )
             .unwrap();
-        assert!(same_camera(&by_ellipsoid, &by_msl, 1e-6), "{terrain_datum}: {by_ellipsoid:?} vs {by_msl:?}");
+        assert!(
+            same_camera(&by_ellipsoid, &by_msl, 1e-6),
+            "{terrain_datum}: {by_ellipsoid:?} vs {by_msl:?}"
+        );
         // Negative control: the same number as MSL is N metres higher.
         let wrong = earth
             .camera(&pose(lat, lon, 3000.0, HeightRef::Msl), &data, &template)
@@ -157,10 +187,17 @@ fn ground_poses_stand_on_the_terrain() {
     assert!((cam.position.x - 1500.0).abs() < 0.5 && (cam.position.y - 1200.0).abs() < 0.5);
     // Outside the data set: no ground, one line.
     let e = earth
-        .camera(&pose(47.5, 8.0, 10.0, HeightRef::Ground), &data, &Camera::default())
+        .camera(
+            &pose(47.5, 8.0, 10.0, HeightRef::Ground),
+            &data,
+            &Camera::default(),
+        )
         .unwrap_err()
         .to_string();
-    assert!(e.contains("outside the data set") && !e.contains('\n'), "{e}");
+    assert!(
+        e.contains("outside the data set") && !e.contains('\n'),
+        "{e}"
+    );
 }
 
 #[test]
@@ -195,16 +232,23 @@ fn wgs84_keyframes_fly_over_the_earth_and_need_a_world_frame() {
     assert!((g.height_m - 1000.0).abs() < 1e-6, "{g:?}");
     assert!((g.lat_deg - 46.725).abs() < 1e-9 && g.heading_deg.min(360.0 - g.heading_deg) < 1e-6);
     assert!((g.pitch_deg + 10.0).abs() < 1e-9, "{g:?}");
-    assert!(mid.position.z < 1000.0 - 150.0, "the world's z drops with curvature: {mid:?}");
+    assert!(
+        mid.position.z < 1000.0 - 150.0,
+        "the world's z drops with curvature: {mid:?}"
+    );
     // The ends are the keyframes.
     let end = earth.pose(&s.camera(30)).unwrap();
     assert!((end.lat_deg - 46.95).abs() < 1e-9 && (end.heading_deg - 10.0).abs() < 1e-6);
     // No world frame: one line naming the cause.
-    let e = Scenario::resolve_on(&file, &data, None).unwrap_err().to_string();
+    let e = Scenario::resolve_on(&file, &data, None)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("on the earth") && !e.contains('\n'), "{e}");
     // World angles do not mix with a WGS84 keyframe.
     let mixed: ScenarioFile =
         toml::from_str(&text.replacen("pitch_deg = -10.0", "pitch = -10.0", 1)).unwrap();
-    let e = Scenario::resolve_on(&mixed, &data, Some(&earth)).unwrap_err().to_string();
+    let e = Scenario::resolve_on(&mixed, &data, Some(&earth))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("heading_deg") && !e.contains('\n'), "{e}");
 }

@@ -790,13 +790,20 @@ fn wgs84_pose_sent_to_serve_renders_like_the_same_pose_in_a_scenario() {
         .arg(&config)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let want = image::open(tmp.path().join("out/frame_00000.png"))
         .unwrap()
         .to_rgba8();
 
     // serve flies the default scenario until the message arrives.
-    let served = anchored_config(tmp.path(), "name = \"d\"\nframes = 10\n[[keyframe]]\nt = 0.0\nposition = [9000.0, 9000.0, 4000.0]\nyaw = 45.0\npitch = -30.0\n");
+    let served = anchored_config(
+        tmp.path(),
+        "name = \"d\"\nframes = 10\n[[keyframe]]\nt = 0.0\nposition = [9000.0, 9000.0, 4000.0]\nyaw = 45.0\npitch = -30.0\n",
+    );
     let name = format!("vkt-geo-{}", std::process::id());
     let sock_path = tmp.path().join("control.sock");
     let child = exe_in(tmp.path())
@@ -811,9 +818,16 @@ fn wgs84_pose_sent_to_serve_renders_like_the_same_pose_in_a_scenario() {
         .unwrap();
     let mut r = open_ring(tmp.path(), &name, Duration::from_secs(60));
     let first = next_frame(&mut r);
-    assert_eq!(first.height_datum, vkterrain::output::ring::layout::DATUM_ELLIPSOID);
+    assert_eq!(
+        first.height_datum,
+        vkterrain::output::ring::layout::DATUM_ELLIPSOID
+    );
     let scripted = r.pixels().to_vec();
-    assert_ne!(scripted, want.as_raw().as_slice(), "negative control: another pose");
+    assert_ne!(
+        scripted,
+        want.as_raw().as_slice(),
+        "negative control: another pose"
+    );
     let msg = format!(
         r#"{{"pose":{{"lat_deg":{lat},"lon_deg":{lon},"height_m":{agl},"height_ref":"ground","heading_deg":{heading},"pitch_deg":{pitch}}},"fov_deg":42.5}}"#
     );
@@ -827,13 +841,26 @@ fn wgs84_pose_sent_to_serve_renders_like_the_same_pose_in_a_scenario() {
         if m.vfov_deg == 42.5 {
             break m;
         }
-        assert!(start.elapsed() < Duration::from_secs(60), "pose never applied");
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "pose never applied"
+        );
     };
-    assert_eq!(r.pixels(), want.as_raw().as_slice(), "control pose != scenario pose");
+    assert_eq!(
+        r.pixels(),
+        want.as_raw().as_slice(),
+        "control pose != scenario pose"
+    );
     // The ring reports the camera on the earth.
-    assert!((m.lat_deg - lat).abs() < 1e-9 && (m.lon_deg - lon).abs() < 1e-9, "{m:?}");
+    assert!(
+        (m.lat_deg - lat).abs() < 1e-9 && (m.lon_deg - lon).abs() < 1e-9,
+        "{m:?}"
+    );
     assert!((m.heading_deg - heading).abs() < 1e-6 && (m.local_pitch_deg - pitch).abs() < 1e-6);
-    assert!(m.height_m.is_finite() && m.height_datum == first.height_datum, "{m:?}");
+    assert!(
+        m.height_m.is_finite() && m.height_datum == first.height_datum,
+        "{m:?}"
+    );
     // A WGS84 pose outside the data set (no ground) is rejected, rendering goes on.
     UnixDatagram::unbound()
         .unwrap()

@@ -11,8 +11,8 @@ use crate::dataset::{NodeStore, PyramidReader, Terrain};
 use crate::driver::Gpu;
 use crate::error::Result;
 use crate::geo::EnuFrame;
-use crate::render::{RenderOptions, Renderer};
 use crate::output::ring::layout::datum_code;
+use crate::render::{RenderOptions, Renderer};
 use crate::scene::{Earth, Scenario};
 
 impl Config {
@@ -98,10 +98,7 @@ impl Config {
     /// The data set's place on the earth, for poses given by latitude/longitude; `None`: a flat
     /// world.
     pub fn open_earth(&self) -> Result<Option<Earth>> {
-        Ok(self
-            .dataset
-            .placement(|p| self.resolve(p))?
-            .map(Earth::new))
+        Ok(self.dataset.placement(|p| self.resolve(p))?.map(Earth::new))
     }
 
     /// The data set's node store (`tiles` or `xyz`), read node by node.

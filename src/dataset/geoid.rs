@@ -69,9 +69,8 @@ impl Geoid {
             AxisMappingStrategy, CoordTransform, CoordTransformOptions, SpatialRef,
         };
         let what = format!("geoid {}", model.name());
-        let err = |e: gdal::errors::GdalError| {
-            Error::invalid(&what, e.to_string().replace('\n', " "))
-        };
+        let err =
+            |e: gdal::errors::GdalError| Error::invalid(&what, e.to_string().replace('\n', " "));
         let mut from = SpatialRef::from_epsg(4979).map_err(err)?;
         let mut to = SpatialRef::from_definition(&format!("EPSG:4326+{}", model.vertical_epsg()))
             .map_err(err)?;
@@ -79,8 +78,7 @@ impl Geoid {
         to.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
         let mut options = CoordTransformOptions::new().map_err(err)?;
         options.set_ballpark_allowed(false).map_err(err)?;
-        let to_orthometric =
-            CoordTransform::new_with_options(&from, &to, &options).map_err(err)?;
+        let to_orthometric = CoordTransform::new_with_options(&from, &to, &options).map_err(err)?;
         let geoid = Geoid {
             model,
             to_orthometric,

@@ -49,7 +49,9 @@ pub fn frame_of_georef(georef: &Georef) -> Result<EnuFrame> {
     if !(lat.is_finite() && lon.is_finite()) || lat.abs() >= 90.0 {
         return Err(Error::invalid(
             georef.crs.label(),
-            format!("sample (0, 0) maps to latitude {lat} / longitude {lon}: no east-north-up frame there"),
+            format!(
+                "sample (0, 0) maps to latitude {lat} / longitude {lon}: no east-north-up frame there"
+            ),
         ));
     }
     Ok(EnuFrame::new(&WGS84, Geodetic::new(lat, lon, 0.0)))
@@ -152,7 +154,11 @@ mod tests {
     #[test]
     fn geographic_grid_is_anchored_at_its_first_sample() {
         let crs = super::super::crs::Crs::wgs84().unwrap();
-        let g = Georef::north_up(crs, [8.0 + 1.0 / 2400.0, 46.0], [1.0 / 1200.0, 1.0 / 1200.0]);
+        let g = Georef::north_up(
+            crs,
+            [8.0 + 1.0 / 2400.0, 46.0],
+            [1.0 / 1200.0, 1.0 / 1200.0],
+        );
         let f = world_frame(Some(&g), None).unwrap().unwrap();
         assert!((f.origin.lat_deg - 46.0).abs() < 1e-9, "{:?}", f.origin);
         assert!((f.origin.lon_deg - (8.0 + 1.0 / 2400.0)).abs() < 1e-9);
@@ -178,6 +184,10 @@ mod tests {
         let g = Georef::north_up(crs, [500_000.0, 5_150_000.0], [30.0, 30.0]);
         let f = world_frame(Some(&g), None).unwrap().unwrap();
         assert!((f.origin.lon_deg - 9.0).abs() < 1e-9, "{:?}", f.origin);
-        assert!((f.origin.lat_deg - 46.503_569_57).abs() < 1e-8, "{:?}", f.origin);
+        assert!(
+            (f.origin.lat_deg - 46.503_569_57).abs() < 1e-8,
+            "{:?}",
+            f.origin
+        );
     }
 }

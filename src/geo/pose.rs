@@ -136,7 +136,10 @@ impl GeoPose {
             ));
         }
         if self.lon_deg.abs() > 360.0 {
-            return bad(format!("longitude {} deg is outside [-360, 360]", self.lon_deg));
+            return bad(format!(
+                "longitude {} deg is outside [-360, 360]",
+                self.lon_deg
+            ));
         }
         if !(-90.0..=90.0).contains(&self.pitch_deg) {
             return bad(format!("pitch {} deg is outside [-90, 90]", self.pitch_deg));
@@ -238,7 +241,13 @@ mod tests {
     #[test]
     fn world_round_trip_far_from_the_origin() {
         let world = EnuFrame::new(&WGS84, Geodetic::new(45.0, 7.0, 0.0));
-        for (lat, lon) in [(45.0, 7.0), (45.45, 7.0), (45.0, 7.7), (44.2, 6.1), (46.3, 8.9)] {
+        for (lat, lon) in [
+            (45.0, 7.0),
+            (45.45, 7.0),
+            (45.0, 7.7),
+            (44.2, 6.1),
+            (46.3, 8.9),
+        ] {
             for (hd, p, r) in [(0.0, 0.0, 0.0), (123.0, -35.0, 12.0), (271.0, 60.0, -80.0)] {
                 let g = pose(lat, lon, 3456.0, hd, p, r);
                 let w = g.to_world(&world, g.height_m);
@@ -280,17 +289,29 @@ mod tests {
             .to_degrees();
         let w = pose(60.0, 10.0 + dlon, 500.0, 0.0, 0.0, 0.0).to_world(&world, 500.0);
         let want = -dlon * 60f64.to_radians().sin();
-        let yaw = if w.yaw_deg > 180.0 { w.yaw_deg - 360.0 } else { w.yaw_deg };
+        let yaw = if w.yaw_deg > 180.0 {
+            w.yaw_deg - 360.0
+        } else {
+            w.yaw_deg
+        };
         assert!((yaw - want).abs() < 0.01, "{yaw} vs {want}");
         assert!(want.abs() > 1.0);
     }
 
     #[test]
     fn validation_names_the_problem() {
-        let e = pose(90.0, 0.0, 0.0, 0.0, 0.0, 0.0).validate("camera").unwrap_err();
+        let e = pose(90.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            .validate("camera")
+            .unwrap_err();
         assert!(e.to_string().contains("latitude"), "{e}");
-        let e = pose(0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0).validate("camera").unwrap_err();
+        let e = pose(0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0)
+            .validate("camera")
+            .unwrap_err();
         assert!(e.to_string().contains("height_m"), "{e}");
-        assert!(pose(-33.9, 151.2, 50.0, 350.0, -89.0, 30.0).validate("c").is_ok());
+        assert!(
+            pose(-33.9, 151.2, 50.0, 350.0, -89.0, 30.0)
+                .validate("c")
+                .is_ok()
+        );
     }
 }

@@ -474,18 +474,20 @@ impl Renderer {
             rgba,
             depth,
             camera: pending.camera,
-            geo: self.world.map(|(frame, height_datum)| crate::readback::GeoFix {
-                pose: crate::geo::GeoPose::from_world(
-                    &frame,
-                    &crate::geo::WorldPose {
-                        position: pending.camera.position,
-                        yaw_deg: pending.camera.yaw_deg,
-                        pitch_deg: pending.camera.pitch_deg,
-                        roll_deg: pending.camera.roll_deg,
-                    },
-                ),
-                height_datum,
-            }),
+            geo: self
+                .world
+                .map(|(frame, height_datum)| crate::readback::GeoFix {
+                    pose: crate::geo::GeoPose::from_world(
+                        &frame,
+                        &crate::geo::WorldPose {
+                            position: pending.camera.position,
+                            yaw_deg: pending.camera.yaw_deg,
+                            pitch_deg: pending.camera.pitch_deg,
+                            roll_deg: pending.camera.roll_deg,
+                        },
+                    ),
+                    height_datum,
+                }),
             timings,
             triangles,
         };

@@ -17,10 +17,10 @@ use std::cell::OnceCell;
 use glam::DVec3;
 
 use super::Camera;
+use crate::dataset::Level0;
 use crate::dataset::crs::{Crs, Georef, Transform};
 use crate::dataset::geoid::{Geoid, GeoidModel};
 use crate::dataset::world::Placement;
-use crate::dataset::Level0;
 use crate::error::{Error, Result};
 use crate::geo::{EnuFrame, GeoPose, Geodetic, HeightRef, WGS84, WorldPose};
 
@@ -93,10 +93,7 @@ impl Earth {
         let t = &georef.sample_to_crs;
         let (col, row) = ((x - t[0]) / t[1], (y - t[3]) / t[5]);
         let (ex, ey) = data.extent();
-        Ok((
-            col / (*w - 1) as f64 * ex,
-            row / (*h - 1) as f64 * ey,
-        ))
+        Ok((col / (*w - 1) as f64 * ex, row / (*h - 1) as f64 * ey))
     }
 
     fn to_grid(&self, georef: &Georef) -> Result<&Transform> {

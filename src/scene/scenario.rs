@@ -206,9 +206,7 @@ impl Scenario {
                     ));
                 };
                 let c = earth.camera(&pose, data, &template)?;
-                let height = WGS84
-                    .to_geodetic(earth.frame().to_ecef(c.position))
-                    .height;
+                let height = WGS84.to_geodetic(earth.frame().to_ecef(c.position)).height;
                 keys.push(Key {
                     t: k.t.unwrap_or(f64::NAN),
                     position: c.position,

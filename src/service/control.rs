@@ -15,9 +15,9 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::geo::{GeoPose, HeightRef};
 use crate::output::lock::{PathLock, lock_path_for};
 use crate::output::ring::sys;
-use crate::geo::{GeoPose, HeightRef};
 use crate::scene::Camera;
 
 /// Largest accepted position coordinate (metres): far beyond any data set, finite.
