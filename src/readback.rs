@@ -41,9 +41,19 @@ pub struct FrameView<'a> {
     /// Reversed-Z depth (1 = near plane, 0 = far/sky) when depth readback is on.
     pub depth: Option<&'a [f32]>,
     pub camera: Camera,
+    /// The camera on the earth, when the world frame is (`Renderer::world`).
+    pub geo: Option<GeoFix>,
     pub timings: FrameTimings,
     /// Triangles submitted for this frame.
     pub triangles: u64,
+}
+
+/// A camera's WGS84 pose and the datum its height is measured from (the terrain's:
+/// `output::ring::layout::DATUM_*`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GeoFix {
+    pub pose: crate::geo::GeoPose,
+    pub height_datum: u32,
 }
 
 /// A buffer the GPU copies a frame's colour into directly instead of the renderer's readback

@@ -333,6 +333,14 @@ fn c_header_and_python_match_rust_layout() {
         ("cpu_record_ms", offset_of!(FrameMeta, cpu_record_ms)),
         ("cpu_wait_ms", offset_of!(FrameMeta, cpu_wait_ms)),
         ("triangles", offset_of!(FrameMeta, triangles)),
+        ("height_datum", offset_of!(FrameMeta, height_datum)),
+        ("lat_deg", offset_of!(FrameMeta, lat_deg)),
+        ("lon_deg", offset_of!(FrameMeta, lon_deg)),
+        ("height_m", offset_of!(FrameMeta, height_m)),
+        ("heading_deg", offset_of!(FrameMeta, heading_deg)),
+        ("local_pitch_deg", offset_of!(FrameMeta, local_pitch_deg)),
+        ("local_roll_deg", offset_of!(FrameMeta, local_roll_deg)),
+        ("_reserved2", offset_of!(FrameMeta, _reserved2)),
     ] {
         want.insert(format!("vkt_frame_meta.{c}"), r);
     }
@@ -377,7 +385,7 @@ fn c_header_and_python_match_rust_layout() {
             offset_of!(SlotHeader, meta) as u64,
             size_of::<FrameMeta>() as u64,
             layout::MAGIC,
-            offset_of!(FrameMeta, triangles) as u64,
+            offset_of!(FrameMeta, _reserved2) as u64,
         ];
         assert_eq!(got, want, "Python offsets differ from the Rust layout");
     }

@@ -749,3 +749,129 @@ fn serve_publishes_zero_copy_where_the_device_can() {
     }
     assert_eq!(s["frames_rendered"], 4);
 }
+
+/// A config like ci.toml, anchored on the earth, with `scenario` as its flight.
+fn anchored_config(dir: &Path, scenario: &str) -> PathBuf {
+    let scenario_path = dir.join("geo.toml");
+    std::fs::write(&scenario_path, scenario).unwrap();
+    let config = dir.join("anchored.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[render]\nwidth = 64\nheight = 64\n\
+             [dataset]\nkind = \"procedural\"\nsize = 513\nseed = 1\nspacing = 60.0\n\
+             anchor = {{ lat_deg = 46.5, lon_deg = 8.0 }}\n\
+             [method]\nname = \"brute\"\n\
+             [scenario]\npath = {:?}\n\
+             [output]\ndir = {:?}\npng_frames = [0]\n",
+            scenario_path.display().to_string(),
+            dir.join("out").display().to_string()
+        ),
+    )
+    .unwrap();
+    config
+}
+
+/// The same WGS84 pose as a scenario keyframe (`render`) and as a control message (`serve`)
+/// gives the same pixels; the ring reports the pose back. Negative control: serve's scripted
+/// frame before the message differs.
+#[test]
+fn wgs84_pose_sent_to_serve_renders_like_the_same_pose_in_a_scenario() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (lat, lon, agl, heading, pitch) = (46.6, 8.12, 1500.0, 210.0, -20.0);
+    let keyframe = format!(
+        "name = \"geo\"\nframes = 1\nvfov_deg = 42.5\n[[keyframe]]\nt = 0.0\n\
+         lat_deg = {lat}\nlon_deg = {lon}\nheight_m = {agl}\nheight_ref = \"ground\"\n\
+         heading_deg = {heading}\npitch_deg = {pitch}\n"
+    );
+    let config = anchored_config(tmp.path(), &keyframe);
+    let out = common::cli::command()
+        .args(["render", "--frames", "1", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let want = image::open(tmp.path().join("out/frame_00000.png"))
+        .unwrap()
+        .to_rgba8();
+
+    // serve flies the default scenario until the message arrives.
+    let served = anchored_config(
+        tmp.path(),
+        "name = \"d\"\nframes = 10\n[[keyframe]]\nt = 0.0\nposition = [9000.0, 9000.0, 4000.0]\nyaw = 45.0\npitch = -30.0\n",
+    );
+    let name = format!("vkt-geo-{}", std::process::id());
+    let sock_path = tmp.path().join("control.sock");
+    let child = exe_in(tmp.path())
+        .arg("serve")
+        .arg("--config")
+        .arg(&served)
+        .args(["--ring", &name, "--control"])
+        .arg(&sock_path)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut r = open_ring(tmp.path(), &name, Duration::from_secs(60));
+    let first = next_frame(&mut r);
+    assert_eq!(
+        first.height_datum,
+        vkterrain::output::ring::layout::DATUM_ELLIPSOID
+    );
+    let scripted = r.pixels().to_vec();
+    assert_ne!(
+        scripted,
+        want.as_raw().as_slice(),
+        "negative control: another pose"
+    );
+    let msg = format!(
+        r#"{{"pose":{{"lat_deg":{lat},"lon_deg":{lon},"height_m":{agl},"height_ref":"ground","heading_deg":{heading},"pitch_deg":{pitch}}},"fov_deg":42.5}}"#
+    );
+    UnixDatagram::unbound()
+        .unwrap()
+        .send_to(msg.as_bytes(), &sock_path)
+        .unwrap();
+    let start = Instant::now();
+    let m = loop {
+        let m = next_frame(&mut r);
+        if m.vfov_deg == 42.5 {
+            break m;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "pose never applied"
+        );
+    };
+    assert_eq!(
+        r.pixels(),
+        want.as_raw().as_slice(),
+        "control pose != scenario pose"
+    );
+    // The ring reports the camera on the earth.
+    assert!(
+        (m.lat_deg - lat).abs() < 1e-9 && (m.lon_deg - lon).abs() < 1e-9,
+        "{m:?}"
+    );
+    assert!((m.heading_deg - heading).abs() < 1e-6 && (m.local_pitch_deg - pitch).abs() < 1e-6);
+    assert!(
+        m.height_m.is_finite() && m.height_datum == first.height_datum,
+        "{m:?}"
+    );
+    // A WGS84 pose outside the data set (no ground) is rejected, rendering goes on.
+    UnixDatagram::unbound()
+        .unwrap()
+        .send_to(
+            br#"{"pose":{"lat_deg":10,"lon_deg":8,"height_m":5,"height_ref":"ground","heading_deg":0,"pitch_deg":0}}"#,
+            &sock_path,
+        )
+        .unwrap();
+    next_frame(&mut r);
+    // SAFETY: signalling our own child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let o = wait_exit(child, Duration::from_secs(60));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}

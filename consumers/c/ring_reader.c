@@ -66,7 +66,10 @@ static void print_layout(void) {
     OFF(vkt_frame_meta, cx); OFF(vkt_frame_meta, cy); OFF(vkt_frame_meta, gpu_prepass_ms);
     OFF(vkt_frame_meta, gpu_terrain_ms); OFF(vkt_frame_meta, gpu_readback_ms);
     OFF(vkt_frame_meta, cpu_record_ms); OFF(vkt_frame_meta, cpu_wait_ms);
-    OFF(vkt_frame_meta, triangles);
+    OFF(vkt_frame_meta, triangles); OFF(vkt_frame_meta, height_datum);
+    OFF(vkt_frame_meta, lat_deg); OFF(vkt_frame_meta, lon_deg); OFF(vkt_frame_meta, height_m);
+    OFF(vkt_frame_meta, heading_deg); OFF(vkt_frame_meta, local_pitch_deg);
+    OFF(vkt_frame_meta, local_roll_deg); OFF(vkt_frame_meta, _reserved2);
 }
 
 static int save_ppm(const char *path, const uint8_t *rgba, uint32_t w, uint32_t h) {

@@ -45,7 +45,7 @@
 #endif
 
 #define VKT_MAGIC 0x31474E4952544B56ull /* "VKTRING1" little-endian */
-#define VKT_LAYOUT_VERSION 2u
+#define VKT_LAYOUT_VERSION 3u
 #define VKT_FLAG_ZERO_COPY 1u
 #define VKT_DEFAULT_DIR "/run/vkterrain"
 #define VKT_FORMAT_RGBA8_SRGB 1u
@@ -107,17 +107,26 @@ typedef struct vkt_frame_meta {
     double cpu_record_ms;      /* 168 */
     double cpu_wait_ms;        /* 176 */
     uint64_t triangles;        /* 184 */
-} vkt_frame_meta;              /* 192 bytes */
+    uint32_t height_datum;     /* 192: 0 none (WGS84 fields NaN), 1 ellipsoid, 2 EGM96, 3 EGM2008 */
+    uint32_t _reserved1;       /* 196 */
+    double lat_deg;            /* 200: WGS84 */
+    double lon_deg;            /* 208 */
+    double height_m;           /* 216: above height_datum */
+    double heading_deg;        /* 224: local NED, clockwise from true north */
+    double local_pitch_deg;    /* 232: nose up */
+    double local_roll_deg;     /* 240: right wing down */
+    uint64_t _reserved2;       /* 248 */
+} vkt_frame_meta;              /* 256 bytes */
 
 typedef struct vkt_slot_header {
     _Atomic uint64_t seq;      /*   0: seqlock */
     uint8_t _pad0[56];
     vkt_frame_meta meta;       /*  64 */
-} vkt_slot_header;             /* 256 bytes; pixels follow at pixels_offset */
+} vkt_slot_header;             /* 320 bytes; pixels follow at pixels_offset */
 
 _Static_assert(sizeof(vkt_ring_header) == 256, "ring header size");
-_Static_assert(sizeof(vkt_slot_header) == 256, "slot header size");
-_Static_assert(sizeof(vkt_frame_meta) == 192, "frame meta size");
+_Static_assert(sizeof(vkt_slot_header) == 320, "slot header size");
+_Static_assert(sizeof(vkt_frame_meta) == 256, "frame meta size");
 
 enum { VKT_FRAME = 0, VKT_TIMEOUT = 1, VKT_CLOSED = 2, VKT_RESTARTED = 3, VKT_ERROR = -1 };
 

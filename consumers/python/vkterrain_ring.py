@@ -35,9 +35,9 @@ import time
 import zlib
 
 MAGIC = int.from_bytes(b"VKTRING1", "little")
-LAYOUT_VERSION = 2
+LAYOUT_VERSION = 3
 HEADER_SIZE = 256          # size of the header struct (slot 0 starts at header_size >= this)
-SLOT_HEADER_SIZE = 256
+SLOT_HEADER_SIZE = 320
 DEFAULT_DIR = "/run/vkterrain"
 FLAG_ZERO_COPY = 1
 STATE_LIVE, STATE_CLOSED, STATE_REPLACED = 1, 2, 3
@@ -50,14 +50,15 @@ H_SLOTS, H_DEPTH_FORMAT, H_SLOT_SIZE, H_PIXELS_OFFSET = 40, 44, 48, 52
 H_DEPTH_OFFSET, H_PID = 56, 60
 H_LATEST, H_STATE, H_FLAGS, H_WAKE, H_PUBLISHED = 64, 72, 76, 128, 192
 S_SEQ, S_META = 0, 64
-META_FORMAT = "<QQQIIII3d6d4d5dQ"
+META_FORMAT = "<QQQIIII3d6d4d5dQII6dQ"
 META_FIELDS = (
     "frame capture_ns publish_ns width height row_stride _reserved0 px py pz yaw_deg pitch_deg "
     "roll_deg vfov_deg near far fx fy cx cy gpu_prepass_ms gpu_terrain_ms gpu_readback_ms "
-    "cpu_record_ms cpu_wait_ms triangles"
+    "cpu_record_ms cpu_wait_ms triangles height_datum _reserved1 lat_deg lon_deg height_m "
+    "heading_deg local_pitch_deg local_roll_deg _reserved2"
 ).split()
 META_SIZE = struct.calcsize(META_FORMAT)
-assert META_SIZE == 192
+assert META_SIZE == 256
 
 _libc = ctypes.CDLL(None, use_errno=True)
 _libc.mmap.restype = ctypes.c_void_p

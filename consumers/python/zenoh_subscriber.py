@@ -5,7 +5,7 @@
     python3 zenoh_subscriber.py --ring vkterrain --connect tcp/127.0.0.1:7447 --frames 10 \\
         --save frame.png
 
-Key expressions: <prefix>/<ring>/frame (the ring slot's 192-byte metadata, the RGBA8 pixels,
+Key expressions: <prefix>/<ring>/frame (the ring slot's 256-byte metadata, the RGBA8 pixels,
 the depth when the service reads it back), <prefix>/<ring>/control (JSON control messages, the
 control socket's), <prefix>/<ring>/status (a queryable answering with the status JSON).
 Prints one line per frame and a summary line `received=.. lost=.. bad=.. latency_median_us=..`.

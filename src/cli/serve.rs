@@ -353,6 +353,15 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
 
     let started = Instant::now();
     let mut ctl = Control::default();
+    // WGS84 poses in control messages, when the data set lies on the earth.
+    if let Some(earth) = config.open_earth()? {
+        let data = p.data.clone();
+        ctl.geo = Some(Box::new(
+            move |pose: &crate::geo::GeoPose, current: &crate::scene::Camera| {
+                earth.camera(pose, &data, current)
+            },
+        ));
+    }
     let mut intervals: VecDeque<f64> = VecDeque::with_capacity(WINDOW);
     let mut publish_ms: VecDeque<f64> = VecDeque::with_capacity(WINDOW);
     let mut rendered: u64 = 0;

@@ -10,8 +10,10 @@ use crate::clipmap::{Clipmap, Geometry, StoreSource};
 use crate::dataset::{NodeStore, PyramidReader, Terrain};
 use crate::driver::Gpu;
 use crate::error::Result;
+use crate::geo::EnuFrame;
+use crate::output::ring::layout::datum_code;
 use crate::render::{RenderOptions, Renderer};
-use crate::scene::Scenario;
+use crate::scene::{Earth, Scenario};
 
 impl Config {
     /// The device `[device]` selects (`VKTERRAIN_DEVICE` and `VKTERRAIN_VALIDATION` win).
@@ -63,13 +65,18 @@ impl Config {
         data: &Terrain,
         options: RenderOptions,
     ) -> Result<Renderer> {
-        Renderer::with_clipmap(
+        let mut renderer = Renderer::with_clipmap(
             gpu,
             data.clone(),
             self.method.clone(),
             options,
             self.open_clipmap()?,
-        )
+        )?;
+        renderer.world = self
+            .dataset
+            .placement(|p| self.resolve(p))?
+            .map(|p| (p.frame, datum_code(&p.vertical_datum)));
+        Ok(renderer)
     }
 
     /// The scenario file `path` (or the configured one, or the built-in default flight)
@@ -77,9 +84,21 @@ impl Config {
     pub fn open_scenario(&self, path: Option<&Path>, data: &Terrain) -> Result<Scenario> {
         let configured = self.scenario.path.as_ref().map(|p| self.resolve(p));
         match path.map(Path::to_path_buf).or(configured) {
-            Some(path) => Scenario::load(&path, data),
+            Some(path) => Scenario::load_on(&path, data, || self.open_earth()),
             None => Scenario::builtin_default(data),
         }
+    }
+
+    /// Where the world lies on the earth: the east-north-up frame at the data set's sample
+    /// (0, 0) (georeferenced data, or `[dataset] anchor`); `None`: a flat world.
+    pub fn world_frame(&self) -> Result<Option<EnuFrame>> {
+        self.dataset.world_frame(|p| self.resolve(p))
+    }
+
+    /// The data set's place on the earth, for poses given by latitude/longitude; `None`: a flat
+    /// world.
+    pub fn open_earth(&self) -> Result<Option<Earth>> {
+        Ok(self.dataset.placement(|p| self.resolve(p))?.map(Earth::new))
     }
 
     /// The data set's node store (`tiles` or `xyz`), read node by node.

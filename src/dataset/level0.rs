@@ -584,6 +584,14 @@ pub trait NodeStore: Send + Sync {
     fn tile_counts(&self) -> Option<super::xyz::XyzCounts> {
         None
     }
+    /// Where the samples lie on the earth (none: procedural or bare PNG data).
+    fn georef(&self) -> Result<Option<super::crs::Georef>> {
+        Ok(None)
+    }
+    /// The datum of the heights (`manifest::datum`).
+    fn vertical_datum(&self) -> String {
+        super::manifest::datum::LOCAL.into()
+    }
 }
 
 /// A `vkterrain preprocess` data set directory as a node store (level 0 opened once, read
@@ -663,6 +671,12 @@ impl NodeStore for DiskStore {
     fn stored_stats(&self, grid_size: u32) -> Result<Option<TileStats>> {
         self.dataset.tile_stats(grid_size)
     }
+    fn georef(&self) -> Result<Option<super::crs::Georef>> {
+        Ok(self.dataset.manifest.georef.clone())
+    }
+    fn vertical_datum(&self) -> String {
+        self.dataset.manifest.vertical_datum.clone()
+    }
     fn level0_rows(&self) -> Option<Result<LevelRows>> {
         Some(LevelRows::open(
             &self.level0_path,
@@ -697,5 +711,11 @@ impl NodeStore for XyzPyramid {
     }
     fn tile_counts(&self) -> Option<super::xyz::XyzCounts> {
         Some(self.fetcher.counters.snapshot())
+    }
+    fn georef(&self) -> Result<Option<super::crs::Georef>> {
+        self.grid.georef().map(Some)
+    }
+    fn vertical_datum(&self) -> String {
+        super::manifest::datum::UNKNOWN.into()
     }
 }

@@ -10,6 +10,7 @@ pub mod gdal_in;
 #[cfg(not(feature = "gdal"))]
 #[path = "gdal_stub.rs"]
 pub mod gdal_in;
+pub mod geoid;
 pub mod interp;
 pub mod level0;
 pub mod manifest;
@@ -22,6 +23,7 @@ pub mod source;
 pub mod stats;
 pub mod tiles;
 pub mod voids;
+pub mod world;
 pub mod xyz;
 
 use crate::error::{Error, Result};

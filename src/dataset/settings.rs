@@ -34,6 +34,8 @@ pub struct ProceduralConfig {
     pub seed: u64,
     /// Sample spacing in metres.
     pub spacing: f64,
+    /// Where sample (0, 0) lies on the earth; none: a flat world (`docs/coordinates.md`).
+    pub anchor: Option<Anchor>,
 }
 
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -50,6 +52,9 @@ pub struct Png16Config {
     /// An albedo image covering the same extent.
     #[serde(default)]
     pub albedo: Option<PathBuf>,
+    /// Where sample (0, 0) lies on the earth; none: a flat world (`docs/coordinates.md`).
+    #[serde(default)]
+    pub anchor: Option<Anchor>,
 }
 
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -60,6 +65,37 @@ pub struct TilesConfig {
     /// The level to load whole when the clipmap is off; none: the finest level that fits.
     #[serde(default)]
     pub lod: Option<u32>,
+    /// For a data set without georeferencing (a procedural or PNG pyramid): where sample
+    /// (0, 0) lies on the earth. A georeferenced data set places itself; an anchor is then an
+    /// error.
+    #[serde(default)]
+    pub anchor: Option<Anchor>,
+}
+
+/// `[dataset] anchor = { lat_deg = .., lon_deg = .. }`: the WGS84 position of sample (0, 0) of a
+/// data set without georeferencing, at height 0 on the ellipsoid. The world frame is then the
+/// east-north-up frame there, and the earth's curvature applies.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Anchor {
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+}
+
+impl Anchor {
+    /// Latitude within [-90, 90] (poles excluded: no east there), longitude within [-180, 180].
+    pub fn check(&self) -> Result<()> {
+        let (lat, lon) = (self.lat_deg, self.lon_deg);
+        if !(lat.is_finite() && lat.abs() < 90.0 && lon.is_finite() && lon.abs() <= 180.0) {
+            return Err(Error::invalid(
+                "dataset.anchor",
+                format!(
+                    "latitude {lat} deg / longitude {lon} deg: need -90 < lat < 90, -180 <= lon <= 180"
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 fn default_spacing() -> f64 {
@@ -77,6 +113,7 @@ impl Default for ProceduralConfig {
             size: p.size,
             seed: p.seed,
             spacing: p.spacing,
+            anchor: None,
         }
     }
 }
@@ -105,8 +142,21 @@ impl DatasetConfig {
         }
     }
 
+    /// The configured `anchor` (data sets without georeferencing).
+    pub fn anchor(&self) -> Option<Anchor> {
+        match self {
+            DatasetConfig::Procedural(p) => p.anchor,
+            DatasetConfig::Png16(p) => p.anchor,
+            DatasetConfig::Tiles(t) => t.anchor,
+            DatasetConfig::Xyz(_) => None,
+        }
+    }
+
     /// Checks what serde cannot.
     pub fn validate(&self) -> Result<()> {
+        if let Some(a) = self.anchor() {
+            a.check()?;
+        }
         let positive = |what: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())

@@ -195,6 +195,9 @@ pub struct Renderer {
     /// Recorded after the terrain pass of every frame when set (dropped after the GPU idles:
     /// `Drop` waits first).
     analysis: Option<Box<dyn analysis::FrameAnalysis>>,
+    /// The world frame on the earth and the datum code of its heights
+    /// (`output::ring::layout::DATUM_*`): frames then carry the camera's WGS84 pose.
+    pub world: Option<(crate::geo::EnuFrame, u32)>,
 }
 
 impl Renderer {
@@ -258,6 +261,7 @@ impl Renderer {
             readback_path,
             stats: RunStats::default(),
             analysis: None,
+            world: None,
         })
     }
 
@@ -470,6 +474,20 @@ impl Renderer {
             rgba,
             depth,
             camera: pending.camera,
+            geo: self
+                .world
+                .map(|(frame, height_datum)| crate::readback::GeoFix {
+                    pose: crate::geo::GeoPose::from_world(
+                        &frame,
+                        &crate::geo::WorldPose {
+                            position: pending.camera.position,
+                            yaw_deg: pending.camera.yaw_deg,
+                            pitch_deg: pending.camera.pitch_deg,
+                            roll_deg: pending.camera.roll_deg,
+                        },
+                    ),
+                    height_datum,
+                }),
             timings,
             triangles,
         };

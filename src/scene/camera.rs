@@ -7,10 +7,11 @@
 //! relative terms out to 100+ km. Rendering is camera-relative: the view matrix has no
 //! translation, vertices are made relative to the camera in the shader (see `docs/`).
 
-use glam::{DMat3, DVec3, Mat4, Vec3};
+use glam::{DVec3, Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::geo::pose::euler_basis;
 
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Camera {
@@ -77,25 +78,9 @@ impl Camera {
         Ok(())
     }
 
-    /// Camera basis in world space: (right, up, forward).
+    /// Camera basis in world space: (right, up, forward) (`geo::pose::euler_basis`).
     pub fn basis(&self) -> (DVec3, DVec3, DVec3) {
-        let (yaw, pitch, roll) = (
-            self.yaw_deg.to_radians(),
-            self.pitch_deg.to_radians(),
-            self.roll_deg.to_radians(),
-        );
-        let forward = DVec3::new(
-            yaw.sin() * pitch.cos(),
-            yaw.cos() * pitch.cos(),
-            pitch.sin(),
-        );
-        // At pitch +-90 the heading still defines "right", so straight-down views keep a stable
-        // orientation instead of a degenerate cross product.
-        let right0 = DVec3::new(yaw.cos(), -yaw.sin(), 0.0);
-        let up0 = right0.cross(forward);
-        // A positive angle about `forward` turns `right` towards -z (right-hand rule).
-        let rot = DMat3::from_axis_angle(forward, roll);
-        (rot * right0, rot * up0, forward)
+        euler_basis(self.yaw_deg, self.pitch_deg, self.roll_deg)
     }
 
     /// World -> view rotation (no translation: positions are camera-relative).

@@ -4,16 +4,21 @@
 //! machine. Keyframes are either timed (`t` in seconds) or, when the scenario gives `speed`
 //! (m/s), timed by the path length. Positions are absolute metres (`position = [x, y, z]`) or
 //! relative to the data set (`at = [u, v]` as fractions of its extent, with `above_ground` or
-//! `altitude` in metres), so one scenario can fly over any data set.
+//! `altitude` in metres), so one scenario can fly over any data set, or on the earth
+//! (`lat_deg`, `lon_deg`, `height_m`, `height_ref`, `heading_deg`, `pitch_deg`, `roll_deg`:
+//! a [`GeoPose`], for a data set with a world frame). Between two earth keyframes the camera
+//! moves along latitude, longitude and height (not along the chord through the earth) and
+//! turns its local heading the short way.
 
 use std::path::Path;
 
 use glam::DVec3;
 use serde::Deserialize;
 
-use super::Camera;
+use super::{Camera, Earth};
 use crate::dataset::Level0;
 use crate::error::{Error, Result};
+use crate::geo::{EnuFrame, GeoPose, HeightRef, WGS84};
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -62,6 +67,49 @@ pub struct KeyframeSpec {
     pub pitch: f64,
     #[serde(default)]
     pub roll: f64,
+    pub lat_deg: Option<f64>,
+    pub lon_deg: Option<f64>,
+    pub height_m: Option<f64>,
+    pub height_ref: Option<HeightRef>,
+    pub heading_deg: Option<f64>,
+    pub pitch_deg: Option<f64>,
+    pub roll_deg: Option<f64>,
+}
+
+impl KeyframeSpec {
+    /// Whether this keyframe is a WGS84 pose.
+    pub fn is_geo(&self) -> bool {
+        self.lat_deg.is_some() || self.lon_deg.is_some() || self.height_m.is_some()
+    }
+
+    /// The keyframe's WGS84 pose; `yaw`/`pitch`/`roll` (world angles) do not mix with it.
+    fn geo_pose(&self, i: usize) -> Result<GeoPose> {
+        let bad = |m: &str| Err(Error::invalid("scenario", format!("keyframe {i}: {m}")));
+        if self.position.is_some() || self.at.is_some() {
+            return bad("give either `position`/`at` or `lat_deg`/`lon_deg`/`height_m`");
+        }
+        if self.yaw != 0.0 || self.pitch != 0.0 || self.roll != 0.0 {
+            return bad(
+                "a WGS84 keyframe takes `heading_deg`, `pitch_deg`, `roll_deg` (local north-east-down), not `yaw`/`pitch`/`roll`",
+            );
+        }
+        let (Some(lat_deg), Some(lon_deg), Some(height_m)) =
+            (self.lat_deg, self.lon_deg, self.height_m)
+        else {
+            return bad("a WGS84 keyframe needs all of `lat_deg`, `lon_deg`, `height_m`");
+        };
+        let pose = GeoPose {
+            lat_deg,
+            lon_deg,
+            height_m,
+            height_ref: self.height_ref.unwrap_or_default(),
+            heading_deg: self.heading_deg.unwrap_or(0.0),
+            pitch_deg: self.pitch_deg.unwrap_or(0.0),
+            roll_deg: self.roll_deg.unwrap_or(0.0),
+        };
+        pose.validate(&format!("scenario keyframe {i}"))?;
+        Ok(pose)
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -71,6 +119,8 @@ struct Key {
     yaw: f64,
     pitch: f64,
     roll: f64,
+    /// A WGS84 keyframe, its height in the world frame's datum (`height_ref` ellipsoid).
+    geo: Option<GeoPose>,
 }
 
 /// A resolved camera path.
@@ -81,14 +131,31 @@ pub struct Scenario {
     pub frames: u32,
     template: Camera,
     keys: Vec<Key>,
+    /// The world frame WGS84 keyframes are placed in.
+    frame: Option<EnuFrame>,
 }
 
 impl Scenario {
     /// Reads and resolves a scenario file against a data set.
     pub fn load<D: Level0 + ?Sized>(path: &Path, data: &D) -> Result<Self> {
+        Self::load_on(path, data, || Ok(None))
+    }
+
+    /// Reads and resolves a scenario file whose WGS84 keyframes (if any) are placed on `earth`
+    /// (asked for only when the file has such keyframes).
+    pub fn load_on<D: Level0 + ?Sized>(
+        path: &Path,
+        data: &D,
+        earth: impl FnOnce() -> Result<Option<Earth>>,
+    ) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let file: ScenarioFile = toml::from_str(&text).map_err(|e| Error::toml(path, &text, &e))?;
-        Self::resolve(&file, data).map_err(|e| Error::Config {
+        let resolved = if file.keyframes.iter().any(KeyframeSpec::is_geo) {
+            earth().and_then(|e| Self::resolve_on(&file, data, e.as_ref()))
+        } else {
+            Self::resolve(&file, data)
+        };
+        resolved.map_err(|e| Error::Config {
             path: path.to_path_buf(),
             message: e.to_string(),
         })
@@ -105,6 +172,16 @@ impl Scenario {
     /// `data`: level-0 heights (exact; a tile pyramid is read node by node) for
     /// `above_ground` keyframes.
     pub fn resolve<D: Level0 + ?Sized>(file: &ScenarioFile, data: &D) -> Result<Self> {
+        Self::resolve_on(file, data, None)
+    }
+
+    /// [`Scenario::resolve`] with WGS84 keyframes placed on `earth` (none: such keyframes are
+    /// an error).
+    pub fn resolve_on<D: Level0 + ?Sized>(
+        file: &ScenarioFile,
+        data: &D,
+        earth: Option<&Earth>,
+    ) -> Result<Self> {
         let bad = |m: String| Err(Error::invalid("scenario", m));
         if !(file.fps.is_finite() && file.fps > 0.0) {
             return bad(format!("fps {} must be positive", file.fps));
@@ -114,7 +191,41 @@ impl Scenario {
         }
         let (ex, ey) = data.extent();
         let mut keys = Vec::with_capacity(file.keyframes.len());
+        let template = Camera {
+            vfov_deg: file.vfov_deg,
+            near: file.near,
+            far: file.far,
+            ..Camera::default()
+        };
         for (i, k) in file.keyframes.iter().enumerate() {
+            if k.is_geo() {
+                let pose = k.geo_pose(i)?;
+                let Some(earth) = earth else {
+                    return bad(format!(
+                        "keyframe {i}: a WGS84 pose needs a data set on the earth (georeferenced, or [dataset] anchor)"
+                    ));
+                };
+                let c = earth.camera(&pose, data, &template)?;
+                let height = WGS84.to_geodetic(earth.frame().to_ecef(c.position)).height;
+                keys.push(Key {
+                    t: k.t.unwrap_or(f64::NAN),
+                    position: c.position,
+                    yaw: c.yaw_deg,
+                    pitch: c.pitch_deg,
+                    roll: c.roll_deg,
+                    geo: Some(GeoPose {
+                        height_m: height,
+                        height_ref: HeightRef::Ellipsoid,
+                        ..pose
+                    }),
+                });
+                continue;
+            }
+            if k.heading_deg.is_some() || k.pitch_deg.is_some() || k.roll_deg.is_some() {
+                return bad(format!(
+                    "keyframe {i}: `heading_deg`/`pitch_deg`/`roll_deg` go with `lat_deg`/`lon_deg`/`height_m`; use `yaw`/`pitch`/`roll` with `position`/`at`"
+                ));
+            }
             let position = match (k.position, k.at) {
                 (Some(p), None) => {
                     if k.above_ground.is_some() || k.altitude.is_some() {
@@ -149,6 +260,7 @@ impl Scenario {
                 yaw: k.yaw,
                 pitch: k.pitch,
                 roll: k.roll,
+                geo: None,
             });
         }
         match file.speed {
@@ -181,9 +293,7 @@ impl Scenario {
             yaw_deg: keys[0].yaw,
             pitch_deg: keys[0].pitch,
             roll_deg: keys[0].roll,
-            vfov_deg: file.vfov_deg,
-            near: file.near,
-            far: file.far,
+            ..template
         };
         let scenario = Scenario {
             name: file.name.clone(),
@@ -191,6 +301,7 @@ impl Scenario {
             frames: file.frames,
             template,
             keys,
+            frame: earth.map(|e| *e.frame()),
         };
         for k in &scenario.keys {
             let mut c = template;
@@ -209,6 +320,7 @@ impl Scenario {
             yaw: camera.yaw_deg,
             pitch: camera.pitch_deg,
             roll: camera.roll_deg,
+            geo: None,
         };
         Ok(Scenario {
             name: name.into(),
@@ -216,6 +328,7 @@ impl Scenario {
             frames,
             template: camera,
             keys: vec![key],
+            frame: None,
         })
     }
 
@@ -240,6 +353,31 @@ impl Scenario {
         };
         let lerp = |x: f64, y: f64| x + (y - x) * s;
         // Headings interpolate the short way round.
+        let short = |from: f64, to: f64| from + ((to - from + 540.0).rem_euclid(360.0) - 180.0) * s;
+        // Strictly between two WGS84 keyframes: along latitude, longitude and height (at a key
+        // itself, its camera exactly as resolved).
+        if let (Some(ga), Some(gb), Some(frame)) = (a.geo, b.geo, &self.frame)
+            && s > 0.0
+            && s < 1.0
+        {
+            let pose = GeoPose {
+                lat_deg: lerp(ga.lat_deg, gb.lat_deg),
+                lon_deg: short(ga.lon_deg, gb.lon_deg),
+                height_m: lerp(ga.height_m, gb.height_m),
+                heading_deg: short(ga.heading_deg, gb.heading_deg),
+                pitch_deg: lerp(ga.pitch_deg, gb.pitch_deg),
+                roll_deg: lerp(ga.roll_deg, gb.roll_deg),
+                ..ga
+            };
+            let w = pose.to_world(frame, pose.height_m);
+            return Camera {
+                position: w.position,
+                yaw_deg: w.yaw_deg,
+                pitch_deg: w.pitch_deg,
+                roll_deg: w.roll_deg,
+                ..self.template
+            };
+        }
         let dyaw = (b.yaw - a.yaw + 540.0).rem_euclid(360.0) - 180.0;
         Camera {
             position: a.position.lerp(b.position, s),

@@ -1,5 +1,6 @@
 //! Camera control: one JSON object per message, e.g.
 //! `{"pose":{"position":[x,y,z],"yaw_deg":0,"pitch_deg":-20,"roll_deg":0},"fov_deg":60}`,
+//! `{"pose":{"lat_deg":46.5,"lon_deg":8.0,"height_m":3000,"height_ref":"msl","heading_deg":90,"pitch_deg":-10}}`,
 //! `{"resolution":[640,360]}`, `{"scripted":true}`,
 //! `{"consumer":{"name":"detector","received":100,"lost":3}}`. Anything malformed or out of
 //! range is rejected and counted; nothing a client sends can stop the renderer. The same
@@ -14,6 +15,7 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::geo::{GeoPose, HeightRef};
 use crate::output::lock::{PathLock, lock_path_for};
 use crate::output::ring::sys;
 use crate::scene::Camera;
@@ -41,15 +43,28 @@ struct ControlMsg {
     consumer: Option<ConsumerReport>,
 }
 
+/// A pose in world metres (`position`, `yaw_deg`, `pitch_deg`, `roll_deg`) or on the earth
+/// (`lat_deg`, `lon_deg`, `height_m`, `height_ref`, `heading_deg`, `pitch_deg`, `roll_deg`;
+/// `docs/coordinates.md`): exactly one of the two forms.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Pose {
-    position: [f64; 3],
-    yaw_deg: f64,
+    position: Option<[f64; 3]>,
+    yaw_deg: Option<f64>,
+    lat_deg: Option<f64>,
+    lon_deg: Option<f64>,
+    height_m: Option<f64>,
+    #[serde(default)]
+    height_ref: HeightRef,
+    heading_deg: Option<f64>,
     pitch_deg: f64,
     #[serde(default)]
     roll_deg: f64,
 }
+
+/// Turns a WGS84 pose into the camera it places (`current` gives the field of view and clip
+/// planes): `serve` installs one when its data set lies on the earth.
+pub type GeoResolver = Box<dyn Fn(&GeoPose, &Camera) -> Result<Camera>>;
 
 #[derive(Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -75,6 +90,8 @@ pub struct Control {
     pub rejected: u64,
     pub last_error: Option<String>,
     consumers: BTreeMap<String, Consumer>,
+    /// WGS84 poses -> cameras; none: the data set has no world frame (such poses are rejected).
+    pub geo: Option<GeoResolver>,
 }
 
 impl Control {
@@ -112,6 +129,50 @@ impl Control {
         });
     }
 
+    /// The camera a pose message places (world metres or WGS84).
+    fn posed(&self, p: &Pose, cam: &Camera) -> Result<Camera, String> {
+        let mut cam = *cam;
+        match (p.position, p.yaw_deg, p.lat_deg, p.lon_deg, p.height_m, p.heading_deg) {
+            (Some(position), Some(yaw), None, None, None, None) => {
+                if position
+                    .iter()
+                    .any(|v| !v.is_finite() || v.abs() > MAX_COORD_M)
+                {
+                    return Err(format!("position outside +-{MAX_COORD_M} m"));
+                }
+                cam.position = glam::DVec3::from_array(position);
+                (cam.yaw_deg, cam.pitch_deg, cam.roll_deg) = (yaw, p.pitch_deg, p.roll_deg);
+                if !(cam.yaw_deg.abs() <= 3600.0 && cam.roll_deg.abs() <= 3600.0) {
+                    return Err("yaw/roll outside +-3600 deg".into());
+                }
+                Ok(cam)
+            }
+            (None, None, Some(lat_deg), Some(lon_deg), Some(height_m), Some(heading_deg)) => {
+                let geo = GeoPose {
+                    lat_deg,
+                    lon_deg,
+                    height_m,
+                    height_ref: p.height_ref,
+                    heading_deg,
+                    pitch_deg: p.pitch_deg,
+                    roll_deg: p.roll_deg,
+                };
+                if !(heading_deg.abs() <= 3600.0 && p.roll_deg.abs() <= 3600.0) {
+                    return Err("heading/roll outside +-3600 deg".into());
+                }
+                geo.validate("pose").map_err(|e| e.to_string())?;
+                let resolve = self.geo.as_ref().ok_or(
+                    "a WGS84 pose needs a data set on the earth (georeferenced, or [dataset] anchor)",
+                )?;
+                resolve(&geo, &cam).map_err(|e| e.to_string())
+            }
+            _ => Err(
+                "pose: give either position + yaw_deg (world metres) or lat_deg + lon_deg + height_m + heading_deg (WGS84)"
+                    .into(),
+            ),
+        }
+    }
+
     /// Applies one message; errors are reasons to reject it.
     fn apply(&mut self, bytes: &[u8], current: &Camera, sender: Option<u32>) -> Result<(), String> {
         if bytes.len() > MAX_MESSAGE {
@@ -122,17 +183,7 @@ impl Control {
         let mut cam = self.live.unwrap_or(*current);
         let mut changed = false;
         if let Some(p) = &msg.pose {
-            if p.position
-                .iter()
-                .any(|v| !v.is_finite() || v.abs() > MAX_COORD_M)
-            {
-                return Err(format!("position outside +-{MAX_COORD_M} m"));
-            }
-            cam.position = glam::DVec3::from_array(p.position);
-            (cam.yaw_deg, cam.pitch_deg, cam.roll_deg) = (p.yaw_deg, p.pitch_deg, p.roll_deg);
-            if !(cam.yaw_deg.abs() <= 3600.0 && cam.roll_deg.abs() <= 3600.0) {
-                return Err("yaw/roll outside +-3600 deg".into());
-            }
+            cam = self.posed(p, &cam)?;
             changed = true;
         }
         if let Some(f) = msg.fov_deg {

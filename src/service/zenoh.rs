@@ -1,7 +1,7 @@
 //! Frames beyond one board: `vkterrain serve` over Zenoh (`docs/zenoh.md`).
 //!
 //! Key expressions, per ring name: `<prefix>/<ring>/frame` (every frame: the ring slot's
-//! 192-byte metadata, then the RGBA8 pixels, then the depth when the ring has depth),
+//! 256-byte metadata, then the RGBA8 pixels, then the depth when the ring has depth),
 //! `<prefix>/<ring>/control` (camera control, the control socket's messages, validation and
 //! counters), `<prefix>/<ring>/status` (a queryable answering with the status JSON).
 //!
@@ -304,7 +304,7 @@ impl Drop for ZenohBridge {
     }
 }
 
-/// The frame payload: the ring slot's metadata (192 bytes, little-endian), the pixels, the
+/// The frame payload: the ring slot's metadata (256 bytes, little-endian), the pixels, the
 /// depth (when present).
 pub fn write_payload(out: &mut [u8], meta: &FrameMeta, rgba: &[u8], depth: Option<&[f32]>) {
     let m = size_of::<FrameMeta>();

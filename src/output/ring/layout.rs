@@ -1,4 +1,4 @@
-//! The ring's shared-memory layout, version 2: a [`RingHeader`] on the segment's first
+//! The ring's shared-memory layout, version 3: a [`RingHeader`] on the segment's first
 //! `header_size` bytes, followed by `slot_count` slots, each a [`SlotHeader`] followed (at
 //! `pixels_offset`) by the pixels and optionally (at `depth_offset`) the depth. Everything is
 //! little-endian with natural alignment; words written often (the latest frame number, the
@@ -15,8 +15,9 @@ use std::sync::atomic::{AtomicU32, AtomicU64};
 
 /// `"VKTRING1"` read as a little-endian u64.
 pub const MAGIC: u64 = u64::from_le_bytes(*b"VKTRING1");
-/// Bumped on any incompatible change of this file (2: page-aligned slots and pixels, `flags`).
-pub const LAYOUT_VERSION: u32 = 2;
+/// Bumped on any incompatible change of this file (2: page-aligned slots and pixels, `flags`;
+/// 3: the camera's WGS84 pose in [`FrameMeta`]).
+pub const LAYOUT_VERSION: u32 = 3;
 /// Default alignment of slots and pixels: a page, what `VK_EXT_external_memory_host` needs.
 pub const SLOT_ALIGN: u32 = 4096;
 /// Largest alignment accepted (64 KiB pages exist on some aarch64 kernels).
@@ -131,12 +132,50 @@ pub struct FrameMeta {
     pub cpu_record_ms: f64,
     pub cpu_wait_ms: f64,
     pub triangles: u64,
+    /// The datum of `height_m` below: [`DATUM_NONE`] (no world frame on the earth: the WGS84
+    /// fields are NaN), [`DATUM_ELLIPSOID`], [`DATUM_EGM96`] or [`DATUM_EGM2008`] (the
+    /// terrain's datum: the pose's height is measured like the terrain's heights).
+    pub height_datum: u32,
+    pub _reserved1: u32,
+    /// The camera on the earth (WGS84 latitude/longitude, degrees).
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    /// The camera's height in metres above `height_datum`.
+    pub height_m: f64,
+    /// Attitude in the local north-east-down frame at the camera (aerospace yaw-pitch-roll:
+    /// heading clockwise from true north, pitch nose up, roll right wing down; degrees).
+    pub heading_deg: f64,
+    pub local_pitch_deg: f64,
+    pub local_roll_deg: f64,
+    pub _reserved2: u64,
+}
+
+/// `height_datum`: the world frame is not on the earth (flat local data).
+pub const DATUM_NONE: u32 = 0;
+/// `height_datum`: metres above the WGS84 ellipsoid.
+pub const DATUM_ELLIPSOID: u32 = 1;
+/// `height_datum`: metres above the EGM96 geoid (mean sea level; SRTM's heights).
+pub const DATUM_EGM96: u32 = 2;
+/// `height_datum`: metres above the EGM2008 geoid.
+pub const DATUM_EGM2008: u32 = 3;
+
+/// The `height_datum` code of a data set's `vertical_datum` (`dataset::manifest::datum`):
+/// local heights on an anchored data set count as ellipsoidal, `unknown` as EGM96.
+pub fn datum_code(vertical_datum: &str) -> u32 {
+    use crate::dataset::manifest::datum;
+    match vertical_datum {
+        datum::EGM96 | datum::UNKNOWN => DATUM_EGM96,
+        datum::EGM2008 => DATUM_EGM2008,
+        _ => DATUM_ELLIPSOID,
+    }
 }
 
 const _: () = {
     assert!(size_of::<RingHeader>() == 256);
-    assert!(size_of::<SlotHeader>() == 256);
-    assert!(size_of::<FrameMeta>() == 192);
+    assert!(size_of::<SlotHeader>() == 320);
+    assert!(size_of::<FrameMeta>() == 256);
+    assert!(std::mem::offset_of!(FrameMeta, height_datum) == 192);
+    assert!(std::mem::offset_of!(FrameMeta, lat_deg) == 200);
     assert!(std::mem::offset_of!(RingHeader, latest) == 64);
     assert!(std::mem::offset_of!(RingHeader, flags) == 76);
     assert!(std::mem::offset_of!(RingHeader, wake) == 128);

@@ -465,6 +465,17 @@ pub fn meta_of(frame: &FrameView<'_>, capture_ns: u64) -> FrameMeta {
         cpu_record_ms: t.cpu_record_ms,
         cpu_wait_ms: t.cpu_wait_ms,
         triangles: frame.triangles,
+        height_datum: frame
+            .geo
+            .map_or(super::layout::DATUM_NONE, |g| g.height_datum),
+        _reserved1: 0,
+        lat_deg: frame.geo.map_or(f64::NAN, |g| g.pose.lat_deg),
+        lon_deg: frame.geo.map_or(f64::NAN, |g| g.pose.lon_deg),
+        height_m: frame.geo.map_or(f64::NAN, |g| g.pose.height_m),
+        heading_deg: frame.geo.map_or(f64::NAN, |g| g.pose.heading_deg),
+        local_pitch_deg: frame.geo.map_or(f64::NAN, |g| g.pose.pitch_deg),
+        local_roll_deg: frame.geo.map_or(f64::NAN, |g| g.pose.roll_deg),
+        _reserved2: 0,
     }
 }
 

@@ -1,0 +1,142 @@
+//! Geoid undulations through PROJ: the height of the geoid above the WGS84 ellipsoid, so that
+//! heights above mean sea level (orthometric, e.g. SRTM's EGM96 heights) and heights above the
+//! ellipsoid (GNSS) can be compared (`docs/coordinates.md` "Datums").
+//!
+//! The undulation `N` is what PROJ's `EPSG:4979 -> EPSG:4326+5773` (WGS 84 3D -> WGS 84 + EGM96
+//! height) gives: `H = h - N`. PROJ reads Debian's `proj-data` grid `egm96_15.gtx`; ballpark
+//! transformations (which would silently return `H = h` when the grid is missing) are refused,
+//! so a missing grid is a one-line error, never an undulation of 0.
+
+use super::manifest::datum;
+use crate::error::{Error, Result};
+
+/// A geoid model PROJ can evaluate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GeoidModel {
+    /// EGM96 (EPSG:5773 heights; grid `egm96_15.gtx`, Debian `proj-data`).
+    Egm96,
+    /// EGM2008 (EPSG:3855 heights; grid `egm08_25.gtx`, not in Debian's `proj-data`).
+    Egm2008,
+}
+
+impl GeoidModel {
+    /// The geoid a manifest's `vertical_datum` refers to: `egm96`, `egm2008`; `unknown`
+    /// ("sea level" of an unstated datum) is taken as EGM96; `ellipsoid` and `local` have none.
+    pub fn of_datum(vertical_datum: &str) -> Option<GeoidModel> {
+        match vertical_datum {
+            datum::EGM96 | datum::UNKNOWN => Some(GeoidModel::Egm96),
+            datum::EGM2008 => Some(GeoidModel::Egm2008),
+            _ => None,
+        }
+    }
+
+    /// EPSG code of the vertical CRS of heights above this geoid.
+    pub fn vertical_epsg(self) -> u32 {
+        match self {
+            GeoidModel::Egm96 => 5773,
+            GeoidModel::Egm2008 => 3855,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            GeoidModel::Egm96 => "EGM96",
+            GeoidModel::Egm2008 => "EGM2008",
+        }
+    }
+}
+
+/// Evaluates a geoid's undulation through PROJ.
+pub struct Geoid {
+    pub model: GeoidModel,
+    #[cfg(feature = "gdal")]
+    to_orthometric: gdal::spatial_ref::CoordTransform,
+}
+
+impl Geoid {
+    /// Without GDAL/PROJ there is no geoid: a one-line error.
+    #[cfg(not(feature = "gdal"))]
+    pub fn new(model: GeoidModel) -> Result<Self> {
+        Err(Error::invalid(
+            model.name(),
+            "this vkterrain was built without GDAL/PROJ (--no-default-features): no geoid, so heights above mean sea level cannot be converted; give heights above the ellipsoid or the ground",
+        ))
+    }
+
+    #[cfg(feature = "gdal")]
+    pub fn new(model: GeoidModel) -> Result<Self> {
+        use gdal::spatial_ref::{
+            AxisMappingStrategy, CoordTransform, CoordTransformOptions, SpatialRef,
+        };
+        let what = format!("geoid {}", model.name());
+        let err =
+            |e: gdal::errors::GdalError| Error::invalid(&what, e.to_string().replace('\n', " "));
+        let mut from = SpatialRef::from_epsg(4979).map_err(err)?;
+        let mut to = SpatialRef::from_definition(&format!("EPSG:4326+{}", model.vertical_epsg()))
+            .map_err(err)?;
+        from.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
+        to.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
+        let mut options = CoordTransformOptions::new().map_err(err)?;
+        options.set_ballpark_allowed(false).map_err(err)?;
+        let to_orthometric = CoordTransform::new_with_options(&from, &to, &options).map_err(err)?;
+        let geoid = Geoid {
+            model,
+            to_orthometric,
+        };
+        // PROJ builds the operation lazily: a missing grid shows on the first point.
+        geoid.undulation(0.0, 0.0).map_err(|e| {
+            Error::invalid(
+                &what,
+                format!("PROJ cannot evaluate it (is its grid installed? Debian: proj-data): {e}"),
+            )
+        })?;
+        Ok(geoid)
+    }
+
+    /// The geoid's height above the WGS84 ellipsoid at a latitude/longitude (degrees), metres.
+    #[cfg(not(feature = "gdal"))]
+    pub fn undulation(&self, _lat_deg: f64, _lon_deg: f64) -> Result<f64> {
+        Err(Error::invalid(self.model.name(), "no PROJ"))
+    }
+
+    /// The geoid's height above the WGS84 ellipsoid at a latitude/longitude (degrees), metres.
+    #[cfg(feature = "gdal")]
+    pub fn undulation(&self, lat_deg: f64, lon_deg: f64) -> Result<f64> {
+        let (mut x, mut y, mut z) = ([lon_deg], [lat_deg], [0.0]);
+        self.to_orthometric
+            .transform_coords(&mut x, &mut y, &mut z)
+            .map_err(|e| {
+                Error::invalid(
+                    format!("geoid {} at {lat_deg}, {lon_deg}", self.model.name()),
+                    e.to_string().replace('\n', " "),
+                )
+            })?;
+        if !z[0].is_finite() || z[0].abs() > 200.0 {
+            return Err(Error::invalid(
+                format!("geoid {} at {lat_deg}, {lon_deg}", self.model.name()),
+                format!("PROJ gave an undulation of {} m", -z[0]),
+            ));
+        }
+        Ok(-z[0])
+    }
+}
+
+#[cfg(all(test, feature = "gdal"))]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn egm96_matches_published_values() {
+        let g = Geoid::new(GeoidModel::Egm96).unwrap();
+        // EGM96 at 0 N 0 E: +17.16 m (NGA's EGM96 tables; the classic check value).
+        let n = g.undulation(0.0, 0.0).unwrap();
+        assert!((n - 17.16).abs() < 0.02, "{n}");
+        // Negative control: the undulation varies (a constant would pass a single check).
+        // The Indian Ocean low is below -100 m near 5 N 78 E.
+        let low = g.undulation(5.0, 78.0).unwrap();
+        assert!(low < -95.0, "{low}");
+        // Swiss Alps (46.5 N 8 E): PROJ's own cs2cs gives H = -50.68 m for h = 0.
+        let alps = g.undulation(46.5, 8.0).unwrap();
+        assert!((alps - 50.68).abs() < 0.01, "{alps}");
+    }
+}

@@ -1,0 +1,193 @@
+//! The world frame of a data set: where vkterrain's metric world (x east, y north, z up) lies
+//! on the earth (`docs/coordinates.md` "World frame").
+//!
+//! - A georeferenced data set: the east-north-up frame at the geodetic position of sample
+//!   (0, 0) at height 0 on the WGS84 ellipsoid, found by PROJ from `georef`.
+//! - A data set without georeferencing (procedural, PNG, a pyramid built from them): the frame
+//!   at `[dataset] anchor` when given.
+//! - Otherwise none: a flat world, exactly as before the earth was modelled.
+
+use std::path::{Path, PathBuf};
+
+#[cfg(not(feature = "gdal"))]
+use super::crs::CrsKind;
+use super::crs::Georef;
+use super::settings::{Anchor, DatasetConfig};
+use super::tiles::Dataset;
+use crate::error::{Error, Result};
+use crate::geo::{EnuFrame, Geodetic, WGS84};
+
+/// WGS84 latitude and longitude (degrees) of sample `(col, row)`'s centre, through PROJ.
+#[cfg(feature = "gdal")]
+pub fn sample_lat_lon(georef: &Georef, col: f64, row: f64) -> Result<(f64, f64)> {
+    use super::crs::{Crs, Transform};
+    let to_wgs84 = Transform::new(&georef.crs, &Crs::wgs84()?)?;
+    let [lon, lat] = to_wgs84.point(georef.at(col, row))?;
+    Ok((lat, lon))
+}
+
+/// WGS84 latitude and longitude (degrees) of sample `(col, row)`'s centre. Without PROJ only a
+/// grid already in WGS 84 geographic coordinates (EPSG:4326) can be placed: its coordinates
+/// are the geodetic ones, no transformation involved.
+#[cfg(not(feature = "gdal"))]
+pub fn sample_lat_lon(georef: &Georef, col: f64, row: f64) -> Result<(f64, f64)> {
+    let crs = &georef.crs;
+    if crs.kind == CrsKind::Geographic && crs.authority.as_deref() == Some("EPSG:4326") {
+        let [x, y] = georef.at(col, row);
+        let deg = crs.unit_size.to_degrees();
+        return Ok((y * deg, x * deg));
+    }
+    Err(Error::invalid(
+        crs.label(),
+        "this vkterrain was built without GDAL/PROJ (--no-default-features): only EPSG:4326 data sets can be placed on the earth",
+    ))
+}
+
+/// The world frame of a georeferenced grid: ENU at sample (0, 0), height 0 on the ellipsoid.
+pub fn frame_of_georef(georef: &Georef) -> Result<EnuFrame> {
+    let (lat, lon) = sample_lat_lon(georef, 0.0, 0.0)?;
+    if !(lat.is_finite() && lon.is_finite()) || lat.abs() >= 90.0 {
+        return Err(Error::invalid(
+            georef.crs.label(),
+            format!(
+                "sample (0, 0) maps to latitude {lat} / longitude {lon}: no east-north-up frame there"
+            ),
+        ));
+    }
+    Ok(EnuFrame::new(&WGS84, Geodetic::new(lat, lon, 0.0)))
+}
+
+/// The world frame of a data set with georeferencing `georef` (none for procedural and bare
+/// PNG data) and the configured `anchor`: `None` is a flat world. Both given is an error (the
+/// data set already says where it lies).
+pub fn world_frame(georef: Option<&Georef>, anchor: Option<Anchor>) -> Result<Option<EnuFrame>> {
+    match (georef, anchor) {
+        (Some(g), None) => frame_of_georef(g).map(Some),
+        (None, Some(a)) => {
+            a.check()?;
+            Ok(Some(EnuFrame::new(
+                &WGS84,
+                Geodetic::new(a.lat_deg, a.lon_deg, 0.0),
+            )))
+        }
+        (None, None) => Ok(None),
+        (Some(g), Some(_)) => Err(Error::invalid(
+            "dataset.anchor",
+            format!(
+                "the data set is georeferenced ({}): it places itself on the earth; remove the anchor",
+                g.crs.label()
+            ),
+        )),
+    }
+}
+
+/// Where a data set lies on the earth: its world frame, the georeferencing of its level-0
+/// grid (none for anchored local data) and the datum of its heights.
+#[derive(Clone, Debug)]
+pub struct Placement {
+    pub frame: EnuFrame,
+    /// The native grid and its level-0 size in samples.
+    pub georef: Option<(Georef, [u64; 2])>,
+    /// `manifest::datum` of the heights.
+    pub vertical_datum: String,
+}
+
+impl DatasetConfig {
+    /// The data set's world frame (see the module doc): reads a `tiles` manifest, opens an
+    /// `xyz` source's grid; relative paths are resolved with `resolve`.
+    pub fn world_frame(&self, resolve: impl Fn(&Path) -> PathBuf) -> Result<Option<EnuFrame>> {
+        Ok(self.placement(resolve)?.map(|p| p.frame))
+    }
+
+    /// Where the data set lies on the earth; `None`: a flat world.
+    pub fn placement(&self, resolve: impl Fn(&Path) -> PathBuf) -> Result<Option<Placement>> {
+        use super::manifest::datum;
+        let (georef, vertical_datum) = match self {
+            DatasetConfig::Procedural(_) | DatasetConfig::Png16(_) => (None, datum::LOCAL.into()),
+            DatasetConfig::Tiles(t) => {
+                let m = Dataset::open(&resolve(&t.path))?.manifest;
+                let size = [m.width, m.height];
+                (m.georef.map(|g| (g, size)), m.vertical_datum)
+            }
+            DatasetConfig::Xyz(_) => {
+                let store = self.open_store(resolve)?;
+                let l = store.layout();
+                (
+                    store.georef()?.map(|g| (g, [l.width, l.height])),
+                    store.vertical_datum(),
+                )
+            }
+        };
+        let frame = world_frame(georef.as_ref().map(|(g, _)| g), self.anchor())?;
+        Ok(frame.map(|frame| Placement {
+            frame,
+            georef,
+            vertical_datum,
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geo::WGS84;
+
+    #[test]
+    fn anchor_places_a_local_data_set_and_none_is_flat() {
+        let a = Anchor {
+            lat_deg: 46.5,
+            lon_deg: 8.0,
+        };
+        let f = world_frame(None, Some(a)).unwrap().unwrap();
+        assert_eq!(f.origin, Geodetic::new(46.5, 8.0, 0.0));
+        assert!((f.origin_ecef - WGS84.to_ecef(f.origin)).length() < 1e-9);
+        assert!(world_frame(None, None).unwrap().is_none());
+        let bad = Anchor {
+            lat_deg: 90.0,
+            lon_deg: 0.0,
+        };
+        let e = world_frame(None, Some(bad)).unwrap_err().to_string();
+        assert!(e.contains("dataset.anchor") && !e.contains('\n'), "{e}");
+    }
+
+    #[cfg(feature = "gdal")]
+    #[test]
+    fn geographic_grid_is_anchored_at_its_first_sample() {
+        let crs = super::super::crs::Crs::wgs84().unwrap();
+        let g = Georef::north_up(
+            crs,
+            [8.0 + 1.0 / 2400.0, 46.0],
+            [1.0 / 1200.0, 1.0 / 1200.0],
+        );
+        let f = world_frame(Some(&g), None).unwrap().unwrap();
+        assert!((f.origin.lat_deg - 46.0).abs() < 1e-9, "{:?}", f.origin);
+        assert!((f.origin.lon_deg - (8.0 + 1.0 / 2400.0)).abs() < 1e-9);
+        assert_eq!(f.origin.height, 0.0);
+        let e = world_frame(
+            Some(&g),
+            Some(Anchor {
+                lat_deg: 1.0,
+                lon_deg: 2.0,
+            }),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("georeferenced"), "{e}");
+    }
+
+    #[cfg(feature = "gdal")]
+    #[test]
+    fn projected_grid_goes_through_proj() {
+        // UTM 32N: easting 500 000 lies on the central meridian 9 E; northing 5 150 000 is
+        // 46.503 569 57 N (`echo 500000 5150000 | cs2cs -d 8 EPSG:32632 EPSG:4326`).
+        let crs = super::super::crs::Crs::parse("EPSG:32632").unwrap();
+        let g = Georef::north_up(crs, [500_000.0, 5_150_000.0], [30.0, 30.0]);
+        let f = world_frame(Some(&g), None).unwrap().unwrap();
+        assert!((f.origin.lon_deg - 9.0).abs() < 1e-9, "{:?}", f.origin);
+        assert!(
+            (f.origin.lat_deg - 46.503_569_57).abs() < 1e-8,
+            "{:?}",
+            f.origin
+        );
+    }
+}

@@ -1,0 +1,175 @@
+//! Cameras placed on the earth: [`GeoPose`] (WGS84 latitude/longitude, a height above the
+//! ellipsoid, mean sea level or the ground, heading/pitch/roll in the local NED frame) <->
+//! [`Camera`] in the data set's world frame, with the heights brought into the terrain's
+//! vertical datum (`docs/coordinates.md` "Datums").
+//!
+//! **One datum for poses and terrain.** The world frame's heights are the terrain's: a sample
+//! of height `h` lies `h` metres along the ellipsoid normal above its grid position. So a
+//! pose's height is converted into the terrain's datum at the pose: for EGM96 terrain (SRTM)
+//! a height above mean sea level is used as it is and a height above the ellipsoid loses the
+//! undulation `N` there; for terrain in ellipsoidal or local heights, an MSL height gains `N`.
+//! The geoid is evaluated at the camera, so the terrain's heights are taken as if the geoid
+//! were parallel to the ellipsoid across the view (EGM96 slopes are below ~1e-4 in most places:
+//! < 5 m at 50 km; see the docs).
+
+use std::cell::OnceCell;
+
+use glam::DVec3;
+
+use super::Camera;
+use crate::dataset::Level0;
+use crate::dataset::crs::{Crs, Georef, Transform};
+use crate::dataset::geoid::{Geoid, GeoidModel};
+use crate::dataset::world::Placement;
+use crate::error::{Error, Result};
+use crate::geo::{EnuFrame, GeoPose, Geodetic, HeightRef, WGS84, WorldPose};
+
+/// A data set's place on the earth, with what converting poses needs (PROJ objects made on
+/// first use: a build without GDAL converts ellipsoidal and ground poses on local data).
+pub struct Earth {
+    pub placement: Placement,
+    /// The geoid of the terrain's heights (none: ellipsoidal or local heights).
+    terrain_geoid: Option<GeoidModel>,
+    egm96: OnceCell<std::result::Result<Geoid, String>>,
+    terrain: OnceCell<std::result::Result<Geoid, String>>,
+    /// WGS 84 -> the grid's CRS (georeferenced data).
+    to_grid: OnceCell<std::result::Result<Transform, String>>,
+}
+
+impl Earth {
+    pub fn new(placement: Placement) -> Self {
+        Earth {
+            terrain_geoid: GeoidModel::of_datum(&placement.vertical_datum),
+            placement,
+            egm96: OnceCell::new(),
+            terrain: OnceCell::new(),
+            to_grid: OnceCell::new(),
+        }
+    }
+
+    pub fn frame(&self) -> &EnuFrame {
+        &self.placement.frame
+    }
+
+    fn geoid<'a>(
+        cell: &'a OnceCell<std::result::Result<Geoid, String>>,
+        model: GeoidModel,
+    ) -> Result<&'a Geoid> {
+        cell.get_or_init(|| Geoid::new(model).map_err(|e| e.to_string()))
+            .as_ref()
+            .map_err(|e| Error::invalid("height_ref", e.clone()))
+    }
+
+    /// EGM96 undulation (mean sea level above the ellipsoid) at a place.
+    pub fn msl_undulation(&self, lat_deg: f64, lon_deg: f64) -> Result<f64> {
+        Self::geoid(&self.egm96, GeoidModel::Egm96)?.undulation(lat_deg, lon_deg)
+    }
+
+    /// Height of the terrain's datum above the ellipsoid at a place (0: ellipsoidal or local).
+    pub fn terrain_undulation(&self, lat_deg: f64, lon_deg: f64) -> Result<f64> {
+        match self.terrain_geoid {
+            None => Ok(0.0),
+            Some(GeoidModel::Egm96) => self.msl_undulation(lat_deg, lon_deg),
+            Some(m) => Self::geoid(&self.terrain, m)?.undulation(lat_deg, lon_deg),
+        }
+    }
+
+    /// Where a latitude/longitude lies in the level-0 grid of `data`, as world metres of the
+    /// grid's own addressing (`Level0::bilinear`): through PROJ for a georeferenced grid, the
+    /// world frame's east/north for anchored local data.
+    pub fn grid_position<D: Level0 + ?Sized>(
+        &self,
+        data: &D,
+        lat_deg: f64,
+        lon_deg: f64,
+    ) -> Result<(f64, f64)> {
+        let Some((georef, [w, h])) = &self.placement.georef else {
+            let p = self
+                .frame()
+                .to_local(WGS84.to_ecef(Geodetic::new(lat_deg, lon_deg, 0.0)));
+            return Ok((p.x, p.y));
+        };
+        let [x, y] = self.to_grid(georef)?.point([lon_deg, lat_deg])?;
+        let t = &georef.sample_to_crs;
+        let (col, row) = ((x - t[0]) / t[1], (y - t[3]) / t[5]);
+        let (ex, ey) = data.extent();
+        Ok((col / (*w - 1) as f64 * ex, row / (*h - 1) as f64 * ey))
+    }
+
+    fn to_grid(&self, georef: &Georef) -> Result<&Transform> {
+        self.to_grid
+            .get_or_init(|| {
+                Crs::wgs84()
+                    .and_then(|wgs| Transform::new(&wgs, &georef.crs))
+                    .map_err(|e| e.to_string())
+            })
+            .as_ref()
+            .map_err(|e| Error::invalid("height_ref = \"ground\"", e.clone()))
+    }
+
+    /// The pose's height in the world frame's (the terrain's) datum; `data` answers ground
+    /// heights.
+    pub fn world_height<D: Level0 + ?Sized>(&self, pose: &GeoPose, data: &D) -> Result<f64> {
+        let (lat, lon) = (pose.lat_deg, pose.lon_deg);
+        match pose.height_ref {
+            HeightRef::Ellipsoid => Ok(pose.height_m - self.terrain_undulation(lat, lon)?),
+            HeightRef::Msl if self.terrain_geoid == Some(GeoidModel::Egm96) => Ok(pose.height_m),
+            HeightRef::Msl => Ok(pose.height_m + self.msl_undulation(lat, lon)?
+                - self.terrain_undulation(lat, lon)?),
+            HeightRef::Ground => {
+                let (x, y) = self.grid_position(data, lat, lon)?;
+                let (ex, ey) = data.extent();
+                if !(-1e-6 * ex..=ex * (1.0 + 1e-6)).contains(&x)
+                    || !(-1e-6 * ey..=ey * (1.0 + 1e-6)).contains(&y)
+                {
+                    return Err(Error::invalid(
+                        "height_ref = \"ground\"",
+                        format!("{lat} deg, {lon} deg lies outside the data set: no ground there"),
+                    ));
+                }
+                Ok(data.bilinear(x, y)? + pose.height_m)
+            }
+        }
+    }
+
+    /// The camera of a pose (`template` gives the field of view and clip planes).
+    pub fn camera<D: Level0 + ?Sized>(
+        &self,
+        pose: &GeoPose,
+        data: &D,
+        template: &Camera,
+    ) -> Result<Camera> {
+        pose.validate("pose")?;
+        let h = self.world_height(pose, data)?;
+        let w = pose.to_world(self.frame(), h);
+        let camera = Camera {
+            position: w.position,
+            yaw_deg: w.yaw_deg,
+            pitch_deg: w.pitch_deg,
+            roll_deg: w.roll_deg,
+            ..*template
+        };
+        camera.validate()?;
+        Ok(camera)
+    }
+
+    /// The WGS84 pose of a camera, its height above the ellipsoid.
+    pub fn pose(&self, camera: &Camera) -> Result<GeoPose> {
+        let mut p = GeoPose::from_world(
+            self.frame(),
+            &WorldPose {
+                position: camera.position,
+                yaw_deg: camera.yaw_deg,
+                pitch_deg: camera.pitch_deg,
+                roll_deg: camera.roll_deg,
+            },
+        );
+        p.height_m += self.terrain_undulation(p.lat_deg, p.lon_deg)?;
+        Ok(p)
+    }
+
+    /// The world position of a geodetic point whose height is in the terrain's datum.
+    pub fn world_position(&self, at: Geodetic) -> DVec3 {
+        self.frame().to_local(WGS84.to_ecef(at))
+    }
+}

@@ -1,0 +1,254 @@
+//! Poses on the earth against independent oracles: geodetic <-> ECEF equal to PROJ
+//! (`EPSG:4979 -> EPSG:4978` through GDAL's OSR), the geoid's undulation as the height
+//! difference between ellipsoidal and MSL poses, ground poses, WGS84 keyframes in scenarios,
+//! and one-line errors where a pose cannot be placed.
+
+use glam::DVec3;
+use vkterrain::dataset::Heightmap;
+use vkterrain::dataset::manifest::datum;
+use vkterrain::dataset::settings::Anchor;
+use vkterrain::dataset::world::{Placement, world_frame};
+use vkterrain::geo::ellipsoid::Ellipsoid;
+use vkterrain::geo::{GeoPose, Geodetic, HeightRef, WGS84};
+use vkterrain::scene::scenario::ScenarioFile;
+use vkterrain::scene::{Camera, Earth, Scenario};
+
+/// A 101x101 grid at 30 m with heights 100 + col (so the ground under a pose is known).
+fn ramp() -> Heightmap {
+    let heights = (0..101 * 101).map(|i| 100.0 + (i % 101) as f32).collect();
+    Heightmap::new("ramp", 101, 101, 30.0, heights).unwrap()
+}
+
+fn anchored(vertical_datum: &str) -> Earth {
+    let frame = world_frame(
+        None,
+        Some(Anchor {
+            lat_deg: 46.5,
+            lon_deg: 8.0,
+        }),
+    )
+    .unwrap()
+    .unwrap();
+    Earth::new(Placement {
+        frame,
+        georef: None,
+        vertical_datum: vertical_datum.into(),
+    })
+}
+
+fn pose(lat: f64, lon: f64, h: f64, r: HeightRef) -> GeoPose {
+    GeoPose {
+        lat_deg: lat,
+        lon_deg: lon,
+        height_m: h,
+        height_ref: r,
+        heading_deg: 200.0,
+        pitch_deg: -15.0,
+        roll_deg: 3.0,
+    }
+}
+
+fn same_camera(a: &Camera, b: &Camera, tol_m: f64) -> bool {
+    a.position.distance(b.position) <= tol_m
+        && (a.yaw_deg - b.yaw_deg).abs() < 1e-9
+        && (a.pitch_deg - b.pitch_deg).abs() < 1e-9
+        && (a.roll_deg - b.roll_deg).abs() < 1e-9
+}
+
+#[cfg(feature = "gdal")]
+#[test]
+fn geodetic_to_ecef_equals_proj_within_a_millimetre() {
+    use gdal::spatial_ref::{AxisMappingStrategy, CoordTransform, SpatialRef};
+    let mut geog = SpatialRef::from_epsg(4979).unwrap();
+    let mut ecef = SpatialRef::from_epsg(4978).unwrap();
+    geog.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
+    ecef.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
+    let fwd = CoordTransform::new(&geog, &ecef).unwrap();
+    let inv = CoordTransform::new(&ecef, &geog).unwrap();
+    // Flattening 1/298 instead of 1/298.257: the negative control (18 m off at the poles).
+    let wrong = Ellipsoid {
+        a: WGS84.a,
+        f: 1.0 / 298.0,
+    };
+    let mut wrong_seen = 0.0f64;
+    let mut n = 0;
+    for lat in [
+        -89.5, -60.0, -33.9, 0.0, 0.001, 27.98, 46.5, 70.0, 80.0, 89.9,
+    ] {
+        for lon in [-179.9, -122.3, -0.5, 0.0, 8.0, 90.0, 179.9] {
+            for h in [-430.0, 0.0, 4478.0, 8848.0, 35_000.0] {
+                let (mut x, mut y, mut z) = ([lon], [lat], [h]);
+                fwd.transform_coords(&mut x, &mut y, &mut z).unwrap();
+                let proj = DVec3::new(x[0], y[0], z[0]);
+                let ours = WGS84.to_ecef(Geodetic::new(lat, lon, h));
+                assert!(
+                    ours.distance(proj) < 1e-3,
+                    "{lat} {lon} {h}: {ours} vs {proj}"
+                );
+                wrong_seen =
+                    wrong_seen.max(wrong.to_ecef(Geodetic::new(lat, lon, h)).distance(proj));
+                // And back: our inverse against PROJ's.
+                let (mut gx, mut gy, mut gz) = ([proj.x], [proj.y], [proj.z]);
+                inv.transform_coords(&mut gx, &mut gy, &mut gz).unwrap();
+                let back = WGS84.to_geodetic(proj);
+                let dlat = (back.lat_deg - gy[0]).to_radians() * WGS84.a;
+                let dlon = (back.lon_deg - gx[0]).to_radians() * WGS84.a * lat.to_radians().cos();
+                assert!(
+                    dlat.abs() < 1e-3 && dlon.abs() < 1e-3,
+                    "{lat} {lon} {h}: {back:?}"
+                );
+                assert!(
+                    (back.height - gz[0]).abs() < 1e-3,
+                    "{lat} {lon} {h}: {back:?} vs {}",
+                    gz[0]
+                );
+                n += 1;
+            }
+        }
+    }
+    assert_eq!(n, 350);
+    assert!(
+        wrong_seen > 10.0,
+        "a wrong flattening went unnoticed ({wrong_seen} m)"
+    );
+}
+
+#[cfg(feature = "gdal")]
+#[test]
+fn msl_and_ellipsoidal_heights_differing_by_the_undulation_give_the_same_camera() {
+    let data = ramp();
+    let template = Camera::default();
+    let (lat, lon) = (46.51, 8.02);
+    for terrain_datum in [datum::LOCAL, datum::EGM96, datum::ELLIPSOID] {
+        let earth = anchored(terrain_datum);
+        let n = earth.msl_undulation(lat, lon).unwrap();
+        assert!(
+            (n - 50.7).abs() < 1.0,
+            "EGM96 near 46.5 N 8 E is about +50.7 m: {n}"
+        );
+        let by_ellipsoid = earth
+            .camera(
+                &pose(lat, lon, 3000.0, HeightRef::Ellipsoid),
+                &data,
+                &template,
+            )
+            .unwrap();
+        let by_msl = earth
+            .camera(
+                &pose(lat, lon, 3000.0 - n, HeightRef::Msl),
+                &data,
+                &template,
+            )
+            .unwrap();
+        assert!(
+            same_camera(&by_ellipsoid, &by_msl, 1e-6),
+            "{terrain_datum}: {by_ellipsoid:?} vs {by_msl:?}"
+        );
+        // Negative control: the same number as MSL is N metres higher.
+        let wrong = earth
+            .camera(&pose(lat, lon, 3000.0, HeightRef::Msl), &data, &template)
+            .unwrap();
+        let dz = wrong.position.distance(by_ellipsoid.position);
+        assert!((dz - n).abs() < 1e-6, "{terrain_datum}: {dz} vs N = {n}");
+        // The reported pose (height in the terrain's datum + its undulation) comes back.
+        let back = earth.pose(&by_msl).unwrap();
+        assert!((back.height_m - 3000.0).abs() < 1e-6, "{back:?}");
+        assert!((back.heading_deg - 200.0).abs() < 1e-8 && (back.lat_deg - lat).abs() < 1e-10);
+    }
+    // The terrain's datum decides where the camera goes: over EGM96 terrain an MSL height is
+    // used as it is (the terrain's heights are MSL heights); over ellipsoidal terrain it
+    // gains N.
+    let over_egm96 = anchored(datum::EGM96)
+        .camera(&pose(lat, lon, 2000.0, HeightRef::Msl), &data, &template)
+        .unwrap();
+    let over_ellipsoid = anchored(datum::ELLIPSOID)
+        .camera(&pose(lat, lon, 2000.0, HeightRef::Msl), &data, &template)
+        .unwrap();
+    let n = anchored(datum::EGM96).msl_undulation(lat, lon).unwrap();
+    assert!((over_ellipsoid.position.distance(over_egm96.position) - n).abs() < 1e-6);
+}
+
+#[test]
+fn ground_poses_stand_on_the_terrain() {
+    let data = ramp();
+    let earth = anchored(datum::LOCAL);
+    // A place about 1.5 km east and 1.2 km north of the anchor, inside the 3 km grid.
+    let at = WGS84.to_geodetic(earth.frame().to_ecef(DVec3::new(1500.0, 1200.0, 0.0)));
+    let cam = earth
+        .camera(
+            &pose(at.lat_deg, at.lon_deg, 250.0, HeightRef::Ground),
+            &data,
+            &Camera::default(),
+        )
+        .unwrap();
+    // Ground there: 100 + x / 30 = 150 m, so the camera is 400 m above the ellipsoid point.
+    let g = WGS84.to_geodetic(earth.frame().to_ecef(cam.position));
+    assert!((g.height - 400.0).abs() < 1e-6, "{g:?}");
+    assert!((cam.position.x - 1500.0).abs() < 0.5 && (cam.position.y - 1200.0).abs() < 0.5);
+    // Outside the data set: no ground, one line.
+    let e = earth
+        .camera(
+            &pose(47.5, 8.0, 10.0, HeightRef::Ground),
+            &data,
+            &Camera::default(),
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("outside the data set") && !e.contains('\n'),
+        "{e}"
+    );
+}
+
+#[test]
+fn wgs84_keyframes_fly_over_the_earth_and_need_a_world_frame() {
+    let data = ramp();
+    let earth = anchored(datum::LOCAL);
+    let text = r#"
+        name = "geo"
+        frames = 31
+        fps = 30.0
+        [[keyframe]]
+        t = 0.0
+        lat_deg = 46.5
+        lon_deg = 8.0
+        height_m = 1000.0
+        heading_deg = 350.0
+        pitch_deg = -10.0
+        [[keyframe]]
+        t = 1.0
+        lat_deg = 46.95
+        lon_deg = 8.0
+        height_m = 1000.0
+        heading_deg = 10.0
+        pitch_deg = -10.0
+    "#;
+    let file: ScenarioFile = toml::from_str(text).unwrap();
+    let s = Scenario::resolve_on(&file, &data, Some(&earth)).unwrap();
+    // Half-way (50 km north): on the ellipsoid-following path, 1000 m above the ellipsoid
+    // (a straight chord would sag about 196 m below it), heading true north.
+    let mid = s.camera(15);
+    let g = earth.pose(&mid).unwrap();
+    assert!((g.height_m - 1000.0).abs() < 1e-6, "{g:?}");
+    assert!((g.lat_deg - 46.725).abs() < 1e-9 && g.heading_deg.min(360.0 - g.heading_deg) < 1e-6);
+    assert!((g.pitch_deg + 10.0).abs() < 1e-9, "{g:?}");
+    assert!(
+        mid.position.z < 1000.0 - 150.0,
+        "the world's z drops with curvature: {mid:?}"
+    );
+    // The ends are the keyframes.
+    let end = earth.pose(&s.camera(30)).unwrap();
+    assert!((end.lat_deg - 46.95).abs() < 1e-9 && (end.heading_deg - 10.0).abs() < 1e-6);
+    // No world frame: one line naming the cause.
+    let e = Scenario::resolve_on(&file, &data, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("on the earth") && !e.contains('\n'), "{e}");
+    // World angles do not mix with a WGS84 keyframe.
+    let mixed: ScenarioFile =
+        toml::from_str(&text.replacen("pitch_deg = -10.0", "pitch = -10.0", 1)).unwrap();
+    let e = Scenario::resolve_on(&mixed, &data, Some(&earth))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("heading_deg") && !e.contains('\n'), "{e}");
+}
