@@ -51,10 +51,10 @@ impl Earth {
         &self.placement.frame
     }
 
-    fn geoid<'a>(
-        cell: &'a OnceCell<std::result::Result<Geoid, String>>,
+    fn geoid(
+        cell: &OnceCell<std::result::Result<Geoid, String>>,
         model: GeoidModel,
-    ) -> Result<&'a Geoid> {
+    ) -> Result<&Geoid> {
         cell.get_or_init(|| Geoid::new(model).map_err(|e| e.to_string()))
             .as_ref()
             .map_err(|e| Error::invalid("height_ref", e.clone()))

@@ -19,6 +19,9 @@ const REOPEN_POLL: Duration = Duration::from_millis(100);
 
 /// What [`RingReader::wait_next`] found.
 #[derive(Clone, Copy, Debug, PartialEq)]
+// FrameMeta is the ring's 256-byte metadata record, returned by value once per frame: boxing it
+// would add a heap allocation to every read for no gain.
+#[allow(clippy::large_enum_variant)]
 pub enum Next {
     /// A frame newer than the last one returned; its pixels are in [`RingReader::pixels`].
     Frame(FrameMeta),
@@ -87,6 +90,7 @@ impl FrameRef<'_> {
     }
 }
 
+#[allow(clippy::large_enum_variant)] // as `Next`
 enum Read {
     Ok(FrameMeta),
     /// The slot is being written or was overwritten during the copy.
