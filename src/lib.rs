@@ -14,6 +14,7 @@ pub mod driver;
 pub mod error;
 pub mod eval;
 pub mod frame;
+pub mod geo;
 /// Constants shared by Rust and WGSL (generated into every shader by `build.rs`).
 pub mod gpu_constants;
 pub mod lod;
