@@ -562,7 +562,11 @@ impl FrameAnalysis for GpuAnalysis {
             MemoryAccess::ComputeReadWrite,
         );
         let blocks = self.groups.0 * self.groups.1;
-        self.dispatch(cmd, &s.blocks, (blocks.div_ceil(EVAL_POINT_WORKGROUP), 1, 1));
+        self.dispatch(
+            cmd,
+            &s.blocks,
+            (blocks.div_ceil(EVAL_POINT_WORKGROUP), 1, 1),
+        );
         b.memory(
             cmd,
             MemoryAccess::ComputeWrite,
