@@ -4,8 +4,12 @@
 // triangle mesh brute force draws), the height and screen-space errors, popping against the
 // previous frame, holes against the reference frame, the PSNR and SSIM terms; per tracked
 // world point the swimming observation; for the reference frame the swim seeds. Histograms
-// are accumulated with atomics, sums per workgroup then in one reducing workgroup: the host
-// reads kilobytes. Mirrors src/eval/metrics.rs; tests/eval_gpu.rs proves both equal.
+// are accumulated with atomics by the per-pixel pass (one invocation per pixel, no workgroup
+// memory or barriers: on a CPU device such as lavapipe each workgroup is then plain SIMD
+// code), which writes the error images; a per-block pass (one invocation per 8x8 block)
+// sums them, counts holes and computes the block's SSIM window; one reducing workgroup sums
+// the blocks: the host reads kilobytes. Mirrors src/eval/metrics.rs; tests/eval_gpu.rs proves
+// both equal.
 
 struct EvalView {
     // xyz: camera right (world); w: focal length (px).
@@ -30,9 +34,9 @@ struct EvalFrame {
     // x: sample spacing (m).
     params: vec4<f32>,
     // x: tracked points; y: first seed written this frame; z: seeds written this frame (0:
-    // none); w: pixel workgroups (partials to sum).
+    // none); w: 8x8 blocks of the frame (partials to sum).
     points: vec4<u32>,
-    // x, y: the seed grid (columns, rows); z: pixel workgroups per row.
+    // x, y: the seed grid (columns, rows); z: 8x8 blocks per row.
     grid: vec4<u32>,
 }
 
@@ -46,13 +50,14 @@ struct Seed {
     pad1: f32,
 }
 
-// One workgroup's sums.
+// One 8x8 block's sums.
 struct Partial {
     // height error |m|, screen-space error px, SSIM of the window, 1 when the window counts.
     sums: vec4<f32>,
     // maximum height error, maximum screen-space error.
     maxes: vec4<f32>,
-    // pixels with an error, holes, squared RGB differences, pixels with a popping value.
+    // pixels with an error, holes, squared RGB differences, 0 (the host counts popping
+    // values in their histogram).
     counts: vec4<u32>,
 }
 
@@ -107,6 +112,8 @@ const TILE_SIDE: u32 = EVAL_REF_TILE + 1u;
 @group(0) @binding(8) var<storage, read_write> error_image: array<f32>;
 @group(0) @binding(9) var<storage, read_write> partials: array<Partial>;
 @group(0) @binding(10) var<storage, read_write> stats: Stats;
+// |height error| (m) per pixel of this frame (where error_image is not NO_ERROR).
+@group(0) @binding(11) var<storage, read_write> metres_image: array<f32>;
 
 // Level-0 height of sample s (inside the data) from its reference tile, or a negative tile.
 struct Sample4 {
@@ -249,23 +256,6 @@ fn sq_diff(a: u32, b: u32) -> u32 {
     return u32(dot(d, d));
 }
 
-var<workgroup> red_sum: array<vec4<f32>, 64>;
-var<workgroup> red_max: array<vec4<f32>, 64>;
-var<workgroup> red_cnt: array<vec4<u32>, 64>;
-
-// Sums (and maxima) of the workgroup's 64 entries into entry 0.
-fn reduce_workgroup(li: u32) {
-    for (var stride = 32u; stride > 0u; stride >>= 1u) {
-        workgroupBarrier();
-        if li < stride {
-            red_sum[li] += red_sum[li + stride];
-            red_max[li] = max(red_max[li], red_max[li + stride]);
-            red_cnt[li] += red_cnt[li + stride];
-        }
-    }
-    workgroupBarrier();
-}
-
 struct PixelResult {
     // |height error| m, screen-space error px (valid when counted).
     metres: f32,
@@ -275,14 +265,13 @@ struct PixelResult {
     signed_px: f32,
 }
 
-fn pixel_error(x: u32, y: u32, d: f32) -> PixelResult {
+// Pixel x (within view v, whose uniforms are `view`) of row y with depth d.
+fn pixel_error(v: u32, view: EvalView, x: u32, y: u32, d: f32) -> PixelResult {
     var out = PixelResult(0.0, 0.0, false, NO_ERROR);
     if !(d > 0.0) {
         return out;
     }
-    let v = view_of(x);
-    let view = frame.views[v];
-    let rel = world_rel(v, x - u32(view.cell.z), y, d);
+    let rel = world_rel(v, x, y, d);
     let p = grid_pos(v, rel);
     if !on_data(p) {
         return out;
@@ -299,117 +288,129 @@ fn pixel_error(x: u32, y: u32, d: f32) -> PixelResult {
     return out;
 }
 
+// Whether a neighbour's depth dn continues the surface at depth d (within 5%).
+fn continues(dn: f32, d: f32) -> bool {
+    return dn > 0.0 && abs(dn - d) <= 0.05 * d;
+}
+
 // Whether the depth around interior pixel i is continuous (no occlusion edge): every
 // 4-neighbour shows terrain within 5% of the pixel's depth (metrics::popping).
 fn continuous(i: u32, d: f32) -> bool {
     let w = frame.size.x;
-    var n = array<u32, 4>(i - 1u, i + 1u, i - w, i + w);
-    for (var k = 0u; k < 4u; k += 1u) {
-        let dn = depth[n[k]];
-        if !(dn > 0.0) || abs(dn - d) > 0.05 * d {
-            return false;
-        }
-    }
-    return true;
+    return continues(depth[i - 1u], d) && continues(depth[i + 1u], d)
+        && continues(depth[i - w], d) && continues(depth[i + w], d);
 }
 
-// Holes (metrics::holes): sky here although the reference and its 8 neighbours show terrain.
-fn is_hole(x: u32, y: u32, d: f32) -> bool {
-    if d > 0.0 {
+// Holes (metrics::holes): sky at interior pixel i although the reference and its 8
+// neighbours show terrain.
+fn is_hole(i: u32) -> bool {
+    if depth[i] > 0.0 {
         return false;
     }
     let w = frame.size.x;
-    for (var yy = y - 1u; yy <= y + 1u; yy += 1u) {
-        for (var xx = x - 1u; xx <= x + 1u; xx += 1u) {
-            if !(ref_depth[yy * w + xx] > 0.0) {
-                return false;
-            }
-        }
-    }
-    return true;
+    let a = i - w;
+    let b = i + w;
+    return ref_depth[a - 1u] > 0.0 && ref_depth[a] > 0.0 && ref_depth[a + 1u] > 0.0
+        && ref_depth[i - 1u] > 0.0 && ref_depth[i] > 0.0 && ref_depth[i + 1u] > 0.0
+        && ref_depth[b - 1u] > 0.0 && ref_depth[b] > 0.0 && ref_depth[b + 1u] > 0.0;
 }
 
-// Per pixel: errors, popping, holes, PSNR terms; per 8x8 workgroup: one SSIM window.
+// Per pixel (one invocation each, no workgroup memory or barriers: a CPU device runs it as
+// plain SIMD loops): the errors into the histograms, the error and metre images, popping.
+// The z dimension is the view (its uniforms are the same in every invocation).
 @compute @workgroup_size(EVAL_TILE_PX, EVAL_TILE_PX)
-fn pixels_main(
-    @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(local_invocation_index) li: u32,
-    @builtin(workgroup_id) wg: vec3<u32>,
-) {
+fn pixels_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let v = gid.z;
+    let view = frame.views[v];
+    if gid.x >= u32(view.cell.w) || gid.y >= frame.size.y {
+        return;
+    }
     let w = frame.size.x;
     let hgt = frame.size.y;
-    let x = gid.x;
+    let x = u32(view.cell.z) + gid.x;
     let y = gid.y;
-    let inside = x < w && y < hgt;
+    let i = y * w + x;
+    let d = depth[i];
+    let e = pixel_error(v, view, gid.x, y, d);
+    let previous = error_image[i];
+    error_image[i] = e.signed_px;
+    metres_image[i] = e.metres;
+    if e.counted {
+        count_in(0u, e.metres);
+        count_in(1u, e.pixels);
+        let interior = x >= 1u && y >= 1u && x + 1u < w && y + 1u < hgt;
+        if frame.size.w == 1u && interior && previous != NO_ERROR && continuous(i, d) {
+            count_in(2u, abs(e.signed_px - previous));
+        }
+    }
+}
+
+// Per 8x8 block of the frame (one invocation each, after pixels_main): sums and maxima of
+// the errors, holes, squared RGB differences, and the block's SSIM window.
+@compute @workgroup_size(EVAL_POINT_WORKGROUP)
+fn blocks_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let b = gid.x;
+    if b >= frame.points.w {
+        return;
+    }
+    let w = frame.size.x;
+    let hgt = frame.size.y;
+    let origin = vec2<u32>(b % frame.grid.z, b / frame.grid.z) * EVAL_TILE_PX;
+    let end = min(origin + vec2<u32>(EVAL_TILE_PX), vec2<u32>(w, hgt));
     var sums = vec4<f32>(0.0);
     var maxes = vec4<f32>(0.0);
     var counts = vec4<u32>(0u);
-    var la = 0.0;
-    var lb = 0.0;
-    if inside {
-        let i = y * w + x;
-        let d = depth[i];
-        let e = pixel_error(x, y, d);
-        if e.counted {
-            sums.x = e.metres;
-            sums.y = e.pixels;
-            maxes.x = e.metres;
-            maxes.y = e.pixels;
-            counts.x = 1u;
-            count_in(0u, e.metres);
-            count_in(1u, e.pixels);
+    var sa = 0.0;
+    var sb = 0.0;
+    for (var y = origin.y; y < end.y; y += 1u) {
+        let inner_y = y >= 1u && y + 1u < hgt;
+        for (var x = origin.x; x < end.x; x += 1u) {
+            let i = y * w + x;
+            let e = error_image[i];
+            if e != NO_ERROR {
+                let m = metres_image[i];
+                let p = abs(e);
+                sums.x += m;
+                sums.y += p;
+                maxes.x = max(maxes.x, m);
+                maxes.y = max(maxes.y, p);
+                counts.x += 1u;
+            }
+            if inner_y && x >= 1u && x + 1u < w && is_hole(i) {
+                counts.y += 1u;
+            }
+            let c = color[i];
+            let r = ref_color[i];
+            counts.z += sq_diff(r, c);
+            sa += luma(r);
+            sb += luma(c);
         }
-        let interior = x >= 1u && y >= 1u && x + 1u < w && y + 1u < hgt;
-        let previous = error_image[i];
-        error_image[i] = e.signed_px;
-        if frame.size.w == 1u && interior && e.counted && previous != NO_ERROR
-            && continuous(i, d) {
-            count_in(2u, abs(e.signed_px - previous));
-            counts.w = 1u;
-        }
-        if interior && is_hole(x, y, d) {
-            counts.y = 1u;
-        }
-        let c = color[i];
-        let r = ref_color[i];
-        counts.z = sq_diff(r, c);
-        la = luma(r);
-        lb = luma(c);
     }
-    // SSIM of the workgroup's window (metrics::ssim): means first, then centred moments.
-    red_sum[li] = vec4<f32>(sums.xy, la, lb);
-    red_max[li] = maxes;
-    red_cnt[li] = counts;
-    reduce_workgroup(li);
-    let total_sum = red_sum[0];
-    let total_max = red_max[0];
-    let total_cnt = red_cnt[0];
-    let ma = total_sum.z / 64.0;
-    let mb = total_sum.w / 64.0;
-    workgroupBarrier();
-    red_sum[li] = vec4<f32>((la - ma) * (la - ma), (lb - mb) * (lb - mb), (la - ma) * (lb - mb), 0.0);
-    red_max[li] = vec4<f32>(0.0);
-    red_cnt[li] = vec4<u32>(0u);
-    reduce_workgroup(li);
-    if li == 0u {
-        let origin = wg.xy * EVAL_TILE_PX;
-        let window = origin.x + EVAL_TILE_PX <= w && origin.y + EVAL_TILE_PX <= hgt;
-        var ssim = 0.0;
-        if window {
-            let m = red_sum[0] / 64.0;
-            let c1 = (0.01 * 255.0) * (0.01 * 255.0);
-            let c2 = (0.03 * 255.0) * (0.03 * 255.0);
-            ssim = ((2.0 * ma * mb + c1) * (2.0 * m.z + c2)) / ((ma * ma + mb * mb + c1) * (m.x + m.y + c2));
+    // SSIM of the block's window (metrics::ssim): means first, then centred moments.
+    let window = origin.x + EVAL_TILE_PX <= w && origin.y + EVAL_TILE_PX <= hgt;
+    var ssim = 0.0;
+    if window {
+        let n = f32(EVAL_TILE_PX * EVAL_TILE_PX);
+        let ma = sa / n;
+        let mb = sb / n;
+        var m = vec3<f32>(0.0);
+        for (var y = origin.y; y < end.y; y += 1u) {
+            for (var x = origin.x; x < end.x; x += 1u) {
+                let i = y * w + x;
+                let la = luma(ref_color[i]) - ma;
+                let lb = luma(color[i]) - mb;
+                m += vec3<f32>(la * la, lb * lb, la * lb);
+            }
         }
-        partials[wg.y * frame.grid.z + wg.x] = Partial(
-            vec4<f32>(total_sum.xy, ssim, select(0.0, 1.0, window)),
-            total_max,
-            total_cnt,
-        );
+        m /= n;
+        let c1 = (0.01 * 255.0) * (0.01 * 255.0);
+        let c2 = (0.03 * 255.0) * (0.03 * 255.0);
+        ssim = ((2.0 * ma * mb + c1) * (2.0 * m.z + c2)) / ((ma * ma + mb * mb + c1) * (m.x + m.y + c2));
     }
+    partials[b] = Partial(vec4<f32>(sums.xy, ssim, select(0.0, 1.0, window)), maxes, counts);
 }
 
-// Sums the pixel pass's partials into stats.totals (one workgroup).
+// Sums the blocks' partials into stats.totals (one workgroup).
 var<workgroup> red_sq: array<vec2<u32>, EVAL_REDUCE_WORKGROUP>;
 var<workgroup> red_sum2: array<vec4<f32>, EVAL_REDUCE_WORKGROUP>;
 var<workgroup> red_max2: array<vec4<f32>, EVAL_REDUCE_WORKGROUP>;

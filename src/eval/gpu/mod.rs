@@ -54,6 +54,7 @@ pub const EVAL_SET: &[Binding] = {
         Binding::new(8, T::STORAGE_BUFFER, C, "error_image"),
         Binding::new(9, T::STORAGE_BUFFER, C, "partials"),
         Binding::new(10, T::STORAGE_BUFFER, C, "stats"),
+        Binding::new(11, T::STORAGE_BUFFER, C, "metres_image"),
     ]
 };
 
@@ -83,6 +84,7 @@ pub struct EvalShared {
     sets: DescriptorSets,
     next_set: AtomicUsize,
     pixels: Pipeline,
+    blocks: Pipeline,
     reduce: Pipeline,
     seed: Pipeline,
     swim: Pipeline,
@@ -142,6 +144,7 @@ impl EvalShared {
             )?,
             zeros,
             pixels: compute_pipeline(gpu, spv, c"pixels_main", &layouts)?,
+            blocks: compute_pipeline(gpu, spv, c"blocks_main", &layouts)?,
             reduce: compute_pipeline(gpu, spv, c"reduce_main", &layouts)?,
             seed: compute_pipeline(gpu, spv, c"seed_main", &layouts)?,
             swim: compute_pipeline(gpu, spv, c"swim_main", &layouts)?,
@@ -232,12 +235,16 @@ pub struct GpuAnalysis {
     depth: vk::Buffer,
     color: vk::Buffer,
     error_image: Buffer,
+    _metres_image: Buffer,
     _partials: Buffer,
     stats: Buffer,
     stats_host: Buffer,
     export: Option<Buffer>,
     image_frames: Vec<u64>,
+    /// 8x8 blocks per row and column of the frame (one SSIM window and partial sum each).
     groups: (u32, u32),
+    /// Workgroups of the per-pixel pass: the widest view's columns, rows, views.
+    pixel_groups: (u32, u32, u32),
     recorded: u64,
     results: Sender<GpuFrameMetrics>,
 }
@@ -266,6 +273,15 @@ impl GpuAnalysis {
             shape.width.div_ceil(EVAL_TILE_PX),
             shape.height.div_ceil(EVAL_TILE_PX),
         );
+        let widest = (0..shape.views)
+            .map(|v| crate::render::view_columns(shape.width, shape.views, v).1)
+            .max()
+            .unwrap_or(shape.width);
+        let pixel_groups = (
+            widest.div_ceil(EVAL_TILE_PX),
+            shape.height.div_ceil(EVAL_TILE_PX),
+            shape.views.max(1) as u32,
+        );
         let device = |name: &str, bytes: u64, usage: vk::BufferUsageFlags| {
             Buffer::new(
                 gpu,
@@ -292,6 +308,11 @@ impl GpuAnalysis {
         };
         let copy_usage = vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::TRANSFER_SRC;
         let error_image = device("eval error image", pixels * 4, copy_usage)?;
+        let metres_image = device(
+            "eval height error image",
+            pixels * 4,
+            vk::BufferUsageFlags::empty(),
+        )?;
         let partials = device(
             "eval partials",
             groups.0 as u64 * groups.1 as u64 * PARTIAL_BYTES,
@@ -342,6 +363,7 @@ impl GpuAnalysis {
                 ("error_image", buffer(error_image.raw)),
                 ("partials", buffer(partials.raw)),
                 ("stats", buffer(stats.raw)),
+                ("metres_image", buffer(metres_image.raw)),
             ],
         )?;
         let analysis = GpuAnalysis {
@@ -353,12 +375,14 @@ impl GpuAnalysis {
             depth,
             color,
             error_image,
+            _metres_image: metres_image,
             _partials: partials,
             stats,
             stats_host,
             export,
             image_frames,
             groups,
+            pixel_groups,
             recorded: 0,
             results,
         };
@@ -467,7 +491,7 @@ impl GpuAnalysis {
         }
     }
 
-    fn dispatch(&self, cmd: vk::CommandBuffer, pipeline: &Pipeline, groups: (u32, u32)) {
+    fn dispatch(&self, cmd: vk::CommandBuffer, pipeline: &Pipeline, groups: (u32, u32, u32)) {
         let d = &self.shared.gpu.device;
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
@@ -479,7 +503,7 @@ impl GpuAnalysis {
                 &[self.set],
                 &[],
             );
-            d.cmd_dispatch(cmd, groups.0, groups.1, 1);
+            d.cmd_dispatch(cmd, groups.0, groups.1, groups.2);
         }
     }
 }
@@ -522,22 +546,33 @@ impl FrameAnalysis for GpuAnalysis {
         let s = &self.shared;
         let seeds = uniforms.points[2];
         if seeds > 0 {
-            self.dispatch(cmd, &s.seed, (seeds.div_ceil(EVAL_POINT_WORKGROUP), 1));
+            self.dispatch(cmd, &s.seed, (seeds.div_ceil(EVAL_POINT_WORKGROUP), 1, 1));
             b.memory(
                 cmd,
                 MemoryAccess::ComputeWrite,
                 MemoryAccess::ComputeReadWrite,
             );
         }
-        self.dispatch(cmd, &s.pixels, self.groups);
+        self.dispatch(cmd, &s.pixels, self.pixel_groups);
         let points = uniforms.points[0];
-        self.dispatch(cmd, &s.swim, (points.div_ceil(EVAL_POINT_WORKGROUP), 1));
+        self.dispatch(cmd, &s.swim, (points.div_ceil(EVAL_POINT_WORKGROUP), 1, 1));
         b.memory(
             cmd,
             MemoryAccess::ComputeWrite,
             MemoryAccess::ComputeReadWrite,
         );
-        self.dispatch(cmd, &s.reduce, (1, 1));
+        let blocks = self.groups.0 * self.groups.1;
+        self.dispatch(
+            cmd,
+            &s.blocks,
+            (blocks.div_ceil(EVAL_POINT_WORKGROUP), 1, 1),
+        );
+        b.memory(
+            cmd,
+            MemoryAccess::ComputeWrite,
+            MemoryAccess::ComputeReadWrite,
+        );
+        self.dispatch(cmd, &s.reduce, (1, 1, 1));
         b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
         let d = &gpu.device;
         let bytes = TOTALS_BYTES + HIST_BYTES + points as u64 * 8;
@@ -601,9 +636,10 @@ impl FrameAnalysis for GpuAnalysis {
                 totals.pixels_sum as f64,
                 Some(totals.pixels_max as f64),
             ),
+            // Every popping value is one count in its histogram.
             popping: Histogram::from_bins(
                 &words[2 * bins..],
-                totals.popping_count as u64,
+                words[2 * bins..].iter().map(|&c| c as u64).sum(),
                 0.0,
                 None,
             ),
