@@ -113,7 +113,18 @@ fn variant_label(method: &MethodConfig, params: &[(String, f64)]) -> String {
     if let MethodConfig::Pgm(s) = method
         && params.iter().any(|(k, _)| k == "grid_scale")
     {
-        return format!("pgm {}x{}", s.grid_cols, s.grid_rows);
+        // Other swept keys (e.g. warp_rows) stay in the label, or variants would share one.
+        let grid = format!("pgm {}x{}", s.grid_cols, s.grid_rows);
+        let rest: Vec<String> = params
+            .iter()
+            .filter(|(k, _)| k != "grid_scale")
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        return if rest.is_empty() {
+            grid
+        } else {
+            format!("{grid} {}", rest.join(","))
+        };
     }
     let p: Vec<String> = params.iter().map(|(k, v)| format!("{k}={v}")).collect();
     format!("{name} {}", p.join(","))
@@ -729,4 +740,29 @@ fn oracle_median(rows: &[&FrameRow], value: impl Fn(&FrameRow, u64) -> f64) -> O
         .filter_map(|r| r.oracle_triangles.map(|o| value(r, o)))
         .collect();
     (!v.is_empty()).then(|| Percentiles::of(v).median)
+}
+
+#[cfg(test)]
+mod label_tests {
+    use super::*;
+
+    #[test]
+    fn pgm_labels_keep_every_swept_key_but_the_grid_scale() {
+        let pgm = MethodConfig::Pgm(Default::default());
+        let g = |warp: f64| {
+            variant_label(
+                &pgm,
+                &[("grid_scale".into(), 1.0), ("warp_rows".into(), warp)],
+            )
+        };
+        // Two variants that differ only in warp_rows must not share a label (they did).
+        assert_ne!(g(0.0), g(1.0));
+        assert!(
+            g(0.0).starts_with("pgm ") && g(0.0).ends_with(" warp_rows=0"),
+            "{}",
+            g(0.0)
+        );
+        let only_grid = variant_label(&pgm, &[("grid_scale".into(), 1.0)]);
+        assert!(!only_grid.contains('='), "{only_grid}");
+    }
 }
