@@ -63,12 +63,14 @@ impl Config {
         data: &Terrain,
         options: RenderOptions,
     ) -> Result<Renderer> {
-        Renderer::with_clipmap(
+        let lattice = geo_anchor_from_env(data)?;
+        Renderer::with_world(
             gpu,
             data.clone(),
             self.method.clone(),
             options,
             self.open_clipmap()?,
+            lattice.as_ref(),
         )
     }
 
@@ -86,4 +88,30 @@ impl Config {
     pub fn open_store(&self) -> Result<Arc<dyn NodeStore>> {
         self.dataset.open_store(|p| self.resolve(p))
     }
+}
+
+/// Until the data set's world frame (issue 14a: georeference or `[dataset] anchor`) reaches
+/// the renderer: `VKTERRAIN_GEO_ANCHOR="LAT,LON"` (degrees) places a local data set on the
+/// ellipsoid at that anchor (`Lattice::anchored_plane`), for benchmarks of the geodetic
+/// mapping against the flat one (scripts/device/geodetic.sh).
+fn geo_anchor_from_env(data: &Terrain) -> Result<Option<crate::geo::Lattice>> {
+    let Ok(text) = std::env::var("VKTERRAIN_GEO_ANCHOR") else {
+        return Ok(None);
+    };
+    let bad = || {
+        crate::error::Error::invalid(
+            "VKTERRAIN_GEO_ANCHOR",
+            format!("{text:?} is not LAT,LON in degrees"),
+        )
+    };
+    let (lat, lon) = text.split_once(',').ok_or_else(bad)?;
+    let lat: f64 = lat.trim().parse().map_err(|_| bad())?;
+    let lon: f64 = lon.trim().parse().map_err(|_| bad())?;
+    if !(lat.abs() < 90.0 && lon.abs() <= 180.0) {
+        return Err(bad());
+    }
+    let frame =
+        crate::geo::EnuFrame::new(&crate::geo::WGS84, crate::geo::Geodetic::new(lat, lon, 0.0));
+    crate::geo::Lattice::anchored_plane(data.width(), data.height(), data.spacing(), frame)
+        .map(Some)
 }

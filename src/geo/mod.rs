@@ -8,6 +8,8 @@
 
 pub mod ellipsoid;
 pub mod frame;
+pub mod lattice;
 
 pub use ellipsoid::{Geodetic, WGS84};
 pub use frame::EnuFrame;
+pub use lattice::Lattice;

@@ -218,6 +218,19 @@ impl Renderer {
         options: RenderOptions,
         clipmap: Option<Clipmap>,
     ) -> Result<Self> {
+        Self::with_world(gpu, data, method, options, clipmap, None)
+    }
+
+    /// [`Renderer::with_clipmap`] with the terrain's samples placed on the earth by
+    /// `lattice` (docs/coordinates.md, "Geodetic geometry"); None: the flat world.
+    pub fn with_world(
+        gpu: &Arc<Gpu>,
+        data: impl Into<Terrain>,
+        method: impl Into<MethodConfig>,
+        options: RenderOptions,
+        clipmap: Option<Clipmap>,
+        lattice: Option<&crate::geo::Lattice>,
+    ) -> Result<Self> {
         let data: Terrain = data.into();
         let method = method.into();
         options.check(gpu)?;
@@ -226,7 +239,7 @@ impl Renderer {
         }
         let layout = options.layout();
         let clipmap = ClipmapStage::new(gpu, clipmap, layout)?;
-        let terrain = TerrainGpu::new(gpu, &data, layout.view_slots(), &clipmap.device)?;
+        let terrain = TerrainGpu::new(gpu, &data, layout.view_slots(), &clipmap.device, lattice)?;
         let pass = TerrainPass::new(gpu)?;
         let method = crate::lod::create(
             &method,
