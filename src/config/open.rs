@@ -95,6 +95,7 @@ impl Config {
 /// ellipsoid at that anchor (`Lattice::anchored_plane`), for benchmarks of the geodetic
 /// mapping against the flat one (scripts/device/geodetic.sh).
 fn geo_anchor_from_env(data: &Terrain) -> Result<Option<crate::geo::Lattice>> {
+    use crate::dataset::Level0;
     let Ok(text) = std::env::var("VKTERRAIN_GEO_ANCHOR") else {
         return Ok(None);
     };

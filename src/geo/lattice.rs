@@ -242,7 +242,7 @@ mod tests {
         let frame = EnuFrame::new(&WGS84, Geodetic::new(46.0, 8.0, 0.0));
         let l = Lattice::anchored_plane(1025, 1025, 30.0, frame).unwrap();
         assert_eq!((l.step, l.nodes), (16, [65, 65]));
-        let locate = |c: f64, r: f64| {
+        let locate = |c: f64, r: f64| -> Result<(f64, f64)> {
             let g = WGS84.to_geodetic(frame.to_ecef(DVec3::new(c * 30.0, r * 30.0, 0.0)));
             Ok((g.lat_deg, g.lon_deg))
         };
