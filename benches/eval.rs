@@ -53,6 +53,8 @@ fn bench_gpu_ms(p: &Prepared, method: &MethodConfig, warmup: usize) -> anyhow::R
     config.method = method.clone();
     let mut options = config.render_options();
     options.frames_in_flight = 1;
+    // Flat like the evaluator's renderers, so both time the same geometry.
+    options.earth = vkterrain::render::EarthGeometry::Flat;
     let mut renderer = config.open_renderer(&gpu, &p.data, options)?;
     let mut checksum = 0u64;
     let mut sink = |f: &vkterrain::readback::FrameView<'_>| {

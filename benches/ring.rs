@@ -251,6 +251,7 @@ fn render_part(
                         haze_distance_m: 0.0,
                     },
                     views: 1,
+                    earth: Default::default(),
                 };
                 let mut renderer = Renderer::new(&gpu, &data, MethodKind::Brute, options)?;
                 let popts = ProducerOptions {

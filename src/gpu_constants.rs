@@ -40,6 +40,9 @@ shared_constants! {
     /// 128 keeps the index buffer small (~400 KB) while an instance still covers 16k triangles,
     /// so per-instance overhead is negligible.
     BRUTE_CHUNK_QUADS: u32 = 128;
+    /// Below the smallest radius of curvature of the WGS84 ellipsoid (the meridian radius at
+    /// the equator, 6,335,439 m): culling bounds grow by a curved surface's sagitta with it.
+    GEO_MIN_RADIUS: f32 = 6.3e6;
     /// Quads per side of a GeoMipMapping block (blocks of 2^5 + 1 = 33 samples, 6 levels).
     GEOMIPMAP_BLOCK_QUADS: u32 = 32;
     /// Ambient term of the directional light, so slopes facing away from the sun stay readable.

@@ -120,6 +120,9 @@ fn frame_uniforms_match_the_wgsl_struct() {
         ("sun_dir", offset_of!(FrameUniforms, sun_dir)),
         ("data_size", offset_of!(FrameUniforms, data_size)),
         ("haze", offset_of!(FrameUniforms, haze)),
+        ("lattice", offset_of!(FrameUniforms, lattice)),
+        ("camera_hi", offset_of!(FrameUniforms, camera_hi)),
+        ("camera_lo", offset_of!(FrameUniforms, camera_lo)),
     ];
     assert_struct_layout(
         &composed_shaders(),

@@ -14,6 +14,12 @@ struct Frame {
     data_size: vec4<u32>,
     // rgb: haze (sky) colour, linear; w: 1 / haze distance in metres (0: no haze).
     haze: vec4<f32>,
+    // The geolocation lattice (src/geo/lattice.rs): x samples per node (0: flat world), y/z
+    // nodes per row/column.
+    lattice: vec4<u32>,
+    // xyz: the camera's world position split into f32 hi and lo parts.
+    camera_hi: vec4<f32>,
+    camera_lo: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -26,6 +32,9 @@ struct Frame {
 @group(0) @binding(4) var linear_sampler: sampler;
 // Bindings 5 and 6: the chunked clipmap (atlas + this view's quadtree).
 //!include clipmap.wgsl
+// Per lattice node three vec4: world position at height 0 as hi.xyz and lo.xyz (split
+// doubles), and the unit up vector (the ellipsoid normal in the world frame).
+@group(0) @binding(9) var<storage, read> geo_lattice: array<vec4<f32>>;
 
 struct TerrainVertex {
     @builtin(position) clip: vec4<f32>,
@@ -65,14 +74,46 @@ fn height_at(grid_pos: vec2<f32>) -> f32 {
     return mix(south, north, f.y);
 }
 
+// Camera-relative position (metres, world axes) of lattice node `node`: hi parts subtracted
+// first, then lo parts (split-double arithmetic, exact for nearby nodes).
+fn lattice_relative(node: vec2<i32>) -> vec3<f32> {
+    let i = 3 * (node.y * i32(frame.lattice.y) + node.x);
+    return (geo_lattice[i].xyz - frame.camera_hi.xyz) + (geo_lattice[i + 1].xyz - frame.camera_lo.xyz);
+}
+
+fn lattice_up(node: vec2<i32>) -> vec3<f32> {
+    return geo_lattice[3 * (node.y * i32(frame.lattice.y) + node.x) + 2].xyz;
+}
+
+// Camera-relative position (metres, world axes) of a surface point given in sample units
+// (integer cell + fraction) and metres of height. Flat world: the camera cell is subtracted in
+// integers, so precision does not depend on the distance from the world origin. On the earth:
+// the geolocation lattice interpolated bilinearly (camera-relative corners) plus height * up.
+fn relative_position(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec3<f32> {
+    let lstep = i32(frame.lattice.x);
+    if lstep == 0 {
+        let spacing = frame.camera_offset.w;
+        let rel_xy = vec2<f32>(cell - frame.camera_cell.xy) * spacing + frac * spacing - frame.camera_offset.xy;
+        return vec3<f32>(rel_xy, height_m - frame.camera_offset.z);
+    }
+    let node = clamp(cell / lstep, vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
+    let f = (vec2<f32>(cell - node * lstep) + frac) / f32(lstep);
+    let p00 = lattice_relative(node);
+    let p10 = lattice_relative(node + vec2<i32>(1, 0));
+    let p01 = lattice_relative(node + vec2<i32>(0, 1));
+    let p11 = lattice_relative(node + vec2<i32>(1, 1));
+    let u00 = lattice_up(node);
+    let u10 = lattice_up(node + vec2<i32>(1, 0));
+    let u01 = lattice_up(node + vec2<i32>(0, 1));
+    let u11 = lattice_up(node + vec2<i32>(1, 1));
+    let p = mix(mix(p00, p10, f.x), mix(p01, p11, f.x), f.y);
+    let up = mix(mix(u00, u10, f.x), mix(u01, u11, f.x), f.y);
+    return p + height_m * up;
+}
+
 // Clip position of a surface point given in sample units (integer cell + fraction) and metres.
-// The subtraction of the camera cell is done in integers, so precision does not depend on the
-// distance from the world origin.
 fn project(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec4<f32> {
-    let spacing = frame.camera_offset.w;
-    let rel_xy = vec2<f32>(cell - frame.camera_cell.xy) * spacing + frac * spacing - frame.camera_offset.xy;
-    let rel = vec3<f32>(rel_xy, height_m - frame.camera_offset.z);
-    return frame.view_proj * vec4<f32>(rel, 1.0);
+    return frame.view_proj * vec4<f32>(relative_position(cell, frac, height_m), 1.0);
 }
 
 // Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map,

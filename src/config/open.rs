@@ -12,7 +12,7 @@ use crate::driver::Gpu;
 use crate::error::Result;
 use crate::geo::EnuFrame;
 use crate::output::ring::layout::datum_code;
-use crate::render::{RenderOptions, Renderer};
+use crate::render::{EarthGeometry, RenderOptions, Renderer};
 use crate::scene::{Earth, Scenario};
 
 impl Config {
@@ -65,17 +65,20 @@ impl Config {
         data: &Terrain,
         options: RenderOptions,
     ) -> Result<Renderer> {
-        let mut renderer = Renderer::with_clipmap(
+        let placement = self.dataset.placement(|p| self.resolve(p))?;
+        let lattice = match (&placement, options.earth) {
+            (Some(p), EarthGeometry::Ellipsoid) => Some(p.lattice(data)?),
+            _ => None,
+        };
+        let mut renderer = Renderer::with_world(
             gpu,
             data.clone(),
             self.method.clone(),
             options,
             self.open_clipmap()?,
+            lattice.as_ref(),
         )?;
-        renderer.world = self
-            .dataset
-            .placement(|p| self.resolve(p))?
-            .map(|p| (p.frame, datum_code(&p.vertical_datum)));
+        renderer.world = placement.map(|p| (p.frame, datum_code(&p.vertical_datum)));
         Ok(renderer)
     }
 

@@ -469,6 +469,15 @@ impl Terrain {
         })
     }
 
+    /// Native level-0 samples per sample of this grid (`Heightmap::source_step`; the
+    /// clipmap's pyramid is level 0 itself).
+    pub fn source_step(&self) -> [f64; 2] {
+        match self {
+            Terrain::Grid(h) => h.source_step,
+            Terrain::Pyramid(_) => [1.0, 1.0],
+        }
+    }
+
     /// Minimum and maximum level-0 height (the pyramid's from its manifest).
     pub fn height_range(&self) -> (f32, f32) {
         match self {

@@ -44,6 +44,10 @@ pub struct Heightmap {
     pub heights: Vec<f32>,
     /// Optional RGBA8 (sRGB) albedo covering the same extent, row 0 = south.
     pub albedo: Option<Albedo>,
+    /// Native level-0 samples per sample of this grid (x, y): `[1, 1]` unless it was loaded
+    /// from a coarser pyramid level or resampled east-west (`tiles::load`). The geolocation
+    /// lattice places sample `(c, r)` at the native sample `(c * x, r * y)`.
+    pub source_step: [f64; 2],
 }
 
 /// An sRGB RGBA8 image aligned with the height grid by extent.
@@ -105,6 +109,7 @@ impl Heightmap {
             spacing,
             heights,
             albedo: None,
+            source_step: [1.0, 1.0],
         })
     }
 

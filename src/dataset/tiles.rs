@@ -238,6 +238,7 @@ pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap>
         sy,
         heights,
     )?;
+    map.source_step = [scale * sy / sx, scale];
     map.albedo = rgba.map(|rgba| Albedo {
         width: w,
         height: h,

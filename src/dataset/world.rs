@@ -12,35 +12,63 @@ use std::path::{Path, PathBuf};
 #[cfg(not(feature = "gdal"))]
 use super::crs::CrsKind;
 use super::crs::Georef;
+use super::level0::{Level0, Terrain};
 use super::settings::{Anchor, DatasetConfig};
 use super::tiles::Dataset;
 use crate::error::{Error, Result};
-use crate::geo::{EnuFrame, Geodetic, WGS84};
+use crate::geo::{EnuFrame, Geodetic, Lattice, WGS84};
+use glam::DVec3;
 
-/// WGS84 latitude and longitude (degrees) of sample `(col, row)`'s centre, through PROJ.
-#[cfg(feature = "gdal")]
+/// WGS84 latitude and longitude (degrees) of sample `(col, row)`'s centre.
 pub fn sample_lat_lon(georef: &Georef, col: f64, row: f64) -> Result<(f64, f64)> {
-    use super::crs::{Crs, Transform};
-    let to_wgs84 = Transform::new(&georef.crs, &Crs::wgs84()?)?;
-    let [lon, lat] = to_wgs84.point(georef.at(col, row))?;
-    Ok((lat, lon))
+    SampleLocator::new(georef)?.lat_lon(col, row)
 }
 
-/// WGS84 latitude and longitude (degrees) of sample `(col, row)`'s centre. Without PROJ only a
-/// grid already in WGS 84 geographic coordinates (EPSG:4326) can be placed: its coordinates
-/// are the geodetic ones, no transformation involved.
-#[cfg(not(feature = "gdal"))]
-pub fn sample_lat_lon(georef: &Georef, col: f64, row: f64) -> Result<(f64, f64)> {
-    let crs = &georef.crs;
-    if crs.kind == CrsKind::Geographic && crs.authority.as_deref() == Some("EPSG:4326") {
-        let [x, y] = georef.at(col, row);
-        let deg = crs.unit_size.to_degrees();
-        return Ok((y * deg, x * deg));
+/// Latitude/longitude of the samples of one georeferenced grid (the PROJ transformation is
+/// set up once, then reused for every sample).
+pub struct SampleLocator<'a> {
+    georef: &'a Georef,
+    #[cfg(feature = "gdal")]
+    to_wgs84: super::crs::Transform,
+}
+
+impl<'a> SampleLocator<'a> {
+    /// Through PROJ (`georef`'s CRS -> EPSG:4326).
+    #[cfg(feature = "gdal")]
+    pub fn new(georef: &'a Georef) -> Result<Self> {
+        use super::crs::{Crs, Transform};
+        let to_wgs84 = Transform::new(&georef.crs, &Crs::wgs84()?)?;
+        Ok(SampleLocator { georef, to_wgs84 })
     }
-    Err(Error::invalid(
-        crs.label(),
-        "this vkterrain was built without GDAL/PROJ (--no-default-features): only EPSG:4326 data sets can be placed on the earth",
-    ))
+
+    /// Without PROJ only a grid already in WGS 84 geographic coordinates (EPSG:4326) can be
+    /// placed: its coordinates are the geodetic ones, no transformation involved.
+    #[cfg(not(feature = "gdal"))]
+    pub fn new(georef: &'a Georef) -> Result<Self> {
+        let crs = &georef.crs;
+        if crs.kind == CrsKind::Geographic && crs.authority.as_deref() == Some("EPSG:4326") {
+            return Ok(SampleLocator { georef });
+        }
+        Err(Error::invalid(
+            crs.label(),
+            "this vkterrain was built without GDAL/PROJ (--no-default-features): only EPSG:4326 data sets can be placed on the earth",
+        ))
+    }
+
+    /// WGS84 latitude and longitude (degrees) of sample `(col, row)`'s centre.
+    #[cfg(feature = "gdal")]
+    pub fn lat_lon(&self, col: f64, row: f64) -> Result<(f64, f64)> {
+        let [lon, lat] = self.to_wgs84.point(self.georef.at(col, row))?;
+        Ok((lat, lon))
+    }
+
+    /// WGS84 latitude and longitude (degrees) of sample `(col, row)`'s centre.
+    #[cfg(not(feature = "gdal"))]
+    pub fn lat_lon(&self, col: f64, row: f64) -> Result<(f64, f64)> {
+        let [x, y] = self.georef.at(col, row);
+        let deg = self.georef.crs.unit_size.to_degrees();
+        Ok((y * deg, x * deg))
+    }
 }
 
 /// The world frame of a georeferenced grid: ENU at sample (0, 0), height 0 on the ellipsoid.
@@ -124,6 +152,33 @@ impl DatasetConfig {
             georef,
             vertical_datum,
         }))
+    }
+}
+
+impl Placement {
+    /// The geolocation lattice of `data` (docs/coordinates.md, "Geodetic geometry"): a
+    /// georeferenced grid's samples where PROJ puts them (sample `(c, r)` of `data` is the
+    /// native sample `(c, r) * data.source_step()`), an anchored local grid's samples dropped
+    /// onto the ellipsoid from the tangent plane (`Lattice::anchored_plane`).
+    pub fn lattice(&self, data: &Terrain) -> Result<Lattice> {
+        let (w, h) = (data.width(), data.height());
+        let Some((georef, _)) = &self.georef else {
+            return Lattice::anchored_plane(w, h, data.spacing(), self.frame);
+        };
+        let locator = SampleLocator::new(georef)?;
+        let [sx, sy] = data.source_step();
+        // Metric node spacing from the grid's own extent (the larger axis spacing).
+        let metres = |c: f64, r: f64| -> Result<DVec3> {
+            let (lat, lon) = locator.lat_lon(c * sx, r * sy)?;
+            Ok(WGS84.to_ecef(Geodetic::new(lat, lon, 0.0)))
+        };
+        let o = metres(0.0, 0.0)?;
+        let ew = (metres((w - 1).max(1) as f64, 0.0)? - o).length() / (w - 1).max(1) as f64;
+        let ns = (metres(0.0, (h - 1).max(1) as f64)? - o).length() / (h - 1).max(1) as f64;
+        let step = Lattice::step_for(w, h, ew.max(ns));
+        Lattice::new(w, h, step, self.frame, |c, r| {
+            locator.lat_lon(c * sx, r * sy)
+        })
     }
 }
 

@@ -28,7 +28,7 @@ use crate::error::{Error, Result};
 use crate::lod::{MethodConfig, MethodKind};
 use crate::readback::FrameView;
 use crate::render::stats::Percentiles;
-use crate::render::{FrameRequest, RenderOptions, Renderer};
+use crate::render::{EarthGeometry, FrameRequest, RenderOptions, Renderer};
 use crate::scene::Scenario;
 
 /// At most this many measured frames (evenly spaced) get the triangle oracle (seconds per
@@ -433,6 +433,8 @@ fn open_run(
     let mut options = setup.options.clone();
     options.frames_in_flight = 1;
     options.readback_depth = setup.cross_check;
+    // The exact surface and the error metrics live in the flat grid frame (docs/eval.md).
+    options.earth = EarthGeometry::Flat;
     let mut renderer = config.open_renderer(setup.gpu, setup.data, options)?;
     let (analysis, rx) = GpuAnalysis::new(shared, role, setup.image_frames.clone())?;
     renderer.set_analysis(Box::new(analysis))?;

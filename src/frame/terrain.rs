@@ -35,6 +35,8 @@ pub const TERRAIN_SET: &[Binding] = {
         Binding::new(6, T::STORAGE_BUFFER, ALL, "clipmap"),
         Binding::new(7, T::SAMPLED_IMAGE, ALL, "atlas_normal"),
         Binding::new(8, T::SAMPLED_IMAGE, ALL, "atlas_albedo"),
+        // The geolocation lattice (src/geo/lattice.rs); a placeholder node in a flat world.
+        Binding::new(9, T::STORAGE_BUFFER, ALL, "geo_lattice"),
     ]
 };
 
@@ -47,6 +49,8 @@ pub struct TerrainInfo {
     pub spacing: f64,
     pub min_height: f32,
     pub max_height: f32,
+    /// The geolocation lattice's `[step, nodes per row, nodes per column]`; None: flat world.
+    pub lattice: Option<[u32; 3]>,
 }
 
 /// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.
@@ -56,6 +60,7 @@ pub struct TerrainGpu {
     _height: Image,
     _normal: Image,
     _albedo: Image,
+    _lattice: Buffer,
     sampler: vk::Sampler,
     /// Set 0: one per view slot (they differ in their uniform buffer and clipmap quadtree).
     pub descriptors: DescriptorSets,
@@ -65,13 +70,44 @@ pub struct TerrainGpu {
 impl TerrainGpu {
     /// Set 0 for `slots` view slots. `clipmap`: the clipmap's device mirror bound at bindings 5
     /// (atlas) and 6 (the view slot's quadtree), 7 and 8 (normal and albedo atlases); a
-    /// disabled placeholder keeps the single-texture path.
+    /// disabled placeholder keeps the single-texture path. `lattice`: where the samples lie
+    /// on the earth (binding 9); None: the flat world of docs/coordinates.md.
     pub fn new(
         gpu: &Arc<Gpu>,
         data: &Terrain,
         slots: usize,
         clipmap: &crate::clipmap::gpu::ClipmapGpu,
+        lattice: Option<&crate::geo::Lattice>,
     ) -> Result<Self> {
+        if let Some(l) = lattice {
+            let need = [
+                (data.width() - 1).div_ceil(l.step) + 1,
+                (data.height() - 1).div_ceil(l.step) + 1,
+            ];
+            if l.nodes != need {
+                return Err(Error::invalid(
+                    data.name(),
+                    format!(
+                        "geolocation lattice of {:?} nodes does not cover {}x{} samples",
+                        l.nodes,
+                        data.width(),
+                        data.height()
+                    ),
+                ));
+            }
+        }
+        let nodes = lattice.map_or_else(
+            || vec![0.0; crate::geo::lattice::NODE_FLOATS],
+            |l| l.gpu_nodes(),
+        );
+        let mut lattice_buffer = Buffer::new(
+            gpu,
+            "geolocation lattice",
+            (nodes.len() * 4) as u64,
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        lattice_buffer.write(bytemuck::cast_slice(&nodes))?;
         let (height, normal, albedo) = if clipmap.enabled {
             // Heights, normals and albedo all come through the clipmap's atlas: 1x1
             // placeholders keep the bindings valid without the full-resolution textures.
@@ -96,6 +132,7 @@ impl TerrainGpu {
             spacing: data.spacing(),
             min_height,
             max_height,
+            lattice: lattice.map(|l| [l.step, l.nodes[0], l.nodes[1]]),
         };
 
         let d = &gpu.device;
@@ -121,14 +158,16 @@ impl TerrainGpu {
         }
         .vk("vkCreateSampler")?;
         let textures = [&height, &normal, &albedo];
-        let (descriptors, uniforms) = Self::descriptor_sets(gpu, slots, textures, sampler, clipmap)
-            .inspect_err(|_| unsafe { d.destroy_sampler(sampler, None) })?;
+        let (descriptors, uniforms) =
+            Self::descriptor_sets(gpu, slots, textures, sampler, clipmap, &lattice_buffer)
+                .inspect_err(|_| unsafe { d.destroy_sampler(sampler, None) })?;
         Ok(TerrainGpu {
             gpu: gpu.clone(),
             info,
             _height: height,
             _normal: normal,
             _albedo: albedo,
+            _lattice: lattice_buffer,
             sampler,
             descriptors,
             uniforms,
@@ -145,6 +184,7 @@ impl TerrainGpu {
         [height, normal, albedo]: [&Image; 3],
         sampler: vk::Sampler,
         clipmap: &crate::clipmap::gpu::ClipmapGpu,
+        lattice: &Buffer,
     ) -> Result<(DescriptorSets, Vec<Buffer>)> {
         let descriptors = DescriptorSets::new(gpu, TERRAIN_SET, slots)?;
         let mut uniforms = Vec::with_capacity(slots);
@@ -168,6 +208,7 @@ impl TerrainGpu {
                     ("clipmap", Resource::Buffer(clipmap.quadtrees[slot].raw)),
                     ("atlas_normal", Resource::Image(clipmap.normals.view)),
                     ("atlas_albedo", Resource::Image(clipmap.albedo.view)),
+                    ("geo_lattice", Resource::Buffer(lattice.raw)),
                 ],
             )?;
             uniforms.push(ubo);

@@ -26,6 +26,12 @@ pub struct FrameUniforms {
     pub data_size: [u32; 4],
     /// rgb: the haze colour (linear); w: 1 / haze distance in metres (0: no haze).
     pub haze: [f32; 4],
+    /// The geolocation lattice (src/geo/lattice.rs): x samples per node (0: no lattice, the
+    /// flat world), y/z nodes per row/column.
+    pub lattice: [u32; 4],
+    /// The camera's world position split into f32 `hi` and `lo` parts (xyz).
+    pub camera_hi: [f32; 4],
+    pub camera_lo: [f32; 4],
 }
 
 impl FrameUniforms {
@@ -36,6 +42,8 @@ impl FrameUniforms {
         let cell_x = (camera.position.x / spacing).floor();
         let cell_y = (camera.position.y / spacing).floor();
         let view_proj = camera.projection(aspect) * camera.view_rotation();
+        let (hi, lo) = crate::geo::lattice::split(camera.position);
+        let lattice = data.lattice.unwrap_or([0; 3]);
         FrameUniforms {
             view_proj: view_proj.to_cols_array(),
             camera_cell: [cell_x as i32, cell_y as i32, 0, 0],
@@ -57,6 +65,9 @@ impl FrameUniforms {
                     0.0
                 },
             ],
+            lattice: [lattice[0], lattice[1], lattice[2], 0],
+            camera_hi: [hi[0], hi[1], hi[2], 0.0],
+            camera_lo: [lo[0], lo[1], lo[2], 0.0],
         }
     }
 }

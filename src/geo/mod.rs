@@ -8,8 +8,10 @@
 
 pub mod ellipsoid;
 pub mod frame;
+pub mod lattice;
 pub mod pose;
 
 pub use ellipsoid::{Geodetic, WGS84};
 pub use frame::EnuFrame;
+pub use lattice::Lattice;
 pub use pose::{GeoPose, HeightRef, WorldPose};

@@ -42,6 +42,7 @@ use crate::readback::{DirectTarget, FrameSink, FrameTimings, FrameView};
 use crate::scene::Camera;
 use crate::slots::{FrameSlot, SlotLayout};
 pub use delivery::ReadbackPath;
+pub use settings::EarthGeometry;
 use slot::{FrameResources, Pending};
 use stats::RunStats;
 use targets::TerrainPass;
@@ -93,6 +94,9 @@ pub struct RenderOptions {
     /// Cameras per frame (1..=[`MAX_VIEWS`]), side by side: view `v` covers columns
     /// [`view_columns`]`(width, views, v)`.
     pub views: usize,
+    /// Ellipsoid or flat geometry for data on the earth (`Config::open_renderer` builds the
+    /// lattice from it).
+    pub earth: EarthGeometry,
 }
 
 impl RenderOptions {
@@ -221,6 +225,19 @@ impl Renderer {
         options: RenderOptions,
         clipmap: Option<Clipmap>,
     ) -> Result<Self> {
+        Self::with_world(gpu, data, method, options, clipmap, None)
+    }
+
+    /// [`Renderer::with_clipmap`] with the terrain's samples placed on the earth by
+    /// `lattice` (docs/coordinates.md, "Geodetic geometry"); None: the flat world.
+    pub fn with_world(
+        gpu: &Arc<Gpu>,
+        data: impl Into<Terrain>,
+        method: impl Into<MethodConfig>,
+        options: RenderOptions,
+        clipmap: Option<Clipmap>,
+        lattice: Option<&crate::geo::Lattice>,
+    ) -> Result<Self> {
         let data: Terrain = data.into();
         let method = method.into();
         options.check(gpu)?;
@@ -229,7 +246,7 @@ impl Renderer {
         }
         let layout = options.layout();
         let clipmap = ClipmapStage::new(gpu, clipmap, layout)?;
-        let terrain = TerrainGpu::new(gpu, &data, layout.view_slots(), &clipmap.device)?;
+        let terrain = TerrainGpu::new(gpu, &data, layout.view_slots(), &clipmap.device, lattice)?;
         let pass = TerrainPass::new(gpu)?;
         let method = crate::lod::create(
             &method,

@@ -30,6 +30,24 @@ pub struct RenderSettings {
     /// Further cameras drawn into the same frame, side by side right of the main one (each
     /// view gets `width / views` columns); they share the clipmap's atlas.
     pub extra_views: Vec<ViewOffset>,
+    /// The terrain's geometry when the data set lies on the earth (georeferenced or
+    /// anchored): `ellipsoid` (default) or `flat`.
+    pub earth: EarthGeometry,
+}
+
+/// Where the vertices of a data set that lies on the earth go (docs/coordinates.md,
+/// "Geodetic geometry"); data sets without a world frame are always flat.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EarthGeometry {
+    /// Every sample where it lies on the WGS84 ellipsoid (the geolocation lattice): the
+    /// earth's curvature is in the picture.
+    #[default]
+    Ellipsoid,
+    /// The grid laid out on the world frame's tangent plane (`x = col * spacing`): what
+    /// every method drew before issue 14; a point `d` from the frame's origin sits
+    /// `d^2 / 2R` too high relative to the earth.
+    Flat,
 }
 
 impl Default for RenderSettings {
@@ -44,6 +62,7 @@ impl Default for RenderSettings {
             sun_elevation_deg: 35.0,
             haze_distance_m: 0.0,
             extra_views: Vec::new(),
+            earth: EarthGeometry::default(),
         }
     }
 }
@@ -71,6 +90,7 @@ impl RenderSettings {
                 haze_distance_m: self.haze_distance_m,
             },
             views: self.views(),
+            earth: self.earth,
         }
     }
 

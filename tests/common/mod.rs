@@ -45,6 +45,7 @@ pub fn options(width: u32, height: u32, frames_in_flight: usize) -> RenderOption
             haze_distance_m: 0.0,
         },
         views: 1,
+        earth: Default::default(),
     }
 }
 

@@ -21,6 +21,11 @@ layout(set = 0, binding = 0, std140) uniform Frame {
     // xy: height samples per side.
     uvec4 data_size;
     vec4 haze;
+    // The geolocation lattice: x samples per node (0: flat world), y/z nodes per row/column.
+    uvec4 lattice;
+    // xyz: the camera's world position split into f32 hi and lo parts.
+    vec4 camera_hi;
+    vec4 camera_lo;
 } frame;
 layout(set = 0, binding = 1) uniform texture2D height_tex;
 
@@ -38,6 +43,11 @@ layout(set = 0, binding = 6, std430) readonly buffer Clipmap {
     ivec4 levels[CLIPMAP_MAX_LEVELS];
     uint entries[];
 } clipmap;
+
+// The geolocation lattice (binding 9): per node hi.xyz, lo.xyz, up.xyz as three vec4.
+layout(set = 0, binding = 9, std430) readonly buffer GeoLattice {
+    vec4 nodes[];
+} geo_lattice;
 
 // The WGSL's Vulkan output convention: naga flips clip-space y of a vertex stage's position
 // (WriterFlags::ADJUST_COORDINATE_SPACE); GLSL stages that write gl_Position do it here.
@@ -190,11 +200,41 @@ float height_at(vec2 grid_pos) {
     return mix(south, north, f.y);
 }
 
+vec3 lattice_relative(ivec2 node) {
+    int i = 3 * (node.y * int(frame.lattice.y) + node.x);
+    return (geo_lattice.nodes[i].xyz - frame.camera_hi.xyz) + (geo_lattice.nodes[i + 1].xyz - frame.camera_lo.xyz);
+}
+
+vec3 lattice_up(ivec2 node) {
+    return geo_lattice.nodes[3 * (node.y * int(frame.lattice.y) + node.x) + 2].xyz;
+}
+
+// Camera-relative position (metres, world axes) of a surface point: the flat world's integer
+// cell subtraction, or the geolocation lattice interpolated bilinearly plus height * up.
+vec3 relative_position(ivec2 cell, vec2 frac_, float height_m) {
+    int step_ = int(frame.lattice.x);
+    if (step_ == 0) {
+        float spacing = frame.camera_offset.w;
+        vec2 rel_xy = vec2(cell - frame.camera_cell.xy) * spacing + frac_ * spacing - frame.camera_offset.xy;
+        return vec3(rel_xy, height_m - frame.camera_offset.z);
+    }
+    ivec2 node = clamp(cell / step_, ivec2(0), ivec2(frame.lattice.yz) - ivec2(2));
+    vec2 f = (vec2(cell - node * step_) + frac_) / float(step_);
+    vec3 p00 = lattice_relative(node);
+    vec3 p10 = lattice_relative(node + ivec2(1, 0));
+    vec3 p01 = lattice_relative(node + ivec2(0, 1));
+    vec3 p11 = lattice_relative(node + ivec2(1, 1));
+    vec3 u00 = lattice_up(node);
+    vec3 u10 = lattice_up(node + ivec2(1, 0));
+    vec3 u01 = lattice_up(node + ivec2(0, 1));
+    vec3 u11 = lattice_up(node + ivec2(1, 1));
+    vec3 p = mix(mix(p00, p10, f.x), mix(p01, p11, f.x), f.y);
+    vec3 up = mix(mix(u00, u10, f.x), mix(u01, u11, f.x), f.y);
+    return p + height_m * up;
+}
+
 // Clip position (WebGPU clip space, y up, like the WGSL) of a surface point given in sample
-// units (integer cell + fraction) and metres; the camera cell is subtracted in integers.
+// units (integer cell + fraction) and metres.
 vec4 project(ivec2 cell, vec2 frac_, float height_m) {
-    float spacing = frame.camera_offset.w;
-    vec2 rel_xy = vec2(cell - frame.camera_cell.xy) * spacing + frac_ * spacing - frame.camera_offset.xy;
-    vec3 rel = vec3(rel_xy, height_m - frame.camera_offset.z);
-    return frame.view_proj * vec4(rel, 1.0);
+    return frame.view_proj * vec4(relative_position(cell, frac_, height_m), 1.0);
 }

@@ -1,0 +1,284 @@
+//! The geolocation lattice: where the terrain's samples lie in the world frame, for the GPU.
+//!
+//! Every `step`-th sample (and one node past the last sample on each axis) the CPU computes in
+//! f64 the world-frame position of the sample at height 0 on the ellipsoid and the unit up
+//! vector there (the ellipsoid normal, rotated into the world frame). Positions are stored
+//! as split doubles (`hi = f32(p)`, `lo = f32(p - hi)`) relative to the world origin. The vertex
+//! shaders (`relative_position` in `shaders/include/terrain_common.wgsl` and its GLSL port)
+//! interpolate the lattice bilinearly at the sample position, add `height * up` and subtract
+//! the camera's split position (hi - hi, then lo - lo), so camera-relative positions keep f32
+//! precision anywhere. [`Lattice::position`] is the CPU mirror: the same lattice data and the
+//! same formula, in f64. docs/coordinates.md ("Geodetic geometry") derives the error budget.
+
+use glam::{DVec2, DVec3};
+
+use super::ellipsoid::{Geodetic, WGS84};
+use super::frame::EnuFrame;
+use crate::error::{Error, Result};
+
+/// Largest lattice cell side (metres) [`Lattice::step_for`] aims for: the sagitta of the
+/// diagonal, `(sqrt(2) * 500)^2 / (8 * 6.3e6)`, is 1.0 cm.
+pub const CELL_M: f64 = 500.0;
+
+/// Floats per lattice node on the GPU: three vec4 (hi.xyz, lo.xyz, up.xyz; w unused).
+pub const NODE_FLOATS: usize = 12;
+
+/// Where the samples of a grid lie on the ellipsoid, every `step` samples.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lattice {
+    /// Samples between lattice nodes on both axes.
+    pub step: u32,
+    /// Nodes per row and per column; node `(i, j)` is sample `(i * step, j * step)`.
+    pub nodes: [u32; 2],
+    /// The world frame the positions are in.
+    pub frame: EnuFrame,
+    /// World positions (f64, height 0) and unit up vectors, row-major.
+    positions: Vec<DVec3>,
+    ups: Vec<DVec3>,
+}
+
+/// The ellipsoid normal (unit, ECEF) at a geodetic latitude/longitude.
+pub fn normal_ecef(lat_deg: f64, lon_deg: f64) -> DVec3 {
+    let (sl, cl) = lat_deg.to_radians().sin_cos();
+    let (so, co) = lon_deg.to_radians().sin_cos();
+    DVec3::new(cl * co, cl * so, sl)
+}
+
+/// Splits an f64 into the f32 pair `(hi, lo)` with `hi + lo` within ~1e-14 relative of it.
+pub fn split(v: DVec3) -> ([f32; 3], [f32; 3]) {
+    let hi = v.as_vec3();
+    let lo = (v - hi.as_dvec3()).as_vec3();
+    (hi.to_array(), lo.to_array())
+}
+
+impl Lattice {
+    /// The default node step for a `width` x `height` grid whose samples are `spacing_m`
+    /// apart (the larger metric spacing): lattice cells of at most [`CELL_M`] (the sagitta of
+    /// their diagonal, the interpolation error, stays under 1 cm), coarser only where the
+    /// lattice would exceed 1024 nodes per side (48 MB).
+    pub fn step_for(width: u32, height: u32, spacing_m: f64) -> u32 {
+        let by_metres = (CELL_M / spacing_m).floor().clamp(1.0, 65536.0) as u32;
+        by_metres.max(width.max(height).div_ceil(1024))
+    }
+
+    /// Node counts per axis for `step`: the last node at or past the last sample.
+    fn node_counts(width: u32, height: u32, step: u32) -> [u32; 2] {
+        [
+            (width.max(2) - 1).div_ceil(step) + 1,
+            (height.max(2) - 1).div_ceil(step) + 1,
+        ]
+    }
+
+    /// A lattice for a `width` x `height` grid in `frame`: `locate(col, row)` gives the
+    /// geodetic latitude/longitude (degrees) of a sample position (it is asked for positions
+    /// up to one step past the last sample).
+    pub fn new(
+        width: u32,
+        height: u32,
+        step: u32,
+        frame: EnuFrame,
+        mut locate: impl FnMut(f64, f64) -> Result<(f64, f64)>,
+    ) -> Result<Self> {
+        if step == 0 {
+            return Err(Error::invalid("geolocation lattice", "step 0"));
+        }
+        let nodes = Self::node_counts(width, height, step);
+        let count = nodes[0] as usize * nodes[1] as usize;
+        let mut positions = Vec::with_capacity(count);
+        let mut ups = Vec::with_capacity(count);
+        for j in 0..nodes[1] {
+            for i in 0..nodes[0] {
+                let (lat, lon) = locate((i * step) as f64, (j * step) as f64)?;
+                if !(lat.is_finite() && lon.is_finite() && lat.abs() <= 90.0) {
+                    return Err(Error::invalid(
+                        "geolocation lattice",
+                        format!(
+                            "sample ({}, {}) maps to latitude {lat}, longitude {lon}",
+                            i * step,
+                            j * step
+                        ),
+                    ));
+                }
+                positions.push(frame.to_local(WGS84.to_ecef(Geodetic::new(lat, lon, 0.0))));
+                ups.push(frame.rotate_to_local(normal_ecef(lat, lon)));
+            }
+        }
+        Ok(Lattice {
+            step,
+            nodes,
+            frame,
+            positions,
+            ups,
+        })
+    }
+
+    /// A grid with `spacing` in metres and no georeferencing, anchored at `frame`'s origin:
+    /// the world-plane point `(col * spacing, row * spacing, 0)` dropped onto the ellipsoid
+    /// along the ellipsoid's normal (its geodetic latitude/longitude at height 0).
+    pub fn anchored_plane(width: u32, height: u32, spacing: f64, frame: EnuFrame) -> Result<Self> {
+        let step = Self::step_for(width, height, spacing);
+        Self::new(width, height, step, frame, |c, r| {
+            let g = WGS84.to_geodetic(frame.to_ecef(DVec3::new(c * spacing, r * spacing, 0.0)));
+            Ok((g.lat_deg, g.lon_deg))
+        })
+    }
+
+    /// A geographic grid: sample `(col, row)` at latitude `origin[1] + row * step_deg[1]`,
+    /// longitude `origin[0] + col * step_deg[0]` (row 0 south), in the ENU frame at sample
+    /// (0, 0) on the ellipsoid (the world frame of docs/coordinates.md).
+    pub fn geographic(
+        width: u32,
+        height: u32,
+        origin: [f64; 2],
+        step_deg: [f64; 2],
+    ) -> Result<Self> {
+        let lon1 = origin[0] + (width - 1) as f64 * step_deg[0];
+        let lat1 = origin[1] + (height - 1) as f64 * step_deg[1];
+        if origin[0].min(lon1) < -180.0 || origin[0].max(lon1) > 180.0 {
+            return Err(Error::invalid(
+                "geographic grid",
+                format!(
+                    "longitudes {}..{lon1} cross the antimeridian, which is not supported",
+                    origin[0]
+                ),
+            ));
+        }
+        if origin[1].min(lat1) <= -90.0 || origin[1].max(lat1) >= 90.0 {
+            return Err(Error::invalid(
+                "geographic grid",
+                format!(
+                    "latitudes {}..{lat1} reach a pole, which is not supported",
+                    origin[1]
+                ),
+            ));
+        }
+        let frame = EnuFrame::new(&WGS84, Geodetic::new(origin[1], origin[0], 0.0));
+        // The larger metric spacing: east-west at the equator-most row, or north-south.
+        let equator_lat = if origin[1] * lat1 <= 0.0 {
+            0.0
+        } else {
+            origin[1].abs().min(lat1.abs())
+        };
+        let ew = WGS84.prime_vertical_radius(equator_lat)
+            * equator_lat.to_radians().cos()
+            * step_deg[0].abs().to_radians();
+        let ns = WGS84.meridian_radius(origin[1]) * step_deg[1].abs().to_radians();
+        let step = Self::step_for(width, height, ew.max(ns));
+        Self::new(width, height, step, frame, |c, r| {
+            Ok((origin[1] + r * step_deg[1], origin[0] + c * step_deg[0]))
+        })
+    }
+
+    /// The GPU layout: per node `[hi.xyz, 0, lo.xyz, 0, up.xyz, 0]`.
+    pub fn gpu_nodes(&self) -> Vec<f32> {
+        let mut out = Vec::with_capacity(self.positions.len() * NODE_FLOATS);
+        for (p, u) in self.positions.iter().zip(&self.ups) {
+            let (hi, lo) = split(*p);
+            let u = u.as_vec3();
+            out.extend_from_slice(&[hi[0], hi[1], hi[2], 0.0, lo[0], lo[1], lo[2], 0.0]);
+            out.extend_from_slice(&[u.x, u.y, u.z, 0.0]);
+        }
+        out
+    }
+
+    /// The node of a lattice position, as the GPU stores it (hi + lo, f32 up) in f64.
+    fn node(&self, i: i64, j: i64) -> (DVec3, DVec3) {
+        let k = j as usize * self.nodes[0] as usize + i as usize;
+        let (hi, lo) = split(self.positions[k]);
+        let p = glam::Vec3::from(hi).as_dvec3() + glam::Vec3::from(lo).as_dvec3();
+        (p, self.ups[k].as_vec3().as_dvec3())
+    }
+
+    /// World position (f64) of the surface point at sample position `s` (columns, rows) and
+    /// `height` metres: the shader's formula on the shader's data (the CPU mirror).
+    pub fn position(&self, s: DVec2, height: f64) -> DVec3 {
+        let step = self.step as f64;
+        let last = [self.nodes[0] as i64 - 2, self.nodes[1] as i64 - 2];
+        let i = ((s.x / step).floor() as i64).clamp(0, last[0]);
+        let j = ((s.y / step).floor() as i64).clamp(0, last[1]);
+        let f = (s - DVec2::new(i as f64, j as f64) * step) / step;
+        let (p00, u00) = self.node(i, j);
+        let (p10, u10) = self.node(i + 1, j);
+        let (p01, u01) = self.node(i, j + 1);
+        let (p11, u11) = self.node(i + 1, j + 1);
+        let lerp = |a: DVec3, b: DVec3, t: f64| a * (1.0 - t) + b * t;
+        let p = lerp(lerp(p00, p10, f.x), lerp(p01, p11, f.x), f.y);
+        let u = lerp(lerp(u00, u10, f.x), lerp(u01, u11, f.x), f.y);
+        p + u * height
+    }
+
+    /// The largest distance between the lattice's interpolated surface and the true ellipsoid
+    /// surface over `locate`'s points, measured at every sample of a `probe_step` grid (tests
+    /// and docs: the interpolation part of the error budget).
+    pub fn max_interpolation_error(
+        &self,
+        width: u32,
+        height: u32,
+        probe_step: u32,
+        mut locate: impl FnMut(f64, f64) -> Result<(f64, f64)>,
+    ) -> Result<f64> {
+        let mut worst: f64 = 0.0;
+        for r in (0..height).step_by(probe_step.max(1) as usize) {
+            for c in (0..width).step_by(probe_step.max(1) as usize) {
+                let (lat, lon) = locate(c as f64, r as f64)?;
+                let exact = self
+                    .frame
+                    .to_local(WGS84.to_ecef(Geodetic::new(lat, lon, 0.0)));
+                let got = self.position(DVec2::new(c as f64, r as f64), 0.0);
+                worst = worst.max((got - exact).length());
+            }
+        }
+        Ok(worst)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nodes_are_exact_and_cells_stay_within_the_sagitta() {
+        // 1025 x 1025 samples of 30 m at 46 N: nodes every 16 samples (480 m).
+        let frame = EnuFrame::new(&WGS84, Geodetic::new(46.0, 8.0, 0.0));
+        let l = Lattice::anchored_plane(1025, 1025, 30.0, frame).unwrap();
+        assert_eq!((l.step, l.nodes), (16, [65, 65]));
+        let locate = |c: f64, r: f64| -> Result<(f64, f64)> {
+            let g = WGS84.to_geodetic(frame.to_ecef(DVec3::new(c * 30.0, r * 30.0, 0.0)));
+            Ok((g.lat_deg, g.lon_deg))
+        };
+        // At nodes: exact to the split-double rounding.
+        let at_nodes = l.max_interpolation_error(1025, 1025, 16, locate).unwrap();
+        assert!(at_nodes < 1e-6, "{at_nodes}");
+        // Between nodes: bounded by the sagitta of the cell diagonal, d^2 / (8 R).
+        let between = l.max_interpolation_error(1025, 1025, 7, locate).unwrap();
+        let d = 480.0 * 2f64.sqrt();
+        let bound = d * d / (8.0 * 6.3e6);
+        assert!(between > 1e-4 && between < bound, "{between} vs {bound}");
+        // Up is the world z at the origin and tilts away from it far off.
+        let u = l.position(DVec2::ZERO, 1.0) - l.position(DVec2::ZERO, 0.0);
+        assert!((u - DVec3::Z).length() < 1e-7, "{u}");
+        // 30 km north: about 70 m below the tangent plane.
+        let p = l.position(DVec2::new(0.0, 1000.0), 0.0);
+        assert!((p.z + 70.6).abs() < 1.0, "{p}");
+    }
+
+    #[test]
+    fn antimeridian_and_poles_are_one_line_errors() {
+        let e = Lattice::geographic(101, 11, [179.95, 10.0], [0.001, 0.001]).unwrap_err();
+        assert!(e.to_string().contains("antimeridian"), "{e}");
+        let e = Lattice::geographic(11, 101, [10.0, 89.95], [0.001, 0.001]).unwrap_err();
+        assert!(e.to_string().contains("pole"), "{e}");
+        assert!(Lattice::geographic(11, 11, [179.98, 89.98], [0.001, 0.001]).is_ok());
+    }
+
+    #[test]
+    fn step_keeps_the_lattice_small() {
+        assert_eq!(Lattice::step_for(1201, 1201, 30.0), 16);
+        assert_eq!(Lattice::step_for(1201, 1201, 90.0), 5);
+        assert_eq!(Lattice::step_for(16384, 16384, 30.0), 16);
+        assert_eq!(Lattice::step_for(16384, 16384, 2.0), 250);
+        assert_eq!(Lattice::step_for(600, 600, 1000.0), 1);
+        assert_eq!(Lattice::node_counts(1201, 1201, 16), [76, 76]);
+        assert_eq!(Lattice::node_counts(17, 2, 16), [2, 2]);
+    }
+}

@@ -1,0 +1,605 @@
+//! The terrain's true geometry on the WGS84 ellipsoid (issue 14, docs/coordinates.md
+//! "Geodetic geometry"): the geolocation lattice on the GPU equals its CPU mirror and the GLSL
+//! port; the horizon dips as the ellipsoid says; spikes at known latitude/longitude/height
+//! project where independent f64 geodesy puts them; a camera far from the world origin moving
+//! 1 mm per frame sees the centre pixel's depth change by 1 mm. The oracles' geodesy (WGS84
+//! to ECEF, ENU rotation, radii of curvature) is written out in this file, not taken from the
+//! code under test. Negative controls: the flat world fails the horizon and landmark checks.
+
+mod common;
+
+use std::sync::Arc;
+
+use glam::{DVec2, DVec3};
+use vkterrain::dataset::Heightmap;
+use vkterrain::driver::Gpu;
+use vkterrain::driver::shaders::{TERRAIN_PROBE_COMP_SPV, TERRAIN_PROBE_SPV};
+use vkterrain::geo::Lattice;
+use vkterrain::lod::{MethodConfig, MethodKind, UdlodSettings};
+use vkterrain::readback::{CollectSink, OwnedFrame};
+use vkterrain::render::{FrameRequest, Renderer, TerrainProbePoint};
+use vkterrain::scene::Camera;
+
+// ---- Independent f64 geodesy (the oracle) -------------------------------------------------
+
+const A: f64 = 6_378_137.0;
+const F: f64 = 1.0 / 298.257_223_563;
+
+fn e2() -> f64 {
+    F * (2.0 - F)
+}
+
+fn ecef(lat_deg: f64, lon_deg: f64, h: f64) -> DVec3 {
+    let (lat, lon) = (lat_deg.to_radians(), lon_deg.to_radians());
+    let n = A / (1.0 - e2() * lat.sin().powi(2)).sqrt();
+    DVec3::new(
+        (n + h) * lat.cos() * lon.cos(),
+        (n + h) * lat.cos() * lon.sin(),
+        (n * (1.0 - e2()) + h) * lat.sin(),
+    )
+}
+
+/// World (ENU at `lat0, lon0`, height 0) coordinates of a geodetic point.
+fn enu(lat0: f64, lon0: f64, lat: f64, lon: f64, h: f64) -> DVec3 {
+    let (p, l) = (lat0.to_radians(), lon0.to_radians());
+    let east = DVec3::new(-l.sin(), l.cos(), 0.0);
+    let north = DVec3::new(-p.sin() * l.cos(), -p.sin() * l.sin(), p.cos());
+    let up = DVec3::new(p.cos() * l.cos(), p.cos() * l.sin(), p.sin());
+    let d = ecef(lat, lon, h) - ecef(lat0, lon0, 0.0);
+    DVec3::new(d.dot(east), d.dot(north), d.dot(up))
+}
+
+/// Radius of curvature of the normal section at `azimuth_deg` (Euler).
+fn radius_in_azimuth(lat_deg: f64, azimuth_deg: f64) -> f64 {
+    let s2 = lat_deg.to_radians().sin().powi(2);
+    let w = (1.0 - e2() * s2).sqrt();
+    let m = A * (1.0 - e2()) / (w * w * w);
+    let n = A / w;
+    let az = azimuth_deg.to_radians();
+    1.0 / (az.cos().powi(2) / m + az.sin().powi(2) / n)
+}
+
+/// Metres per degree of latitude at `lat_deg` (the meridian radius).
+fn metres_per_deg_lat(lat_deg: f64) -> f64 {
+    let w2 = 1.0 - e2() * lat_deg.to_radians().sin().powi(2);
+    (A * (1.0 - e2()) / (w2 * w2.sqrt())).to_radians()
+}
+
+/// Pixel (x right, y down, continuous; pixel centres at +0.5) of a world point.
+fn pixel_of(camera: &Camera, p: DVec3, width: u32, height: u32) -> DVec2 {
+    let (right, up, forward) = camera.basis();
+    let d = p - camera.position;
+    let f = camera.focal_px(height);
+    DVec2::new(
+        width as f64 / 2.0 + f * d.dot(right) / d.dot(forward),
+        height as f64 / 2.0 - f * d.dot(up) / d.dot(forward),
+    )
+}
+
+/// Pixel of a probed clip position (WebGPU clip space, y up).
+fn pixel_of_clip(clip: [f32; 4], width: u32, height: u32) -> DVec2 {
+    let (x, y, w) = (clip[0] as f64, clip[1] as f64, clip[3] as f64);
+    DVec2::new(
+        (x / w * 0.5 + 0.5) * width as f64,
+        (0.5 - y / w * 0.5) * height as f64,
+    )
+}
+
+// ---- Rendering helpers ---------------------------------------------------------------------
+
+/// A geographic grid: sample (col, row) at latitude `lat0 + row * d`, longitude
+/// `lon0 + col * d`, heights from `h(lat, lon)`; spacing: the north-south metres (texturing
+/// and the flat control only).
+fn geographic(size: u32, lat0: f64, lon0: f64, d: f64, h: &dyn Fn(f64, f64) -> f64) -> Heightmap {
+    let mut heights = Vec::with_capacity((size * size) as usize);
+    for r in 0..size {
+        for c in 0..size {
+            heights.push(h(lat0 + r as f64 * d, lon0 + c as f64 * d) as f32);
+        }
+    }
+    Heightmap::new(
+        "geographic",
+        size,
+        size,
+        d * metres_per_deg_lat(lat0),
+        heights,
+    )
+    .unwrap()
+}
+
+struct Rendered {
+    frames: Vec<OwnedFrame>,
+    renderer: Renderer,
+}
+
+fn render(
+    gpu: &Arc<Gpu>,
+    data: &Heightmap,
+    method: impl Into<MethodConfig>,
+    lattice: Option<&Lattice>,
+    (width, height): (u32, u32),
+    cameras: &[Camera],
+) -> Rendered {
+    let mut sink = CollectSink::default();
+    let mut renderer = Renderer::with_world(
+        gpu,
+        data,
+        method,
+        common::options(width, height, 2),
+        None,
+        lattice,
+    )
+    .expect("renderer");
+    for c in cameras {
+        renderer.render(FrameRequest::from(*c), &mut sink).unwrap();
+    }
+    renderer.finish(&mut sink).unwrap();
+    Rendered {
+        frames: sink.frames,
+        renderer,
+    }
+}
+
+fn probe(
+    r: &Renderer,
+    spv: &[u8],
+    entry: &std::ffi::CStr,
+    pts: &[([i32; 2], [f32; 2])],
+) -> Vec<TerrainProbePoint> {
+    let points: Vec<TerrainProbePoint> = pts
+        .iter()
+        .map(|(cell, frac)| TerrainProbePoint {
+            cell: [cell[0], cell[1], 0, 0],
+            pos: [
+                cell[0] as f32 + frac[0],
+                cell[1] as f32 + frac[1],
+                frac[0],
+                frac[1],
+            ],
+            ..Default::default()
+        })
+        .collect();
+    r.probe_terrain_helpers(0, spv, entry, &points).unwrap()
+}
+
+// ---- Tests ---------------------------------------------------------------------------------
+
+#[test]
+fn gpu_projection_equals_the_cpu_mirror_and_the_glsl_port() {
+    let gpu = common::gpu(false);
+    // 257 x 257 samples of 100 m with hills, anchored at 45 N 7 E (a local data set on the
+    // earth: the plane dropped onto the ellipsoid).
+    let (size, spacing) = (257u32, 100.0);
+    let heights: Vec<f32> = (0..size * size)
+        .map(|i| {
+            let (c, r) = ((i % size) as f32, (i / size) as f32);
+            300.0 + 200.0 * (c * 0.05).sin() * (r * 0.04).cos()
+        })
+        .collect();
+    let data = Heightmap::new("hills", size, size, spacing, heights).unwrap();
+    let frame = vkterrain::geo::EnuFrame::new(
+        &vkterrain::geo::WGS84,
+        vkterrain::geo::Geodetic::new(45.0, 7.0, 0.0),
+    );
+    let lattice = Lattice::anchored_plane(size, size, spacing, frame).unwrap();
+    assert_eq!(lattice.step, 5);
+    let camera = Camera {
+        position: DVec3::new(3000.0, 2000.0, 1500.0),
+        yaw_deg: 40.0,
+        pitch_deg: -8.0,
+        vfov_deg: 50.0,
+        far: 1e6,
+        ..Camera::default()
+    };
+    let (w, h) = (320u32, 200u32);
+    let r = render(
+        &gpu,
+        &data,
+        MethodKind::Brute,
+        Some(&lattice),
+        (w, h),
+        &[camera],
+    );
+    // Every 7th sample, plus fractions between samples (UDLOD's morphs).
+    let mut pts = Vec::new();
+    for row in (0..size as i32).step_by(7) {
+        for col in (0..size as i32).step_by(7) {
+            pts.push(([col, row], [0.0, 0.0]));
+            pts.push(([col, row], [0.37, 0.81]));
+        }
+    }
+    let wgsl = probe(&r.renderer, TERRAIN_PROBE_SPV, c"probe_main", &pts);
+    let glsl = probe(&r.renderer, TERRAIN_PROBE_COMP_SPV, c"main", &pts);
+    let differing = wgsl.iter().zip(&glsl).filter(|(a, b)| a != b).count();
+    assert_eq!(
+        differing, 0,
+        "GLSL port differs from the WGSL on the lattice"
+    );
+    let view_proj = (camera.projection(w as f64 / h as f64) * camera.view_rotation()).as_dmat4();
+    let (mut worst_px, mut worst_depth, mut worst_flat) = (0.0f64, 0.0f64, 0.0f64);
+    let mut compared = 0;
+    for ((cell, frac), got) in pts.iter().zip(&wgsl) {
+        let s = DVec2::new(
+            cell[0] as f64 + frac[0] as f64,
+            cell[1] as f64 + frac[1] as f64,
+        );
+        let height = got.heights[1] as f64;
+        let rel = lattice.position(s, height) - camera.position;
+        let clip = view_proj * rel.extend(1.0);
+        // In view (or just outside): far off-screen, a pixel is a tiny angle and f32 clip
+        // coordinates resolve it to ~1e-6 of the pixel coordinate, not to 0.01 px.
+        let ndc = clip.truncate().truncate() / clip.w;
+        if clip.w < 10.0 || ndc.abs().max_element() > 1.2 {
+            continue;
+        }
+        compared += 1;
+        let cpu = pixel_of_clip(clip.as_vec4().to_array(), w, h);
+        let gpu_px = pixel_of_clip(got.clip, w, h);
+        worst_px = worst_px.max((cpu - gpu_px).length());
+        worst_depth = worst_depth.max((clip.w - got.clip[3] as f64).abs() / clip.w);
+        // The flat world's position of the same point (the negative control).
+        let flat = DVec3::new(s.x * spacing, s.y * spacing, height) - camera.position;
+        let fclip = view_proj * flat.extend(1.0);
+        worst_flat =
+            worst_flat.max((pixel_of_clip(fclip.as_vec4().to_array(), w, h) - gpu_px).length());
+    }
+    println!(
+        "lattice GPU vs CPU: {compared} points, worst {worst_px:.2e} px, depth rel {worst_depth:.2e}; flat world off by up to {worst_flat:.2} px"
+    );
+    assert!(compared > 200, "{compared}");
+    assert!(worst_px < 0.01, "GPU and CPU differ by {worst_px} px");
+    assert!(
+        worst_depth < 1e-5,
+        "GPU and CPU depth differ by {worst_depth} relative"
+    );
+    assert!(
+        worst_flat > 0.2,
+        "the flat world should differ: {worst_flat} px"
+    );
+    drop(r);
+    common::assert_no_validation_messages(&gpu);
+}
+
+/// Row (continuous, y down) where the centre column turns from sky to terrain: the top edge
+/// of the first terrain pixel.
+fn horizon_row(frame: &OwnedFrame) -> f64 {
+    let x = frame.width / 2;
+    (0..frame.height)
+        .find(|&y| frame.depth_at(x, y).expect("depth") > 0.0)
+        .expect("terrain in the centre column") as f64
+}
+
+#[test]
+fn horizon_dips_as_the_ellipsoid_says() {
+    let gpu = common::gpu(false);
+    // Sea level (all heights 0) on a geographic grid: 45..55.24 N, 7..17.24 E, 0.02 deg.
+    let (size, lat0, lon0, d) = (513u32, 45.0, 7.0, 0.02);
+    let data = geographic(size, lat0, lon0, d, &|_, _| 0.0);
+    let lattice = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
+    let (w, h) = (64u32, 400u32);
+    let azimuth = 30.0;
+    // Level cameras over sample (0, 0) (the world origin) looking north-north-east into the
+    // data, 8 deg vertical field of view (0.02 deg per pixel).
+    let cameras: Vec<Camera> = [100.0, 1000.0, 10_000.0]
+        .iter()
+        .map(|&alt| Camera {
+            position: DVec3::new(0.0, 0.0, alt),
+            yaw_deg: azimuth,
+            pitch_deg: 0.0,
+            vfov_deg: 8.0,
+            near: 1.0,
+            far: 2e6,
+            ..Camera::default()
+        })
+        .collect();
+    let geo = render(
+        &gpu,
+        &data,
+        MethodKind::Brute,
+        Some(&lattice),
+        (w, h),
+        &cameras,
+    );
+    let flat = render(&gpu, &data, MethodKind::Brute, None, (w, h), &cameras);
+    let r = radius_in_azimuth(lat0, azimuth);
+    for (i, c) in cameras.iter().enumerate() {
+        let alt = c.position.z;
+        let dip = (r / (r + alt)).acos();
+        let expected = h as f64 / 2.0 + c.focal_px(h) * dip.tan();
+        let got = horizon_row(&geo.frames[i]);
+        let got_flat = horizon_row(&flat.frames[i]);
+        println!(
+            "h = {alt} m: dip {:.4} deg, horizon row expected {expected:.2}, geodetic {got}, flat {got_flat}",
+            dip.to_degrees()
+        );
+        assert!(
+            (got - expected).abs() <= 0.5,
+            "h = {alt} m: horizon at row {got}, the ellipsoid says {expected:.2}"
+        );
+        if alt >= 1000.0 {
+            // Negative control: the flat earth's horizon is the data's far edge, far too high.
+            assert!(
+                (got_flat - expected).abs() > 5.0,
+                "h = {alt} m: the flat world passed ({got_flat} vs {expected:.2})"
+            );
+        }
+    }
+    drop((geo, flat));
+    common::assert_no_validation_messages(&gpu);
+}
+
+#[test]
+fn landmark_spikes_project_where_f64_geodesy_puts_them() {
+    let gpu = common::gpu(false);
+    let (size, d) = (257u32, 0.001);
+    let (w, h) = (1024u32, 768u32);
+    for lat0 in [0.0, 45.0, 70.0] {
+        let lon0 = 10.0;
+        // Spikes at three samples; heights above the ellipsoid.
+        let spikes = [
+            ([64i32, 64i32], 1500.0),
+            ([200, 40], 800.0),
+            ([128, 220], 2500.0),
+        ];
+        let heights = |la: f64, lo: f64| {
+            for (s, hgt) in spikes {
+                let (sl, so) = (lat0 + s[1] as f64 * d, lon0 + s[0] as f64 * d);
+                if (la - sl).abs() < d / 2.0 && (lo - so).abs() < d / 2.0 {
+                    return hgt;
+                }
+            }
+            20.0
+        };
+        let data = geographic(size, lat0, lon0, d, &heights);
+        let lattice = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
+        for dist_km in [1.0, 10.0, 50.0, 200.0] {
+            // The camera south-west of the first spike, 3 km up plus the earth's drop, aimed a
+            // little beside it so the tip is off-centre; 5 deg field of view.
+            let (sc, hs) = spikes[0];
+            let (slat, slon) = (lat0 + sc[1] as f64 * d, lon0 + sc[0] as f64 * d);
+            let tip = enu(lat0, lon0, slat, slon, hs);
+            let dist = dist_km * 1000.0;
+            let m = metres_per_deg_lat(slat);
+            let clat = slat - dist * 0.6 / m;
+            let clon = slon - dist * 0.8 / (m * slat.to_radians().cos());
+            let calt = 3000.0 + dist * dist / (2.0 * 6.37e6);
+            let pos = enu(lat0, lon0, clat, clon, calt);
+            let to = tip - pos;
+            let mut camera = Camera {
+                position: pos,
+                yaw_deg: to.x.atan2(to.y).to_degrees() + 0.4,
+                pitch_deg: (to.z / to.truncate().length()).atan().to_degrees() - 0.3,
+                vfov_deg: 5.0,
+                near: 1.0,
+                far: 1e6,
+                ..Camera::default()
+            };
+            camera.roll_deg = 0.0;
+            let geo = render(
+                &gpu,
+                &data,
+                MethodKind::Brute,
+                Some(&lattice),
+                (w, h),
+                &[camera],
+            );
+            let flat = render(&gpu, &data, MethodKind::Brute, None, (w, h), &[camera]);
+            let pts: Vec<_> = spikes.iter().map(|(s, _)| (*s, [0.0f32, 0.0])).collect();
+            let got = probe(&geo.renderer, TERRAIN_PROBE_SPV, c"probe_main", &pts);
+            let got_flat = probe(&flat.renderer, TERRAIN_PROBE_SPV, c"probe_main", &pts);
+            for (k, (s, hs)) in spikes.iter().enumerate() {
+                let p = enu(
+                    lat0,
+                    lon0,
+                    lat0 + s[1] as f64 * d,
+                    lon0 + s[0] as f64 * d,
+                    *hs,
+                );
+                let expected = pixel_of(&camera, p, w, h);
+                let px = pixel_of_clip(got[k].clip, w, h);
+                let px_flat = pixel_of_clip(got_flat[k].clip, w, h);
+                let err = (px - expected).length();
+                println!(
+                    "lat {lat0} cam {dist_km} km spike {k}: expected {expected:.2}, got {px:.2} (err {err:.3} px), flat err {:.1} px",
+                    (px_flat - expected).length()
+                );
+                assert_eq!(got[k].heights[0], *hs as f32, "the spike's height");
+                assert!(err <= 0.5, "lat {lat0}, {dist_km} km, spike {k}: {err} px");
+                if dist_km <= 50.0 {
+                    // Negative control. (From 200 km a spike 3 km below the camera is seen
+                    // at a few degrees; the flat world's errors shrink there to ~1 px.)
+                    assert!(
+                        (px_flat - expected).length() > 2.0,
+                        "the flat world passed at {dist_km} km"
+                    );
+                }
+            }
+            if dist_km > 10.0 {
+                // Farther off, rays past the thin tip leave the data (sky behind it).
+                continue;
+            }
+            // The tip is in view (rendered, not only probed): terrain just below its pixel.
+            // (The spike is one sample wide: at 70 N and 10 km it is ~1,300 px tall and
+            // ~33 px wide at its base, so within a pixel of the tip it covers ~0.01 px.)
+            let e = pixel_of(&camera, tip, w, h);
+            let (ex, ey) = (e.x as u32, e.y as u32);
+            assert!(
+                ex > 0 && ex + 1 < w && ey + 24 < h,
+                "tip outside the image: {e}"
+            );
+            let f = &geo.frames[0];
+            // The spike's own depth there (not terrain behind it): within 2 % of the tip's.
+            let tip_depth = (tip - camera.position).dot(camera.basis().2);
+            let covered = (ey..ey + 24).any(|y| {
+                (ex - 1..=ex + 1).any(|x| {
+                    let d = f.depth_at(x, y).unwrap();
+                    d > 0.0 && (camera.linear_depth(d) - tip_depth).abs() < 0.02 * tip_depth
+                })
+            });
+            assert!(
+                covered,
+                "the spike is not drawn just below the tip's pixel {e}"
+            );
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+}
+
+/// A camera moving 1 mm per frame along its view axis, far from the world origin: the centre
+/// pixel's view depth changes by 1 mm +- 0.2 mm per frame and no pixel is sky.
+fn precision_at(gpu: &Arc<Gpu>, lat0: f64, lon0: f64, cam_lat: f64, cam_lon: f64) {
+    let (size, d) = (513u32, 0.0008);
+    let hills = |la: f64, lo: f64| 200.0 + 80.0 * (la * 900.0).sin() * (lo * 700.0).cos();
+    let data = geographic(size, lat0, lon0, d, &hills);
+    let lattice = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
+    let ground = enu(lat0, lon0, cam_lat, cam_lon, hills(cam_lat, cam_lon));
+    let base = Camera {
+        position: ground + DVec3::new(0.0, 0.0, 150.0),
+        yaw_deg: 20.0,
+        pitch_deg: -35.0,
+        vfov_deg: 40.0,
+        near: 1.0,
+        far: 1e5,
+        ..Camera::default()
+    };
+    let (_, _, forward) = base.basis();
+    let cameras: Vec<Camera> = (0..6)
+        .map(|i| Camera {
+            position: base.position + forward * (i as f64 * 1e-3),
+            ..base
+        })
+        .collect();
+    let (w, h) = (96u32, 64u32);
+    let r = render(
+        gpu,
+        &data,
+        MethodKind::Brute,
+        Some(&lattice),
+        (w, h),
+        &cameras,
+    );
+    let depths: Vec<f64> = r
+        .frames
+        .iter()
+        .zip(&cameras)
+        .map(|(f, c)| c.linear_depth(f.depth_at(w / 2, h / 2).unwrap()))
+        .collect();
+    println!(
+        "{cam_lat} N {cam_lon} E, {:.0} m from the world origin: centre depths {depths:?}",
+        base.position.length()
+    );
+    assert!(base.position.truncate().length() > 10_000.0);
+    for pair in depths.windows(2) {
+        let step = pair[0] - pair[1];
+        assert!(
+            (step - 1e-3).abs() <= 0.2e-3,
+            "depth changed by {:.3} mm for a 1 mm move",
+            step * 1e3
+        );
+    }
+    for f in &r.frames {
+        let holes = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| f.depth_at(x, y).unwrap() == 0.0)
+            .count();
+        assert_eq!(holes, 0, "sky pixels (holes) in a view of the ground");
+    }
+}
+
+#[test]
+fn one_millimetre_moves_are_resolved_far_from_the_origin() {
+    let gpu = common::gpu(false);
+    // 80 N 179.9 E, the data ending short of the antimeridian; and on the equator.
+    precision_at(&gpu, 79.85, 179.58, 80.0, 179.9);
+    precision_at(&gpu, -0.2, 30.0, 0.0, 30.3);
+    common::assert_no_validation_messages(&gpu);
+}
+
+#[test]
+fn udlod_renders_the_earth_like_brute_force() {
+    let gpu = common::gpu(false);
+    let (size, lat0, lon0, d) = (513u32, 46.0, 8.0, 0.001);
+    let hills = |la: f64, lo: f64| 900.0 + 300.0 * (la * 400.0).sin() * (lo * 300.0).cos();
+    let data = geographic(size, lat0, lon0, d, &hills);
+    let lattice = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
+    let camera = Camera {
+        position: DVec3::new(5000.0, 3000.0, 2500.0),
+        yaw_deg: 35.0,
+        pitch_deg: -6.0,
+        far: 1e6,
+        ..Camera::default()
+    };
+    let (w, h) = (160u32, 100u32);
+    let fine = UdlodSettings {
+        tau_px: 0.25,
+        ..Default::default()
+    };
+    let brute = render(
+        &gpu,
+        &data,
+        MethodKind::Brute,
+        Some(&lattice),
+        (w, h),
+        &[camera],
+    );
+    let udlod = render(&gpu, &data, fine.clone(), Some(&lattice), (w, h), &[camera]);
+    let flat_r = render(&gpu, &data, fine, None, (w, h), &[camera]);
+    let flat_brute = render(&gpu, &data, MethodKind::Brute, None, (w, h), &[camera]);
+    // Pixels whose terrain/sky or depth (more than 1 %) differ.
+    let compare = |a: &OwnedFrame, b: &OwnedFrame| {
+        let mut differ = 0usize;
+        for y in 0..h {
+            for x in 0..w {
+                let (da, db) = (a.depth_at(x, y).unwrap(), b.depth_at(x, y).unwrap());
+                if (da == 0.0) != (db == 0.0) {
+                    differ += 1;
+                } else if da > 0.0 {
+                    let (za, zb) = (camera.linear_depth(da), camera.linear_depth(db));
+                    if (za - zb).abs() > 0.01 * za {
+                        differ += 1;
+                    }
+                }
+            }
+        }
+        differ as f64 / (w * h) as f64
+    };
+    let geo = compare(&brute.frames[0], &udlod.frames[0]);
+    let flat = compare(&brute.frames[0], &flat_r.frames[0]);
+    let flat_lod = compare(&flat_brute.frames[0], &flat_r.frames[0]);
+    let mut diff = Vec::new();
+    for y in 0..h {
+        let row: String = (0..w)
+            .map(|x| {
+                let (da, db) = (
+                    brute.frames[0].depth_at(x, y).unwrap(),
+                    udlod.frames[0].depth_at(x, y).unwrap(),
+                );
+                if (da == 0.0) != (db == 0.0) {
+                    if da == 0.0 { '+' } else { '-' }
+                } else if da > 0.0
+                    && (camera.linear_depth(da) - camera.linear_depth(db)).abs()
+                        > 0.01 * camera.linear_depth(da)
+                {
+                    'x'
+                } else if da > 0.0 {
+                    '.'
+                } else {
+                    ' '
+                }
+            })
+            .collect();
+        diff.push(row);
+    }
+    println!("{}", diff.join("\n"));
+    println!(
+        "pixels differing from brute force: UDLOD on the earth {geo:.4}, UDLOD on the flat world {flat:.4}, flat UDLOD vs flat brute {flat_lod:.4}"
+    );
+    assert!(
+        geo < 0.01,
+        "UDLOD differs from brute force on {geo} of the pixels"
+    );
+    // Negative control: UDLOD on the flat world draws a different surface.
+    assert!(flat > 0.1, "flat UDLOD matched the earth: {flat}");
+    drop((brute, udlod, flat_r));
+    common::assert_no_validation_messages(&gpu);
+}
