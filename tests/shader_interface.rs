@@ -451,16 +451,16 @@ fn a_wrong_descriptor_table_is_reported() {
             mutate(&|t| t[6].ty = vk::DescriptorType::UNIFORM_BUFFER),
         ),
         (
-            "atlas_albedo: not in the table",
+            "geo_lattice: not in the table",
             mutate(&|t| {
                 t.pop();
             }),
         ),
         (
-            "TERRAIN_SET entry 9 \"extra\": no shader",
+            "TERRAIN_SET entry 10 \"extra\": no shader",
             mutate(&|t| {
                 t.push(Binding::new(
-                    9,
+                    10,
                     vk::DescriptorType::SAMPLER,
                     t[0].stages,
                     "extra",

@@ -207,6 +207,41 @@ impl Lattice {
         p + u * height
     }
 
+    /// Where world point `p` lies over the lattice: the sample position `s` whose surface
+    /// normal line passes through `p`, and `p`'s height above the lattice surface along it
+    /// (`position(s, height) == p`). Gauss-Newton on the CPU mirror: the mapping is smooth and
+    /// nearly linear, so a few iterations reach 1e-9 samples; points outside the grid
+    /// extrapolate from the edge cells. The renderer measures LOD distances from this point.
+    pub fn sample_at(&self, p: DVec3) -> (DVec2, f64) {
+        let mut s = DVec2::new(
+            (self.nodes[0] - 1) as f64 * self.step as f64 / 2.0,
+            (self.nodes[1] - 1) as f64 * self.step as f64 / 2.0,
+        );
+        let mut height = 0.0;
+        for _ in 0..50 {
+            let base = self.position(s, 0.0);
+            let up = (self.position(s, 1.0) - base).normalize();
+            let r = p - base;
+            height = r.dot(up);
+            let e = r - up * height;
+            let dx = self.position(s + DVec2::X, 0.0) - base;
+            let dy = self.position(s + DVec2::Y, 0.0) - base;
+            // Least squares: [dx dy] ds = e.
+            let (a, b, c) = (dx.dot(dx), dx.dot(dy), dy.dot(dy));
+            let det = a * c - b * b;
+            if det.abs() < 1e-30 {
+                break;
+            }
+            let (ex, ey) = (dx.dot(e), dy.dot(e));
+            let ds = DVec2::new(c * ex - b * ey, a * ey - b * ex) / det;
+            s += ds;
+            if ds.length() < 1e-9 {
+                break;
+            }
+        }
+        (s, height)
+    }
+
     /// The largest distance between the lattice's interpolated surface and the true ellipsoid
     /// surface over `locate`'s points, measured at every sample of a `probe_step` grid (tests
     /// and docs: the interpolation part of the error budget).
@@ -260,6 +295,25 @@ mod tests {
         // 30 km north: about 70 m below the tangent plane.
         let p = l.position(DVec2::new(0.0, 1000.0), 0.0);
         assert!((p.z + 70.6).abs() < 1.0, "{p}");
+    }
+
+    #[test]
+    fn sample_at_inverts_position() {
+        let frame = EnuFrame::new(&WGS84, Geodetic::new(60.0, 20.0, 0.0));
+        let l = Lattice::geographic(1201, 801, [20.0, 60.0], [1.0 / 1200.0, 1.0 / 1200.0]).unwrap();
+        assert_eq!(l.frame.origin, frame.origin);
+        for (s, h) in [
+            (DVec2::new(0.0, 0.0), 0.0),
+            (DVec2::new(1000.3, 700.9), 2500.0),
+            (DVec2::new(37.25, 555.5), -30.0),
+            // Outside the grid (a viewer beyond its edge).
+            (DVec2::new(-150.0, 900.0), 9000.0),
+        ] {
+            let p = l.position(s, h);
+            let (got, got_h) = l.sample_at(p);
+            assert!((got - s).length() < 1e-6, "{s} -> {got}");
+            assert!((got_h - h).abs() < 1e-6, "{h} -> {got_h}");
+        }
     }
 
     #[test]

@@ -202,6 +202,9 @@ pub struct Renderer {
     /// The world frame on the earth and the datum code of its heights
     /// (`output::ring::layout::DATUM_*`): frames then carry the camera's WGS84 pose.
     pub world: Option<(crate::geo::EnuFrame, u32)>,
+    /// The geolocation lattice the terrain is drawn through (None: the flat world), and the
+    /// grid's nominal spacing: LOD viewers are carried into the grid's frame through it.
+    lattice: Option<(crate::geo::Lattice, f64)>,
 }
 
 impl Renderer {
@@ -263,6 +266,7 @@ impl Renderer {
             .map(|f| FrameResources::new(gpu, &pass, options.extent(), options.readback_depth, f))
             .collect::<Result<Vec<_>>>()?;
         let readback_path = slots[0].readback.path();
+        let lattice = lattice.map(|l| (l.clone(), data.spacing()));
         Ok(Renderer {
             gpu: gpu.clone(),
             options,
@@ -279,6 +283,7 @@ impl Renderer {
             stats: RunStats::default(),
             analysis: None,
             world: None,
+            lattice,
         })
     }
 
@@ -388,7 +393,7 @@ impl Renderer {
     fn update_views(&mut self, frame: FrameSlot, requests: &[FrameRequest]) -> Result<()> {
         let viewers: Vec<glam::DVec3> = requests
             .iter()
-            .map(|r| r.lod_viewer.unwrap_or(r.camera.position))
+            .map(|r| self.grid_viewer(r.lod_viewer.unwrap_or(r.camera.position)))
             .collect();
         let ground = self.clipmap.prepare(frame, &viewers)?;
         for (v, view) in self.layout.view_slots_of(frame).enumerate() {
@@ -409,6 +414,21 @@ impl Renderer {
             self.method.update(view, &state)?;
         }
         Ok(())
+    }
+
+    /// Where LOD distances are measured from, in the grid's frame (`x = col * spacing`,
+    /// `y = row * spacing`, `z` = height): on the flat world the world point itself; on the
+    /// earth the sample position under it and its height above the ellipsoid
+    /// ([`crate::geo::Lattice::sample_at`]), so every method's and the clipmap's distances and
+    /// reference heights refer to the samples actually below the viewer (docs/coordinates.md).
+    fn grid_viewer(&self, world: glam::DVec3) -> glam::DVec3 {
+        match &self.lattice {
+            None => world,
+            Some((l, spacing)) => {
+                let (s, height) = l.sample_at(world);
+                glam::DVec3::new(s.x * spacing, s.y * spacing, height)
+            }
+        }
     }
 
     /// The sink's zero-copy target for frame `index` ([`FrameSink::direct_target`]), if it
