@@ -604,3 +604,113 @@ fn udlod_renders_the_earth_like_brute_force() {
     drop((brute, udlod, flat_r, flat_brute));
     common::assert_no_validation_messages(&gpu);
 }
+
+/// A real georeferenced data set through the whole chain (`vkterrain preprocess` of an SRTM3
+/// tile, `[dataset] kind = "tiles"`, `Config::open_renderer`): the data set's placement builds
+/// the lattice, through PROJ, at the native samples the loaded grid's samples stand for (the
+/// grid is resampled east-west on load: `Heightmap::source_step`). Every probed sample in
+/// view projects where independent f64 geodesy puts its latitude/longitude (from the
+/// manifest's `sample_to_crs`) within 0.5 px. Negative control: the same samples placed at
+/// the native columns of their own index (the resampling ignored) miss by pixels.
+#[test]
+fn a_georeferenced_data_set_is_drawn_where_its_samples_lie() {
+    let data_dir = common::shared_data().expect("../shared/data (the real data; CI has it)");
+    let tmp = std::env::temp_dir().join(format!("vkt-geodetic-{}", std::process::id()));
+    let out = tmp.join("n42e001");
+    vkterrain::dataset::preprocess::run(
+        &vkterrain::dataset::preprocess::Options {
+            input: vkterrain::dataset::preprocess::Input::Files(vec![
+                data_dir.join("srtm/N42E001.hgt.zip"),
+            ]),
+            out: out.clone(),
+            force: true,
+            ..Default::default()
+        },
+        &vkterrain::dataset::preprocess::NoProgress,
+    )
+    .unwrap();
+    let config_path = tmp.join("n42e001.toml");
+    std::fs::write(
+        &config_path,
+        format!(
+            "[render]\nwidth = 320\nheight = 200\nreadback_depth = true\n\n[dataset]\nkind = \"tiles\"\npath = \"{}\"\n",
+            out.display()
+        ),
+    )
+    .unwrap();
+    let config = vkterrain::config::Config::load(Some(&config_path)).unwrap();
+    let terrain = config.open_terrain().unwrap();
+    let grid = terrain.grid().unwrap().clone();
+    let step = grid.source_step;
+    // 42-43 N: east-west samples are cos(42.5 deg) = 0.74 of the north-south ones apart.
+    assert!(step[0] > 1.3 && step[1] == 1.0, "{step:?}");
+    let georef = vkterrain::dataset::tiles::Dataset::open(&out)
+        .unwrap()
+        .manifest
+        .georef
+        .expect("SRTM is georeferenced");
+    assert_eq!(georef.crs.authority.as_deref(), Some("EPSG:4326"));
+    // Latitude/longitude of native sample (c, r): the manifest's affine map, in degrees.
+    let lat_lon = |c: f64, r: f64| {
+        let [x, y] = georef.at(c, r);
+        (y, x)
+    };
+    let (lat0, lon0) = lat_lon(0.0, 0.0);
+    let gpu = common::gpu(false);
+    let mut options = config.render_options();
+    options.frames_in_flight = 1;
+    let mut renderer = config
+        .open_renderer(&gpu, &terrain, options)
+        .expect("renderer");
+    // 3 km above the tile's south-west part, looking north-east and down.
+    let camera = Camera {
+        position: enu(lat0, lon0, lat0 + 0.2, lon0 + 0.2, 5000.0),
+        yaw_deg: 45.0,
+        pitch_deg: -25.0,
+        far: 1e6,
+        ..Camera::default()
+    };
+    let mut sink = CollectSink::default();
+    renderer
+        .render(FrameRequest::from(camera), &mut sink)
+        .unwrap();
+    renderer.finish(&mut sink).unwrap();
+    let mut pts = Vec::new();
+    for r in (0..grid.height as i32).step_by(40) {
+        for c in (0..grid.width as i32).step_by(30) {
+            pts.push(([c, r], [0.0f32, 0.0]));
+        }
+    }
+    let got = probe(&renderer, TERRAIN_PROBE_SPV, c"probe_main", &pts);
+    let (w, h) = (320u32, 200u32);
+    let (mut compared, mut worst, mut control_misses) = (0, 0.0f64, 0);
+    for ((cell, _), g) in pts.iter().zip(&got) {
+        let px = pixel_of_clip(g.clip, w, h);
+        if g.clip[3] < 10.0 || px.x < 0.0 || px.y < 0.0 || px.x > w as f64 || px.y > h as f64 {
+            continue;
+        }
+        compared += 1;
+        let height = g.heights[1] as f64;
+        let (c, r) = (cell[0] as f64 * step[0], cell[1] as f64 * step[1]);
+        let (lat, lon) = lat_lon(c, r);
+        let expected = pixel_of(&camera, enu(lat0, lon0, lat, lon, height), w, h);
+        worst = worst.max((px - expected).length());
+        let (wlat, wlon) = lat_lon(cell[0] as f64, cell[1] as f64);
+        let wrong = pixel_of(&camera, enu(lat0, lon0, wlat, wlon, height), w, h);
+        if (px - wrong).length() > 2.0 {
+            control_misses += 1;
+        }
+    }
+    println!(
+        "{compared} samples in view: worst {worst:.3} px from f64 geodesy; {control_misses} miss by > 2 px when the resampling is ignored"
+    );
+    assert!(compared >= 50, "{compared} samples in view");
+    assert!(worst <= 0.5, "a sample is {worst} px from where it lies");
+    assert!(
+        control_misses * 2 > compared,
+        "ignoring the resampling should misplace most samples: {control_misses} of {compared}"
+    );
+    drop(renderer);
+    common::assert_no_validation_messages(&gpu);
+    std::fs::remove_dir_all(&tmp).ok();
+}

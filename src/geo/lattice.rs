@@ -220,9 +220,10 @@ impl Lattice {
         let mut height = 0.0;
         for _ in 0..50 {
             let base = self.position(s, 0.0);
-            let up = (self.position(s, 1.0) - base).normalize();
+            // The interpolated up vector as `position` applies it (not renormalized).
+            let up = self.position(s, 1.0) - base;
             let r = p - base;
-            height = r.dot(up);
+            height = r.dot(up) / up.length_squared();
             let e = r - up * height;
             let dx = self.position(s + DVec2::X, 0.0) - base;
             let dy = self.position(s + DVec2::Y, 0.0) - base;
