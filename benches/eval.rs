@@ -15,7 +15,7 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use vkterrain::cli::render::{Prepared, RenderArgs, prepare};
+use vkterrain::cli::render::{Prepared, RenderArgs, prepare_as};
 use vkterrain::eval::run::{EvalSetup, Evaluation, evaluate, variants};
 use vkterrain::eval::{report, table};
 use vkterrain::lod::{MethodConfig, MethodKind, sweep};
@@ -130,7 +130,8 @@ fn run_case(root: &str, case: &Case, short: bool) -> anyhow::Result<Option<Evalu
         argv.extend(["--scenario".into(), format!("{root}/{s}")]);
     }
     let args = Wrapper::try_parse_from(argv)?.args;
-    let p = match prepare(&args) {
+    // Flat like `vkterrain eval` (docs/eval.md): same scenario cameras, same geometry.
+    let p = match prepare_as(&args, Some(vkterrain::render::EarthGeometry::Flat)) {
         Ok(p) => p,
         Err(e) => {
             println!(

@@ -225,7 +225,7 @@ fn wgs84_keyframes_fly_over_the_earth_and_need_a_world_frame() {
         pitch_deg = -10.0
     "#;
     let file: ScenarioFile = toml::from_str(text).unwrap();
-    let s = Scenario::resolve_on(&file, &data, Some(&earth)).unwrap();
+    let s = Scenario::resolve_on(&file, &data, Some(&earth), false).unwrap();
     // Half-way (50 km north): on the ellipsoid-following path, 1000 m above the ellipsoid
     // (a straight chord would sag about 196 m below it), heading true north.
     let mid = s.camera(15);
@@ -245,15 +245,80 @@ fn wgs84_keyframes_fly_over_the_earth_and_need_a_world_frame() {
     let end = earth.pose(&s.camera(30)).unwrap();
     assert!((end.lat_deg - 46.95).abs() < 1e-9 && (end.heading_deg - 10.0).abs() < 1e-6);
     // No world frame: one line naming the cause.
-    let e = Scenario::resolve_on(&file, &data, None)
+    let e = Scenario::resolve_on(&file, &data, None, false)
         .unwrap_err()
         .to_string();
     assert!(e.contains("on the earth") && !e.contains('\n'), "{e}");
     // World angles do not mix with a WGS84 keyframe.
     let mixed: ScenarioFile =
         toml::from_str(&text.replacen("pitch_deg = -10.0", "pitch = -10.0", 1)).unwrap();
-    let e = Scenario::resolve_on(&mixed, &data, Some(&earth))
+    let e = Scenario::resolve_on(&mixed, &data, Some(&earth), false)
         .unwrap_err()
         .to_string();
     assert!(e.contains("heading_deg") && !e.contains('\n'), "{e}");
+}
+
+/// Keyframes given on the grid (`position`, `at`) over a data set drawn on the ellipsoid are
+/// placed over their own samples there: the camera sits where the geolocation lattice puts
+/// the sample at the keyframe's height (within the lattice's 1 cm interpolation), looks along
+/// yaw/pitch against the lattice's own local axes there (grid north, up), and frames between
+/// two keyframes keep their height above the drawn surface. Negative control: resolved flat
+/// (`grid_on_earth` false), the same keyframe 90 km from the anchor is ~640 m too high above
+/// the drawn surface.
+#[test]
+fn grid_keyframes_follow_the_terrain_onto_the_ellipsoid() {
+    use glam::DVec2;
+    use std::sync::Arc;
+    use vkterrain::dataset::Terrain;
+    let data = Heightmap::new("flat", 1001, 1001, 100.0, vec![500.0; 1001 * 1001]).unwrap();
+    let earth = anchored(datum::LOCAL);
+    let terrain = Terrain::from(Arc::new(data.clone()));
+    let lattice = earth.placement.lattice(&terrain).unwrap();
+    assert_eq!(lattice.step, 5);
+    let text = r#"
+        name = "grid"
+        frames = 31
+        fps = 30.0
+        [[keyframe]]
+        t = 0.0
+        position = [80000.0, 40000.0, 2000.0]
+        yaw = 30.0
+        pitch = -20.0
+        roll = 5.0
+        [[keyframe]]
+        t = 1.0
+        position = [80000.0, 60000.0, 2000.0]
+        yaw = 30.0
+        pitch = -20.0
+        roll = 5.0
+    "#;
+    let file: ScenarioFile = toml::from_str(text).unwrap();
+    let s = Scenario::resolve_on(&file, &data, Some(&earth), true).unwrap();
+    let c = s.camera(0);
+    let expected = lattice.position(DVec2::new(800.0, 400.0), 2000.0);
+    assert!(
+        c.position.distance(expected) < 0.02,
+        "camera {} vs the lattice's {expected}",
+        c.position
+    );
+    // The lattice's local axes at that sample: up, grid north made orthogonal to it, east.
+    let s0 = DVec2::new(800.0, 400.0);
+    let base = lattice.position(s0, 0.0);
+    let up = (lattice.position(s0, 1.0) - base).normalize();
+    let north_dir = lattice.position(s0 + DVec2::Y, 0.0) - base;
+    let north = (north_dir - up * north_dir.dot(up)).normalize();
+    let east = north.cross(up);
+    let (r, u, f) = vkterrain::geo::pose::euler_basis(30.0, -20.0, 5.0);
+    let to_world = |v: DVec3| east * v.x + north * v.y + up * v.z;
+    let (cr, cu, cf) = c.basis();
+    for (got, want) in [(cr, to_world(r)), (cu, to_world(u)), (cf, to_world(f))] {
+        assert!(got.angle_between(want) < 1e-5, "{got} vs {want}");
+    }
+    // Half-way: 2000 m above the drawn surface (the flat grid's ground is at 500 m).
+    let (_, h_mid) = lattice.sample_at(s.camera(15).position);
+    assert!((h_mid - 2000.0).abs() < 0.05, "{h_mid}");
+    // Negative control: placed flat, the keyframe is the curvature drop too high.
+    let flat = Scenario::resolve_on(&file, &data, Some(&earth), false).unwrap();
+    let (_, h_flat) = lattice.sample_at(flat.camera(0).position);
+    assert!(h_flat - 2000.0 > 500.0, "{h_flat}");
 }

@@ -66,7 +66,8 @@ impl Progress for Bars {
 }
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
-    let p = super::render::prepare(&args.render)?;
+    // The exact surface and the metrics live in the grid's frame (docs/eval.md).
+    let p = super::render::prepare_as(&args.render, Some(crate::render::EarthGeometry::Flat))?;
     let methods = &args.methods;
     if methods.is_empty() {
         anyhow::bail!("--methods lists no method");

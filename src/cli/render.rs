@@ -100,7 +100,19 @@ impl RenderArgs {
 
 /// Loads and checks config, data set and scenario; creates nothing.
 pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
-    let config = args.config()?;
+    prepare_as(args, None)
+}
+
+/// [`prepare`] with `[render] earth` replaced by `earth` when given (the evaluator works on
+/// the flat grid: docs/eval.md), before the scenario is placed.
+pub fn prepare_as(
+    args: &RenderArgs,
+    earth: Option<crate::render::EarthGeometry>,
+) -> anyhow::Result<Prepared> {
+    let mut config = args.config()?;
+    if let Some(earth) = earth {
+        config.render.earth = earth;
+    }
     let data = config.open_terrain()?;
     let scenario = config.open_scenario(args.scenario.as_deref(), &data)?;
     let frames = args.frames.unwrap_or(scenario.frames);

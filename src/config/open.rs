@@ -86,8 +86,11 @@ impl Config {
     /// resolved against `data`.
     pub fn open_scenario(&self, path: Option<&Path>, data: &Terrain) -> Result<Scenario> {
         let configured = self.scenario.path.as_ref().map(|p| self.resolve(p));
+        // On the ellipsoid, keyframes given on the grid are placed over their samples there.
+        let on_earth = self.render.earth == EarthGeometry::Ellipsoid;
         match path.map(Path::to_path_buf).or(configured) {
-            Some(path) => Scenario::load_on(&path, data, || self.open_earth()),
+            Some(path) => Scenario::load_on(&path, data, || self.open_earth(), on_earth),
+            None if on_earth => Scenario::builtin_default_on(data, self.open_earth()?.as_ref()),
             None => Scenario::builtin_default(data),
         }
     }

@@ -23,6 +23,11 @@ pub trait Level0 {
     fn height(&self) -> u32;
     /// Metres between neighbouring samples (x and y).
     fn spacing(&self) -> f64;
+    /// Native level-0 samples of the data set per sample of this grid (`Heightmap::
+    /// source_step`): `[1, 1]` unless loaded from a coarser level or resampled.
+    fn source_step(&self) -> [f64; 2] {
+        [1.0, 1.0]
+    }
     /// Height of sample `(col, row)` in metres; an error for a position outside the grid or data
     /// that cannot be read.
     fn sample(&self, col: u32, row: u32) -> Result<f32>;
@@ -83,6 +88,9 @@ impl Level0 for Heightmap {
     }
     fn spacing(&self) -> f64 {
         self.spacing
+    }
+    fn source_step(&self) -> [f64; 2] {
+        self.source_step
     }
     #[inline]
     fn sample(&self, col: u32, row: u32) -> Result<f32> {
@@ -469,15 +477,6 @@ impl Terrain {
         })
     }
 
-    /// Native level-0 samples per sample of this grid (`Heightmap::source_step`; the
-    /// clipmap's pyramid is level 0 itself).
-    pub fn source_step(&self) -> [f64; 2] {
-        match self {
-            Terrain::Grid(h) => h.source_step,
-            Terrain::Pyramid(_) => [1.0, 1.0],
-        }
-    }
-
     /// Minimum and maximum level-0 height (the pyramid's from its manifest).
     pub fn height_range(&self) -> (f32, f32) {
         match self {
@@ -504,6 +503,13 @@ impl Level0 for Terrain {
         match self {
             Terrain::Grid(h) => h.spacing,
             Terrain::Pyramid(p) => p.spacing,
+        }
+    }
+    /// The clipmap's pyramid is level 0 itself.
+    fn source_step(&self) -> [f64; 2] {
+        match self {
+            Terrain::Grid(h) => h.source_step,
+            Terrain::Pyramid(_) => [1.0, 1.0],
         }
     }
     fn sample(&self, col: u32, row: u32) -> Result<f32> {

@@ -89,11 +89,58 @@ impl Earth {
                 .to_local(WGS84.to_ecef(Geodetic::new(lat_deg, lon_deg, 0.0)));
             return Ok((p.x, p.y));
         };
+        let _ = (w, h);
         let [x, y] = self.to_grid(georef)?.point([lon_deg, lat_deg])?;
         let t = &georef.sample_to_crs;
         let (col, row) = ((x - t[0]) / t[1], (y - t[3]) / t[5]);
-        let (ex, ey) = data.extent();
-        Ok((col / (*w - 1) as f64 * ex, row / (*h - 1) as f64 * ey))
+        let (step, spacing) = (data.source_step(), data.spacing());
+        Ok((col / step[0] * spacing, row / step[1] * spacing))
+    }
+
+    /// The latitude/longitude (degrees) of grid position `(x, y)` (world metres of the grid's
+    /// own addressing, as [`Earth::grid_position`] returns): the inverse of that, and the
+    /// mapping the geolocation lattice draws the grid with (`Placement::lattice`).
+    pub fn grid_lat_lon<D: Level0 + ?Sized>(&self, data: &D, x: f64, y: f64) -> Result<(f64, f64)> {
+        let Some((georef, _)) = &self.placement.georef else {
+            let g = WGS84.to_geodetic(self.frame().to_ecef(DVec3::new(x, y, 0.0)));
+            return Ok((g.lat_deg, g.lon_deg));
+        };
+        let (step, spacing) = (data.source_step(), data.spacing());
+        crate::dataset::world::SampleLocator::new(georef)?
+            .lat_lon(x / spacing * step[0], y / spacing * step[1])
+    }
+
+    /// The WGS84 pose of a camera given on the grid (`position` in the grid's world metres,
+    /// `z` in the terrain's datum; yaw/pitch/roll against the grid's axes): over the same
+    /// sample, at that height above the ellipsoid (the terrain's heights are drawn so), its
+    /// heading turned by the grid north's own true heading there (meridian convergence of a
+    /// projected grid, zero for a geographic one). Scenarios use it so that keyframes given on
+    /// the grid keep their place over the terrain when it is drawn on the ellipsoid.
+    pub fn grid_pose<D: Level0 + ?Sized>(
+        &self,
+        data: &D,
+        position: DVec3,
+        yaw_deg: f64,
+        pitch_deg: f64,
+        roll_deg: f64,
+    ) -> Result<GeoPose> {
+        let (lat, lon) = self.grid_lat_lon(data, position.x, position.y)?;
+        // Grid north's true heading: towards the grid point one sample north.
+        let (lat_n, lon_n) = self.grid_lat_lon(data, position.x, position.y + data.spacing())?;
+        let here = EnuFrame::new(&WGS84, Geodetic::new(lat, lon, 0.0));
+        let d = here.to_local(WGS84.to_ecef(Geodetic::new(lat_n, lon_n, 0.0)));
+        let convergence = d.x.atan2(d.y).to_degrees();
+        Ok(GeoPose {
+            lat_deg: lat,
+            lon_deg: lon,
+            // `world_height` takes the terrain's undulation off again: the camera sits at `z` in
+            // the terrain's datum, as on the flat grid.
+            height_m: position.z + self.terrain_undulation(lat, lon)?,
+            height_ref: HeightRef::Ellipsoid,
+            heading_deg: (yaw_deg + convergence).rem_euclid(360.0),
+            pitch_deg,
+            roll_deg,
+        })
     }
 
     fn to_grid(&self, georef: &Georef) -> Result<&Transform> {

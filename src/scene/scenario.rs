@@ -138,20 +138,23 @@ pub struct Scenario {
 impl Scenario {
     /// Reads and resolves a scenario file against a data set.
     pub fn load<D: Level0 + ?Sized>(path: &Path, data: &D) -> Result<Self> {
-        Self::load_on(path, data, || Ok(None))
+        Self::load_on(path, data, || Ok(None), false)
     }
 
     /// Reads and resolves a scenario file whose WGS84 keyframes (if any) are placed on `earth`
-    /// (asked for only when the file has such keyframes).
+    /// (asked for only when the file has such keyframes or `grid_on_earth`). `grid_on_earth`:
+    /// the terrain is drawn on the ellipsoid, so keyframes given on the grid are placed over
+    /// their samples there too ([`Earth::grid_pose`]).
     pub fn load_on<D: Level0 + ?Sized>(
         path: &Path,
         data: &D,
         earth: impl FnOnce() -> Result<Option<Earth>>,
+        grid_on_earth: bool,
     ) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let file: ScenarioFile = toml::from_str(&text).map_err(|e| Error::toml(path, &text, &e))?;
-        let resolved = if file.keyframes.iter().any(KeyframeSpec::is_geo) {
-            earth().and_then(|e| Self::resolve_on(&file, data, e.as_ref()))
+        let resolved = if grid_on_earth || file.keyframes.iter().any(KeyframeSpec::is_geo) {
+            earth().and_then(|e| Self::resolve_on(&file, data, e.as_ref(), grid_on_earth))
         } else {
             Self::resolve(&file, data)
         };
@@ -163,24 +166,32 @@ impl Scenario {
 
     /// The default flight, compiled in so the binary needs no files beside it.
     pub fn builtin_default<D: Level0 + ?Sized>(data: &D) -> Result<Self> {
+        Self::builtin_default_on(data, None)
+    }
+
+    /// [`Scenario::builtin_default`] over the terrain drawn on `earth`'s ellipsoid.
+    pub fn builtin_default_on<D: Level0 + ?Sized>(data: &D, earth: Option<&Earth>) -> Result<Self> {
         const TEXT: &str = include_str!("../../config/scenarios/default.toml");
         let file: ScenarioFile =
             toml::from_str(TEXT).map_err(|e| Error::invalid("built-in scenario", e.to_string()))?;
-        Self::resolve(&file, data)
+        Self::resolve_on(&file, data, earth, earth.is_some())
     }
 
     /// `data`: level-0 heights (exact; a tile pyramid is read node by node) for
     /// `above_ground` keyframes.
     pub fn resolve<D: Level0 + ?Sized>(file: &ScenarioFile, data: &D) -> Result<Self> {
-        Self::resolve_on(file, data, None)
+        Self::resolve_on(file, data, None, false)
     }
 
     /// [`Scenario::resolve`] with WGS84 keyframes placed on `earth` (none: such keyframes are
-    /// an error).
+    /// an error), and with `grid_on_earth` also the keyframes given on the grid (`at`,
+    /// `position`: over their samples on the ellipsoid, [`Earth::grid_pose`]; frames between
+    /// them then follow latitude, longitude and height like WGS84 keyframes).
     pub fn resolve_on<D: Level0 + ?Sized>(
         file: &ScenarioFile,
         data: &D,
         earth: Option<&Earth>,
+        grid_on_earth: bool,
     ) -> Result<Self> {
         let bad = |m: String| Err(Error::invalid("scenario", m));
         if !(file.fps.is_finite() && file.fps > 0.0) {
@@ -197,6 +208,22 @@ impl Scenario {
             far: file.far,
             ..Camera::default()
         };
+        let on_earth = |earth: &Earth, pose: &GeoPose, t: f64| -> Result<Key> {
+            let c = earth.camera(pose, data, &template)?;
+            let height = WGS84.to_geodetic(earth.frame().to_ecef(c.position)).height;
+            Ok(Key {
+                t,
+                position: c.position,
+                yaw: c.yaw_deg,
+                pitch: c.pitch_deg,
+                roll: c.roll_deg,
+                geo: Some(GeoPose {
+                    height_m: height,
+                    height_ref: HeightRef::Ellipsoid,
+                    ..*pose
+                }),
+            })
+        };
         for (i, k) in file.keyframes.iter().enumerate() {
             if k.is_geo() {
                 let pose = k.geo_pose(i)?;
@@ -205,20 +232,7 @@ impl Scenario {
                         "keyframe {i}: a WGS84 pose needs a data set on the earth (georeferenced, or [dataset] anchor)"
                     ));
                 };
-                let c = earth.camera(&pose, data, &template)?;
-                let height = WGS84.to_geodetic(earth.frame().to_ecef(c.position)).height;
-                keys.push(Key {
-                    t: k.t.unwrap_or(f64::NAN),
-                    position: c.position,
-                    yaw: c.yaw_deg,
-                    pitch: c.pitch_deg,
-                    roll: c.roll_deg,
-                    geo: Some(GeoPose {
-                        height_m: height,
-                        height_ref: HeightRef::Ellipsoid,
-                        ..pose
-                    }),
-                });
+                keys.push(on_earth(earth, &pose, k.t.unwrap_or(f64::NAN))?);
                 continue;
             }
             if k.heading_deg.is_some() || k.pitch_deg.is_some() || k.roll_deg.is_some() {
@@ -254,6 +268,11 @@ impl Scenario {
                     ));
                 }
             };
+            if let (true, Some(earth)) = (grid_on_earth, earth) {
+                let pose = earth.grid_pose(data, position, k.yaw, k.pitch, k.roll)?;
+                keys.push(on_earth(earth, &pose, k.t.unwrap_or(f64::NAN))?);
+                continue;
+            }
             keys.push(Key {
                 t: k.t.unwrap_or(f64::NAN),
                 position,
