@@ -532,6 +532,32 @@ fn one_millimetre_moves_are_resolved_far_from_the_origin() {
     common::assert_no_validation_messages(&gpu);
 }
 
+/// PGM casts its screen grid onto the flat plane: on the earth it is a one-line error naming
+/// the way out, not a wrong picture.
+#[test]
+fn pgm_on_the_earth_is_a_one_line_error() {
+    let gpu = common::gpu(false);
+    let data = geographic(65, 46.0, 8.0, 0.001, &|_, _| 100.0);
+    let lattice = Lattice::geographic(65, 65, [8.0, 46.0], [0.001, 0.001]).unwrap();
+    let options = common::options(64, 64, 1);
+    let pgm = MethodConfig::from(MethodKind::Pgm);
+    let e = Renderer::with_world(
+        &gpu,
+        &data,
+        pgm.clone(),
+        options.clone(),
+        None,
+        Some(&lattice),
+    )
+    .err()
+    .expect("pgm on the ellipsoid")
+    .to_string();
+    assert!(e.contains("earth = \"flat\"") && !e.contains('\n'), "{e}");
+    // The flat world takes it (the control).
+    assert!(Renderer::with_world(&gpu, &data, pgm, options, None, None).is_ok());
+    common::assert_no_validation_messages(&gpu);
+}
+
 #[test]
 fn udlod_renders_the_earth_like_brute_force() {
     let gpu = common::gpu(false);
@@ -605,23 +631,26 @@ fn udlod_renders_the_earth_like_brute_force() {
     common::assert_no_validation_messages(&gpu);
 }
 
-/// A real georeferenced data set through the whole chain (`vkterrain preprocess` of an SRTM3
-/// tile, `[dataset] kind = "tiles"`, `Config::open_renderer`): the data set's placement builds
-/// the lattice, through PROJ, at the native samples the loaded grid's samples stand for (the
-/// grid is resampled east-west on load: `Heightmap::source_step`). Every probed sample in
-/// view projects where independent f64 geodesy puts its latitude/longitude (from the
-/// manifest's `sample_to_crs`) within 0.5 px. Negative control: the same samples placed at
-/// the native columns of their own index (the resampling ignored) miss by pixels.
+/// Nothing lost, on a real georeferenced data set through the whole chain (`vkterrain
+/// preprocess` of an SRTM3 tile, `[dataset] kind = "tiles"`, `Config::open_terrain` and
+/// `open_renderer` on the ellipsoid): the grid is the source's own (1201 x 1201, nothing
+/// resampled), and for **every** source sample, read independently with GDAL from the
+/// `.hgt.zip` (its latitude/longitude from GDAL's geotransform), the renderer's vertex there
+/// (`sample_height` and `project` of set 0, what brute force draws) has exactly the source
+/// height (0 m), and where it is in view it projects where f64 geodesy puts that
+/// latitude/longitude/height within 0.5 px. Voids (-32768) have no source height and are
+/// counted apart. Negative control: the same data loaded for the flat world is resampled
+/// east-west (fewer columns: source samples are lost).
+#[cfg(feature = "gdal")]
 #[test]
-fn a_georeferenced_data_set_is_drawn_where_its_samples_lie() {
+fn every_source_sample_is_a_vertex_where_it_lies() {
     let data_dir = common::shared_data().expect("../shared/data (the real data; CI has it)");
     let tmp = std::env::temp_dir().join(format!("vkt-geodetic-{}", std::process::id()));
     let out = tmp.join("n42e001");
+    let zip = data_dir.join("srtm/N42E001.hgt.zip");
     vkterrain::dataset::preprocess::run(
         &vkterrain::dataset::preprocess::Options {
-            input: vkterrain::dataset::preprocess::Input::Files(vec![
-                data_dir.join("srtm/N42E001.hgt.zip"),
-            ]),
+            input: vkterrain::dataset::preprocess::Input::Files(vec![zip.clone()]),
             out: out.clone(),
             force: true,
             ..Default::default()
@@ -629,42 +658,60 @@ fn a_georeferenced_data_set_is_drawn_where_its_samples_lie() {
         &vkterrain::dataset::preprocess::NoProgress,
     )
     .unwrap();
+    // The source, independently: GDAL's SRTMHGT driver through /vsizip/.
+    let src = gdal::Dataset::open(format!("/vsizip/{}/N42E001.hgt", zip.display())).unwrap();
+    let gt = src.geo_transform().unwrap();
+    let (sw, sh) = src.raster_size();
+    let source: Vec<i16> = src
+        .rasterband(1)
+        .unwrap()
+        .read_as::<i16>((0, 0), (sw, sh), (sw, sh), None)
+        .unwrap()
+        .data()
+        .to_vec();
+    assert_eq!((sw, sh), (1201, 1201));
     let config_path = tmp.join("n42e001.toml");
-    std::fs::write(
-        &config_path,
-        format!(
-            "[render]\nwidth = 320\nheight = 200\nreadback_depth = true\n\n[dataset]\nkind = \"tiles\"\npath = \"{}\"\n",
-            out.display()
-        ),
-    )
-    .unwrap();
+    let config_text = format!(
+        "[render]\nwidth = 320\nheight = 200\nreadback_depth = true\n\n[dataset]\nkind = \"tiles\"\npath = \"{}\"\n",
+        out.display()
+    );
+    std::fs::write(&config_path, &config_text).unwrap();
     let config = vkterrain::config::Config::load(Some(&config_path)).unwrap();
     let terrain = config.open_terrain().unwrap();
     let grid = terrain.grid().unwrap().clone();
-    let step = grid.source_step;
-    // 42-43 N: east-west samples are cos(42.5 deg) = 0.74 of the north-south ones apart.
-    assert!(step[0] > 1.3 && step[1] == 1.0, "{step:?}");
+    assert_eq!(
+        (grid.width, grid.height, grid.source_step),
+        (1201, 1201, [1.0, 1.0])
+    );
+    // Negative control: the flat world's load resamples (cos 42.5 deg: ~886 columns).
+    std::fs::write(
+        &config_path,
+        config_text.replace("[render]\n", "[render]\nearth = \"flat\"\n"),
+    )
+    .unwrap();
+    let flat = vkterrain::config::Config::load(Some(&config_path)).unwrap();
+    let flat_width = flat.open_terrain().unwrap().grid().unwrap().width;
+    assert!(
+        flat_width < 1000,
+        "the flat world's grid has {flat_width} columns"
+    );
+    // The data set's own georeferencing maps the source's sample centres to grid samples.
     let georef = vkterrain::dataset::tiles::Dataset::open(&out)
         .unwrap()
         .manifest
         .georef
         .expect("SRTM is georeferenced");
-    assert_eq!(georef.crs.authority.as_deref(), Some("EPSG:4326"));
-    // Latitude/longitude of native sample (c, r): the manifest's affine map, in degrees.
-    let lat_lon = |c: f64, r: f64| {
-        let [x, y] = georef.at(c, r);
-        (y, x)
-    };
-    let (lat0, lon0) = lat_lon(0.0, 0.0);
+    let t = georef.sample_to_crs;
+    let grid_of = |lon: f64, lat: f64| ((lon - t[0]) / t[1], (lat - t[3]) / t[5]);
+    let (lat0, lon0) = (t[3], t[0]);
     let gpu = common::gpu(false);
     let mut options = config.render_options();
     options.frames_in_flight = 1;
     let mut renderer = config
         .open_renderer(&gpu, &terrain, options)
         .expect("renderer");
-    // 3 km above the tile's south-west part, looking north-east and down.
     let camera = Camera {
-        position: enu(lat0, lon0, lat0 + 0.2, lon0 + 0.2, 5000.0),
+        position: enu(lat0, lon0, 42.2, 1.2, 5000.0),
         yaw_deg: 45.0,
         pitch_deg: -25.0,
         far: 1e6,
@@ -675,40 +722,51 @@ fn a_georeferenced_data_set_is_drawn_where_its_samples_lie() {
         .render(FrameRequest::from(camera), &mut sink)
         .unwrap();
     renderer.finish(&mut sink).unwrap();
-    let mut pts = Vec::new();
-    for r in (0..grid.height as i32).step_by(40) {
-        for c in (0..grid.width as i32).step_by(30) {
-            pts.push(([c, r], [0.0f32, 0.0]));
+    // Every source sample: (GDAL pixel centre) -> lat/lon -> the grid's sample.
+    let mut pts = Vec::with_capacity(sw * sh);
+    let mut expected = Vec::with_capacity(sw * sh);
+    for gy in 0..sh {
+        for gx in 0..sw {
+            let lon = gt[0] + (gx as f64 + 0.5) * gt[1] + (gy as f64 + 0.5) * gt[2];
+            let lat = gt[3] + (gx as f64 + 0.5) * gt[4] + (gy as f64 + 0.5) * gt[5];
+            let (c, r) = grid_of(lon, lat);
+            assert!(
+                (c - c.round()).abs() < 1e-6 && (r - r.round()).abs() < 1e-6,
+                "source sample ({gx}, {gy}) falls between grid samples: ({c}, {r})"
+            );
+            pts.push(([c.round() as i32, r.round() as i32], [0.0f32, 0.0]));
+            expected.push((lat, lon, source[gy * sw + gx]));
         }
     }
     let got = probe(&renderer, TERRAIN_PROBE_SPV, c"probe_main", &pts);
     let (w, h) = (320u32, 200u32);
-    let (mut compared, mut worst, mut control_misses) = (0, 0.0f64, 0);
-    for ((cell, _), g) in pts.iter().zip(&got) {
+    let (mut voids, mut height_misses, mut in_view, mut worst_px) = (0, 0, 0, 0.0f64);
+    for (g, &(lat, lon, src_h)) in got.iter().zip(&expected) {
+        if src_h == -32768 {
+            voids += 1;
+            continue;
+        }
+        if g.heights[0] != src_h as f32 {
+            height_misses += 1;
+        }
         let px = pixel_of_clip(g.clip, w, h);
         if g.clip[3] < 10.0 || px.x < 0.0 || px.y < 0.0 || px.x > w as f64 || px.y > h as f64 {
             continue;
         }
-        compared += 1;
-        let height = g.heights[1] as f64;
-        let (c, r) = (cell[0] as f64 * step[0], cell[1] as f64 * step[1]);
-        let (lat, lon) = lat_lon(c, r);
-        let expected = pixel_of(&camera, enu(lat0, lon0, lat, lon, height), w, h);
-        worst = worst.max((px - expected).length());
-        let (wlat, wlon) = lat_lon(cell[0] as f64, cell[1] as f64);
-        let wrong = pixel_of(&camera, enu(lat0, lon0, wlat, wlon, height), w, h);
-        if (px - wrong).length() > 2.0 {
-            control_misses += 1;
-        }
+        in_view += 1;
+        let want = pixel_of(&camera, enu(lat0, lon0, lat, lon, src_h as f64), w, h);
+        worst_px = worst_px.max((px - want).length());
     }
     println!(
-        "{compared} samples in view: worst {worst:.3} px from f64 geodesy; {control_misses} miss by > 2 px when the resampling is ignored"
+        "{} source samples: {voids} voids, {height_misses} heights differ; {in_view} in view, worst {worst_px:.4} px from f64 geodesy",
+        sw * sh
     );
-    assert!(compared >= 50, "{compared} samples in view");
-    assert!(worst <= 0.5, "a sample is {worst} px from where it lies");
+    assert_eq!(height_misses, 0, "source heights not reproduced");
+    assert!(voids < sw * sh / 100, "{voids} voids");
+    assert!(in_view > 10_000, "{in_view} samples in view");
     assert!(
-        control_misses * 2 > compared,
-        "ignoring the resampling should misplace most samples: {control_misses} of {compared}"
+        worst_px <= 0.5,
+        "a sample is {worst_px} px from where it lies"
     );
     drop(renderer);
     common::assert_no_validation_messages(&gpu);

@@ -416,6 +416,7 @@ fn height_mips_are_box_averages_down_to_one_texel() {
         spacing: 1.0,
         heights: (0..15).map(|i| i as f32).collect(),
         albedo: None,
+        axis_spacing: [1.0, 1.0],
         source_step: [1.0, 1.0],
     };
     let mips = pgm::height_mips(&data);

@@ -173,7 +173,8 @@ impl Geometry {
         let s = self.side() as usize;
         let texels = s * s;
         let step = self.spacing * (1u64 << lod.min(62)) as f64;
-        let normals = interp::normals_snorm8(s, s, step, |i, j| node.heights[j * s + i] as f64);
+        let normals =
+            interp::normals_snorm8(s, s, [step, step], |i, j| node.heights[j * s + i] as f64);
         let albedo = match &node.rgba {
             Some(rgba) => rgba.clone(),
             None => {

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use super::Config;
 use crate::clipmap::{Clipmap, Geometry, StoreSource};
+use crate::dataset::tiles::LoadGrid;
 use crate::dataset::{NodeStore, PyramidReader, Terrain};
 use crate::driver::Gpu;
 use crate::error::Result;
@@ -29,8 +30,14 @@ impl Config {
                 self.open_store()?,
             )?)))
         } else {
+            // On the ellipsoid every native sample is drawn where it lies (the lattice); the
+            // flat world needs square metres.
+            let grid = match self.render.earth {
+                EarthGeometry::Ellipsoid => LoadGrid::Native,
+                EarthGeometry::Flat => LoadGrid::SquareMetres,
+            };
             Ok(Terrain::Grid(Arc::new(
-                self.dataset.load(|p| self.resolve(p))?,
+                self.dataset.load_as(|p| self.resolve(p), grid)?,
             )))
         }
     }

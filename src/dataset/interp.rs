@@ -86,7 +86,7 @@ pub fn triangulated([h00, h10, h01, h11]: [f64; 4], fx: f64, fy: f64) -> f64 {
 pub fn normals_snorm8(
     width: usize,
     height: usize,
-    step: f64,
+    step: [f64; 2],
     heights: impl Fn(usize, usize) -> f64,
 ) -> Vec<u8> {
     let mut out = Vec::with_capacity(width * height * 4);
@@ -94,8 +94,8 @@ pub fn normals_snorm8(
         for c in 0..width {
             let (cl, cr) = (c.saturating_sub(1), (c + 1).min(width - 1));
             let (rd, ru) = (r.saturating_sub(1), (r + 1).min(height - 1));
-            let dx = (heights(cr, r) - heights(cl, r)) / ((cr - cl) as f64 * step);
-            let dy = (heights(c, ru) - heights(c, rd)) / ((ru - rd) as f64 * step);
+            let dx = (heights(cr, r) - heights(cl, r)) / ((cr - cl) as f64 * step[0]);
+            let dy = (heights(c, ru) - heights(c, rd)) / ((ru - rd) as f64 * step[1]);
             out.extend(normal_snorm8(dx, dy));
         }
     }
@@ -141,7 +141,7 @@ mod tests {
     fn normals_of_a_plane_are_its_normal_everywhere_including_edges() {
         // z = 0.5 x: normal (-0.5, 0, 1) / |..|, at every sample (one-sided differences agree
         // with central ones on a plane).
-        let n = normals_snorm8(5, 3, 2.0, |c, _| c as f64);
+        let n = normals_snorm8(5, 3, [2.0, 2.0], |c, _| c as f64);
         let want = normal_snorm8(0.5, 0.0);
         assert!(n.chunks_exact(4).all(|t| t == want));
         assert_eq!(n.len(), 5 * 3 * 4);

@@ -44,6 +44,10 @@ pub struct Heightmap {
     pub heights: Vec<f32>,
     /// Optional RGBA8 (sRGB) albedo covering the same extent, row 0 = south.
     pub albedo: Option<Albedo>,
+    /// Metres between neighbouring samples along x and y (the normals' slopes): `[spacing,
+    /// spacing]` except on a native non-square grid (`tiles::LoadGrid::Native`), where
+    /// `spacing` is the smallest of them (LOD distances err on the fine side).
+    pub axis_spacing: [f64; 2],
     /// Native level-0 samples per sample of this grid (x, y): `[1, 1]` unless it was loaded
     /// from a coarser pyramid level or resampled east-west (`tiles::load`). The geolocation
     /// lattice places sample `(c, r)` at the native sample `(c * x, r * y)`.
@@ -109,6 +113,7 @@ impl Heightmap {
             spacing,
             heights,
             albedo: None,
+            axis_spacing: [spacing, spacing],
             source_step: [1.0, 1.0],
         })
     }
@@ -168,7 +173,7 @@ impl Heightmap {
         interp::normals_snorm8(
             self.width as usize,
             self.height as usize,
-            self.spacing,
+            self.axis_spacing,
             |c, r| self.sample(c as u32, r as u32) as f64,
         )
     }

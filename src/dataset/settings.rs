@@ -211,8 +211,18 @@ impl DatasetConfig {
         }
     }
 
-    /// Loads the whole height grid; relative paths are resolved with `resolve`.
+    /// Loads the whole height grid; relative paths are resolved with `resolve`. A non-square
+    /// grid is resampled to square metres (the flat world; [`DatasetConfig::load_as`]).
     pub fn load(&self, resolve: impl Fn(&Path) -> PathBuf) -> Result<Heightmap> {
+        self.load_as(resolve, tiles::LoadGrid::SquareMetres)
+    }
+
+    /// [`DatasetConfig::load`] with a non-square (geographic) grid loaded as `grid` says.
+    pub fn load_as(
+        &self,
+        resolve: impl Fn(&Path) -> PathBuf,
+        grid: tiles::LoadGrid,
+    ) -> Result<Heightmap> {
         match self {
             DatasetConfig::Procedural(p) => procedural::generate(&procedural::ProceduralParams {
                 size: p.size,
@@ -227,7 +237,7 @@ impl DatasetConfig {
                 p.albedo.as_deref().map(&resolve).as_deref(),
             ),
             DatasetConfig::Tiles(t) => {
-                tiles::load(&resolve(&t.path), t.lod, tiles::DEFAULT_MAX_SAMPLES)
+                tiles::load_as(&resolve(&t.path), t.lod, tiles::DEFAULT_MAX_SAMPLES, grid)
             }
             DatasetConfig::Xyz(_) => Err(Error::invalid(
                 "dataset.kind",

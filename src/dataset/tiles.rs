@@ -168,11 +168,51 @@ impl Dataset {
 /// Default bound on the samples of a level assembled into one [`Heightmap`].
 pub const DEFAULT_MAX_SAMPLES: u64 = 4097 * 4097;
 
+/// How a grid whose samples are not square in metres (a geographic grid) is loaded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LoadGrid {
+    /// Resampled east-west to the north-south spacing: a square grid for the flat world
+    /// (`[render] earth = "flat"`, the evaluator).
+    #[default]
+    SquareMetres,
+    /// The data set's own samples, every one of them (the ellipsoid's geolocation lattice
+    /// places them): `spacing` is the smallest metric spacing anywhere on the grid (LOD
+    /// distances measured with it err on the fine side), `axis_spacing` the stated ones.
+    Native,
+}
+
 /// Loads level `lod` (or, without one, the finest level of at most `max_samples` samples
 /// that fits [`super::MAX_SIDE`]) as a [`Heightmap`] for the brute-force renderer. Coarser levels
 /// have `2^lod` times the spacing; non-square spacing (geographic data) is resampled
-/// east-west to the north-south spacing.
+/// east-west to the north-south spacing ([`LoadGrid::SquareMetres`]; [`load_as`] chooses).
 pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap> {
+    load_as(dir, lod, max_samples, LoadGrid::SquareMetres)
+}
+
+/// The smallest east-west metres between samples of a geographic grid: the manifest states
+/// them at the centre latitude; they shrink with cos(latitude) towards the pole.
+fn poleward_east_west(ds: &Dataset, sx: f64) -> f64 {
+    use super::crs::CrsKind;
+    let Some(g) = ds.manifest.georef.as_ref() else {
+        return sx;
+    };
+    if g.crs.kind != CrsKind::Geographic {
+        return sx;
+    }
+    let deg = g.crs.unit_size.to_degrees();
+    let h = ds.manifest.height.max(1) as f64 - 1.0;
+    let (a, b) = (g.at(0.0, 0.0)[1] * deg, g.at(0.0, h)[1] * deg);
+    let (centre, pole) = ((a + b) / 2.0, a.abs().max(b.abs()).min(89.999));
+    sx * pole.to_radians().cos() / centre.to_radians().cos()
+}
+
+/// [`load`] with the grid's loading chosen by `grid`.
+pub fn load_as(
+    dir: &Path,
+    lod: Option<u32>,
+    max_samples: u64,
+    grid: LoadGrid,
+) -> Result<Heightmap> {
     let ds = Dataset::open(dir)?;
     let fits = |l: u32| {
         let (w, h) = ds.layout.level_size(l);
@@ -206,10 +246,29 @@ pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap>
     let (w, h, heights, rgba) = ds.level_raster(lod)?;
     let scale = (1u64 << lod) as f64;
     let [sx, sy] = ds.manifest.spacing.map(|s| s * scale);
-    // ISSUE-14 removes this: today's renderer draws a flat, square-sampled grid, so a
-    // geographic (or otherwise non-square) native grid is resampled east-west to the
-    // north-south spacing here, at load time. The data set itself keeps the native grid.
-    let (w2, heights) = if ((sx - sy) / sy).abs() > 1e-9 {
+    let square = ((sx - sy) / sy).abs() <= 1e-9;
+    let label = if lod == 0 {
+        String::new()
+    } else {
+        format!(" level {lod}")
+    };
+    let name = format!("{}{label} ({})", ds.manifest.name, ds.manifest.content);
+    let albedo = rgba.map(|rgba| Albedo {
+        width: w,
+        height: h,
+        rgba,
+    });
+    if grid == LoadGrid::Native && !square {
+        let mut map = Heightmap::new(name, w, h, poleward_east_west(&ds, sx).min(sy), heights)?;
+        map.axis_spacing = [sx, sy];
+        map.source_step = [scale, scale];
+        map.albedo = albedo;
+        return Ok(map);
+    }
+    // The flat world draws a square-sampled grid, so a geographic (or otherwise non-square)
+    // native grid is resampled east-west to the north-south spacing here, at load time. The
+    // data set itself keeps the native grid ([`LoadGrid::Native`] loads it).
+    let (w2, heights) = if !square {
         let w2 = (((w - 1) as f64 * sx / sy).round() as u32 + 1).max(2);
         let mut out = Vec::with_capacity(w2 as usize * h as usize);
         for r in 0..h as usize {
@@ -226,23 +285,8 @@ pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap>
     } else {
         (w, heights)
     };
-    let label = if lod == 0 {
-        String::new()
-    } else {
-        format!(" level {lod}")
-    };
-    let mut map = Heightmap::new(
-        format!("{}{label} ({})", ds.manifest.name, ds.manifest.content),
-        w2,
-        h,
-        sy,
-        heights,
-    )?;
+    let mut map = Heightmap::new(name, w2, h, sy, heights)?;
     map.source_step = [scale * sy / sx, scale];
-    map.albedo = rgba.map(|rgba| Albedo {
-        width: w,
-        height: h,
-        rgba,
-    });
+    map.albedo = albedo;
     Ok(map)
 }

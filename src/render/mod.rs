@@ -242,8 +242,14 @@ impl Renderer {
         lattice: Option<&crate::geo::Lattice>,
     ) -> Result<Self> {
         let data: Terrain = data.into();
-        let method = method.into();
+        let method: MethodConfig = method.into();
         options.check(gpu)?;
+        if lattice.is_some() && method.kind() == crate::lod::MethodKind::Pgm {
+            return Err(Error::invalid(
+                "method pgm",
+                "its screen grid is cast onto the flat plane, not onto the ellipsoid: set [render] earth = \"flat\" to draw this data set with it",
+            ));
+        }
         if let Some(c) = &clipmap {
             check_level0(c, &data)?;
         }
