@@ -772,3 +772,152 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
     common::assert_no_validation_messages(&gpu);
     std::fs::remove_dir_all(&tmp).ok();
 }
+
+/// The chunked clipmap on a native geographic grid drawn on the ellipsoid (SRTM3 N42E001,
+/// 1201 x 1201 at 92 x 68 m, `[clipmap] enabled`): UDLOD through the clipmap, converged at each
+/// of 200 poses (the crack tests' poses, laid on the earth over their grid samples like
+/// scenario keyframes), covers every pixel brute force on the earth covers (watertight: no
+/// sky where the exact surface is), and the clipmap's CPU height query equals the GPU's.
+/// Negative control: the same data set through the flat world's clipmap is refused (its
+/// spacing is not square).
+#[cfg(feature = "gdal")]
+#[test]
+fn udlod_through_the_clipmap_is_watertight_on_a_native_geographic_grid() {
+    use vkterrain::config::Config;
+    let data_dir = common::shared_data().expect("../shared/data (the real data; CI has it)");
+    let tmp = std::env::temp_dir().join(format!("vkt-geodetic-cm-{}", std::process::id()));
+    let out = tmp.join("n42e001");
+    vkterrain::dataset::preprocess::run(
+        &vkterrain::dataset::preprocess::Options {
+            input: vkterrain::dataset::preprocess::Input::Files(vec![
+                data_dir.join("srtm/N42E001.hgt.zip"),
+            ]),
+            out: out.clone(),
+            force: true,
+            ..Default::default()
+        },
+        &vkterrain::dataset::preprocess::NoProgress,
+    )
+    .unwrap();
+    let (w, h) = (96u32, 64u32);
+    let config_with = |extra: &str| {
+        let path = tmp.join("c.toml");
+        std::fs::write(
+            &path,
+            format!(
+                "[render]\nwidth = {w}\nheight = {h}\nreadback_depth = true\nframes_in_flight = 1\n{extra}\n[dataset]\nkind = \"tiles\"\npath = \"{}\"\n",
+                out.display()
+            ),
+        )
+        .unwrap();
+        Config::load(Some(&path)).unwrap()
+    };
+    let clipmap_text = "\n[clipmap]\nenabled = true\natlas_capacity = 400\nnode_count = 6\n";
+    // Negative control first: the flat world's clipmap refuses the non-square grid.
+    let flat = config_with(&format!("earth = \"flat\"\n{clipmap_text}"));
+    let e = flat
+        .open_terrain()
+        .err()
+        .expect("flat clipmap on geographic data")
+        .to_string();
+    assert!(e.contains("not square") && !e.contains('\n'), "{e}");
+    let brute_cfg = config_with("");
+    let cm_cfg = config_with(clipmap_text);
+    let grid = brute_cfg.open_terrain().unwrap();
+    let pyramid = cm_cfg.open_terrain().unwrap();
+    let earth = brute_cfg
+        .open_earth()
+        .unwrap()
+        .expect("SRTM lies on the earth");
+    let gpu = common::gpu(false);
+    let mut brute = brute_cfg
+        .open_renderer(&gpu, &grid, brute_cfg.render_options())
+        .unwrap();
+    let mut cm_cfg_udlod = cm_cfg.clone();
+    cm_cfg_udlod.method = MethodConfig::from(MethodKind::Udlod);
+    let mut udlod = cm_cfg_udlod
+        .open_renderer(&gpu, &pyramid, cm_cfg.render_options())
+        .unwrap();
+    let map = grid.grid().unwrap();
+    let template = Camera::default();
+    let cameras: Vec<Camera> = common::poses::poses(map, 200)
+        .iter()
+        .map(|c| {
+            let pose = earth
+                .grid_pose(&grid, c.position, c.yaw_deg, c.pitch_deg, c.roll_deg)
+                .unwrap();
+            earth.camera(&pose, &grid, &template).unwrap()
+        })
+        .collect();
+    let (mut holes, mut frames_total) = (0usize, 0usize);
+    for (i, c) in cameras.iter().enumerate() {
+        let mut sink = CollectSink::default();
+        brute.render(FrameRequest::from(*c), &mut sink).unwrap();
+        brute.finish(&mut sink).unwrap();
+        let reference = sink.frames.pop().unwrap();
+        let mut frame = None;
+        for k in 0..300 {
+            let mut sink = CollectSink::default();
+            udlod.render(FrameRequest::from(*c), &mut sink).unwrap();
+            udlod.finish(&mut sink).unwrap();
+            frame = sink.frames.pop();
+            frames_total += 1;
+            let cm = udlod.clipmap().unwrap();
+            if cm.busy() == 0 && cm.views.iter().all(|v| v.fallback_cells == 0) {
+                break;
+            }
+            assert!(
+                k < 299,
+                "pose {i}: the clipmap did not converge: {} busy, {:?} fallback cells, {:?}",
+                cm.busy(),
+                cm.views
+                    .iter()
+                    .map(|v| v.fallback_cells)
+                    .collect::<Vec<_>>(),
+                cm.counters
+            );
+        }
+        let f = frame.unwrap();
+        for y in 0..h {
+            for x in 0..w {
+                if reference.depth_at(x, y).unwrap() > 0.0 && f.depth_at(x, y).unwrap() == 0.0 {
+                    holes += 1;
+                }
+            }
+        }
+    }
+    // CPU == GPU height queries on the last view.
+    let points: Vec<[f32; 2]> = (0..4096u32)
+        .map(|k| {
+            let u = (k as f32 * 0.618_034).fract() * 1200.0;
+            let v = (k as f32 * 0.414_213_6).fract() * 1200.0;
+            if k % 2 == 0 {
+                [u.floor(), v.floor()]
+            } else {
+                [u, v]
+            }
+        })
+        .collect();
+    let gpu_h = udlod.probe_heights_in_view(0, &points).unwrap();
+    let cm = udlod.clipmap().unwrap();
+    let worst = points
+        .iter()
+        .zip(&gpu_h)
+        .map(|(p, g)| (cm.sample_height(0, *p) - g[0]).abs())
+        .fold(0f32, f32::max);
+    println!(
+        "{} poses, {frames_total} clipmap frames: {holes} hole pixels; CPU vs GPU heights worst {worst:e} m",
+        cameras.len()
+    );
+    assert_eq!(
+        holes, 0,
+        "UDLOD through the clipmap left holes on the earth"
+    );
+    assert!(
+        worst <= 4.0 * f32::EPSILON * 3200.0,
+        "CPU and GPU heights differ by {worst} m"
+    );
+    drop((brute, udlod));
+    common::assert_no_validation_messages(&gpu);
+    std::fs::remove_dir_all(&tmp).ok();
+}

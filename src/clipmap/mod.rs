@@ -113,8 +113,11 @@ pub struct Geometry {
     pub center: u32,
     pub border: u32,
     pub levels: Vec<(u32, u32)>,
-    /// Metres between level-0 samples (north-south; the clipmap needs square spacing).
+    /// Metres between level-0 samples: the LOD metric (north-south on a square grid; the
+    /// smallest metric spacing on a native non-square grid, [`Geometry::with_native_spacing`]).
     pub spacing: f64,
+    /// Stated metres between level-0 samples along x and y (the normals' slopes).
+    pub axis_spacing: [f64; 2],
     /// Level-0 height range (metres), for the colour ramp of untextured data.
     pub height_range: [f32; 2],
 }
@@ -130,8 +133,20 @@ impl Geometry {
             border: l.border,
             levels: (0..l.levels()).map(|lod| l.nodes(lod)).collect(),
             spacing: store.spacing()[1],
+            axis_spacing: store.spacing(),
             height_range: store.height_range(),
         }
+    }
+
+    /// The geometry for a native non-square grid drawn on the ellipsoid: the LOD metric as
+    /// the level-0 reader takes it (`tiles::native_lod_spacing`); square grids are unchanged.
+    pub fn with_native_spacing(mut self, georef: Option<&crate::dataset::crs::Georef>) -> Self {
+        let [sx, sy] = self.axis_spacing;
+        if ((sx - sy) / sy).abs() > 1e-9 {
+            self.spacing =
+                crate::dataset::tiles::native_lod_spacing(georef, self.height, self.axis_spacing);
+        }
+        self
     }
 
     pub fn of(ds: &Dataset) -> Self {
@@ -143,6 +158,7 @@ impl Geometry {
             border: l.border,
             levels: (0..l.levels()).map(|lod| l.nodes(lod)).collect(),
             spacing: ds.manifest.spacing[1],
+            axis_spacing: ds.manifest.spacing,
             height_range: ds.manifest.height_range,
         }
     }
@@ -172,9 +188,9 @@ impl Geometry {
     pub fn shading(&self, lod: u32, node: &NodeData) -> Vec<u8> {
         let s = self.side() as usize;
         let texels = s * s;
-        let step = self.spacing * (1u64 << lod.min(62)) as f64;
-        let normals =
-            interp::normals_snorm8(s, s, [step, step], |i, j| node.heights[j * s + i] as f64);
+        let scale = (1u64 << lod.min(62)) as f64;
+        let step = self.axis_spacing.map(|a| a * scale);
+        let normals = interp::normals_snorm8(s, s, step, |i, j| node.heights[j * s + i] as f64);
         let albedo = match &node.rgba {
             Some(rgba) => rgba.clone(),
             None => {

@@ -25,17 +25,13 @@ impl Config {
     /// The data set's level 0: the whole grid in memory, or with `[clipmap] enabled` the tile
     /// pyramid read node by node (level 0 is then never held whole on the host).
     pub fn open_terrain(&self) -> Result<Terrain> {
+        let grid = self.load_grid();
         if self.clipmap.enabled {
-            Ok(Terrain::Pyramid(Arc::new(PyramidReader::from_store(
+            Ok(Terrain::Pyramid(Arc::new(PyramidReader::from_store_as(
                 self.open_store()?,
+                grid,
             )?)))
         } else {
-            // On the ellipsoid every native sample is drawn where it lies (the lattice); the
-            // flat world needs square metres.
-            let grid = match self.render.earth {
-                EarthGeometry::Ellipsoid => LoadGrid::Native,
-                EarthGeometry::Flat => LoadGrid::SquareMetres,
-            };
             Ok(Terrain::Grid(Arc::new(
                 self.dataset.load_as(|p| self.resolve(p), grid)?,
             )))
@@ -49,7 +45,10 @@ impl Config {
             return Ok(None);
         }
         let store = self.open_store()?;
-        let geometry = Geometry::of_store(&*store);
+        let mut geometry = Geometry::of_store(&*store);
+        if self.load_grid() == LoadGrid::Native {
+            geometry = geometry.with_native_spacing(store.georef()?.as_ref());
+        }
         Clipmap::new(
             geometry,
             self.clipmap.clone(),
@@ -57,6 +56,15 @@ impl Config {
             self.render.views(),
         )
         .map(Some)
+    }
+
+    /// How a non-square (geographic) grid is loaded: on the ellipsoid every native sample is
+    /// drawn where it lies (the lattice); the flat world needs square metres.
+    fn load_grid(&self) -> LoadGrid {
+        match self.render.earth {
+            EarthGeometry::Ellipsoid => LoadGrid::Native,
+            EarthGeometry::Flat => LoadGrid::SquareMetres,
+        }
     }
 
     /// The renderer's options (`[render]`).

@@ -14,6 +14,7 @@ use super::interp::GridCell;
 use super::pyramid::{LayerSet, Layout, LevelRows, Node};
 use super::stats::TileStats;
 use super::tiles::Dataset;
+use super::tiles::LoadGrid;
 use super::xyz::XyzPyramid;
 use crate::error::{Error, Result};
 
@@ -183,21 +184,41 @@ impl PyramidReader {
         Self::from_store(Arc::new(DiskStore::open(dir)?))
     }
 
-    /// Level 0 of any node store (a data set directory, live XYZ tiles).
+    /// Level 0 of any node store (a data set directory, live XYZ tiles), for the flat world:
+    /// its spacing must be square.
     pub fn from_store(store: Arc<dyn NodeStore>) -> Result<Self> {
+        Self::from_store_as(store, LoadGrid::SquareMetres)
+    }
+
+    /// [`PyramidReader::from_store`]; with [`LoadGrid::Native`] (the ellipsoid) a non-square
+    /// grid is taken as it is, its spacing the LOD metric of `tiles::native_lod_spacing`.
+    pub fn from_store_as(store: Arc<dyn NodeStore>, grid: LoadGrid) -> Result<Self> {
         let [sx, sy] = store.spacing();
         let what = || store.describe();
-        if !(sx.is_finite() && sy.is_finite() && sx > 0.0 && sy > 0.0)
-            || ((sx - sy) / sy).abs() > 1e-9
-        {
-            // ISSUE-14: goes away when the clipmap renders native (non-square) grids.
+        if !(sx.is_finite() && sy.is_finite() && sx > 0.0 && sy > 0.0) {
+            return Err(Error::invalid(
+                what(),
+                format!("sample spacing {sx} x {sy} m"),
+            ));
+        }
+        let square = ((sx - sy) / sy).abs() <= 1e-9;
+        if !square && grid == LoadGrid::SquareMetres {
             return Err(Error::invalid(
                 what(),
                 format!(
-                    "sample spacing {sx} x {sy} m is not square; the clipmap path needs square spacing (disable [clipmap] to resample)"
+                    "sample spacing {sx} x {sy} m is not square; the flat world's clipmap needs square spacing (draw it on the ellipsoid, [render] earth = \"ellipsoid\", or disable [clipmap] to resample)"
                 ),
             ));
         }
+        let spacing = if square {
+            sy
+        } else {
+            super::tiles::native_lod_spacing(
+                store.georef()?.as_ref(),
+                store.layout().height,
+                [sx, sy],
+            )
+        };
         let layout = store.layout();
         let limit = 1u64 << 30;
         if layout.width > limit || layout.height > limit {
@@ -212,7 +233,7 @@ impl PyramidReader {
             name: store.name(),
             width: layout.width as u32,
             height: layout.height as u32,
-            spacing: sy,
+            spacing,
             height_range: store.height_range(),
             center: layout.center,
             capacity: 3 * nx as usize + 8,

@@ -3,6 +3,7 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
+use super::crs::Georef;
 use super::manifest::{self, Manifest};
 use super::pyramid::{
     LEVEL_HEADER, LEVEL_MAGIC, LayerSet, Layout, Node, level_header, read_node_from,
@@ -189,21 +190,24 @@ pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap>
     load_as(dir, lod, max_samples, LoadGrid::SquareMetres)
 }
 
-/// The smallest east-west metres between samples of a geographic grid: the manifest states
-/// them at the centre latitude; they shrink with cos(latitude) towards the pole.
-fn poleward_east_west(ds: &Dataset, sx: f64) -> f64 {
+/// The LOD metric of a native grid whose stated metres between samples are `[sx, sy]`
+/// (`height` rows, georeferenced by `georef`): the smallest metric spacing anywhere on it, so
+/// distances measured with it are never longer than true ones. A geographic grid's stated
+/// east-west spacing holds at its centre latitude and shrinks with cos(latitude) towards the
+/// pole.
+pub fn native_lod_spacing(georef: Option<&Georef>, height: u64, [sx, sy]: [f64; 2]) -> f64 {
     use super::crs::CrsKind;
-    let Some(g) = ds.manifest.georef.as_ref() else {
-        return sx;
+    let ew = match georef {
+        Some(g) if g.crs.kind == CrsKind::Geographic => {
+            let deg = g.crs.unit_size.to_degrees();
+            let last = height.max(1) as f64 - 1.0;
+            let (a, b) = (g.at(0.0, 0.0)[1] * deg, g.at(0.0, last)[1] * deg);
+            let (centre, pole) = ((a + b) / 2.0, a.abs().max(b.abs()).min(89.999));
+            sx * pole.to_radians().cos() / centre.to_radians().cos()
+        }
+        _ => sx,
     };
-    if g.crs.kind != CrsKind::Geographic {
-        return sx;
-    }
-    let deg = g.crs.unit_size.to_degrees();
-    let h = ds.manifest.height.max(1) as f64 - 1.0;
-    let (a, b) = (g.at(0.0, 0.0)[1] * deg, g.at(0.0, h)[1] * deg);
-    let (centre, pole) = ((a + b) / 2.0, a.abs().max(b.abs()).min(89.999));
-    sx * pole.to_radians().cos() / centre.to_radians().cos()
+    ew.min(sy)
 }
 
 /// [`load`] with the grid's loading chosen by `grid`.
@@ -259,7 +263,9 @@ pub fn load_as(
         rgba,
     });
     if grid == LoadGrid::Native && !square {
-        let mut map = Heightmap::new(name, w, h, poleward_east_west(&ds, sx).min(sy), heights)?;
+        let lod_spacing =
+            native_lod_spacing(ds.manifest.georef.as_ref(), ds.manifest.height, [sx, sy]);
+        let mut map = Heightmap::new(name, w, h, lod_spacing, heights)?;
         map.axis_spacing = [sx, sy];
         map.source_step = [scale, scale];
         map.albedo = albedo;
