@@ -1,6 +1,12 @@
 #!/usr/bin/env bash
 # Issue 18 (tau means tau) on the GPU machine: UDLOD triangles, error and frame time per tau,
 # for this branch's binary and, when present, main's binary before the change.
+# The branch's eval sweeps grid 4 (the default since issue 18's third round) against grid 8 in
+# one run, each at tau 0.5, 0.7, 1, 1.4, 2, 2.8, 4, 5.6: grid 4 at tau 0.5/1/2/4 is the new
+# default, grid 8 at 0.7/1.4/2.8/5.6 selects exactly what main's grid 8 (share 0.5) selects at
+# 0.5/1/2/4 (the share only rescales tau: docs/udlod.md, "Issue 18, third round"), grid 8 at
+# 0.5/1/2/4 is grid 8 with its own new share. The bench (wall frame time, 2 frames in flight)
+# runs each binary's default.
 #
 # Here, before carrying: a release build, `../shared/device-vulkan/prepare.sh
 # target/release/vkterrain`, optionally main's release binary copied to
@@ -32,9 +38,16 @@ for bin in .device-vk/vkterrain .device-vk/vkterrain-before; do
       "$bin" bench --config "$cfg" --method udlod --tau-px "$tau" --resolutions 1920x1080 \
         --compare-frames-in-flight 2 --frames 300 --warmup 20
     done
-    log "$bin eval $cfg tau sweep 1920x1080"
-    "$bin" eval --config "$cfg" --methods udlod --sweep tau_px=0.5,1,2,4 --width 1920 \
-      --height 1080 --out "$(mktemp -d)" --force 2>&1 | tail -6
+    if [ "$bin" = .device-vk/vkterrain ]; then
+      log "$bin eval $cfg grid 4 vs 8, tau sweep 1920x1080"
+      "$bin" eval --config "$cfg" --methods udlod --sweep grid_size=4,8 \
+        --sweep tau_px=0.5,0.7,1,1.4,2,2.8,4,5.6 --width 1920 --height 1080 \
+        --out "$(mktemp -d)" --force 2>&1 | tail -20
+    else
+      log "$bin eval $cfg tau sweep 1920x1080"
+      "$bin" eval --config "$cfg" --methods udlod --sweep tau_px=0.5,1,2,4 --width 1920 \
+        --height 1080 --out "$(mktemp -d)" --force 2>&1 | tail -6
+    fi
   done
 done
 rm -f "$PUGET"

@@ -59,6 +59,18 @@ pub fn render(
     render_method(gpu, data, MethodKind::Brute, options, requests)
 }
 
+/// The UDLOD tile sizes (`grid_size`) the crack, popping and error-bound tests check: the
+/// shipped default and grid 8 (the default before issue 18's third round), so a change of the
+/// default keeps both covered.
+pub fn udlod_grids() -> Vec<u32> {
+    let default = UdlodSettings::default().grid_size;
+    if default == 8 {
+        vec![8]
+    } else {
+        vec![default, 8]
+    }
+}
+
 /// `kind` with `udlod` as its settings when it is UDLOD, else with its defaults.
 pub fn method_with(kind: MethodKind, udlod: UdlodSettings) -> MethodConfig {
     match kind {
