@@ -20,7 +20,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// UDLOD's default tile size (stored by `vkterrain preprocess` by default).
-const GRID: u32 = 4;
+const GRID: u32 = 8;
 
 fn main() {
     let sets = std::env::var("VKT_STARTUP_DATASETS")

@@ -32,7 +32,7 @@ pub struct UdlodSettings {
 impl Default for UdlodSettings {
     fn default() -> Self {
         UdlodSettings {
-            grid_size: 4,
+            grid_size: 8,
             tau_px: 1.0,
             morph_range: 0.2,
             max_tiles: 16384,
