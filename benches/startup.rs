@@ -1,6 +1,6 @@
 //! UDLOD start-up on tile pyramids (a benchmark, not a test): the tile statistics `Levels`
-//! needs, (a) read from the data set (`stats-g16.bin`, stored by `vkterrain preprocess`: what
-//! start-up does now), (b) computed from level 0 through the bounded node reader on one
+//! needs, (a) read from the data set (`stats-g{GRID}.bin`, `GRID` UDLOD's default grid size,
+//! stored by `vkterrain preprocess`: what start-up does now), (b) computed from level 0 through the bounded node reader on one
 //! thread (what start-up did before), (c) computed from level 0's file in parallel (a grid size
 //! that was not stored). `cargo bench --bench startup`.
 //!
@@ -19,13 +19,16 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// UDLOD's default tile size (stored by `vkterrain preprocess` by default).
+const GRID: u32 = 8;
+
 fn main() {
     let sets = std::env::var("VKT_STARTUP_DATASETS")
         .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/target/data/proc4k").to_string());
     let before = std::env::var("VKT_STARTUP_BEFORE").map_or(true, |v| v != "0");
     let threads = rayon::current_num_threads();
     println!(
-        "UDLOD start-up (grid_size 16, error field 8): tile statistics for Levels; {threads} threads for (c); warm page cache, medians of 3 (one run for (b))"
+        "UDLOD start-up (grid_size {GRID}): tile statistics for Levels; {threads} threads for (c); warm page cache, medians of 3 (one run for (b))"
     );
     println!(
         "| data set | samples | (a) stored s | (b) level 0, 1 thread s | (c) level 0, parallel s | stats file MiB |"
@@ -37,17 +40,18 @@ fn main() {
             .map(|_| {
                 let t = Instant::now();
                 let r = PyramidReader::open(&dir).expect("data set");
-                let s = r.tile_stats(16).expect("stats");
+                let s = r.tile_stats(GRID).expect("stats");
                 let levels = Levels::from_stats(s, r.spacing());
                 assert_eq!(r.node_loads(), 0, "start-up read level 0");
                 std::hint::black_box(levels);
                 t.elapsed().as_secs_f64()
             })
             .collect::<Vec<_>>();
-        let bytes = std::fs::metadata(dir.join("stats-g16.bin")).map_or(0, |m| m.len());
+        let bytes =
+            std::fs::metadata(dir.join(format!("stats-g{GRID}.bin"))).map_or(0, |m| m.len());
         let old = if before {
             let t = Instant::now();
-            let l = Levels::new(&reader.sweep(), 16).expect("levels");
+            let l = Levels::new(&reader.sweep(), GRID).expect("levels");
             std::hint::black_box(l);
             format!("{:.2}", t.elapsed().as_secs_f64())
         } else {
@@ -57,7 +61,7 @@ fn main() {
             .map(|_| {
                 let t = Instant::now();
                 let rows = reader.store().level0_rows().expect("disk").expect("rows");
-                let s = TileStats::compute(&rows, 16, &|_| {}).expect("stats");
+                let s = TileStats::compute(&rows, GRID, &|_| {}).expect("stats");
                 std::hint::black_box(Levels::from_stats(s, reader.spacing()));
                 t.elapsed().as_secs_f64()
             })

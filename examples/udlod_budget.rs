@@ -94,6 +94,10 @@ fn main() -> anyhow::Result<()> {
             );
         }
         let (mut tiles_n, mut tris_o, mut slack) = (0usize, 0u64, Vec::new());
+        // Per drawn tile with an error: how tight the worst case is (the largest exact
+        // per-sample projected error / the tile's error at its nearest sample) and how far its
+        // worst sample lies behind its nearest point (nearest distance / worst sample's).
+        let (mut tight, mut behind) = (Vec::new(), Vec::new());
         // Drawn tiles whose parent's exact per-sample projected error is within tau (the
         // parent alone would do): split by the parent's own pixel term (rule looseness) or
         // only by the crack-free chain.
@@ -106,7 +110,13 @@ fn main() -> anyhow::Result<()> {
             tiles_n += tiles.len();
             let mut parents = std::collections::HashMap::new();
             for t in &tiles {
-                slack.push(tile_slack(&levels, &data, &cam, focal, tau, *t));
+                let bound = tile_slack(&levels, &data, &cam, focal, tau, *t);
+                slack.push(bound);
+                if bound > 0.0 {
+                    let (exact, near_over_worst) = tile_exact(&levels, &data, &cam, focal, *t);
+                    tight.push(exact / tau / bound);
+                    behind.push(near_over_worst);
+                }
                 per_level[t.lod as usize] += 1;
                 if t.lod < levels.root_lod {
                     let q = Tile {
@@ -118,8 +128,10 @@ fn main() -> anyhow::Result<()> {
                         .entry(q)
                         .or_insert_with(|| tile_exact_splits(&levels, &data, &cam, focal, tau, q));
                     if !needed {
-                        let screen =
-                            select::WORST_CASE_SHARE * levels.tile_error(q) as f64 * focal / tau;
+                        let screen = select::worst_case_share(levels.grid_size)
+                            * levels.tile_error(q) as f64
+                            * focal
+                            / tau;
                         if (select::tile_distance(&levels, &sp, q) as f64) < screen {
                             over_rule += 1;
                         } else {
@@ -238,8 +250,57 @@ fn main() -> anyhow::Result<()> {
             q(0.9),
             q(1.0)
         );
+        for v in [&mut tight, &mut behind] {
+            v.sort_by(f64::total_cmp);
+        }
+        let qv = |v: &Vec<f64>, f: f64| v[((v.len().max(1) - 1) as f64 * f) as usize];
+        if !tight.is_empty() {
+            println!(
+                "  worst case's tightness (exact largest projected error / tile error at its nearest sample), {} tiles: p10 {:.3} p50 {:.3} p90 {:.3}; nearest distance / worst sample's distance: p10 {:.3} p50 {:.3} p90 {:.3}",
+                tight.len(),
+                qv(&tight, 0.1),
+                qv(&tight, 0.5),
+                qv(&tight, 0.9),
+                qv(&behind, 0.1),
+                qv(&behind, 0.5),
+                qv(&behind, 0.9)
+            );
+        }
     }
     Ok(())
+}
+
+/// A drawn tile's largest exact projected error (px: |level grid - sample| x focal / distance
+/// over its full-resolution samples) and its nearest sample's distance over the distance of
+/// the sample with the largest geometric error.
+fn tile_exact(
+    levels: &Levels,
+    data: &vkterrain::dataset::Heightmap,
+    cam: &vkterrain::scene::Camera,
+    focal: f64,
+    t: Tile,
+) -> (f64, f64) {
+    let span = levels.grid_size << t.lod;
+    let (c0, r0) = (t.x * span, t.y * span);
+    let (c1, r1) = (
+        (c0 + span).min(data.width - 1),
+        (r0 + span).min(data.height - 1),
+    );
+    let (mut px, mut near, mut worst) = (0.0f64, f64::INFINITY, (0.0f64, f64::INFINITY));
+    for r in r0..=r1 {
+        for c in c0..=c1 {
+            let h = data.sample(c, r) as f64;
+            let dh = (select::level_height(data, t.lod, c, r).unwrap() - h).abs();
+            let pnt = glam::DVec3::new(c as f64 * data.spacing, r as f64 * data.spacing, h);
+            let d = (pnt - cam.position).length();
+            px = px.max(dh * focal / d);
+            near = near.min(d);
+            if dh > worst.0 {
+                worst = (dh, d);
+            }
+        }
+    }
+    (px, near / worst.1)
 }
 
 /// Largest projected error of a drawn tile (its own geometric error at the nearest of its

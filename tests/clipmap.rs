@@ -1085,35 +1085,35 @@ fn stored_tile_statistics_equal_the_computed_ones() {
             && bits(&a.tile_error) == bits(&b.tile_error)
             && e64(&a.level_error) == e64(&b.level_error)
     };
-    // Stored (grid 16, the default of preprocess): no level-0 node read.
+    // Stored (grid 8, UDLOD's default and preprocess's): no level-0 node read.
     let stored = reader
         .store()
-        .stored_stats(16)
+        .stored_stats(8)
         .unwrap()
-        .expect("grid 16 stored");
+        .expect("grid 8 stored");
     assert_eq!(reader.node_loads(), 0);
     let from_disk = Levels::from_stats(stored.clone(), reader.spacing());
-    let computed = Levels::new(&data, 16).unwrap();
+    let computed = Levels::new(&data, 8).unwrap();
     assert!(same(&from_disk, &computed), "stored statistics differ");
     let (mm, te, le) = reference_statistics(&data, &computed);
     assert_eq!(bits(&mm), bits(&from_disk.min_max.concat()));
     assert_eq!(bits(&te), bits(&from_disk.tile_error));
     assert_eq!(le, from_disk.level_error);
     // In parallel over the pyramid's level file: the same bits.
-    let par = TileStats::compute(&data, 16, &|_| {}).unwrap();
+    let par = TileStats::compute(&data, 8, &|_| {}).unwrap();
     assert_eq!(par, stored);
-    // Not stored (grid 8): computed from level 0, equal to the in-memory computation.
-    assert!(reader.store().stored_stats(8).unwrap().is_none());
-    let s8 = reader.tile_stats(8).unwrap();
+    // Not stored (grid 16): computed from level 0, equal to the in-memory computation.
+    assert!(reader.store().stored_stats(16).unwrap().is_none());
+    let s16 = reader.tile_stats(16).unwrap();
     assert!(same(
-        &Levels::from_stats(s8, reader.spacing()),
-        &Levels::new(&data, 8).unwrap()
+        &Levels::from_stats(s16, reader.spacing()),
+        &Levels::new(&data, 16).unwrap()
     ));
 
     // A stored minimum one ulp lower: a valid file whose levels differ.
     let moved = dataset().with_file_name("moved-stats");
     copy_dir(dataset(), &moved);
-    let file = moved.join("stats-g16.bin");
+    let file = moved.join("stats-g8.bin");
     let mut bytes = std::fs::read(&file).unwrap();
     let levels = stored.levels.len();
     let first_tile = 40 + 16 * levels + 12 * 5; // tile 5 of level 0: (min, max, error)
@@ -1122,12 +1122,12 @@ fn stored_tile_statistics_equal_the_computed_ones() {
         .copy_from_slice(&f32::from_bits(v.to_bits() - 1).to_le_bytes());
     std::fs::write(&file, &bytes).unwrap();
     let mutated = PyramidReader::open(&moved).unwrap();
-    let m = mutated.store().stored_stats(16).unwrap().unwrap();
+    let m = mutated.store().stored_stats(8).unwrap().unwrap();
     assert!(!same(&Levels::from_stats(m, reader.spacing()), &computed));
     // A NaN: refused with a one-line error naming the file.
     bytes[first_tile..first_tile + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     std::fs::write(&file, &bytes).unwrap();
-    let e = mutated.tile_stats(16).unwrap_err().to_string();
-    assert!(e.contains("stats-g16.bin") && !e.contains('\n'), "{e}");
+    let e = mutated.tile_stats(8).unwrap_err().to_string();
+    assert!(e.contains("stats-g8.bin") && !e.contains('\n'), "{e}");
     std::fs::remove_dir_all(&moved).ok();
 }

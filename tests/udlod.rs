@@ -32,9 +32,11 @@ fn terrain(size: u32, spacing: f64) -> Heightmap {
 
 use common::poses::poses;
 
-fn settings() -> UdlodSettings {
+use common::udlod_grids as grids;
+
+fn settings(grid_size: u32) -> UdlodSettings {
     UdlodSettings {
-        grid_size: 8,
+        grid_size,
         ..UdlodSettings::default()
     }
 }
@@ -77,19 +79,25 @@ fn gpu_and_cpu_tiles(
 fn gpu_selection_equals_cpu_reference() {
     let data = terrain(257, 30.0);
     let cams = poses(&data, 40);
-    for (i, (gpu, cpu)) in gpu_and_cpu_tiles(&data, &cams, settings())
-        .into_iter()
-        .enumerate()
-    {
-        let g: HashSet<_> = gpu.iter().copied().collect();
-        let c: HashSet<_> = cpu.iter().copied().collect();
-        assert_eq!(g.len(), gpu.len(), "pose {i}: duplicate tiles on the GPU");
-        let only_gpu: Vec<_> = g.difference(&c).collect();
-        let only_cpu: Vec<_> = c.difference(&g).collect();
-        assert!(
-            only_gpu.is_empty() && only_cpu.is_empty(),
-            "pose {i}: GPU-only {only_gpu:?}, CPU-only {only_cpu:?}"
-        );
+    for grid in grids() {
+        for (i, (gpu, cpu)) in gpu_and_cpu_tiles(&data, &cams, settings(grid))
+            .into_iter()
+            .enumerate()
+        {
+            let g: HashSet<_> = gpu.iter().copied().collect();
+            let c: HashSet<_> = cpu.iter().copied().collect();
+            assert_eq!(
+                g.len(),
+                gpu.len(),
+                "grid {grid} pose {i}: duplicate tiles on the GPU"
+            );
+            let only_gpu: Vec<_> = g.difference(&c).collect();
+            let only_cpu: Vec<_> = c.difference(&g).collect();
+            assert!(
+                only_gpu.is_empty() && only_cpu.is_empty(),
+                "grid {grid} pose {i}: GPU-only {only_gpu:?}, CPU-only {only_cpu:?}"
+            );
+        }
     }
 }
 
@@ -201,34 +209,40 @@ fn gpu_vertex_morph_equals_the_cpu_mirror() {
     let data = terrain(257, 30.0);
     let mut cameras = low_flight(&data, 10);
     cameras.extend(poses(&data, 10));
-    let on = compare_morph(&data, &cameras, &settings());
+    for grid in grids() {
+        morph_equals_the_cpu_mirror(&data, &cameras, grid);
+    }
+}
+
+fn morph_equals_the_cpu_mirror(data: &Heightmap, cameras: &[Camera], grid: u32) {
+    let on = compare_morph(data, cameras, &settings(grid));
     println!(
-        "morph on: {} vertices, {} mid-morph ({} sliding odd vertices), {} mismatches, heights within {:.2} ulp",
+        "grid {grid}, morph on: {} vertices, {} mid-morph ({} sliding odd vertices), {} mismatches, heights within {:.2} ulp",
         on.vertices, on.mid_morph, on.sliding, on.mismatched, on.worst_height_ulps
     );
     assert!(
         on.mismatched == 0,
-        "{} vertices differ, e.g. {:#?}",
+        "grid {grid}: {} vertices differ, e.g. {:#?}",
         on.mismatched,
         on.mismatches
     );
     assert!(
         on.mid_morph >= 2000 && on.sliding >= 1000 && on.mid_morph * 50 >= on.vertices,
-        "too few vertices mid-morph to mean anything: {on:?}"
+        "grid {grid}: too few vertices mid-morph to mean anything: {on:?}"
     );
     assert!(on.worst_height_ulps <= 4.0, "{on:?}");
     let off = UdlodSettings {
         morph: false,
-        ..settings()
+        ..settings(grid)
     };
-    let off = compare_morph(&data, &cameras[..4], &off);
+    let off = compare_morph(data, &cameras[..4], &off);
     println!(
-        "morph off: {} vertices, {} mismatches",
+        "grid {grid}, morph off: {} vertices, {} mismatches",
         off.vertices, off.mismatched
     );
     assert!(
         off.mismatched == 0,
-        "{} vertices differ, e.g. {:#?}",
+        "grid {grid}: {} vertices differ, e.g. {:#?}",
         off.mismatched,
         off.mismatches
     );
@@ -252,10 +266,16 @@ fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
 
 #[test]
 fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
+    for grid in grids() {
+        neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing_at(grid);
+    }
+}
+
+fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing_at(grid: u32) {
     let data = terrain(257, 30.0);
     let lod = UdlodSettings {
         cull: false,
-        ..settings()
+        ..settings(grid)
     };
     let levels = Levels::new(&data, lod.grid_size).unwrap();
     let mut checked_edges = 0;
@@ -268,7 +288,7 @@ fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
                 if let Some(&m) = cells.get(&(nx, ny)) {
                     assert!(
                         l.abs_diff(m) <= 1,
-                        "{cam:?}: leaf cells ({x},{y}) lod {l} and ({nx},{ny}) lod {m}"
+                        "grid {grid} {cam:?}: leaf cells ({x},{y}) lod {l} and ({nx},{ny}) lod {m}"
                     );
                 }
             }
@@ -307,16 +327,22 @@ fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing() {
     }
     assert!(
         checked_edges > 100,
-        "too few coarse/fine edges checked: {checked_edges}"
+        "grid {grid}: too few coarse/fine edges checked: {checked_edges}"
     );
 }
 
 #[test]
 fn pure_rotation_keeps_the_tile_set_without_culling() {
+    for grid in grids() {
+        pure_rotation_keeps_the_tile_set_without_culling_at(grid);
+    }
+}
+
+fn pure_rotation_keeps_the_tile_set_without_culling_at(grid: u32) {
     let data = terrain(257, 30.0);
     let lod = UdlodSettings {
         cull: false,
-        ..settings()
+        ..settings(grid)
     };
     let levels = Levels::new(&data, lod.grid_size).unwrap();
     for base in poses(&data, 20) {
@@ -338,8 +364,14 @@ fn pure_rotation_keeps_the_tile_set_without_culling() {
 
 #[test]
 fn culling_keeps_every_tile_a_brute_force_box_test_keeps() {
+    for grid in grids() {
+        culling_keeps_every_tile_a_brute_force_box_test_keeps_at(grid);
+    }
+}
+
+fn culling_keeps_every_tile_a_brute_force_box_test_keeps_at(grid: u32) {
     let data = terrain(257, 30.0);
-    let lod = settings();
+    let lod = settings(grid);
     let levels = Levels::new(&data, lod.grid_size).unwrap();
     for cam in poses(&data, 60) {
         let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
@@ -387,7 +419,10 @@ fn culling_keeps_every_tile_a_brute_force_box_test_keeps() {
                 }
             }
             if visible {
-                assert!(covered(&kept), "{cam:?}: visible tile {t:?} was culled");
+                assert!(
+                    covered(&kept),
+                    "grid {grid} {cam:?}: visible tile {t:?} was culled"
+                );
             }
         }
     }
@@ -398,6 +433,12 @@ fn culling_keeps_every_tile_a_brute_force_box_test_keeps() {
 /// silhouette), over >= 200 poses.
 #[test]
 fn watertight_over_200_poses() {
+    for grid in grids() {
+        watertight_over_200_poses_at(grid);
+    }
+}
+
+fn watertight_over_200_poses_at(grid: u32) {
     let data = terrain(129, 30.0);
     let cams = poses(&data, 200);
     let sentinel = [1.0f32, 0.0, 1.0];
@@ -406,7 +447,7 @@ fn watertight_over_200_poses() {
         let mut options = common::options(96, 64, 2);
         let udlod = UdlodSettings {
             morph,
-            ..settings()
+            ..settings(grid)
         };
         options.readback_depth = true;
         let mut sink = CollectSink::default();
@@ -462,7 +503,7 @@ fn watertight_over_200_poses() {
         }
         assert_eq!(
             holes, 0,
-            "pose {i} {:?}: {holes} sentinel pixels inside the terrain",
+            "grid {grid} pose {i} {:?}: {holes} sentinel pixels inside the terrain",
             cams[i]
         );
         holes_total += holes;
@@ -471,10 +512,10 @@ fn watertight_over_200_poses() {
     // The check can fail: without morphing, T-junctions between levels open cracks.
     assert!(
         unmorphed_holes > 0,
-        "morphing off should show cracks; the test would not see them"
+        "grid {grid}: morphing off should show cracks; the test would not see them"
     );
     println!(
-        "watertight: {terrain_px} terrain pixels, 0 holes; {unmorphed_holes} holes with morphing off"
+        "grid {grid}, watertight: {terrain_px} terrain pixels, 0 holes; {unmorphed_holes} holes with morphing off"
     );
     assert!(
         terrain_px > 200 * 96 * 64 / 4,

@@ -59,8 +59,9 @@ pub struct Options {
     pub memory_budget: Option<u64>,
 }
 
-/// The tile size whose statistics are stored unless told otherwise (UDLOD's default).
-pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [16];
+/// The tile size whose statistics are stored unless told otherwise (UDLOD's default; other
+/// sizes are computed from level 0 at start-up, or stored with `--stats-grid-sizes`).
+pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [8];
 
 impl Default for Options {
     fn default() -> Self {
