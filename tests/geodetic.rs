@@ -846,7 +846,7 @@ fn udlod_through_the_clipmap_is_watertight_on_a_native_geographic_grid() {
             let pose = earth
                 .grid_pose(&grid, c.position, c.yaw_deg, c.pitch_deg, c.roll_deg)
                 .unwrap();
-            earth.camera(&pose, &grid, &template).unwrap()
+            earth.camera_at(&pose, c.position.z, &template).unwrap()
         })
         .collect();
     let (mut holes, mut frames_total) = (0usize, 0usize);

@@ -112,10 +112,11 @@ impl Earth {
 
     /// The WGS84 pose of a camera given on the grid (`position` in the grid's world metres,
     /// `z` in the terrain's datum; yaw/pitch/roll against the grid's axes): over the same
-    /// sample, at that height above the ellipsoid (the terrain's heights are drawn so), its
-    /// heading turned by the grid north's own true heading there (meridian convergence of a
-    /// projected grid, zero for a geographic one). Scenarios use it so that keyframes given on
-    /// the grid keep their place over the terrain when it is drawn on the ellipsoid.
+    /// sample, its heading turned by the grid north's own true heading there (meridian
+    /// convergence of a projected grid, zero for a geographic one). Its `height_m` is `z`, in
+    /// the terrain's datum, which is how the lattice draws the terrain's heights: place it with
+    /// [`Earth::camera_at`]`(pose, z, ..)` (no geoid needed). Scenarios use it so that
+    /// keyframes given on the grid keep their place over the terrain on the ellipsoid.
     pub fn grid_pose<D: Level0 + ?Sized>(
         &self,
         data: &D,
@@ -133,9 +134,7 @@ impl Earth {
         Ok(GeoPose {
             lat_deg: lat,
             lon_deg: lon,
-            // `world_height` takes the terrain's undulation off again: the camera sits at `z` in
-            // the terrain's datum, as on the flat grid.
-            height_m: position.z + self.terrain_undulation(lat, lon)?,
+            height_m: position.z,
             height_ref: HeightRef::Ellipsoid,
             heading_deg: (yaw_deg + convergence).rem_euclid(360.0),
             pitch_deg,
@@ -188,7 +187,19 @@ impl Earth {
     ) -> Result<Camera> {
         pose.validate("pose")?;
         let h = self.world_height(pose, data)?;
-        let w = pose.to_world(self.frame(), h);
+        self.camera_at(pose, h, template)
+    }
+
+    /// The camera of `pose` at `world_height` metres in the terrain's datum (its own
+    /// `height_m`/`height_ref` unused).
+    pub fn camera_at(
+        &self,
+        pose: &GeoPose,
+        world_height: f64,
+        template: &Camera,
+    ) -> Result<Camera> {
+        pose.validate("pose")?;
+        let w = pose.to_world(self.frame(), world_height);
         let camera = Camera {
             position: w.position,
             yaw_deg: w.yaw_deg,

@@ -208,10 +208,15 @@ impl Scenario {
             far: file.far,
             ..Camera::default()
         };
-        let on_earth = |earth: &Earth, pose: &GeoPose, t: f64| -> Result<Key> {
-            let c = earth.camera(pose, data, &template)?;
+        // A key on the earth; `world_height`: the pose's height is already in the terrain's
+        // datum (grid keyframes), else `height_m` above `height_ref` (WGS84 keyframes).
+        let on_earth = |earth: &Earth, pose: &GeoPose, world_height: Option<f64>, t: f64| {
+            let c = match world_height {
+                Some(h) => earth.camera_at(pose, h, &template)?,
+                None => earth.camera(pose, data, &template)?,
+            };
             let height = WGS84.to_geodetic(earth.frame().to_ecef(c.position)).height;
-            Ok(Key {
+            Ok::<Key, Error>(Key {
                 t,
                 position: c.position,
                 yaw: c.yaw_deg,
@@ -232,7 +237,7 @@ impl Scenario {
                         "keyframe {i}: a WGS84 pose needs a data set on the earth (georeferenced, or [dataset] anchor)"
                     ));
                 };
-                keys.push(on_earth(earth, &pose, k.t.unwrap_or(f64::NAN))?);
+                keys.push(on_earth(earth, &pose, None, k.t.unwrap_or(f64::NAN))?);
                 continue;
             }
             if k.heading_deg.is_some() || k.pitch_deg.is_some() || k.roll_deg.is_some() {
@@ -270,7 +275,12 @@ impl Scenario {
             };
             if let (true, Some(earth)) = (grid_on_earth, earth) {
                 let pose = earth.grid_pose(data, position, k.yaw, k.pitch, k.roll)?;
-                keys.push(on_earth(earth, &pose, k.t.unwrap_or(f64::NAN))?);
+                keys.push(on_earth(
+                    earth,
+                    &pose,
+                    Some(position.z),
+                    k.t.unwrap_or(f64::NAN),
+                )?);
                 continue;
             }
             keys.push(Key {
