@@ -763,6 +763,47 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
     );
     assert_eq!(height_misses, 0, "source heights not reproduced");
     assert!(voids < sw * sh / 100, "{voids} voids");
+    // A named landmark: Pica d'Estats (3,143 m; 42 deg 39' 59" N, 1 deg 23' 51" E, as
+    // published). The highest drawn vertex within 1 km of those coordinates lies within 150 m
+    // of them (the summit is where its coordinates say), it is as high as SRTM3 can say
+    // (its 3" samples miss the sharp top: 3,100 m, 75 m away; within 60 m of the published
+    // height), and it is in view, so the check above placed it within 0.5 px.
+    let (plat, plon, ph) = (
+        42.0 + 39.0 / 60.0 + 59.0 / 3600.0,
+        1.0 + 23.0 / 60.0 + 51.0 / 3600.0,
+        3143.0,
+    );
+    let at_peak = enu(lat0, lon0, plat, plon, 0.0);
+    let (k, top, off) = expected
+        .iter()
+        .enumerate()
+        .map(|(k, (la, lo, hh))| {
+            (
+                k,
+                *hh as f64,
+                (enu(lat0, lon0, *la, *lo, 0.0) - at_peak).length(),
+            )
+        })
+        .filter(|(_, _, d)| *d < 1000.0)
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("samples near the summit");
+    let summit_px = pixel_of_clip(got[k].clip, w, h);
+    println!(
+        "Pica d'Estats: highest vertex within 1 km {top} m (published {ph} m), {off:.0} m from the published position, drawn at {summit_px:.1}"
+    );
+    assert!(
+        off < 150.0,
+        "the highest vertex near the summit is {off} m from it"
+    );
+    assert!(
+        (top - ph).abs() < 60.0,
+        "the summit is {top} m, published {ph} m"
+    );
+    let on_screen = |p: DVec2| p.x > 0.0 && p.x < w as f64 && p.y > 0.0 && p.y < h as f64;
+    assert!(
+        got[k].clip[3] > 10.0 && on_screen(summit_px),
+        "the summit is not in view: {summit_px}"
+    );
     assert!(in_view > 10_000, "{in_view} samples in view");
     assert!(
         worst_px <= 0.5,
