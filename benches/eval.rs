@@ -107,12 +107,25 @@ fn check_agreement(p: &Prepared, evaluation: &Evaluation, warmup: usize) -> anyh
         println!("eval and bench agree within {AGREEMENT_BAND}x");
         Ok(())
     } else {
-        anyhow::bail!(
+        Err(Disagreement(failures.join("; ")).into())
+    }
+}
+
+/// Eval and bench GPU times outside [`AGREEMENT_BAND`] (the variants and their ratios).
+#[derive(Debug)]
+struct Disagreement(String);
+
+impl std::fmt::Display for Disagreement {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
             "eval and bench GPU times differ by more than {AGREEMENT_BAND}x: {}",
-            failures.join("; ")
+            self.0
         )
     }
 }
+
+impl std::error::Error for Disagreement {}
 
 fn run_case(root: &str, case: &Case, short: bool) -> anyhow::Result<Option<Evaluation>> {
     let mut argv = vec![
@@ -296,7 +309,17 @@ fn main() -> anyhow::Result<()> {
     };
     let mut all = Vec::new();
     for case in &cases {
-        if let Some(e) = run_case(root, case, short)? {
+        // Lavapipe's GPU times on a shared 2-core machine jump now and then (one run measured
+        // a variant's eval median at 5.3x its bench median, the next 1.04x): a disagreement is
+        // measured once more, and fails only if it repeats.
+        let evaluation = match run_case(root, case, short) {
+            Err(e) if e.downcast_ref::<Disagreement>().is_some() => {
+                println!("{e}; measuring {} once more", case.name);
+                run_case(root, case, short)?
+            }
+            other => other?,
+        };
+        if let Some(e) = evaluation {
             if short {
                 check(&e)?;
             }
