@@ -46,6 +46,9 @@ pub struct FrameView<'a> {
     pub timings: FrameTimings,
     /// Triangles submitted for this frame.
     pub triangles: u64,
+    /// Tiles the LOD method wanted but its fixed budget could not hold, over the frame's
+    /// views ([`crate::lod::LodMethod::budget_overflow`]; 0: none).
+    pub budget_overflow: u64,
 }
 
 /// A camera's WGS84 pose and the datum its height is measured from (the terrain's:

@@ -201,3 +201,58 @@ fn clipmap_and_two_view_frames_are_evaluated_and_cross_checked() {
     }
     let _ = std::fs::remove_dir_all(pyramid.parent().unwrap());
 }
+
+/// A UDLOD variant whose tile budget is too small for its frames: `eval` counts the frames
+/// whose budget overflowed (summary.csv `budget_overflow_frames`), warns on stderr and in the
+/// report; the same run with the default budget has none (the control).
+#[test]
+fn an_overflowing_tile_budget_is_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("ev");
+    let config = ci_config();
+    let o = vkterrain(&[
+        "eval",
+        "--config",
+        &config,
+        "--methods",
+        "udlod",
+        "--sweep",
+        "max_tiles=16,16384",
+        "--frames",
+        "4",
+        "--warmup",
+        "1",
+        "--width",
+        "96",
+        "--height",
+        "64",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let csv = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = header
+        .iter()
+        .position(|h| *h == "budget_overflow_frames")
+        .expect("budget_overflow_frames column");
+    let overflow_of = |variant: &str| -> usize {
+        let line = csv
+            .lines()
+            .find(|l| l.starts_with(variant))
+            .unwrap_or_else(|| panic!("{variant} in {csv}"));
+        line.split(',').nth(col).unwrap().parse().unwrap()
+    };
+    assert_eq!(overflow_of("udlod max_tiles=16,"), 3, "{csv}");
+    assert_eq!(overflow_of("udlod max_tiles=16384,"), 0, "{csv}");
+    assert!(
+        stderr.contains("warning: udlod max_tiles=16:") && !stderr.contains("max_tiles=16384:"),
+        "{stderr}"
+    );
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        report.contains("**Warning**: udlod max_tiles=16:"),
+        "{report}"
+    );
+}

@@ -139,6 +139,9 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         "{}",
         crate::eval::table::text(crate::eval::table::SUMMARY_COLUMNS, &evaluation.summaries)
     );
+    for w in crate::eval::budget_warnings(&evaluation.summaries) {
+        eprintln!("warning: {w}");
+    }
     if let Some(check) = &evaluation.cross_check {
         println!(
             "cross-check: GPU metrics equal the CPU path's on {} frames",

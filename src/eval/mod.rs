@@ -14,3 +14,19 @@ pub mod oracle;
 pub mod report;
 pub mod run;
 pub mod table;
+
+/// One line per variant whose LOD budget overflowed in some measured frame (those frames are
+/// coarser than the variant's settings ask: UDLOD's `max_tiles`); printed by `vkterrain eval`
+/// and written into the report.
+pub fn budget_warnings(summaries: &[run::RunSummary]) -> Vec<String> {
+    summaries
+        .iter()
+        .filter(|s| s.budget_overflow_frames > 0)
+        .map(|s| {
+            format!(
+                "{}: the LOD budget overflowed in {} of {} measured frames (UDLOD: raise `max_tiles` or coarsen `grid_size`); those frames are coarser than the settings ask",
+                s.variant, s.budget_overflow_frames, s.frames
+            )
+        })
+        .collect()
+}

@@ -127,12 +127,12 @@ fn summary_csv(eval: &Evaluation) -> String {
 
 fn summary_csv_of(summaries: &[RunSummary]) -> String {
     let mut sum = String::from(
-        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median\n",
+        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median,budget_overflow_frames\n",
     );
     for s in summaries {
         let _ = writeln!(
             sum,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{}",
             csv_field(&s.variant),
             csv_field(&s.method),
             s.frames,
@@ -158,7 +158,8 @@ fn summary_csv_of(summaries: &[RunSummary]) -> String {
             s.swimming_px.p99,
             s.swimming_m.mean,
             optional(s.oracle_triangles_median, 0),
-            optional(s.oracle_ratio_median, 3)
+            optional(s.oracle_ratio_median, 3),
+            s.budget_overflow_frames
         );
     }
     sum
@@ -346,6 +347,9 @@ fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)
         super::table::SUMMARY_COLUMNS,
         &eval.summaries,
     ));
+    for w in super::budget_warnings(&eval.summaries) {
+        let _ = writeln!(md, "\n**Warning**: {w}");
+    }
     let pareto: Vec<&str> = front
         .iter()
         .map(|&i| eval.summaries[i].variant.as_str())
@@ -431,6 +435,7 @@ mod tests {
             gpu_eval_ms: 2.0,
             cpu_record_ms: 0.1,
             triangles: 1000,
+            budget_overflow: 0,
             error: GeometricError::default(),
             holes: 0,
             psnr_db: 40.0,
@@ -452,6 +457,7 @@ mod tests {
             gpu_terrain_ms_median: 0.0,
             gpu_eval_ms_median: 0.0,
             triangles_median: 0.0,
+            budget_overflow_frames: 0,
             error: GeometricError::default(),
             holes_total: 0,
             psnr_db_mean: 40.0,

@@ -144,6 +144,8 @@ pub struct FrameRow {
     pub gpu_eval_ms: f64,
     pub cpu_record_ms: f64,
     pub triangles: u64,
+    /// Tiles the method's budget could not hold this frame (UDLOD's `max_tiles`; 0: none).
+    pub budget_overflow: u64,
     /// Percentiles to one histogram bin (1.2%, never understated); count, mean, max exact.
     pub error: GeometricError,
     pub holes: usize,
@@ -172,6 +174,9 @@ pub struct RunSummary {
     /// GPU time of the frame analysis and the readback copy per frame (median, ms).
     pub gpu_eval_ms_median: f64,
     pub triangles_median: f64,
+    /// Measured frames whose LOD budget overflowed (coarser than the settings ask: UDLOD's
+    /// `max_tiles`); eval warns when it is not 0.
+    pub budget_overflow_frames: usize,
     /// Over all pixels of all measured frames (percentiles to 1.2%, never understated).
     pub error: GeometricError,
     pub holes_total: usize,
@@ -287,12 +292,12 @@ impl EvalSetup<'_> {
 }
 
 /// A delivered frame as the evaluator keeps it: RGBA (sampled frames only), depth (with
-/// `--cross-check`), timings, triangles.
+/// `--cross-check`), timings, triangles and the LOD budget's overflow.
 type Delivered = (
     Vec<u8>,
     Option<Vec<f32>>,
     crate::readback::FrameTimings,
-    u64,
+    (u64, u64),
 );
 
 /// A finished FLIP computation: run, frame, statistics, coloured map (image frames).
@@ -487,12 +492,12 @@ impl Run {
                 },
                 f.depth.map(<[f32]>::to_vec),
                 f.timings,
-                f.triangles,
+                (f.triangles, f.budget_overflow),
             ));
             Ok(())
         };
         self.renderer.render_views(requests, &mut sink)?;
-        let (rgba, depth, timings, triangles) = delivered
+        let (rgba, depth, timings, (triangles, budget_overflow)) = delivered
             .ok_or_else(|| Error::invalid("eval", format!("frame {k} was not delivered")))?;
         let gpu = self
             .results
@@ -580,6 +585,7 @@ impl Run {
             gpu_eval_ms: timings.gpu_readback_ms,
             cpu_record_ms: timings.cpu_record_ms,
             triangles,
+            budget_overflow,
             error: GeometricError {
                 metres: gpu.metres.summary(),
                 pixels: gpu.pixels.summary(),
@@ -680,6 +686,7 @@ fn finish(
             gpu_terrain_ms_median: pick(|r| r.gpu_terrain_ms).median,
             gpu_eval_ms_median: pick(|r| r.gpu_eval_ms).median,
             triangles_median: pick(|r| r.triangles as f64).median,
+            budget_overflow_frames: measured.iter().filter(|r| r.budget_overflow > 0).count(),
             error: run.errors.summary(),
             holes_total: measured.iter().map(|r| r.holes).sum(),
             psnr_db_mean: finite_mean(|r| r.psnr_db),

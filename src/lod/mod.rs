@@ -241,6 +241,12 @@ pub trait LodMethod {
     /// Triangles the last frame of `slot` drew (including zero-area ones). Called once that
     /// frame's GPU work is complete, so GPU-driven methods can report what the GPU chose.
     fn triangles(&self, slot: ViewSlot) -> u64;
+    /// Tiles (or other units) the last completed frame of `slot` wanted but the method's fixed
+    /// budget could not hold (UDLOD's `max_tiles`): that frame is coarser than its settings
+    /// ask. 0 for methods without such a budget.
+    fn budget_overflow(&self, _slot: ViewSlot) -> u64 {
+        0
+    }
     /// Method-specific counters of the last completed frame of `slot` (e.g. tiles, overflow).
     fn counters(&self, _slot: ViewSlot) -> Vec<(&'static str, u64)> {
         Vec::new()

@@ -492,6 +492,11 @@ impl Renderer {
             .view_slots_of(frame)
             .map(|view| self.method.triangles(view))
             .sum();
+        let budget_overflow = self
+            .layout
+            .view_slots_of(frame)
+            .map(|view| self.method.budget_overflow(view))
+            .sum();
         if let Some(stage) = &mut self.analysis {
             stage.complete(frame, pending.index)?;
         }
@@ -533,6 +538,7 @@ impl Renderer {
                 }),
             timings,
             triangles,
+            budget_overflow,
         };
         let sink_start = Instant::now();
         let result = sink.frame(&view);

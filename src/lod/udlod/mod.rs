@@ -496,6 +496,10 @@ impl LodMethod for Udlod {
         c.draw[1] as u64 * 2 * (self.settings.grid_size as u64).pow(2)
     }
 
+    fn budget_overflow(&self, slot: ViewSlot) -> u64 {
+        self.read_counters(slot).overflow as u64
+    }
+
     fn counters(&self, slot: ViewSlot) -> Vec<(&'static str, u64)> {
         let c = self.read_counters(slot);
         vec![

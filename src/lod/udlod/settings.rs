@@ -63,6 +63,11 @@ impl UdlodSettings {
             apply: |s, v| s.grid_size = v as u32,
         },
         Sweep {
+            key: "max_tiles",
+            help: "tile budget per frame and view",
+            apply: |s, v| s.max_tiles = v as u32,
+        },
+        Sweep {
             key: "morph_range",
             help: "share of each level's range that morphs",
             apply: |s, v| s.morph_range = v,
