@@ -322,3 +322,64 @@ fn grid_keyframes_follow_the_terrain_onto_the_ellipsoid() {
     let (_, h_flat) = lattice.sample_at(flat.camera(0).position);
     assert!(h_flat - 2000.0 > 500.0, "{h_flat}");
 }
+
+/// `[[render.extra_views]]` on the earth are rig offsets in the local frame at the main camera:
+/// 50 km north of the world frame's origin, a rear view 10 m up pitched 5 deg down has, as a
+/// WGS84 pose, the main camera's latitude/longitude, 10 m more height, heading + 180 and local
+/// pitch -5. Negative control: applied in the world frame's axes (`ViewOffset::apply`, the
+/// flat world), its local pitch is off by the frame's tilt there (~0.45 deg).
+#[test]
+fn extra_views_are_rig_offsets_in_the_local_frame_on_the_earth() {
+    use vkterrain::geo::WorldPose;
+    use vkterrain::scene::ViewOffset;
+    let earth = anchored(datum::LOCAL);
+    let frame = earth.frame();
+    let main_pose = GeoPose {
+        lat_deg: 46.95,
+        lon_deg: 8.0,
+        height_m: 1500.0,
+        height_ref: HeightRef::Ellipsoid,
+        heading_deg: 30.0,
+        pitch_deg: 0.0,
+        roll_deg: 0.0,
+    };
+    let w = main_pose.to_world(frame, 1500.0);
+    let main = Camera {
+        position: w.position,
+        yaw_deg: w.yaw_deg,
+        pitch_deg: w.pitch_deg,
+        roll_deg: w.roll_deg,
+        ..Camera::default()
+    };
+    let rig = ViewOffset {
+        offset_m: [0.0, 0.0, 10.0],
+        yaw_deg: 180.0,
+        pitch_deg: Some(-5.0),
+    };
+    let pose_of = |c: &Camera| {
+        GeoPose::from_world(
+            frame,
+            &WorldPose {
+                position: c.position,
+                yaw_deg: c.yaw_deg,
+                pitch_deg: c.pitch_deg,
+                roll_deg: c.roll_deg,
+            },
+        )
+    };
+    let g = pose_of(&rig.apply_on(&main, Some(frame)));
+    assert!(
+        (g.lat_deg - 46.95).abs() < 1e-9 && (g.lon_deg - 8.0).abs() < 1e-9,
+        "{g:?}"
+    );
+    assert!((g.height_m - 1510.0).abs() < 1e-6, "{g:?}");
+    assert!((g.heading_deg - 210.0).abs() < 1e-6, "{g:?}");
+    assert!(
+        (g.pitch_deg + 5.0).abs() < 1e-6 && g.roll_deg.abs() < 1e-6,
+        "{g:?}"
+    );
+    let flat = pose_of(&rig.apply(&main));
+    assert!((flat.pitch_deg + 5.0).abs() > 0.3, "{flat:?}");
+    // Without a world frame `apply_on` is `apply`.
+    assert_eq!(rig.apply_on(&main, None), rig.apply(&main));
+}

@@ -162,9 +162,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     );
     let result = (|| -> anyhow::Result<()> {
         for frame in 0..p.frames as u64 {
-            let views = FrameRequest::with_extra_views(
+            let views = FrameRequest::with_extra_views_on(
                 p.scenario.camera(frame),
                 &p.config.render.extra_views,
+                renderer.earth_frame(),
             );
             renderer.render_views(&views, &mut sink)?;
         }

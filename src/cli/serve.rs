@@ -474,7 +474,11 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             camera = ctl
                 .live
                 .unwrap_or_else(|| p.scenario.camera(rendered % scripted_frames));
-            let views = FrameRequest::with_extra_views(camera, &config.render.extra_views);
+            let views = FrameRequest::with_extra_views_on(
+                camera,
+                &config.render.extra_views,
+                renderer.earth_frame(),
+            );
             renderer.render_views(
                 &views,
                 &mut Outputs {

@@ -153,8 +153,19 @@ impl FrameRequest {
     /// The requests of one frame: `main` and a camera per offset (config
     /// `render.extra_views`), in view order.
     pub fn with_extra_views(main: Camera, extra: &[crate::scene::ViewOffset]) -> Vec<Self> {
+        Self::with_extra_views_on(main, extra, None)
+    }
+
+    /// [`FrameRequest::with_extra_views`] with the offsets in the local frame at the main
+    /// camera when `world` is given (the terrain on the ellipsoid: [`Renderer::earth_frame`];
+    /// `ViewOffset::apply_on`).
+    pub fn with_extra_views_on(
+        main: Camera,
+        extra: &[crate::scene::ViewOffset],
+        world: Option<&crate::geo::EnuFrame>,
+    ) -> Vec<Self> {
         std::iter::once(main)
-            .chain(extra.iter().map(|o| o.apply(&main)))
+            .chain(extra.iter().map(|o| o.apply_on(&main, world)))
             .map(FrameRequest::from)
             .collect()
     }
@@ -420,6 +431,12 @@ impl Renderer {
             self.method.update(view, &state)?;
         }
         Ok(())
+    }
+
+    /// The world frame on the earth when the terrain is drawn on the ellipsoid (None: flat):
+    /// where rig offsets (`[[render.extra_views]]`) are applied in the local frame.
+    pub fn earth_frame(&self) -> Option<&crate::geo::EnuFrame> {
+        self.lattice.as_ref().map(|(l, _)| &l.frame)
     }
 
     /// Where LOD distances are measured from, in the grid's frame (`x = col * spacing`,
