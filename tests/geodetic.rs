@@ -179,6 +179,26 @@ fn probe(
     r.probe_terrain_helpers(0, spv, entry, &points).unwrap()
 }
 
+/// SRTM3 N42E001 from `../shared/data` preprocessed (`vkterrain preprocess`) into a fresh
+/// directory under the system's temporary directory named `name` and this process: (that
+/// directory, the source `.hgt.zip`, the data set).
+#[cfg(feature = "gdal")]
+fn srtm3_n42e001(name: &str) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
+    let data_dir = common::shared_data().expect("../shared/data (the real data; CI has it)");
+    let tmp = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
+    let out = tmp.join("n42e001");
+    let zip = data_dir.join("srtm/N42E001.hgt.zip");
+    let options = Options {
+        input: Input::Files(vec![zip.clone()]),
+        out: out.clone(),
+        force: true,
+        ..Default::default()
+    };
+    preprocess::run(&options, &NoProgress).unwrap();
+    (tmp, zip, out)
+}
+
 // ---- Tests ---------------------------------------------------------------------------------
 
 #[test]
@@ -644,20 +664,7 @@ fn udlod_renders_the_earth_like_brute_force() {
 #[cfg(feature = "gdal")]
 #[test]
 fn every_source_sample_is_a_vertex_where_it_lies() {
-    let data_dir = common::shared_data().expect("../shared/data (the real data; CI has it)");
-    let tmp = std::env::temp_dir().join(format!("vkt-geodetic-{}", std::process::id()));
-    let out = tmp.join("n42e001");
-    let zip = data_dir.join("srtm/N42E001.hgt.zip");
-    vkterrain::dataset::preprocess::run(
-        &vkterrain::dataset::preprocess::Options {
-            input: vkterrain::dataset::preprocess::Input::Files(vec![zip.clone()]),
-            out: out.clone(),
-            force: true,
-            ..Default::default()
-        },
-        &vkterrain::dataset::preprocess::NoProgress,
-    )
-    .unwrap();
+    let (tmp, zip, out) = srtm3_n42e001("vkt-geodetic");
     // The source, independently: GDAL's SRTMHGT driver through /vsizip/.
     let src = gdal::Dataset::open(format!("/vsizip/{}/N42E001.hgt", zip.display())).unwrap();
     let gt = src.geo_transform().unwrap();
@@ -825,21 +832,7 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
 #[test]
 fn udlod_through_the_clipmap_is_watertight_on_a_native_geographic_grid() {
     use vkterrain::config::Config;
-    let data_dir = common::shared_data().expect("../shared/data (the real data; CI has it)");
-    let tmp = std::env::temp_dir().join(format!("vkt-geodetic-cm-{}", std::process::id()));
-    let out = tmp.join("n42e001");
-    vkterrain::dataset::preprocess::run(
-        &vkterrain::dataset::preprocess::Options {
-            input: vkterrain::dataset::preprocess::Input::Files(vec![
-                data_dir.join("srtm/N42E001.hgt.zip"),
-            ]),
-            out: out.clone(),
-            force: true,
-            ..Default::default()
-        },
-        &vkterrain::dataset::preprocess::NoProgress,
-    )
-    .unwrap();
+    let (tmp, _, out) = srtm3_n42e001("vkt-geodetic-cm");
     let (w, h) = (96u32, 64u32);
     let config_with = |extra: &str| {
         let path = tmp.join("c.toml");
