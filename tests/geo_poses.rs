@@ -330,7 +330,6 @@ fn grid_keyframes_follow_the_terrain_onto_the_ellipsoid() {
 /// flat world), its local pitch is off by the frame's tilt there (~0.45 deg).
 #[test]
 fn extra_views_are_rig_offsets_in_the_local_frame_on_the_earth() {
-    use vkterrain::geo::WorldPose;
     use vkterrain::scene::ViewOffset;
     let earth = anchored(datum::LOCAL);
     let frame = earth.frame();
@@ -356,17 +355,7 @@ fn extra_views_are_rig_offsets_in_the_local_frame_on_the_earth() {
         yaw_deg: 180.0,
         pitch_deg: Some(-5.0),
     };
-    let pose_of = |c: &Camera| {
-        GeoPose::from_world(
-            frame,
-            &WorldPose {
-                position: c.position,
-                yaw_deg: c.yaw_deg,
-                pitch_deg: c.pitch_deg,
-                roll_deg: c.roll_deg,
-            },
-        )
-    };
+    let pose_of = |c: &Camera| GeoPose::from_world(frame, &c.into());
     let g = pose_of(&rig.apply_on(&main, Some(frame)));
     assert!(
         (g.lat_deg - 46.95).abs() < 1e-9 && (g.lon_deg - 8.0).abs() < 1e-9,

@@ -141,8 +141,7 @@ impl Geometry {
     /// The geometry for a native non-square grid drawn on the ellipsoid: the LOD metric as
     /// the level-0 reader takes it (`tiles::native_lod_spacing`); square grids are unchanged.
     pub fn with_native_spacing(mut self, georef: Option<&crate::dataset::crs::Georef>) -> Self {
-        let [sx, sy] = self.axis_spacing;
-        if ((sx - sy) / sy).abs() > 1e-9 {
+        if !crate::dataset::tiles::is_square(self.axis_spacing) {
             self.spacing =
                 crate::dataset::tiles::native_lod_spacing(georef, self.height, self.axis_spacing);
         }

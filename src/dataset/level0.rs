@@ -201,7 +201,7 @@ impl PyramidReader {
                 format!("sample spacing {sx} x {sy} m"),
             ));
         }
-        let square = ((sx - sy) / sy).abs() <= 1e-9;
+        let square = super::tiles::is_square([sx, sy]);
         if !square && grid == LoadGrid::SquareMetres {
             return Err(Error::invalid(
                 what(),

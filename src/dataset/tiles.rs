@@ -190,6 +190,12 @@ pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap>
     load_as(dir, lod, max_samples, LoadGrid::SquareMetres)
 }
 
+/// Are `[sx, sy]` metres between samples square (to 1e-9)? Non-square grids are resampled
+/// for the flat world and kept native on the ellipsoid.
+pub fn is_square([sx, sy]: [f64; 2]) -> bool {
+    ((sx - sy) / sy).abs() <= 1e-9
+}
+
 /// The LOD metric of a native grid whose stated metres between samples are `[sx, sy]`
 /// (`height` rows, georeferenced by `georef`): the smallest metric spacing anywhere on it, so
 /// distances measured with it are never longer than true ones. A geographic grid's stated
@@ -250,7 +256,7 @@ pub fn load_as(
     let (w, h, heights, rgba) = ds.level_raster(lod)?;
     let scale = (1u64 << lod) as f64;
     let [sx, sy] = ds.manifest.spacing.map(|s| s * scale);
-    let square = ((sx - sy) / sy).abs() <= 1e-9;
+    let square = is_square([sx, sy]);
     let label = if lod == 0 {
         String::new()
     } else {

@@ -167,14 +167,18 @@ impl Placement {
         };
         let locator = SampleLocator::new(georef)?;
         let [sx, sy] = data.source_step();
-        // Metric node spacing from the grid's own extent (the larger axis spacing).
+        // The largest metric sample spacing, from the grid's own extent: east-west along the
+        // first and the last row (the equator-most one is the wider), north-south.
         let metres = |c: f64, r: f64| -> Result<DVec3> {
             let (lat, lon) = locator.lat_lon(c * sx, r * sy)?;
             Ok(WGS84.to_ecef(Geodetic::new(lat, lon, 0.0)))
         };
-        let o = metres(0.0, 0.0)?;
-        let ew = (metres((w - 1).max(1) as f64, 0.0)? - o).length() / (w - 1).max(1) as f64;
-        let ns = (metres(0.0, (h - 1).max(1) as f64)? - o).length() / (h - 1).max(1) as f64;
+        let (last_c, last_r) = ((w - 1).max(1) as f64, (h - 1).max(1) as f64);
+        let along_row = |r: f64| -> Result<f64> {
+            Ok((metres(last_c, r)? - metres(0.0, r)?).length() / last_c)
+        };
+        let ew = along_row(0.0)?.max(along_row(last_r)?);
+        let ns = (metres(0.0, last_r)? - metres(0.0, 0.0)?).length() / last_r;
         let step = Lattice::step_for(w, h, ew.max(ns));
         Lattice::new(w, h, step, self.frame, |c, r| {
             locator.lat_lon(c * sx, r * sy)

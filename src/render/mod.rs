@@ -253,14 +253,8 @@ impl Renderer {
         lattice: Option<&crate::geo::Lattice>,
     ) -> Result<Self> {
         let data: Terrain = data.into();
-        let method: MethodConfig = method.into();
+        let method = method.into();
         options.check(gpu)?;
-        if lattice.is_some() && method.kind() == crate::lod::MethodKind::Pgm {
-            return Err(Error::invalid(
-                "method pgm",
-                "its screen grid is cast onto the flat plane, not onto the ellipsoid: set [render] earth = \"flat\" to draw this data set with it",
-            ));
-        }
         if let Some(c) = &clipmap {
             check_level0(c, &data)?;
         }
@@ -542,15 +536,7 @@ impl Renderer {
             geo: self
                 .world
                 .map(|(frame, height_datum)| crate::readback::GeoFix {
-                    pose: crate::geo::GeoPose::from_world(
-                        &frame,
-                        &crate::geo::WorldPose {
-                            position: pending.camera.position,
-                            yaw_deg: pending.camera.yaw_deg,
-                            pitch_deg: pending.camera.pitch_deg,
-                            roll_deg: pending.camera.roll_deg,
-                        },
-                    ),
+                    pose: crate::geo::GeoPose::from_world(&frame, &(&pending.camera).into()),
                     height_datum,
                 }),
             timings,

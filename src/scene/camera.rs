@@ -146,6 +146,18 @@ impl Default for ViewOffset {
     }
 }
 
+impl From<&Camera> for crate::geo::WorldPose {
+    /// The camera's position and world yaw/pitch/roll (for `GeoPose::from_world`).
+    fn from(c: &Camera) -> Self {
+        crate::geo::WorldPose {
+            position: c.position,
+            yaw_deg: c.yaw_deg,
+            pitch_deg: c.pitch_deg,
+            roll_deg: c.roll_deg,
+        }
+    }
+}
+
 impl ViewOffset {
     /// The camera this offset makes of `main`.
     pub fn apply(&self, main: &Camera) -> Camera {
@@ -164,19 +176,11 @@ impl ViewOffset {
     /// camera, as a camera rig mounted on a vehicle is described. Far from the world frame's
     /// origin its axes tilt against the local ones (0.45 deg at 50 km), which `apply` ignores.
     pub fn apply_on(&self, main: &Camera, world: Option<&crate::geo::EnuFrame>) -> Camera {
-        use crate::geo::{EnuFrame, GeoPose, Geodetic, WGS84, WorldPose};
+        use crate::geo::{EnuFrame, GeoPose, Geodetic, WGS84};
         let Some(world) = world else {
             return self.apply(main);
         };
-        let main_pose = GeoPose::from_world(
-            world,
-            &WorldPose {
-                position: main.position,
-                yaw_deg: main.yaw_deg,
-                pitch_deg: main.pitch_deg,
-                roll_deg: main.roll_deg,
-            },
-        );
+        let main_pose = GeoPose::from_world(world, &main.into());
         let here = EnuFrame::new(
             &WGS84,
             Geodetic::new(main_pose.lat_deg, main_pose.lon_deg, main_pose.height_m),

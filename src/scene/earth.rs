@@ -22,7 +22,7 @@ use crate::dataset::crs::{Crs, Georef, Transform};
 use crate::dataset::geoid::{Geoid, GeoidModel};
 use crate::dataset::world::Placement;
 use crate::error::{Error, Result};
-use crate::geo::{EnuFrame, GeoPose, Geodetic, HeightRef, WGS84, WorldPose};
+use crate::geo::{EnuFrame, GeoPose, Geodetic, HeightRef, WGS84};
 
 /// A data set's place on the earth, with what converting poses needs (PROJ objects made on
 /// first use: a build without GDAL converts ellipsoidal and ground poses on local data).
@@ -83,13 +83,12 @@ impl Earth {
         lat_deg: f64,
         lon_deg: f64,
     ) -> Result<(f64, f64)> {
-        let Some((georef, [w, h])) = &self.placement.georef else {
+        let Some((georef, _)) = &self.placement.georef else {
             let p = self
                 .frame()
                 .to_local(WGS84.to_ecef(Geodetic::new(lat_deg, lon_deg, 0.0)));
             return Ok((p.x, p.y));
         };
-        let _ = (w, h);
         let [x, y] = self.to_grid(georef)?.point([lon_deg, lat_deg])?;
         let t = &georef.sample_to_crs;
         let (col, row) = ((x - t[0]) / t[1], (y - t[3]) / t[5]);
@@ -213,15 +212,7 @@ impl Earth {
 
     /// The WGS84 pose of a camera, its height above the ellipsoid.
     pub fn pose(&self, camera: &Camera) -> Result<GeoPose> {
-        let mut p = GeoPose::from_world(
-            self.frame(),
-            &WorldPose {
-                position: camera.position,
-                yaw_deg: camera.yaw_deg,
-                pitch_deg: camera.pitch_deg,
-                roll_deg: camera.roll_deg,
-            },
-        );
+        let mut p = GeoPose::from_world(self.frame(), &camera.into());
         p.height_m += self.terrain_undulation(p.lat_deg, p.lon_deg)?;
         Ok(p)
     }

@@ -82,6 +82,37 @@ impl KeyframeSpec {
         self.lat_deg.is_some() || self.lon_deg.is_some() || self.height_m.is_some()
     }
 
+    /// The camera position of a keyframe given on the grid (`position`, or `at` with
+    /// `above_ground`/`altitude`) in the grid's world metres; its angles are `yaw`/`pitch`/
+    /// `roll` (the WGS84 ones do not mix with it).
+    fn grid_position<D: Level0 + ?Sized>(&self, i: usize, data: &D) -> Result<DVec3> {
+        let bad = |m: &str| Err(Error::invalid("scenario", format!("keyframe {i}: {m}")));
+        if self.heading_deg.is_some() || self.pitch_deg.is_some() || self.roll_deg.is_some() {
+            return bad(
+                "`heading_deg`/`pitch_deg`/`roll_deg` go with `lat_deg`/`lon_deg`/`height_m`; use `yaw`/`pitch`/`roll` with `position`/`at`",
+            );
+        }
+        match (self.position, self.at) {
+            (Some(p), None) => {
+                if self.above_ground.is_some() || self.altitude.is_some() {
+                    return bad("`above_ground`/`altitude` go with `at`, not `position`");
+                }
+                Ok(DVec3::from_array(p))
+            }
+            (None, Some([u, v])) => {
+                let (ex, ey) = data.extent();
+                let (x, y) = (u * ex, v * ey);
+                let z = match (self.above_ground, self.altitude) {
+                    (Some(a), None) => data.bilinear(x, y)? + a,
+                    (None, Some(a)) => a,
+                    _ => return bad("`at` needs exactly one of `above_ground`, `altitude`"),
+                };
+                Ok(DVec3::new(x, y, z))
+            }
+            _ => bad("give exactly one of `position`, `at`"),
+        }
+    }
+
     /// The keyframe's WGS84 pose; `yaw`/`pitch`/`roll` (world angles) do not mix with it.
     fn geo_pose(&self, i: usize) -> Result<GeoPose> {
         let bad = |m: &str| Err(Error::invalid("scenario", format!("keyframe {i}: {m}")));
@@ -121,6 +152,39 @@ struct Key {
     roll: f64,
     /// A WGS84 keyframe, its height in the world frame's datum (`height_ref` ellipsoid).
     geo: Option<GeoPose>,
+}
+
+impl Key {
+    /// A key on the earth at time `t`: `pose` placed by `earth` (`world_height`: its height is
+    /// already in the terrain's datum, as for grid keyframes; None: `height_m` above
+    /// `height_ref`, as WGS84 keyframes give it), kept as a WGS84 pose with its height above
+    /// the ellipsoid for the interpolation between keys.
+    fn on_earth<D: Level0 + ?Sized>(
+        earth: &Earth,
+        pose: &GeoPose,
+        world_height: Option<f64>,
+        t: f64,
+        data: &D,
+        template: &Camera,
+    ) -> Result<Key> {
+        let c = match world_height {
+            Some(h) => earth.camera_at(pose, h, template)?,
+            None => earth.camera(pose, data, template)?,
+        };
+        let height = WGS84.to_geodetic(earth.frame().to_ecef(c.position)).height;
+        Ok(Key {
+            t,
+            position: c.position,
+            yaw: c.yaw_deg,
+            pitch: c.pitch_deg,
+            roll: c.roll_deg,
+            geo: Some(GeoPose {
+                height_m: height,
+                height_ref: HeightRef::Ellipsoid,
+                ..*pose
+            }),
+        })
+    }
 }
 
 /// A resolved camera path.
@@ -200,34 +264,12 @@ impl Scenario {
         if file.keyframes.is_empty() {
             return bad("no [[keyframe]]".into());
         }
-        let (ex, ey) = data.extent();
         let mut keys = Vec::with_capacity(file.keyframes.len());
         let template = Camera {
             vfov_deg: file.vfov_deg,
             near: file.near,
             far: file.far,
             ..Camera::default()
-        };
-        // A key on the earth; `world_height`: the pose's height is already in the terrain's
-        // datum (grid keyframes), else `height_m` above `height_ref` (WGS84 keyframes).
-        let on_earth = |earth: &Earth, pose: &GeoPose, world_height: Option<f64>, t: f64| {
-            let c = match world_height {
-                Some(h) => earth.camera_at(pose, h, &template)?,
-                None => earth.camera(pose, data, &template)?,
-            };
-            let height = WGS84.to_geodetic(earth.frame().to_ecef(c.position)).height;
-            Ok::<Key, Error>(Key {
-                t,
-                position: c.position,
-                yaw: c.yaw_deg,
-                pitch: c.pitch_deg,
-                roll: c.roll_deg,
-                geo: Some(GeoPose {
-                    height_m: height,
-                    height_ref: HeightRef::Ellipsoid,
-                    ..*pose
-                }),
-            })
         };
         for (i, k) in file.keyframes.iter().enumerate() {
             if k.is_geo() {
@@ -237,49 +279,21 @@ impl Scenario {
                         "keyframe {i}: a WGS84 pose needs a data set on the earth (georeferenced, or [dataset] anchor)"
                     ));
                 };
-                keys.push(on_earth(earth, &pose, None, k.t.unwrap_or(f64::NAN))?);
+                let t = k.t.unwrap_or(f64::NAN);
+                keys.push(Key::on_earth(earth, &pose, None, t, data, &template)?);
                 continue;
             }
-            if k.heading_deg.is_some() || k.pitch_deg.is_some() || k.roll_deg.is_some() {
-                return bad(format!(
-                    "keyframe {i}: `heading_deg`/`pitch_deg`/`roll_deg` go with `lat_deg`/`lon_deg`/`height_m`; use `yaw`/`pitch`/`roll` with `position`/`at`"
-                ));
-            }
-            let position = match (k.position, k.at) {
-                (Some(p), None) => {
-                    if k.above_ground.is_some() || k.altitude.is_some() {
-                        return bad(format!(
-                            "keyframe {i}: `above_ground`/`altitude` go with `at`, not `position`"
-                        ));
-                    }
-                    DVec3::from_array(p)
-                }
-                (None, Some([u, v])) => {
-                    let (x, y) = (u * ex, v * ey);
-                    let z = match (k.above_ground, k.altitude) {
-                        (Some(a), None) => data.bilinear(x, y)? + a,
-                        (None, Some(a)) => a,
-                        _ => {
-                            return bad(format!(
-                                "keyframe {i}: `at` needs exactly one of `above_ground`, `altitude`"
-                            ));
-                        }
-                    };
-                    DVec3::new(x, y, z)
-                }
-                _ => {
-                    return bad(format!(
-                        "keyframe {i}: give exactly one of `position`, `at`"
-                    ));
-                }
-            };
+            let position = k.grid_position(i, data)?;
             if let (true, Some(earth)) = (grid_on_earth, earth) {
                 let pose = earth.grid_pose(data, position, k.yaw, k.pitch, k.roll)?;
-                keys.push(on_earth(
+                let t = k.t.unwrap_or(f64::NAN);
+                keys.push(Key::on_earth(
                     earth,
                     &pose,
                     Some(position.z),
-                    k.t.unwrap_or(f64::NAN),
+                    t,
+                    data,
+                    &template,
                 )?);
                 continue;
             }

@@ -407,6 +407,12 @@ pub struct Pgm {
 
 impl Pgm {
     pub fn new(ctx: &MethodContext<'_>, settings: &PgmSettings) -> Result<Self> {
+        if ctx.terrain.info.lattice.is_some() {
+            return Err(Error::invalid(
+                "method pgm",
+                "its screen grid is cast onto the flat plane, not onto the ellipsoid: set [render] earth = \"flat\" to draw this data set with it",
+            ));
+        }
         let gpu = ctx.gpu;
         let settings = settings.clone();
         settings.validate()?;
