@@ -14,6 +14,10 @@ CARGO ?= cargo
 # The shared real data (never committed): ../shared/data by default.
 SHARED ?= ../shared
 export VKTERRAIN_SHARED_DATA ?= $(abspath $(SHARED)/data)
+# Tests and CI's benchmarks run on lavapipe from Mesa >= 25: on Debian 12 (Mesa 22.3) the
+# pinned bookworm-backports driver, unpacked into target/lavapipe-25, nothing installed
+# (scripts/lavapipe.sh; docs/architecture.md "Which lavapipe"). VKTERRAIN_LAVAPIPE=system opts out.
+LAVAPIPE = lvp_env=$$(scripts/lavapipe.sh) && env $$lvp_env
 
 .PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap bench-ring bench-ring-fuzz bench-preprocess bench-startup fuzz data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test
 
@@ -23,10 +27,10 @@ run: deps data-default
 	$(CARGO) run --release --locked -- render --config config/default.toml
 
 test: deps-test
-	VKTERRAIN_VALIDATION=1 $(CARGO) test --locked
+	$(LAVAPIPE) VKTERRAIN_VALIDATION=1 $(CARGO) test --locked
 
 bench: deps
-	$(CARGO) bench --locked --bench frame_time
+	$(LAVAPIPE) $(CARGO) bench --locked --bench frame_time
 
 # UDLOD vs brute force on the procedural, Puget Sound and SRTM data (../shared/data).
 bench-udlod: deps data-srtm
@@ -55,10 +59,10 @@ out/datasets/franconia/manifest.json: src/dataset/manifest.rs
 
 # The speed/accuracy evaluation at CI size (short) or full size: see docs/eval.md.
 bench-eval: deps data
-	$(CARGO) bench --locked --bench eval
+	$(LAVAPIPE) $(CARGO) bench --locked --bench eval
 
 bench-eval-short: deps
-	VKTERRAIN_EVAL_SHORT=1 $(CARGO) bench --locked --bench eval
+	$(LAVAPIPE) VKTERRAIN_EVAL_SHORT=1 $(CARGO) bench --locked --bench eval
 
 # The clipmap's fast flight over a 4097² procedural pyramid much larger than the atlas.
 bench-clipmap: deps data-proc4k
