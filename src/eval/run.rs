@@ -28,7 +28,7 @@ use crate::error::{Error, Result};
 use crate::lod::{MethodConfig, MethodKind};
 use crate::readback::FrameView;
 use crate::render::stats::Percentiles;
-use crate::render::{EarthGeometry, FrameRequest, RenderOptions, Renderer};
+use crate::render::{FrameRequest, RenderOptions, Renderer};
 use crate::scene::Scenario;
 
 /// At most this many measured frames (evenly spaced) get the triangle oracle (seconds per
@@ -341,9 +341,13 @@ pub fn evaluate(
     };
     let brute = MethodConfig::Brute {};
     let others: Vec<&Variant> = variants.iter().filter(|v| v.method != brute).collect();
+    // The renderers' own lattice (None: the flat world): the exact surface is placed as they
+    // place the terrain (docs/eval.md, "On the earth").
+    let lattice = setup.config.open_lattice(setup.data, setup.options.earth)?;
     let shared = EvalShared::new(
         gpu,
         setup.data,
+        lattice.as_ref(),
         shape,
         setup.frames as u64,
         1 + others.len(),
@@ -438,8 +442,6 @@ fn open_run(
     let mut options = setup.options.clone();
     options.frames_in_flight = 1;
     options.readback_depth = setup.cross_check;
-    // The exact surface and the error metrics live in the flat grid frame (docs/eval.md).
-    options.earth = EarthGeometry::Flat;
     let mut renderer = config.open_renderer(setup.gpu, setup.data, options)?;
     let (analysis, rx) = GpuAnalysis::new(shared, role, setup.image_frames.clone())?;
     renderer.set_analysis(Box::new(analysis))?;
@@ -456,7 +458,7 @@ fn open_run(
         images: Vec::new(),
         cpu: setup
             .cross_check
-            .then(|| super::check::CpuRun::new(shape_of(setup))),
+            .then(|| super::check::CpuRun::new(shape_of(setup), shared.lattice().cloned())),
     })
 }
 
