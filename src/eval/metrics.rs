@@ -9,6 +9,10 @@
 //! pixel target `tau` bounds (`e * focal / d <= tau`), so the two can be compared directly.
 //! Measuring against the data (not against another rendered image) keeps the reference
 //! independent of any LOD parameter and of rasterization differences along silhouettes.
+//!
+//! On the earth ([`OnEarth`]) `P` is first carried into the grid's frame through the
+//! renderers' geolocation lattice (the sample position under it, its height above the lattice
+//! surface), so "vertical" is the local up (docs/eval.md, "On the earth").
 
 use glam::DVec3;
 use rayon::prelude::*;

@@ -222,6 +222,9 @@ pub struct Evaluation {
     pub frames: u32,
     pub warmup: usize,
     pub clipmap: bool,
+    /// Where the terrain was drawn and measured: "ellipsoid" (the WGS84 ellipsoid through the
+    /// geolocation lattice) or "flat" (the grid on the tangent plane, or no world frame).
+    pub earth: String,
     pub reference: String,
     /// How the speed axis was measured.
     pub timing: String,
@@ -425,7 +428,7 @@ pub fn evaluate(
         .lock()
         .unwrap_or_else(|p| p.into_inner())
         .tiles_loaded;
-    finish(setup, runs, wall_s, tiles_loaded)
+    finish(setup, runs, wall_s, (tiles_loaded, lattice.is_some()))
 }
 
 fn open_run(
@@ -643,7 +646,7 @@ fn finish(
     setup: &EvalSetup<'_>,
     runs: Vec<Run>,
     wall_s: f64,
-    reference_tiles_loaded: u64,
+    (reference_tiles_loaded, on_earth): (u64, bool),
 ) -> Result<Evaluation> {
     let focal = setup.scenario.camera(0).focal_px(setup.options.height);
     let mut summaries = Vec::new();
@@ -718,8 +721,14 @@ fn finish(
         frames: setup.frames,
         warmup: setup.warmup,
         clipmap,
+        earth: if on_earth { "ellipsoid" } else { "flat" }.into(),
         reference: format!(
-            "geometric errors against level 0 of the data, exactly: the full-resolution mesh brute force draws (every sample a vertex), evaluated on the GPU from reference tiles read from level 0{}; images (PSNR, SSIM, FLIP, holes) against brute force rendered with the same cameras{}",
+            "geometric errors against level 0 of the data, exactly: the full-resolution mesh brute force draws (every sample a vertex{}), evaluated on the GPU from reference tiles read from level 0{}; images (PSNR, SSIM, FLIP, holes) against brute force rendered with the same cameras{}",
+            if on_earth {
+                ", on the WGS84 ellipsoid where the renderers' geolocation lattice places it: each pixel's point mapped back to the grid through the lattice, heights along its up"
+            } else {
+                ""
+            },
             if clipmap {
                 " (the pyramid's, never a clipmap level)"
             } else {
