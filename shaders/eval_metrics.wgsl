@@ -308,23 +308,32 @@ fn lattice_inverse(v: u32, rel: vec3<f32>) -> GridPoint {
     let view = frame.views[v];
     let l = i32(frame.lattice.x);
     let fl = f32(l);
+    let last = vec2<i32>(frame.lattice.yz) - vec2<i32>(2);
     var n = lattice_cell(view.cell.xy);
     var f = (vec2<f32>(view.cell.xy - n * l) + view.offset.xy / frame.params.x) / fl;
+    var q = patch_of(v, n);
     // Height relative to the camera's: the camera's absolute height is added at the end.
     var dz = 0.0;
     let h_cam = view.offset.z + view.offset.w;
+    // A residual this small is the f32 model's own noise (docs/eval.md, "On the earth").
+    let tolerance = 5e-7 * length(rel) + 1e-4;
     for (var k = 0u; k < EVAL_LATTICE_ITERATIONS; k += 1u) {
-        let m = clamp(n + vec2<i32>(floor(f)), vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
-        f -= vec2<f32>(m - n);
-        n = m;
-        let q = patch_of(v, n);
+        let m = clamp(n + vec2<i32>(floor(f)), vec2<i32>(0), last);
+        if any(m != n) {
+            f -= vec2<f32>(m - n);
+            n = m;
+            q = patch_of(v, n);
+        }
         let h = h_cam + dz;
         let u = bilerp(q.u00, q.u10, q.u01, q.u11, f);
+        let r = rel - (bilerp(q.p00, q.p10, q.p01, q.p11, f) + h * u);
+        if dot(r, r) <= tolerance * tolerance {
+            break;
+        }
         let ux = mix(q.u10 - q.u00, q.u11 - q.u01, f.y);
         let uy = mix(q.u01 - q.u00, q.u11 - q.u10, f.x);
         let jx = mix(q.p10 - q.p00, q.p11 - q.p01, f.y) + h * ux;
         let jy = mix(q.p01 - q.p00, q.p11 - q.p10, f.x) + h * uy;
-        let r = rel - (bilerp(q.p00, q.p10, q.p01, q.p11, f) + h * u);
         // Solve [jx jy u] d = r (Cramer's rule).
         let c = cross(jy, u);
         let det = dot(jx, c);
@@ -334,9 +343,6 @@ fn lattice_inverse(v: u32, rel: vec3<f32>) -> GridPoint {
         let d = vec3<f32>(dot(r, c), dot(jx, cross(r, u)), dot(jx, cross(jy, r))) / det;
         f += d.xy;
         dz += d.z;
-        if all(abs(d.xy) < vec2<f32>(1e-6)) && abs(d.z) < 1e-4 {
-            break;
-        }
     }
     let s = f * fl;
     let cell = floor(s);
