@@ -18,10 +18,16 @@ struct EvalView {
     up: vec4<f32>,
     // xyz: camera forward; w: far plane (m).
     forward: vec4<f32>,
-    // xy: the sample cell the camera is in; z: the view's first column; w: its columns.
+    // xy: the sample cell the camera is in (on the earth: the sample under it,
+    // Lattice::sample_at); z: the view's first column; w: its columns.
     cell: vec4<i32>,
-    // xy: camera xy - cell * spacing (m); z + w: camera z (m) as f32 high and low parts.
+    // xy: camera's sample position - cell, times spacing (m); z + w: camera z (on the earth:
+    // its height above the lattice surface) (m) as f32 high and low parts.
     offset: vec4<f32>,
+    // On the earth: the camera's world position split into f32 hi and lo parts (the
+    // renderer's camera_hi / camera_lo).
+    cam_hi: vec4<f32>,
+    cam_lo: vec4<f32>,
 }
 
 struct EvalFrame {
@@ -38,6 +44,9 @@ struct EvalFrame {
     points: vec4<u32>,
     // x, y: the seed grid (columns, rows); z: 8x8 blocks per row.
     grid: vec4<u32>,
+    // The geolocation lattice (src/geo/lattice.rs): x samples per node (0: flat world), y/z
+    // nodes per row/column.
+    lattice: vec4<u32>,
 }
 
 // A tracked world point: sample cell + fraction (x, y) and the exact surface's height there.
@@ -114,6 +123,9 @@ const TILE_SIDE: u32 = EVAL_REF_TILE + 1u;
 @group(0) @binding(10) var<storage, read_write> stats: Stats;
 // |height error| (m) per pixel of this frame (where error_image is not NO_ERROR).
 @group(0) @binding(11) var<storage, read_write> metres_image: array<f32>;
+// The renderer's geolocation lattice (three vec4 per node: hi, lo, up; one placeholder node
+// in a flat world), the same data the vertex shaders place the terrain with.
+@group(0) @binding(12) var<storage, read> geo_lattice: array<vec4<f32>>;
 
 // Level-0 height of sample s (inside the data) from its reference tile, or a negative tile.
 struct Sample4 {
@@ -210,11 +222,144 @@ struct GridPos {
     frac: vec2<f32>,
 }
 
+// A camera-relative point in the grid's frame: its sample position and its height (m) above
+// the surface of height 0 along the surface's up (flat world: z).
+struct GridPoint {
+    p: GridPos,
+    // Height minus the camera's (m): add the camera's (offset.z + offset.w) for the height.
+    dz: f32,
+}
+
 fn grid_pos(v: u32, rel: vec3<f32>) -> GridPos {
+    return grid_point(v, rel).p;
+}
+
+fn grid_point(v: u32, rel: vec3<f32>) -> GridPoint {
+    if frame.lattice.x != 0u {
+        return lattice_inverse(v, rel);
+    }
     let view = frame.views[v];
     let q = (view.offset.xy + rel.xy) / frame.params.x;
     let fl = floor(q);
-    return GridPos(view.cell.xy + vec2<i32>(fl), q - fl);
+    return GridPoint(GridPos(view.cell.xy + vec2<i32>(fl), q - fl), rel.z);
+}
+
+// Camera-relative position of lattice node `node` for view v (hi parts subtracted first, then
+// lo parts: terrain_common.wgsl's lattice_relative with the view's camera).
+fn lattice_rel(v: u32, node: vec2<i32>) -> vec3<f32> {
+    let i = 3 * (node.y * i32(frame.lattice.y) + node.x);
+    let view = frame.views[v];
+    return (geo_lattice[i].xyz - view.cam_hi.xyz) + (geo_lattice[i + 1].xyz - view.cam_lo.xyz);
+}
+
+fn lattice_up(node: vec2<i32>) -> vec3<f32> {
+    return geo_lattice[3 * (node.y * i32(frame.lattice.y) + node.x) + 2].xyz;
+}
+
+// The lattice cell (lower node) of a sample cell, clamped like the vertex shaders'.
+fn lattice_cell(cell: vec2<i32>) -> vec2<i32> {
+    let l = i32(frame.lattice.x);
+    let c = vec2<i32>(floor(vec2<f32>(cell) / f32(l)));
+    return clamp(c, vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
+}
+
+// One lattice cell of view v: corners (camera-relative) and up vectors.
+struct Patch {
+    p00: vec3<f32>,
+    p10: vec3<f32>,
+    p01: vec3<f32>,
+    p11: vec3<f32>,
+    u00: vec3<f32>,
+    u10: vec3<f32>,
+    u01: vec3<f32>,
+    u11: vec3<f32>,
+}
+
+fn patch_of(v: u32, n: vec2<i32>) -> Patch {
+    let x = vec2<i32>(1, 0);
+    let y = vec2<i32>(0, 1);
+    return Patch(
+        lattice_rel(v, n), lattice_rel(v, n + x), lattice_rel(v, n + y), lattice_rel(v, n + x + y),
+        lattice_up(n), lattice_up(n + x), lattice_up(n + y), lattice_up(n + x + y),
+    );
+}
+
+fn bilerp(a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, d: vec3<f32>, f: vec2<f32>) -> vec3<f32> {
+    return mix(mix(a, b, f.x), mix(c, d, f.x), f.y);
+}
+
+// Camera-relative position (view v) of the surface point at sample cell + frac and height h:
+// the vertex shaders' relative_position on the earth.
+fn lattice_position(v: u32, cell: vec2<i32>, frac: vec2<f32>, h: f32) -> vec3<f32> {
+    let l = i32(frame.lattice.x);
+    let n = lattice_cell(cell);
+    let f = (vec2<f32>(cell - n * l) + frac) / f32(l);
+    let q = patch_of(v, n);
+    return bilerp(q.p00, q.p10, q.p01, q.p11, f) + h * bilerp(q.u00, q.u10, q.u01, q.u11, f);
+}
+
+// The inverse of lattice_position (Lattice::sample_at on the CPU): the sample position and
+// height whose surface point is the camera-relative `rel`. Newton on the bilinear patch
+// `P(f) + h U(f) = rel` of the current lattice cell, in camera-relative f32, starting from
+// the camera's own sample position and height; after each step the estimate moves into the
+// cell it lies in (outside the lattice the edge cells extrapolate, as the vertex shaders do).
+// docs/eval.md ("On the earth") derives the precision.
+fn lattice_inverse(v: u32, rel: vec3<f32>) -> GridPoint {
+    let view = frame.views[v];
+    let l = i32(frame.lattice.x);
+    let fl = f32(l);
+    let last = vec2<i32>(frame.lattice.yz) - vec2<i32>(2);
+    var n = lattice_cell(view.cell.xy);
+    var f = (vec2<f32>(view.cell.xy - n * l) + view.offset.xy / frame.params.x) / fl;
+    var q = patch_of(v, n);
+    // Height relative to the camera's: the camera's absolute height is added at the end.
+    var dz = 0.0;
+    let h_cam = view.offset.z + view.offset.w;
+    // A residual this small is the f32 model's own noise (docs/eval.md, "On the earth").
+    let tolerance = 5e-7 * length(rel) + 1e-4;
+    for (var k = 0u; k < EVAL_LATTICE_ITERATIONS; k += 1u) {
+        let m = clamp(n + vec2<i32>(floor(f)), vec2<i32>(0), last);
+        if any(m != n) {
+            f -= vec2<f32>(m - n);
+            n = m;
+            q = patch_of(v, n);
+        }
+        let h = h_cam + dz;
+        let u = bilerp(q.u00, q.u10, q.u01, q.u11, f);
+        let r = rel - (bilerp(q.p00, q.p10, q.p01, q.p11, f) + h * u);
+        if dot(r, r) <= tolerance * tolerance {
+            break;
+        }
+        let ux = mix(q.u10 - q.u00, q.u11 - q.u01, f.y);
+        let uy = mix(q.u01 - q.u00, q.u11 - q.u10, f.x);
+        let jx = mix(q.p10 - q.p00, q.p11 - q.p01, f.y) + h * ux;
+        let jy = mix(q.p01 - q.p00, q.p11 - q.p10, f.x) + h * uy;
+        // Solve [jx jy u] d = r (Cramer's rule).
+        let c = cross(jy, u);
+        let det = dot(jx, c);
+        if abs(det) < 1e-30 {
+            break;
+        }
+        let d = vec3<f32>(dot(r, c), dot(jx, cross(r, u)), dot(jx, cross(jy, r))) / det;
+        f += d.xy;
+        dz += d.z;
+    }
+    let s = f * fl;
+    let cell = floor(s);
+    return GridPoint(GridPos(n * l + vec2<i32>(cell), s - cell), dz);
+}
+
+// The up vector (unit length on the earth) at sample cell + frac; the flat world's is z.
+fn up_at(cell: vec2<i32>, frac: vec2<f32>) -> vec3<f32> {
+    if frame.lattice.x == 0u {
+        return vec3<f32>(0.0, 0.0, 1.0);
+    }
+    let l = i32(frame.lattice.x);
+    let n = lattice_cell(cell);
+    let f = (vec2<f32>(cell - n * l) + frac) / f32(l);
+    let x = vec2<i32>(1, 0);
+    let y = vec2<i32>(0, 1);
+    return normalize(bilerp(lattice_up(n), lattice_up(n + x), lattice_up(n + y), lattice_up(n + x + y), f));
 }
 
 // Whether a sample position lies on the data, at least EVAL_EDGE_BAND samples inside its
@@ -227,7 +372,9 @@ fn on_data(p: GridPos) -> bool {
     return all(low_ok) && all(high_ok);
 }
 
-// Height of a camera-relative point above the exact surface at `p` (metres).
+// Height of a point `rel_z` above the camera's height (flat world: its camera-relative z; on
+// the earth: its height above the lattice surface minus the camera's) above the exact surface
+// of height h there (metres).
 fn height_error(v: u32, rel_z: f32, h: f32) -> f32 {
     let off = frame.views[v].offset;
     return ((off.z - h) + rel_z) + off.w;
@@ -272,7 +419,8 @@ fn pixel_error(v: u32, view: EvalView, x: u32, y: u32, d: f32) -> PixelResult {
         return out;
     }
     let rel = world_rel(v, x, y, d);
-    let p = grid_pos(v, rel);
+    let g = grid_point(v, rel);
+    let p = g.p;
     if !on_data(p) {
         return out;
     }
@@ -280,7 +428,7 @@ fn pixel_error(v: u32, view: EvalView, x: u32, y: u32, d: f32) -> PixelResult {
     if !h.ok {
         return out;
     }
-    let dh = height_error(v, rel.z, h.h);
+    let dh = height_error(v, g.dz, h.h);
     out.metres = abs(dh);
     out.pixels = abs(dh) * view.right.w / length(rel);
     out.counted = true;
@@ -498,6 +646,9 @@ fn seed_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // Camera-relative position of a seed for view v.
 fn seed_rel(s: Seed, v: u32) -> vec3<f32> {
+    if frame.lattice.x != 0u {
+        return lattice_position(v, s.cell, s.frac, s.z);
+    }
     let view = frame.views[v];
     let spacing = frame.params.x;
     let xy = vec2<f32>(s.cell - view.cell.xy) * spacing + s.frac * spacing - view.offset.xy;
@@ -545,15 +696,18 @@ fn observe(s: Seed) -> vec2<f32> {
         }
         let q = world_rel(v, x, y, d);
         let footprint = length(rel) / focal;
-        if length(q.xy - rel.xy) > 2.0 * footprint + 1e-6 {
+        // Horizontal: across the surface's up at the point.
+        let up = up_at(s.cell, s.frac);
+        let dq = q - rel;
+        if length(dq - up * dot(dq, up)) > 2.0 * footprint + 1e-6 {
             return none;
         }
-        let p = grid_pos(v, q);
-        let h = exact_height(p.cell, p.frac);
+        let g = grid_point(v, q);
+        let h = exact_height(g.p.cell, g.p.frac);
         if !h.ok {
             return none;
         }
-        return vec2<f32>(height_error(v, q.z, h.h), length(q));
+        return vec2<f32>(height_error(v, g.dz, h.h), length(q));
     }
     return none;
 }

@@ -84,6 +84,11 @@ shared_constants! {
     EVAL_POINT_WORKGROUP: u32 = 64;
     /// Threads of the one workgroup that sums the per-workgroup partials.
     EVAL_REDUCE_WORKGROUP: u32 = 256;
+    /// Evaluator on the earth: most Newton iterations inverting the geolocation lattice per
+    /// point (camera-relative f32, docs/eval.md "On the earth"; converged after 3-4 from the
+    /// camera's lattice cell; the loop stops once the residual is f32 noise, 2^-21 of the
+    /// point's distance).
+    EVAL_LATTICE_ITERATIONS: u32 = 6;
     /// Threads per workgroup of the UDLOD morph probe (tests: morphed vertices read back).
     UDLOD_PROBE_WORKGROUP: u32 = 64;
     /// Threads per workgroup of the terrain-helper probes (tests: WGSL vs GLSL helpers).

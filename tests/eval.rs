@@ -135,7 +135,8 @@ fn bad_sweeps_and_methods_are_one_line_errors() {
 
 /// Everything the renderer can render is evaluable, and the GPU metrics equal the CPU path on
 /// it: heights through the clipmap over a tile pyramid (the reference from the pyramid's level
-/// 0), and two views side by side. `--cross-check` fails the run on any difference.
+/// 0), two views side by side, and the clipmap case anchored on the earth (measured on the
+/// ellipsoid). `--cross-check` fails the run on any difference.
 #[test]
 fn clipmap_and_two_view_frames_are_evaluated_and_cross_checked() {
     let tmp = tempfile::tempdir().unwrap();
@@ -158,11 +159,24 @@ fn clipmap_and_two_view_frames_are_evaluated_and_cross_checked() {
         ),
     )
     .unwrap();
-    for (config, methods, expect_views, expect_clipmap) in [
-        (&clipmap, "brute,udlod", 1, true),
-        (&views, "brute,udlod,pgm", 2, false),
-    ] {
-        let out = tmp.path().join(format!("ev{expect_views}"));
+    // The clipmap case again with the pyramid anchored on the earth: drawn and measured on the
+    // ellipsoid (the GPU inverting the lattice per pixel and per swim point, the CPU by
+    // Lattice::sample_at).
+    let earth = tmp.path().join("earth.toml");
+    let text = std::fs::read_to_string(&clipmap).unwrap().replace(
+        "[method]",
+        "anchor = { lat_deg = 60.0, lon_deg = 20.0 }\n\n[method]",
+    );
+    std::fs::write(&earth, text).unwrap();
+    for (i, (config, methods, expect_views, expect_clipmap, expect_earth)) in [
+        (&clipmap, "brute,udlod", 1, true, "flat"),
+        (&views, "brute,udlod,pgm", 2, false, "flat"),
+        (&earth, "brute,udlod", 1, true, "ellipsoid"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let out = tmp.path().join(format!("ev{i}"));
         let o = vkterrain(&[
             "eval",
             "--config",
@@ -183,6 +197,7 @@ fn clipmap_and_two_view_frames_are_evaluated_and_cross_checked() {
                 .unwrap();
         assert_eq!(results["views"], expect_views);
         assert_eq!(results["clipmap"], expect_clipmap);
+        assert_eq!(results["earth"], expect_earth);
         let runs = methods.split(',').count() as u64;
         let check = &results["cross_check"];
         assert_eq!(check["frames"].as_u64(), Some(9 * runs), "{check}");

@@ -3,7 +3,10 @@
 //! screen-space-error and popping histograms within one bin, means and maxima to f32
 //! precision, holes and PSNR exactly, SSIM to 1e-4 — for the reference itself and for a method
 //! with real errors (PGM). Negative control: the same frames measured on the CPU against a
-//! surface 0.3 m higher must differ. Validation (incl. synchronization) on.
+//! surface 0.3 m higher must differ. On the earth (the terrain drawn through an anchored
+//! geolocation lattice, the GPU inverting it per pixel, the CPU by `Lattice::sample_at`) the
+//! same, with a second negative control: the CPU mapping the points to the grid as on the
+//! flat world must differ. Validation (incl. synchronization) on.
 
 mod common;
 
@@ -14,8 +17,9 @@ use vkterrain::dataset::{Heightmap, Terrain};
 use vkterrain::eval::check::{CpuFrame, Floors, FrameMeasures, compare, cpu_measures};
 use vkterrain::eval::gpu::reference::ViewCone;
 use vkterrain::eval::gpu::{EvalShared, FrameShape, GpuAnalysis, Role};
-use vkterrain::eval::metrics::ViewColumns;
-use vkterrain::lod::{MethodConfig, PgmSettings};
+use vkterrain::eval::metrics::{OnEarth, ViewColumns};
+use vkterrain::geo::{EnuFrame, Geodetic, Lattice, WGS84};
+use vkterrain::lod::{MethodConfig, PgmSettings, UdlodSettings};
 use vkterrain::readback::CollectSink;
 use vkterrain::render::Renderer;
 use vkterrain::scene::Scenario;
@@ -28,12 +32,25 @@ fn raised(data: &Heightmap, dz: f32) -> Heightmap {
 
 #[test]
 fn gpu_metrics_equal_the_cpu_path_on_small_frames() {
+    gpu_metrics_equal_the_cpu_path(30.0, None);
+}
+
+/// 257 samples of 120 m (31 km) anchored at 60 N: the far side lies ~75 m below the tangent
+/// plane at the origin.
+#[test]
+fn gpu_metrics_equal_the_cpu_path_on_the_earth() {
+    let frame = EnuFrame::new(&WGS84, Geodetic::new(60.0, 20.0, 0.0));
+    let lattice = Lattice::anchored_plane(257, 257, 120.0, frame).unwrap();
+    gpu_metrics_equal_the_cpu_path(120.0, Some(&lattice));
+}
+
+fn gpu_metrics_equal_the_cpu_path(spacing: f64, lattice: Option<&Lattice>) {
     let gpu = common::gpu(false);
     let data = Arc::new(
         procedural::generate(&ProceduralParams {
             size: 257,
             seed: 3,
-            spacing: 30.0,
+            spacing,
             ..Default::default()
         })
         .unwrap(),
@@ -47,16 +64,34 @@ fn gpu_metrics_equal_the_cpu_path_on_small_frames() {
         height: h,
         views: 1,
     };
-    let shared = EvalShared::new(&gpu, &terrain, shape, frames, 2, 64 << 20).unwrap();
-    let mut pgm: MethodConfig = PgmSettings::default().into();
-    pgm.apply_sweep("grid_scale", 0.25).unwrap();
+    let shared = EvalShared::new(&gpu, &terrain, lattice, shape, frames, 2, 64 << 20).unwrap();
+    // A method with real errors: PGM at a quarter grid; on the earth (which PGM refuses)
+    // UDLOD at tau 4 px.
+    let variant: MethodConfig = if lattice.is_none() {
+        let mut pgm: MethodConfig = PgmSettings::default().into();
+        pgm.apply_sweep("grid_scale", 0.25).unwrap();
+        pgm
+    } else {
+        UdlodSettings {
+            tau_px: 4.0,
+            ..Default::default()
+        }
+        .into()
+    };
     let mut runs = Vec::new();
     for (method, role) in [
         (MethodConfig::Brute {}, Role::Reference),
-        (pgm, Role::Variant),
+        (variant, Role::Variant),
     ] {
-        let mut renderer =
-            Renderer::new(&gpu, data.clone(), method, common::options(w, h, 1)).unwrap();
+        let mut renderer = Renderer::with_world(
+            &gpu,
+            data.clone(),
+            method,
+            common::options(w, h, 1),
+            None,
+            lattice,
+        )
+        .unwrap();
         let (analysis, results) = GpuAnalysis::new(&shared, role, vec![0, frames - 1]).unwrap();
         renderer.set_analysis(Box::new(analysis)).unwrap();
         runs.push((renderer, results, None::<Vec<Option<f64>>>));
@@ -92,7 +127,14 @@ fn gpu_metrics_equal_the_cpu_path_on_small_frames() {
                 reference_depth: reference.depth.as_deref(),
             };
             let previous = runs[i].2.as_deref();
-            let (cpu, image) = cpu_measures(&*data, &views, shape, &cpu_frame, previous).unwrap();
+            let measure = |surface: &Heightmap, earth: bool| match (lattice, earth) {
+                (Some(lattice), true) => {
+                    let on_earth = OnEarth { surface, lattice };
+                    cpu_measures(&on_earth, &views, shape, &cpu_frame, previous)
+                }
+                _ => cpu_measures(surface, &views, shape, &cpu_frame, previous),
+            };
+            let (cpu, image) = measure(&data, true).unwrap();
             let gpu_measures = FrameMeasures::from(metrics);
             let problems = compare(&gpu_measures, &cpu, floors);
             assert!(problems.is_empty(), "run {i}, frame {k}: {problems:#?}");
@@ -104,17 +146,25 @@ fn gpu_metrics_equal_the_cpu_path_on_small_frames() {
                 variant_errors += (cpu.pixels.quantile(0.99) > 0.05) as usize;
             }
             // Negative control: a surface 0.3 m higher is not the one the GPU measured against.
-            let (shifted, _) = cpu_measures(&higher, &views, shape, &cpu_frame, previous).unwrap();
+            let (shifted, _) = measure(&higher, true).unwrap();
             assert!(
                 !compare(&gpu_measures, &shifted, floors).is_empty(),
                 "run {i}, frame {k}: a raised surface went unnoticed"
             );
+            // On the earth: the flat world's mapping is not the one the GPU measured with.
+            if lattice.is_some() {
+                let (flat, _) = measure(&data, false).unwrap();
+                assert!(
+                    !compare(&gpu_measures, &flat, floors).is_empty(),
+                    "run {i}, frame {k}: the flat mapping went unnoticed"
+                );
+            }
             runs[i].2 = Some(image);
         }
     }
     assert!(
         variant_errors > 0,
-        "PGM at a quarter grid has visible errors"
+        "the variant (PGM at a quarter grid, UDLOD tau 4) has visible errors"
     );
     drop(runs);
     drop(shared);

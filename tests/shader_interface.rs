@@ -517,3 +517,41 @@ fn tessellation_uniforms_match_the_wgsl_struct() {
         size_of::<TessUniforms>(),
     );
 }
+
+/// The evaluator's uniforms and swim seeds (`src/eval/gpu/layout.rs`) against
+/// `shaders/eval_metrics.wgsl`: the views carry the camera's split position for the lattice
+/// inverse, the frame the lattice's size.
+#[test]
+fn eval_structs_match_the_wgsl_structs() {
+    use vkterrain::eval::gpu::layout::{EvalFrame, EvalView, Seed};
+    let eval = [("eval_metrics", EVAL_METRICS_WGSL)];
+    let view = [
+        ("right", offset_of!(EvalView, right)),
+        ("up", offset_of!(EvalView, up)),
+        ("forward", offset_of!(EvalView, forward)),
+        ("cell", offset_of!(EvalView, cell)),
+        ("offset", offset_of!(EvalView, offset)),
+        ("cam_hi", offset_of!(EvalView, cam_hi)),
+        ("cam_lo", offset_of!(EvalView, cam_lo)),
+    ];
+    assert_struct_layout(&eval, "EvalView", &view, size_of::<EvalView>());
+    let frame = [
+        ("views", offset_of!(EvalFrame, views)),
+        ("size", offset_of!(EvalFrame, size)),
+        ("data", offset_of!(EvalFrame, data)),
+        ("params", offset_of!(EvalFrame, params)),
+        ("points", offset_of!(EvalFrame, points)),
+        ("grid", offset_of!(EvalFrame, grid)),
+        ("lattice", offset_of!(EvalFrame, lattice)),
+    ];
+    assert_struct_layout(&eval, "EvalFrame", &frame, size_of::<EvalFrame>());
+    let seed = [
+        ("cell", offset_of!(Seed, cell)),
+        ("valid", offset_of!(Seed, valid)),
+        ("pad0", offset_of!(Seed, pad0)),
+        ("frac", offset_of!(Seed, frac)),
+        ("z", offset_of!(Seed, z)),
+        ("pad1", offset_of!(Seed, pad1)),
+    ];
+    assert_struct_layout(&eval, "Seed", &seed, size_of::<Seed>());
+}

@@ -66,8 +66,8 @@ impl Progress for Bars {
 }
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
-    // The exact surface and the metrics live in the grid's frame (docs/eval.md).
-    let p = super::render::prepare_as(&args.render, Some(crate::render::EarthGeometry::Flat))?;
+    // On the configured earth (`[render] earth`, `--earth`): docs/eval.md, "On the earth".
+    let p = super::render::prepare(&args.render)?;
     let methods = &args.methods;
     if methods.is_empty() {
         anyhow::bail!("--methods lists no method");

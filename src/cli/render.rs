@@ -54,6 +54,10 @@ pub struct RenderArgs {
     /// Frames excluded from the timing summary (lavapipe compiles shaders lazily).
     #[arg(long, default_value_t = 5)]
     pub warmup: usize,
+    /// The terrain's geometry on the earth (overrides `[render] earth`): `ellipsoid` or
+    /// `flat` (data sets without a world frame are always flat).
+    #[arg(long, value_enum)]
+    pub earth: Option<crate::render::EarthGeometry>,
 }
 
 /// Everything a render run needs, checked before any output exists.
@@ -93,6 +97,9 @@ impl RenderArgs {
         if let Some(d) = &self.device {
             config.device.select = Some(d.clone());
         }
+        if let Some(e) = self.earth {
+            config.render.earth = e;
+        }
         config.validate()?;
         Ok(config)
     }
@@ -100,19 +107,7 @@ impl RenderArgs {
 
 /// Loads and checks config, data set and scenario; creates nothing.
 pub fn prepare(args: &RenderArgs) -> anyhow::Result<Prepared> {
-    prepare_as(args, None)
-}
-
-/// [`prepare`] with `[render] earth` replaced by `earth` when given (the evaluator works on
-/// the flat grid: docs/eval.md), before the scenario is placed.
-pub fn prepare_as(
-    args: &RenderArgs,
-    earth: Option<crate::render::EarthGeometry>,
-) -> anyhow::Result<Prepared> {
-    let mut config = args.config()?;
-    if let Some(earth) = earth {
-        config.render.earth = earth;
-    }
+    let config = args.config()?;
     let data = config.open_terrain()?;
     let scenario = config.open_scenario(args.scenario.as_deref(), &data)?;
     let frames = args.frames.unwrap_or(scenario.frames);

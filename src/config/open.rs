@@ -8,10 +8,11 @@ use std::sync::Arc;
 use super::Config;
 use crate::clipmap::{Clipmap, Geometry, StoreSource};
 use crate::dataset::tiles::LoadGrid;
+use crate::dataset::world::Placement;
 use crate::dataset::{NodeStore, PyramidReader, Terrain};
 use crate::driver::Gpu;
 use crate::error::Result;
-use crate::geo::EnuFrame;
+use crate::geo::{EnuFrame, Lattice};
 use crate::output::ring::layout::datum_code;
 use crate::render::{EarthGeometry, RenderOptions, Renderer};
 use crate::scene::{Earth, Scenario};
@@ -81,10 +82,7 @@ impl Config {
         options: RenderOptions,
     ) -> Result<Renderer> {
         let placement = self.dataset.placement(|p| self.resolve(p))?;
-        let lattice = match (&placement, options.earth) {
-            (Some(p), EarthGeometry::Ellipsoid) => Some(p.lattice(data)?),
-            _ => None,
-        };
+        let lattice = Self::lattice_of(placement.as_ref(), data, options.earth)?;
         let mut renderer = Renderer::with_world(
             gpu,
             data.clone(),
@@ -95,6 +93,24 @@ impl Config {
         )?;
         renderer.world = placement.map(|p| (p.frame, datum_code(&p.vertical_datum)));
         Ok(renderer)
+    }
+
+    /// The geolocation lattice a renderer with `earth` draws `data` through (None: the flat
+    /// world: no world frame, or `earth = "flat"`).
+    pub fn open_lattice(&self, data: &Terrain, earth: EarthGeometry) -> Result<Option<Lattice>> {
+        let placement = self.dataset.placement(|p| self.resolve(p))?;
+        Self::lattice_of(placement.as_ref(), data, earth)
+    }
+
+    fn lattice_of(
+        placement: Option<&Placement>,
+        data: &Terrain,
+        earth: EarthGeometry,
+    ) -> Result<Option<Lattice>> {
+        match (placement, earth) {
+            (Some(p), EarthGeometry::Ellipsoid) => p.lattice(data).map(Some),
+            _ => Ok(None),
+        }
     }
 
     /// The scenario file `path` (or the configured one, or the built-in default flight)

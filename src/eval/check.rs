@@ -11,10 +11,13 @@
 use serde::Serialize;
 
 use super::gpu::{FrameShape, GpuFrameMetrics};
-use super::metrics::{self, Histogram, SWIM_SEED_EVERY, Summary, SwimTracker, ViewColumns};
+use super::metrics::{
+    self, Histogram, OnEarth, SWIM_SEED_EVERY, Summary, SwimTracker, ViewColumns,
+};
 use super::run::EvalSetup;
 use crate::dataset::Terrain;
 use crate::error::{Error, Result};
+use crate::geo::Lattice;
 use crate::gpu_constants::EVAL_NO_ERROR_PX;
 use crate::render::FrameRequest;
 
@@ -103,6 +106,8 @@ pub fn cpu_measures<S: metrics::ExactSurface + ?Sized>(
 /// The CPU side of one renderer's cross-check.
 pub struct CpuRun {
     shape: FrameShape,
+    /// The renderers' geolocation lattice on the earth (None: the flat world).
+    lattice: Option<Lattice>,
     previous: Option<Vec<Option<f64>>>,
     swim: SwimTracker,
     problems: Vec<String>,
@@ -110,9 +115,11 @@ pub struct CpuRun {
 }
 
 impl CpuRun {
-    pub fn new(shape: FrameShape) -> Self {
+    /// A cross-check of frames of `shape`, on the earth through `lattice` (None: flat).
+    pub fn new(shape: FrameShape, lattice: Option<Lattice>) -> Self {
         CpuRun {
             shape,
+            lattice,
             previous: None,
             swim: SwimTracker::new(),
             problems: Vec::new(),
@@ -124,6 +131,28 @@ impl CpuRun {
     pub fn measure(
         &mut self,
         data: &Terrain,
+        views: &[ViewColumns],
+        k: u64,
+        frame: &CpuFrame<'_>,
+        gpu: &GpuFrameMetrics,
+    ) -> Result<()> {
+        match self.lattice.take() {
+            None => self.measure_on(data, views, k, frame, gpu),
+            Some(lattice) => {
+                let surface = OnEarth {
+                    surface: data,
+                    lattice: &lattice,
+                };
+                let result = self.measure_on(&surface, views, k, frame, gpu);
+                self.lattice = Some(lattice);
+                result
+            }
+        }
+    }
+
+    fn measure_on<S: metrics::ExactSurface + ?Sized>(
+        &mut self,
+        data: &S,
         views: &[ViewColumns],
         k: u64,
         frame: &CpuFrame<'_>,

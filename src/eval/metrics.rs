@@ -9,11 +9,16 @@
 //! pixel target `tau` bounds (`e * focal / d <= tau`), so the two can be compared directly.
 //! Measuring against the data (not against another rendered image) keeps the reference
 //! independent of any LOD parameter and of rasterization differences along silhouettes.
+//!
+//! On the earth ([`OnEarth`]) `P` is first carried into the grid's frame through the
+//! renderers' geolocation lattice (the sample position under it, its height above the lattice
+//! surface), so "vertical" is the local up (docs/eval.md, "On the earth").
 
 use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::dataset::{Heightmap, Level0, Terrain};
+use crate::geo::Lattice;
 use crate::gpu_constants::{EVAL_EDGE_BAND, EVAL_HIST_BINS, EVAL_HIST_MIN, EVAL_HIST_STEP};
 use crate::scene::Camera;
 
@@ -32,6 +37,55 @@ pub trait ExactSurface: Sync {
     fn extent(&self) -> (f64, f64);
     /// Metres between samples.
     fn spacing(&self) -> f64;
+    /// A world point in the grid's frame: `x = col * spacing`, `y = row * spacing` of the
+    /// sample position it lies over and `z` its height above the surface of height 0, along
+    /// that surface's up. On the flat world the identity; on the earth ([`OnEarth`]) the
+    /// inverse of the geolocation lattice.
+    fn to_grid(&self, world: DVec3) -> DVec3 {
+        world
+    }
+    /// The inverse of [`ExactSurface::to_grid`].
+    fn to_world(&self, grid: DVec3) -> DVec3 {
+        grid
+    }
+    /// The unit up vector (world axes) at grid point `grid`.
+    fn up_at(&self, _grid: DVec3) -> DVec3 {
+        DVec3::Z
+    }
+}
+
+/// An exact surface drawn on the earth through the geolocation lattice the renderers use
+/// (docs/eval.md, "On the earth"): a world point maps to the grid by [`Lattice::sample_at`]
+/// (the shader's `lattice_inverse` in f64), its height error is measured along the lattice's
+/// up there.
+pub struct OnEarth<'a, S: ExactSurface + ?Sized> {
+    pub surface: &'a S,
+    pub lattice: &'a Lattice,
+}
+
+impl<S: ExactSurface + ?Sized> ExactSurface for OnEarth<'_, S> {
+    fn mesh_height(&self, x: f64, y: f64) -> f64 {
+        self.surface.mesh_height(x, y)
+    }
+    fn extent(&self) -> (f64, f64) {
+        self.surface.extent()
+    }
+    fn spacing(&self) -> f64 {
+        self.surface.spacing()
+    }
+    fn to_grid(&self, world: DVec3) -> DVec3 {
+        let (s, height) = self.lattice.sample_at(world);
+        let spacing = self.spacing();
+        DVec3::new(s.x * spacing, s.y * spacing, height)
+    }
+    fn to_world(&self, grid: DVec3) -> DVec3 {
+        let s = grid.truncate() / self.spacing();
+        self.lattice.position(s, grid.z)
+    }
+    fn up_at(&self, grid: DVec3) -> DVec3 {
+        let s = grid.truncate() / self.spacing();
+        (self.lattice.position(s, 1.0) - self.lattice.position(s, 0.0)).normalize()
+    }
 }
 
 impl ExactSurface for Heightmap {
@@ -320,10 +374,11 @@ fn pixel_error<S: ExactSurface + ?Sized>(
     }
     let v = view_of(views, x);
     let p = world_point(&v.camera, x - v.first, y, v.count, height, d);
-    if !on_data(data, p.x, p.y) {
+    let g = data.to_grid(p);
+    if !on_data(data, g.x, g.y) {
         return None;
     }
-    let metres = p.z - data.mesh_height(p.x, p.y);
+    let metres = g.z - data.mesh_height(g.x, g.y);
     let distance = (p - v.camera.position).length();
     Some(PixelError {
         x,
@@ -577,8 +632,8 @@ impl SwimTracker {
             let d = reference_depth[(y * width + x) as usize];
             let point = (d > 0.0).then(|| {
                 let v = view_of(views, x);
-                let p = world_point(&v.camera, x - v.first, y, v.count, height, d);
-                DVec3::new(p.x, p.y, data.mesh_height(p.x, p.y))
+                let g = data.to_grid(world_point(&v.camera, x - v.first, y, v.count, height, d));
+                data.to_world(DVec3::new(g.x, g.y, data.mesh_height(g.x, g.y)))
             });
             self.points.push(point);
             self.observed.push(Vec::new());
@@ -683,11 +738,15 @@ fn observe_point<S: ExactSurface + ?Sized>(
         }
         let q = world_point(camera, x, y, v.count, height, d);
         let footprint = rel.length() / focal;
-        if (q.truncate() - p.truncate()).length() > 2.0 * footprint + 1e-6 {
+        // Horizontal: across the surface's up at the point (the flat world's xy).
+        let up = data.up_at(data.to_grid(p));
+        let dq = q - p;
+        if (dq - up * dq.dot(up)).length() > 2.0 * footprint + 1e-6 {
             return None;
         }
+        let g = data.to_grid(q);
         return Some((
-            q.z - data.mesh_height(q.x, q.y),
+            g.z - data.mesh_height(g.x, g.y),
             (q - camera.position).length(),
         ));
     }

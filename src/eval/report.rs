@@ -313,7 +313,7 @@ fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)
     let _ = writeln!(md, "# Evaluation: {} on {}\n", eval.scenario, eval.dataset);
     let _ = writeln!(
         md,
-        "- Device: {}\n- Resolution: {}x{}, {} view(s){}\n- Data set: {}\n- Frames: {} ({} warm-up excluded from the summaries)\n- Speed: {}\n- Reference: {}\n- FLIP: {}\n- Evaluation wall time: {:.1} s\n",
+        "- Device: {}\n- Resolution: {}x{}, {} view(s){}\n- Data set: {} (terrain: {})\n- Frames: {} ({} warm-up excluded from the summaries)\n- Speed: {}\n- Reference: {}\n- FLIP: {}\n- Evaluation wall time: {:.1} s\n",
         eval.device,
         eval.width,
         eval.height,
@@ -324,6 +324,7 @@ fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)
             ""
         },
         eval.dataset,
+        eval.earth,
         eval.frames,
         eval.warmup,
         eval.timing,

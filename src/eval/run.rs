@@ -28,7 +28,7 @@ use crate::error::{Error, Result};
 use crate::lod::{MethodConfig, MethodKind};
 use crate::readback::FrameView;
 use crate::render::stats::Percentiles;
-use crate::render::{EarthGeometry, FrameRequest, RenderOptions, Renderer};
+use crate::render::{FrameRequest, RenderOptions, Renderer};
 use crate::scene::Scenario;
 
 /// At most this many measured frames (evenly spaced) get the triangle oracle (seconds per
@@ -222,6 +222,9 @@ pub struct Evaluation {
     pub frames: u32,
     pub warmup: usize,
     pub clipmap: bool,
+    /// Where the terrain was drawn and measured: "ellipsoid" (the WGS84 ellipsoid through the
+    /// geolocation lattice) or "flat" (the grid on the tangent plane, or no world frame).
+    pub earth: String,
     pub reference: String,
     /// How the speed axis was measured.
     pub timing: String,
@@ -341,9 +344,13 @@ pub fn evaluate(
     };
     let brute = MethodConfig::Brute {};
     let others: Vec<&Variant> = variants.iter().filter(|v| v.method != brute).collect();
+    // The renderers' own lattice (None: the flat world): the exact surface is placed as they
+    // place the terrain (docs/eval.md, "On the earth").
+    let lattice = setup.config.open_lattice(setup.data, setup.options.earth)?;
     let shared = EvalShared::new(
         gpu,
         setup.data,
+        lattice.as_ref(),
         shape,
         setup.frames as u64,
         1 + others.len(),
@@ -421,7 +428,7 @@ pub fn evaluate(
         .lock()
         .unwrap_or_else(|p| p.into_inner())
         .tiles_loaded;
-    finish(setup, runs, wall_s, tiles_loaded)
+    finish(setup, runs, wall_s, (tiles_loaded, lattice.is_some()))
 }
 
 fn open_run(
@@ -438,8 +445,6 @@ fn open_run(
     let mut options = setup.options.clone();
     options.frames_in_flight = 1;
     options.readback_depth = setup.cross_check;
-    // The exact surface and the error metrics live in the flat grid frame (docs/eval.md).
-    options.earth = EarthGeometry::Flat;
     let mut renderer = config.open_renderer(setup.gpu, setup.data, options)?;
     let (analysis, rx) = GpuAnalysis::new(shared, role, setup.image_frames.clone())?;
     renderer.set_analysis(Box::new(analysis))?;
@@ -456,7 +461,7 @@ fn open_run(
         images: Vec::new(),
         cpu: setup
             .cross_check
-            .then(|| super::check::CpuRun::new(shape_of(setup))),
+            .then(|| super::check::CpuRun::new(shape_of(setup), shared.lattice().cloned())),
     })
 }
 
@@ -641,7 +646,7 @@ fn finish(
     setup: &EvalSetup<'_>,
     runs: Vec<Run>,
     wall_s: f64,
-    reference_tiles_loaded: u64,
+    (reference_tiles_loaded, on_earth): (u64, bool),
 ) -> Result<Evaluation> {
     let focal = setup.scenario.camera(0).focal_px(setup.options.height);
     let mut summaries = Vec::new();
@@ -716,8 +721,14 @@ fn finish(
         frames: setup.frames,
         warmup: setup.warmup,
         clipmap,
+        earth: if on_earth { "ellipsoid" } else { "flat" }.into(),
         reference: format!(
-            "geometric errors against level 0 of the data, exactly: the full-resolution mesh brute force draws (every sample a vertex), evaluated on the GPU from reference tiles read from level 0{}; images (PSNR, SSIM, FLIP, holes) against brute force rendered with the same cameras{}",
+            "geometric errors against level 0 of the data, exactly: the full-resolution mesh brute force draws (every sample a vertex{}), evaluated on the GPU from reference tiles read from level 0{}; images (PSNR, SSIM, FLIP, holes) against brute force rendered with the same cameras{}",
+            if on_earth {
+                ", on the WGS84 ellipsoid where the renderers' geolocation lattice places it: each pixel's point mapped back to the grid through the lattice, heights along its up"
+            } else {
+                ""
+            },
             if clipmap {
                 " (the pyramid's, never a clipmap level)"
             } else {

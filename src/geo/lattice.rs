@@ -181,8 +181,9 @@ impl Lattice {
         out
     }
 
-    /// The node of a lattice position, as the GPU stores it (hi + lo, f32 up) in f64.
-    fn node(&self, i: i64, j: i64) -> (DVec3, DVec3) {
+    /// Node `(i, j)`'s world position and up vector, as the GPU stores them (hi + lo, f32
+    /// up) in f64.
+    pub fn node_position(&self, i: i64, j: i64) -> (DVec3, DVec3) {
         let k = j as usize * self.nodes[0] as usize + i as usize;
         let (hi, lo) = split(self.positions[k]);
         let p = glam::Vec3::from(hi).as_dvec3() + glam::Vec3::from(lo).as_dvec3();
@@ -197,10 +198,10 @@ impl Lattice {
         let i = ((s.x / step).floor() as i64).clamp(0, last[0]);
         let j = ((s.y / step).floor() as i64).clamp(0, last[1]);
         let f = (s - DVec2::new(i as f64, j as f64) * step) / step;
-        let (p00, u00) = self.node(i, j);
-        let (p10, u10) = self.node(i + 1, j);
-        let (p01, u01) = self.node(i, j + 1);
-        let (p11, u11) = self.node(i + 1, j + 1);
+        let (p00, u00) = self.node_position(i, j);
+        let (p10, u10) = self.node_position(i + 1, j);
+        let (p01, u01) = self.node_position(i, j + 1);
+        let (p11, u11) = self.node_position(i + 1, j + 1);
         let lerp = |a: DVec3, b: DVec3, t: f64| a * (1.0 - t) + b * t;
         let p = lerp(lerp(p00, p10, f.x), lerp(p01, p11, f.x), f.y);
         let u = lerp(lerp(u00, u10, f.x), lerp(u01, u11, f.x), f.y);

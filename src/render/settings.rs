@@ -37,7 +37,7 @@ pub struct RenderSettings {
 
 /// Where the vertices of a data set that lies on the earth go (docs/coordinates.md,
 /// "Geodetic geometry"); data sets without a world frame are always flat.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum EarthGeometry {
     /// Every sample where it lies on the WGS84 ellipsoid (the geolocation lattice): the

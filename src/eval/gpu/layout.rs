@@ -1,13 +1,20 @@
 //! The host side of `shaders/eval_metrics.wgsl`'s structs, byte for byte (naga reflection
 //! proves the layouts equal: `tests/shader_interface.rs`).
 
+use glam::DVec3;
+
+use crate::geo::Lattice;
+use crate::geo::lattice::split;
 use crate::gpu_constants::EVAL_MAX_VIEWS;
 use crate::scene::Camera;
 
 const _: () = assert!(EVAL_MAX_VIEWS as usize == crate::render::MAX_VIEWS);
 
 /// `EvalView`: one camera of the frame, camera-relative like the renderer's uniforms (an
-/// integer sample cell plus a small metric offset; the height as f32 high and low parts).
+/// integer sample cell plus a small metric offset; the height as f32 high and low parts). On
+/// the earth the cell, offset and height are the camera's place in the grid's frame (the
+/// sample under it and its height above the lattice surface, [`Lattice::sample_at`]: where
+/// the shader's lattice inverse starts) and `cam_hi` / `cam_lo` its split world position.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct EvalView {
@@ -16,18 +23,33 @@ pub struct EvalView {
     pub forward: [f32; 4],
     pub cell: [i32; 4],
     pub offset: [f32; 4],
+    pub cam_hi: [f32; 4],
+    pub cam_lo: [f32; 4],
 }
 
 impl EvalView {
     /// `camera` drawn into columns `(first, count)` of a frame `height` pixels tall, over data
-    /// of `spacing` metres.
-    pub fn new(camera: &Camera, (first, count): (u32, u32), height: u32, spacing: f64) -> Self {
+    /// of `spacing` metres, placed by `lattice` on the earth (None: the flat world).
+    pub fn new(
+        camera: &Camera,
+        (first, count): (u32, u32),
+        height: u32,
+        spacing: f64,
+        lattice: Option<&Lattice>,
+    ) -> Self {
         let (right, up, forward) = camera.basis();
-        let p = camera.position;
+        let p = match lattice {
+            None => camera.position,
+            Some(l) => {
+                let (s, h) = l.sample_at(camera.position);
+                DVec3::new(s.x * spacing, s.y * spacing, h)
+            }
+        };
         let cell = ((p.x / spacing).floor(), (p.y / spacing).floor());
         let z_hi = p.z as f32;
         let z_lo = (p.z - z_hi as f64) as f32;
-        let v4 = |v: glam::DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+        let v4 = |v: DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+        let (hi, lo) = split(camera.position);
         EvalView {
             right: v4(right, camera.focal_px(height)),
             up: v4(up, camera.near),
@@ -39,6 +61,8 @@ impl EvalView {
                 z_hi,
                 z_lo,
             ],
+            cam_hi: [hi[0], hi[1], hi[2], 0.0],
+            cam_lo: [lo[0], lo[1], lo[2], 0.0],
         }
     }
 }
@@ -59,6 +83,8 @@ pub struct EvalFrame {
     pub points: [u32; 4],
     /// Seed grid columns and rows, pixel workgroups per row.
     pub grid: [u32; 4],
+    /// The geolocation lattice's samples per node (0: flat world), nodes per row and column.
+    pub lattice: [u32; 4],
 }
 
 /// `Totals`: the sums the reducing workgroup writes.

@@ -32,6 +32,7 @@ use crate::driver::descriptors::{Binding, DescriptorSets, Resource};
 use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, compute_pipeline};
 use crate::error::{Error, Result};
+use crate::geo::Lattice;
 use crate::gpu_constants::{EVAL_HIST_BINS, EVAL_NO_ERROR_PX, EVAL_POINT_WORKGROUP, EVAL_TILE_PX};
 use crate::render::analysis::{AnalysisFrame, FrameAnalysis};
 use crate::slots::FrameSlot;
@@ -55,6 +56,8 @@ pub const EVAL_SET: &[Binding] = {
         Binding::new(9, T::STORAGE_BUFFER, C, "partials"),
         Binding::new(10, T::STORAGE_BUFFER, C, "stats"),
         Binding::new(11, T::STORAGE_BUFFER, C, "metres_image"),
+        // The renderer's geolocation lattice (a placeholder node in a flat world).
+        Binding::new(12, T::STORAGE_BUFFER, C, "geo_lattice"),
     ]
 };
 
@@ -93,20 +96,38 @@ pub struct EvalShared {
     pub frames: u64,
     spacing: f64,
     data_size: (u32, u32),
+    /// Where the renderers place the terrain on the earth (None: the flat world); the shader
+    /// maps each pixel's point back to the grid through it.
+    lattice: Option<Lattice>,
+    lattice_nodes: Buffer,
 }
 
 impl EvalShared {
     /// Shared state for `runs` analysed renderers of `frames` frames of `shape` over `data`,
-    /// with a reference atlas of at most `reference_bytes`.
+    /// with a reference atlas of at most `reference_bytes`; `lattice`: the renderers' terrain
+    /// on the earth (the lattice they were opened with), None: the flat world.
     pub fn new(
         gpu: &Arc<Gpu>,
         data: &Terrain,
+        lattice: Option<&Lattice>,
         shape: FrameShape,
         frames: u64,
         runs: usize,
         reference_bytes: u64,
     ) -> Result<Arc<Self>> {
-        let surface = ReferenceSurface::new(gpu, data, reference_bytes)?;
+        let surface = ReferenceSurface::new(gpu, data, lattice, reference_bytes)?;
+        let nodes = lattice.map_or_else(
+            || vec![0.0; crate::geo::lattice::NODE_FLOATS],
+            Lattice::gpu_nodes,
+        );
+        let mut lattice_nodes = Buffer::new(
+            gpu,
+            "eval geolocation lattice",
+            (nodes.len() * 4) as u64,
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        lattice_nodes.write(bytemuck::cast_slice(&nodes))?;
         let pixels = shape.width as u64 * shape.height as u64;
         let storage = |name: &str, bytes: u64| {
             Buffer::new(
@@ -154,7 +175,14 @@ impl EvalShared {
             frames,
             spacing: data.spacing(),
             data_size: (data.width(), data.height()),
+            lattice: lattice.cloned(),
+            lattice_nodes,
         }))
+    }
+
+    /// The renderers' geolocation lattice (None: the flat world).
+    pub fn lattice(&self) -> Option<&Lattice> {
+        self.lattice.as_ref()
     }
 
     /// Readies the reference surface for frame `frame` of `views` (no frame in flight).
@@ -364,6 +392,7 @@ impl GpuAnalysis {
                 ("partials", buffer(partials.raw)),
                 ("stats", buffer(stats.raw)),
                 ("metres_image", buffer(metres_image.raw)),
+                ("geo_lattice", buffer(shared.lattice_nodes.raw)),
             ],
         )?;
         let analysis = GpuAnalysis {
@@ -413,7 +442,13 @@ impl GpuAnalysis {
         }
         let mut views = [EvalView::default(); crate::gpu_constants::EVAL_MAX_VIEWS as usize];
         for (v, (camera, &columns)) in frame.cameras.iter().zip(frame.columns).enumerate() {
-            views[v] = EvalView::new(camera, columns, shape.height, self.shared.spacing);
+            views[v] = EvalView::new(
+                camera,
+                columns,
+                shape.height,
+                self.shared.spacing,
+                self.shared.lattice.as_ref(),
+            );
         }
         let grid = SWIM_GRID.0 * SWIM_GRID.1;
         let round = (frame.index / SWIM_SEED_EVERY) as u32;
@@ -441,6 +476,11 @@ impl GpuAnalysis {
                 self.groups.0 * self.groups.1,
             ],
             grid: [SWIM_GRID.0, SWIM_GRID.1, self.groups.0, 0],
+            lattice: self
+                .shared
+                .lattice
+                .as_ref()
+                .map_or([0; 4], |l| [l.step, l.nodes[0], l.nodes[1], 0]),
         })
     }
 

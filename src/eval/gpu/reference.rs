@@ -22,6 +22,7 @@ use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::memory::Buffer;
 use crate::error::{Error, Result};
+use crate::geo::Lattice;
 use crate::gpu_constants::EVAL_REF_TILE;
 use crate::scene::Camera;
 
@@ -55,12 +56,20 @@ pub struct ReferenceSurface {
     table_host: Vec<u32>,
     /// Tiles read from level 0 so far.
     pub tiles_loaded: u64,
+    /// On the earth: each tile's world box (row-major over the tiles), see [`earth_boxes`].
+    earth: Option<Vec<(DVec3, DVec3)>>,
 }
 
 impl ReferenceSurface {
     /// Tiles over `data` in an atlas of at most `budget_bytes` (and the device's storage-buffer
-    /// range); never more than the data has.
-    pub fn new(gpu: &Arc<Gpu>, data: &Terrain, budget_bytes: u64) -> Result<Self> {
+    /// range); never more than the data has. `lattice`: where the renderers place the terrain
+    /// on the earth (None: the flat world); tiles are then selected by their curved boxes.
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        data: &Terrain,
+        lattice: Option<&Lattice>,
+        budget_bytes: u64,
+    ) -> Result<Self> {
         let tiles = (
             (data.width() - 1).div_ceil(EVAL_REF_TILE),
             (data.height() - 1).div_ceil(EVAL_REF_TILE),
@@ -92,11 +101,13 @@ impl ReferenceSurface {
         table.write(bytemuck::cast_slice(&table_host))?;
         let (lo, hi) = data.height_range();
         let margin = 0.1 * (hi - lo) as f64 + 100.0;
+        let z_range = (lo as f64 - margin, hi as f64 + margin);
         Ok(ReferenceSurface {
+            earth: lattice.map(|l| earth_boxes(l, tiles, (data.width(), data.height()), z_range)),
             data: data.clone(),
             tiles,
             capacity,
-            z_range: (lo as f64 - margin, hi as f64 + margin),
+            z_range,
             atlas,
             table,
             staging: None,
@@ -203,6 +214,14 @@ impl ReferenceSurface {
     /// intersect the view's frustum: a quadtree descent from the whole tile grid.
     pub fn visible_tiles(&self, view: &ViewCone) -> Vec<(u32, u32)> {
         let frustum = Frustum::of(view);
+        if let Some(boxes) = &self.earth {
+            return (0..self.tiles.1)
+                .flat_map(|ty| (0..self.tiles.0).map(move |tx| (tx, ty)))
+                .zip(boxes)
+                .filter(|(_, (lo, hi))| frustum.touches(*lo, *hi))
+                .map(|(key, _)| key)
+                .collect();
+        }
         let spacing = self.data.spacing();
         let side = EVAL_REF_TILE as f64 * spacing;
         let mut out = Vec::new();
@@ -235,6 +254,61 @@ impl ReferenceSurface {
         }
         out
     }
+}
+
+/// On the earth, the world box of every reference tile (row-major over `tiles`): the box of
+/// the lattice nodes of every lattice cell a sample position of the tile widened by one sample
+/// lies in, each node at the lowest and the highest height of `z_range` along its up vector,
+/// grown by two of the largest node spacing. The renderers' surface over a lattice cell is
+/// the bilinear blend of its corners plus height times the blended up vector, a convex
+/// combination of the corners' `p + h u`, so it lies inside the box of those (no sagitta
+/// term needed); the growth covers the one-sample widening's extrapolation at the data's
+/// edges. Computed once; the frustum then tests each tile's box (O(tiles) per view).
+pub fn earth_boxes(
+    lattice: &Lattice,
+    tiles: (u32, u32),
+    (width, height): (u32, u32),
+    z_range: (f64, f64),
+) -> Vec<(DVec3, DVec3)> {
+    let step = lattice.step as i64;
+    let last = [lattice.nodes[0] as i64 - 1, lattice.nodes[1] as i64 - 1];
+    // The lattice cell of a sample index, clamped like the shaders'.
+    let cell = |s: i64, axis: usize| s.div_euclid(step).clamp(0, last[axis] - 1);
+    let mut grow: f64 = 0.0;
+    for j in 0..=last[1] {
+        for i in 0..=last[0] {
+            let p = lattice.node_position(i, j).0;
+            if i < last[0] {
+                grow = grow.max((lattice.node_position(i + 1, j).0 - p).length());
+            }
+            if j < last[1] {
+                grow = grow.max((lattice.node_position(i, j + 1).0 - p).length());
+            }
+        }
+    }
+    // Two samples' worth of the widest lattice edge.
+    let grow = DVec3::splat(2.0 * grow / step as f64);
+    let mut out = Vec::with_capacity(tiles.0 as usize * tiles.1 as usize);
+    for ty in 0..tiles.1 as i64 {
+        for tx in 0..tiles.0 as i64 {
+            let c0 = tx * EVAL_REF_TILE as i64 - 1;
+            let r0 = ty * EVAL_REF_TILE as i64 - 1;
+            let c1 = (c0 + EVAL_REF_TILE as i64 + 2).min(width as i64);
+            let r1 = (r0 + EVAL_REF_TILE as i64 + 2).min(height as i64);
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for j in cell(r0, 1)..=cell(r1, 1) + 1 {
+                for i in cell(c0, 0)..=cell(c1, 0) + 1 {
+                    let (p, u) = lattice.node_position(i, j);
+                    for z in [z_range.0, z_range.1] {
+                        lo = lo.min(p + u * z);
+                        hi = hi.max(p + u * z);
+                    }
+                }
+            }
+            out.push((lo - grow, hi + grow));
+        }
+    }
+    out
 }
 
 /// Level-0 samples of tile `key` (`TILE_SIDE`² heights, rows from the south; samples past the
