@@ -278,6 +278,19 @@ impl Chunked {
             slots.push(s);
         }
         let pipelines = Pipelines::new(ctx, &[ctx.terrain.descriptors.layout, sets.layout])?;
+        tracing::info!(
+            "chunked: {} traversal, {} quads per chunk, levels {}..={} (tree depth {}, root depth \
+             {}); a CBT of this tree: binary depth {}, {} bytes of sums + {} bytes of bits per slot",
+            settings.traversal.name(),
+            settings.chunk_quads,
+            depths.finest,
+            depths.root,
+            depths.tree_depth(),
+            depths.root - depths.start,
+            cbt.depth,
+            cbt.heap_bytes(),
+            cbt.bit_bytes()
+        );
         Ok(Chunked {
             gpu: gpu.clone(),
             settings,
