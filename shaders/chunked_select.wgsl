@@ -43,6 +43,10 @@ struct ChunkState {
     passes_started: u32,
     splits: atomic<u32>,
     merges: atomic<u32>,
+    // vkCmdDrawMeshTasksIndirectEXT arguments (the mesh path: one task workgroup per chunk).
+    mesh_x: u32,
+    mesh_y: u32,
+    mesh_z: u32,
 }
 
 @group(1) @binding(1) var<storage, read_write> state: ChunkState;
@@ -385,6 +389,9 @@ fn finish() {
     state.map_x = n;
     state.map_y = 1u;
     state.map_z = 1u;
+    state.mesh_x = n;
+    state.mesh_y = 1u;
+    state.mesh_z = 1u;
 }
 
 // One workgroup per listed chunk: its level into every level-0 cell it covers (the LOD map

@@ -333,3 +333,66 @@ fn triangles_fall_with_the_threshold() {
     let full = tri(MethodKind::Brute.into());
     assert!(coarse < fine && fine < full, "{coarse} {fine} {full}");
 }
+
+/// `draw = "mesh"` on a device without task + mesh shaders (masked, or not offered, as on
+/// lavapipe) is a one-line error naming the feature and the extension; where the device has
+/// them, the mesh path draws the instanced path's picture (depth equal within a ULP-scale
+/// tolerance: the GLSL port of the placement) and other methods still run.
+#[test]
+fn mesh_draw_needs_mesh_shaders_or_matches_instancing() {
+    use vkterrain::driver::{Gpu, GpuOptions};
+    let data = terrain(129);
+    let mesh = ChunkedSettings {
+        draw: vkterrain::lod::chunked::ChunkDraw::Mesh,
+        ..settings(Traversal::Naive)
+    };
+    let masked = Gpu::new(&GpuOptions {
+        validation: true,
+        mask_features: vec!["meshShader".into()],
+        ..GpuOptions::default()
+    })
+    .unwrap();
+    let e = Renderer::new(&masked, &data, mesh.clone(), common::options(96, 64, 2))
+        .err()
+        .expect("draw = mesh without meshShader must fail")
+        .to_string();
+    let prefix = "method chunked with draw = \"mesh\" (VK_EXT_mesh_shader) needs the Vulkan feature meshShader, which is ";
+    assert!(e.starts_with(prefix) && !e.contains('\n'), "{e}");
+    // Control: the instanced path runs on the same device.
+    drop(
+        Renderer::new(
+            &masked,
+            &data,
+            settings(Traversal::Naive),
+            common::options(96, 64, 2),
+        )
+        .expect("instanced chunked needs no mesh shaders"),
+    );
+    common::assert_no_validation_messages(&masked);
+    let gpu = common::gpu(false);
+    if !gpu.enabled.mesh_shader {
+        let e = Renderer::new(&gpu, &data, mesh, common::options(96, 64, 2))
+            .err()
+            .expect("a device without mesh shaders must refuse draw = mesh")
+            .to_string();
+        assert!(e.starts_with(prefix) && e.contains("not offered"), "{e}");
+        return;
+    }
+    drop(gpu);
+    let cams = poses(&data, 20);
+    let a = render(&data, settings(Traversal::Naive), &cams);
+    let b = render(&data, mesh, &cams);
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        let (dx, dy) = (x.depth.as_ref().unwrap(), y.depth.as_ref().unwrap());
+        let differ = dx
+            .iter()
+            .zip(dy)
+            .filter(|(p, q)| (**p - **q).abs() > 1e-6)
+            .count();
+        assert!(
+            differ * 1000 <= dx.len(),
+            "pose {i}: {differ} depth pixels differ"
+        );
+        assert_eq!(x.triangles, y.triangles, "pose {i}");
+    }
+}

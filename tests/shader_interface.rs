@@ -188,13 +188,17 @@ fn chunked_uniforms_match_the_wgsl_struct() {
 
 /// `ChunkState` as the selection kernels see it, with its indirect arguments where Vulkan
 /// reads them (dispatch at 0, the indexed draw at `DRAW_OFFSET`, the LOD-map dispatch at
-/// `MAP_OFFSET`).
+/// `MAP_OFFSET`, the mesh-task draw at `MESH_OFFSET`).
 #[test]
 fn chunk_state_matches_the_wgsl_struct() {
-    use vkterrain::lod::chunked::{ChunkState as S, DRAW_OFFSET as D, MAP_OFFSET as M};
+    use vkterrain::lod::chunked::{
+        ChunkState as S, DRAW_OFFSET as D, MAP_OFFSET as M, MESH_OFFSET as ME,
+    };
     let draw = offset_of!(S, draw);
     let map = offset_of!(S, map);
-    assert_eq!((D as usize, M as usize), (draw, map));
+    let mesh = offset_of!(S, mesh);
+    assert_eq!((D as usize, M as usize, ME as usize), (draw, map, mesh));
+    type T = vk::DrawMeshTasksIndirectCommandEXT;
     type I = vk::DrawIndexedIndirectCommand;
     type P = vk::DispatchIndirectCommand;
     let rust = [
@@ -218,6 +222,9 @@ fn chunk_state_matches_the_wgsl_struct() {
         ("passes_started", offset_of!(S, passes_started)),
         ("splits", offset_of!(S, splits)),
         ("merges", offset_of!(S, merges)),
+        ("mesh_x", mesh + offset_of!(T, group_count_x)),
+        ("mesh_y", mesh + offset_of!(T, group_count_y)),
+        ("mesh_z", mesh + offset_of!(T, group_count_z)),
     ];
     assert_struct_layout(
         &[("chunked_select", CHUNKED_SELECT_WGSL)],

@@ -25,8 +25,11 @@ use crate::dataset::stats::TileStats;
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
+use crate::driver::device::Feature;
 use crate::driver::memory::Buffer;
-use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
+use crate::driver::pipeline::{
+    Pipeline, TerrainPipelineDesc, compute_pipeline, mesh_terrain_pipeline, terrain_pipeline,
+};
 use crate::error::{Error, Result};
 use crate::frame::ViewState;
 use crate::gpu_constants::UDLOD_MAX_LEVELS;
@@ -64,12 +67,15 @@ pub struct ChunkState {
     pub passes_started: u32,
     pub splits: u32,
     pub merges: u32,
+    pub mesh: [u32; 3],
 }
 
 /// Where `ChunkState::draw` starts: the `vkCmdDrawIndexedIndirect` arguments.
 pub const DRAW_OFFSET: u64 = std::mem::offset_of!(ChunkState, draw) as u64;
 /// Where `ChunkState::map` starts: the LOD-map pass's `vkCmdDispatchIndirect` arguments.
 pub const MAP_OFFSET: u64 = std::mem::offset_of!(ChunkState, map) as u64;
+/// Where `ChunkState::mesh` starts: the `vkCmdDrawMeshTasksIndirectEXT` arguments.
+pub const MESH_OFFSET: u64 = std::mem::offset_of!(ChunkState, mesh) as u64;
 pub const CHUNK_BYTES: u64 = 16;
 /// The deepest CBT allowed (binary depth): 64 MiB of sums; one level deeper (256 MiB) is
 /// beyond what one storage buffer may hold on many devices (lavapipe: 128 MiB).
@@ -77,23 +83,35 @@ pub const CBT_MAX_DEPTH: u32 = 24;
 
 /// Descriptor set 1 (`shaders/include/chunked_common.wgsl`, `shaders/chunked_select.wgsl`,
 /// `shaders/chunked.wgsl`).
-pub const CHUNKED_SET: &[Binding] = {
+pub const CHUNKED_SET: &[Binding] = &chunked_set(vk::ShaderStageFlags::empty());
+
+/// [`CHUNKED_SET`] with the draw's bindings readable by task and mesh stages too (the mesh
+/// path, `shaders/glsl/include/chunked_common.glsl`).
+pub const CHUNKED_SET_MESH: &[Binding] = &chunked_set(stages(
+    vk::ShaderStageFlags::TASK_EXT,
+    vk::ShaderStageFlags::MESH_EXT,
+));
+
+/// The set 1 table; `draw_extra`: stages beyond compute and vertex that draw with it.
+const fn chunked_set(draw_extra: vk::ShaderStageFlags) -> [Binding; 9] {
     use vk::DescriptorType as T;
     const C: vk::ShaderStageFlags = vk::ShaderStageFlags::COMPUTE;
-    const CV: vk::ShaderStageFlags =
-        stages(vk::ShaderStageFlags::COMPUTE, vk::ShaderStageFlags::VERTEX);
-    &[
-        Binding::new(0, T::UNIFORM_BUFFER, CV, "chunked"),
+    let cv = stages(
+        stages(vk::ShaderStageFlags::COMPUTE, vk::ShaderStageFlags::VERTEX),
+        draw_extra,
+    );
+    [
+        Binding::new(0, T::UNIFORM_BUFFER, cv, "chunked"),
         Binding::new(1, T::STORAGE_BUFFER, C, "state"),
         Binding::new(2, T::STORAGE_BUFFER, C, "lists"),
-        Binding::new(3, T::STORAGE_BUFFER, CV, "final_chunks"),
+        Binding::new(3, T::STORAGE_BUFFER, cv, "final_chunks"),
         Binding::new(4, T::STORAGE_BUFFER, C, "min_max"),
         Binding::new(5, T::STORAGE_BUFFER, C, "chunk_error"),
-        Binding::new(6, T::STORAGE_BUFFER, CV, "lod_map"),
+        Binding::new(6, T::STORAGE_BUFFER, cv, "lod_map"),
         Binding::new(7, T::STORAGE_BUFFER, C, "cbt_heap"),
         Binding::new(8, T::STORAGE_BUFFER, C, "cbt_bits"),
     ]
-};
+}
 
 struct SlotBuffers {
     uniforms: Buffer,
@@ -124,7 +142,11 @@ struct Pipelines {
 }
 
 impl Pipelines {
-    fn new(ctx: &MethodContext<'_>, set_layouts: &[vk::DescriptorSetLayout]) -> Result<Self> {
+    fn new(
+        ctx: &MethodContext<'_>,
+        set_layouts: &[vk::DescriptorSetLayout],
+        draw: ChunkDraw,
+    ) -> Result<Self> {
         let gpu = ctx.gpu;
         let spv = crate::driver::shaders::CHUNKED_SELECT_SPV;
         let c = |entry: &std::ffi::CStr| compute_pipeline(gpu, spv, entry, set_layouts);
@@ -139,19 +161,33 @@ impl Pipelines {
             cbt_list: c(c"cbt_list")?,
             finish: c(c"finish")?,
             lod_map: c(c"lod_map_fill")?,
-            draw: terrain_pipeline(
-                gpu,
-                &ctx.formats,
-                &TerrainPipelineDesc {
-                    spv: crate::driver::shaders::CHUNKED_SPV,
-                    vertex_entry: c"vs_main",
-                    fragment_entry: c"fs_main",
-                    set_layouts,
-                    topology: vk::PrimitiveTopology::TRIANGLE_LIST,
-                    cull_back_faces: false,
-                },
-            )?,
+            draw: Self::draw(ctx, set_layouts, draw)?,
         })
+    }
+
+    fn draw(
+        ctx: &MethodContext<'_>,
+        set_layouts: &[vk::DescriptorSetLayout],
+        draw: ChunkDraw,
+    ) -> Result<Pipeline> {
+        let desc = TerrainPipelineDesc {
+            spv: crate::driver::shaders::CHUNKED_SPV,
+            vertex_entry: c"vs_main",
+            fragment_entry: c"fs_main",
+            set_layouts,
+            topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+            cull_back_faces: false,
+        };
+        match draw {
+            ChunkDraw::Instanced => terrain_pipeline(ctx.gpu, &ctx.formats, &desc),
+            ChunkDraw::Mesh => mesh_terrain_pipeline(
+                ctx.gpu,
+                &ctx.formats,
+                &desc,
+                crate::driver::shaders::CHUNKED_TASK_SPV,
+                crate::driver::shaders::CHUNKED_MESH_SPV,
+            ),
+        }
     }
 }
 
@@ -169,6 +205,8 @@ pub struct Chunked {
     /// Set 1 of every slot (`SlotBuffers::set`); kept alive for them.
     _sets: DescriptorSets,
     pipelines: Pipelines,
+    /// The mesh-shader entry points (`draw = "mesh"`).
+    mesh: Option<ash::ext::mesh_shader::Device>,
 }
 
 /// A host-written storage buffer holding `bytes`.
@@ -238,7 +276,17 @@ impl Chunked {
         }
         let depths = Depths::new(&levels, &settings);
         let cbt = Self::cbt_layout(gpu, &settings, depths)?;
-        let sets = DescriptorSets::new(gpu, CHUNKED_SET, ctx.slots)?;
+        let table = match settings.draw {
+            ChunkDraw::Instanced => CHUNKED_SET,
+            ChunkDraw::Mesh => {
+                gpu.require(
+                    Feature::MeshShader,
+                    "method chunked with draw = \"mesh\" (VK_EXT_mesh_shader)",
+                )?;
+                CHUNKED_SET_MESH
+            }
+        };
+        let sets = DescriptorSets::new(gpu, table, ctx.slots)?;
         let min_max = host_buffer(
             gpu,
             "chunked min/max",
@@ -277,11 +325,13 @@ impl Chunked {
             )?;
             slots.push(s);
         }
-        let pipelines = Pipelines::new(ctx, &[ctx.terrain.descriptors.layout, sets.layout])?;
+        let set_layouts = [ctx.terrain.descriptors.layout, sets.layout];
+        let pipelines = Pipelines::new(ctx, &set_layouts, settings.draw)?;
         tracing::info!(
-            "chunked: {} traversal, {} quads per chunk, levels {}..={} (tree depth {}, root depth \
+            "chunked: {} traversal, {} draw, {} quads per chunk, levels {}..={} (tree depth {}, root depth \
              {}); a CBT of this tree: binary depth {}, {} bytes of sums + {} bytes of bits per slot",
             settings.traversal.name(),
+            settings.draw.name(),
             settings.chunk_quads,
             depths.finest,
             depths.root,
@@ -291,6 +341,8 @@ impl Chunked {
             cbt.heap_bytes(),
             cbt.bit_bytes()
         );
+        let mesh = (settings.draw == ChunkDraw::Mesh)
+            .then(|| ash::ext::mesh_shader::Device::new(&gpu.instance.raw, &gpu.device));
         Ok(Chunked {
             gpu: gpu.clone(),
             settings,
@@ -304,6 +356,7 @@ impl Chunked {
             slots,
             _sets: sets,
             pipelines,
+            mesh,
         })
     }
 

@@ -3,7 +3,9 @@
 
 use ash::vk;
 
-use super::{ChunkState, Chunked, ChunkedUniforms, DRAW_OFFSET, MAP_OFFSET, Traversal};
+use super::{
+    ChunkState, Chunked, ChunkedUniforms, DRAW_OFFSET, MAP_OFFSET, MESH_OFFSET, Traversal,
+};
 use crate::driver::barrier::{Barriers, MemoryAccess};
 use crate::error::Result;
 use crate::frame::ViewState;
@@ -158,11 +160,11 @@ impl LodMethod for Chunked {
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, p.lod_map.raw);
             d.cmd_dispatch_indirect(cmd, s.state.raw, MAP_OFFSET);
-            b.memory(
-                cmd,
-                MemoryAccess::ComputeWrite,
-                MemoryAccess::VertexShaderRead,
-            );
+            let draw_read = match self.mesh {
+                None => MemoryAccess::VertexShaderRead,
+                Some(_) => MemoryAccess::MeshShaderRead,
+            };
+            b.memory(cmd, MemoryAccess::ComputeWrite, draw_read);
             b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
             let region = vk::BufferCopy {
                 src_offset: 0,
@@ -193,8 +195,16 @@ impl LodMethod for Chunked {
                 &[frame_set, s.set],
                 &[],
             );
-            d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
-            d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, DRAW_STRIDE);
+            match &self.mesh {
+                None => {
+                    d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
+                    d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, DRAW_STRIDE);
+                }
+                Some(mesh) => {
+                    let stride = size_of::<vk::DrawMeshTasksIndirectCommandEXT>() as u32;
+                    mesh.cmd_draw_mesh_tasks_indirect(cmd, s.state.raw, MESH_OFFSET, 1, stride);
+                }
+            }
         }
     }
 

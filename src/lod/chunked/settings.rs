@@ -35,6 +35,19 @@ pub enum ChunkDraw {
     /// One chunk mesh instanced per selected chunk through one indexed indirect draw.
     #[default]
     Instanced,
+    /// Task + mesh shaders (GLSL, `shaders/glsl/chunked.task|mesh`): one task workgroup per
+    /// listed chunk, one mesh workgroup per block of it, through one indirect mesh-task draw.
+    /// Needs `VK_EXT_mesh_shader` with `taskShader` and `meshShader`.
+    Mesh,
+}
+
+impl ChunkDraw {
+    pub fn name(self) -> &'static str {
+        match self {
+            ChunkDraw::Instanced => "instanced",
+            ChunkDraw::Mesh => "mesh",
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
@@ -152,13 +165,14 @@ mod tests {
     #[test]
     fn config_section_selects_chunked_with_its_settings() {
         let m: MethodConfig = toml::from_str(
-            "name = \"chunked\"\ntraversal = \"cbt\"\ndraw = \"instanced\"\nerror_px = 2.0",
+            "name = \"chunked\"\ntraversal = \"cbt\"\ndraw = \"mesh\"\nerror_px = 2.0",
         )
         .unwrap();
         let MethodConfig::Chunked(s) = &m else {
             panic!("{m:?}")
         };
         assert_eq!(s.traversal, Traversal::Cbt);
+        assert_eq!(s.draw, ChunkDraw::Mesh);
         assert_eq!(s.error_px, 2.0);
         assert_eq!(s.chunk_quads, ChunkedSettings::default().chunk_quads);
         // A stray key, an unknown variant and a bad value are errors, not ignored.
