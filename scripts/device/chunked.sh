@@ -52,4 +52,10 @@ printf '[render]\nwidth = 640\nheight = 360\nframes_in_flight = 2\n[dataset]\nki
 log "eval chunked CBT (4 px), ci terrain 1920x1080"
 timeout 90 "$bin" eval --config "$out/ci_cbt.toml" --width 1920 --height 1080 --frames 60 --warmup 10 \
   --methods chunked --out "$out/eval_cbt" --force || log "exit $?"
-cat "$out/eval/report.md" "$out/eval_cbt/report.md" 2>/dev/null | head -80
+# The mesh path's placement (GLSL port) through the evaluator: error and holes must match the
+# instanced rows above (4 px).
+sed 's/traversal = "cbt"/draw = "mesh"/' "$out/ci_cbt.toml" > "$out/ci_mesh.toml"
+log "eval chunked mesh draw (4 px), ci terrain 1920x1080"
+timeout 90 "$bin" eval --config "$out/ci_mesh.toml" --width 1920 --height 1080 --frames 60 --warmup 10 \
+  --methods chunked --out "$out/eval_mesh" --force || log "exit $?"
+cat "$out/eval/report.md" "$out/eval_cbt/report.md" "$out/eval_mesh/report.md" 2>/dev/null | grep '^|'
