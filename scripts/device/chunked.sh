@@ -11,6 +11,8 @@
 #     draw = instanced | mesh (VK_EXT_mesh_shader; a one-line error if the device lacks it).
 #  3. The error-threshold sweep against brute force and UDLOD: `eval` on config/ci.toml,
 #     error_px 1, 2, 4 (Hedberg's), 8; and the CBT variant at 4 px.
+# Bench warm-up is 30 frames: with 2 frames in flight each slot's CBT steps every other frame
+# and needs (tree depth - root depth) steps from its initial tree.
 # No data files needed (procedural terrains generated in memory). About 2 minutes.
 # Here, before carrying: a release build and `../shared/device-vulkan/prepare.sh
 # target/release/vkterrain`. Run there from the repository root:
@@ -33,7 +35,7 @@ for depth in 5 7 9 11; do
     cfg=$(big "$traversal" "$depth")
     log "bench chunked $traversal max_depth $depth (8193², 4-quad chunks) 1920x1080"
     RUST_LOG=vkterrain=info timeout 60 "$bin" bench --config "$cfg" --resolutions 1920x1080 \
-      --compare-frames-in-flight 2 --frames 60 --warmup 10 --json "$out/bench_${traversal}_${depth}.json" \
+      --compare-frames-in-flight 2 --frames 90 --warmup 30 --json "$out/bench_${traversal}_${depth}.json" \
       || log "exit $?"
   done
 done
@@ -42,7 +44,7 @@ for traversal in naive cbt; do
   cfg=$(big "$traversal" 9 mesh)
   log "bench chunked $traversal draw mesh max_depth 9 1920x1080"
   timeout 60 "$bin" bench --config "$cfg" --resolutions 1920x1080 --compare-frames-in-flight 2 \
-    --frames 60 --warmup 10 --json "$out/bench_${traversal}_9_mesh.json" || log "exit $?"
+    --frames 90 --warmup 30 --json "$out/bench_${traversal}_9_mesh.json" || log "exit $?"
 done
 log "eval brute, udlod, chunked error_px sweep, config/ci.toml 1920x1080"
 timeout 150 "$bin" eval --config config/ci.toml --width 1920 --height 1080 --frames 60 --warmup 10 \
