@@ -43,6 +43,10 @@ shared_constants! {
     /// Below the smallest radius of curvature of the WGS84 ellipsoid (the meridian radius at
     /// the equator, 6,335,439 m): culling bounds grow by a curved surface's sagitta with it.
     GEO_MIN_RADIUS: f32 = 6.3e6;
+    /// Chunked LOD's mesh path: quads per side of the block one mesh workgroup emits (a chunk
+    /// of more quads is split into blocks: 81 vertices and 128 triangles per workgroup, within
+    /// every VK_EXT_mesh_shader device's output limits of 256 each).
+    CHUNKED_MESH_QUADS: u32 = 8;
     /// Quads per side of a GeoMipMapping block (blocks of 2^5 + 1 = 33 samples, 6 levels).
     GEOMIPMAP_BLOCK_QUADS: u32 = 32;
     /// Ambient term of the directional light, so slopes facing away from the sun stay readable.

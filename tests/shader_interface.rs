@@ -8,8 +8,8 @@ use std::mem::{offset_of, size_of};
 use ash::vk;
 use vkterrain::driver::descriptors::{Binding, PROBE_SET};
 use vkterrain::driver::shaders::{
-    BRUTE_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL, GEOMIPMAP_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL,
-    UDLOD_TILING_WGSL, UDLOD_WGSL,
+    BRUTE_WGSL, CHUNKED_SELECT_WGSL, CHUNKED_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL,
+    GEOMIPMAP_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL,
 };
 use vkterrain::eval::gpu::EVAL_SET;
 use vkterrain::frame::FrameUniforms;
@@ -40,7 +40,14 @@ fn shader_sets() -> ShaderSets {
     let udlod = ("UDLOD_SET", UDLOD_SET);
     let pgm = ("PGM_SET", PGM_SET);
     let probe = ("PROBE_SET", PROBE_SET);
+    let chunked = ("CHUNKED_SET", vkterrain::lod::chunked::CHUNKED_SET);
     vec![
+        ("chunked", CHUNKED_WGSL, vec![(0, terrain), (1, chunked)]),
+        (
+            "chunked_select",
+            CHUNKED_SELECT_WGSL,
+            vec![(0, terrain), (1, chunked)],
+        ),
         ("brute", BRUTE_WGSL, vec![(0, terrain)]),
         ("geomipmap", GEOMIPMAP_WGSL, vec![(0, terrain)]),
         ("udlod", UDLOD_WGSL, vec![(0, terrain), (1, udlod)]),
@@ -145,6 +152,87 @@ fn udlod_uniforms_match_the_wgsl_struct() {
     ];
     let shaders = composed_shaders();
     assert_struct_layout(&shaders[1..3], "Udlod", &rust, size_of::<UdlodUniforms>());
+}
+
+#[test]
+fn chunked_uniforms_match_the_wgsl_struct() {
+    use vkterrain::lod::chunked::ChunkedUniforms as U;
+    let rust = [
+        ("frustum", offset_of!(U, frustum)),
+        ("levels", offset_of!(U, levels)),
+        ("viewer", offset_of!(U, viewer)),
+        ("params", offset_of!(U, params)),
+        ("sizes", offset_of!(U, sizes)),
+        ("lists", offset_of!(U, lists)),
+        ("cbt", offset_of!(U, cbt)),
+    ];
+    assert_struct_layout(
+        &[
+            ("chunked", CHUNKED_WGSL),
+            ("chunked_select", CHUNKED_SELECT_WGSL),
+        ],
+        "Chunked",
+        &rust,
+        size_of::<U>(),
+    );
+    assert_struct_layout(
+        &[
+            ("chunked", CHUNKED_WGSL),
+            ("chunked_select", CHUNKED_SELECT_WGSL),
+        ],
+        "Chunk",
+        &[("x", 0), ("y", 4), ("lod", 8), ("pad", 12)],
+        vkterrain::lod::chunked::CHUNK_BYTES as usize,
+    );
+}
+
+/// `ChunkState` as the selection kernels see it, with its indirect arguments where Vulkan
+/// reads them (dispatch at 0, the indexed draw at `DRAW_OFFSET`, the LOD-map dispatch at
+/// `MAP_OFFSET`, the mesh-task draw at `MESH_OFFSET`).
+#[test]
+fn chunk_state_matches_the_wgsl_struct() {
+    use vkterrain::lod::chunked::{
+        ChunkState as S, DRAW_OFFSET as D, MAP_OFFSET as M, MESH_OFFSET as ME,
+    };
+    let draw = offset_of!(S, draw);
+    let map = offset_of!(S, map);
+    let mesh = offset_of!(S, mesh);
+    assert_eq!((D as usize, M as usize, ME as usize), (draw, map, mesh));
+    type T = vk::DrawMeshTasksIndirectCommandEXT;
+    type I = vk::DrawIndexedIndirectCommand;
+    type P = vk::DispatchIndirectCommand;
+    let rust = [
+        ("dispatch_x", offset_of!(S, dispatch) + offset_of!(P, x)),
+        ("dispatch_y", offset_of!(S, dispatch) + offset_of!(P, y)),
+        ("dispatch_z", offset_of!(S, dispatch) + offset_of!(P, z)),
+        ("pass_index", offset_of!(S, pass_index)),
+        ("index_count", draw + offset_of!(I, index_count)),
+        ("instance_count", draw + offset_of!(I, instance_count)),
+        ("first_index", draw + offset_of!(I, first_index)),
+        ("vertex_offset", draw + offset_of!(I, vertex_offset)),
+        ("first_instance", draw + offset_of!(I, first_instance)),
+        ("map_x", map + offset_of!(P, x)),
+        ("map_y", map + offset_of!(P, y)),
+        ("map_z", map + offset_of!(P, z)),
+        ("current_count", offset_of!(S, current_count)),
+        ("next_count", offset_of!(S, next_count)),
+        ("final_count", offset_of!(S, final_count)),
+        ("overflow", offset_of!(S, overflow)),
+        ("culled", offset_of!(S, culled)),
+        ("passes_started", offset_of!(S, passes_started)),
+        ("splits", offset_of!(S, splits)),
+        ("merges", offset_of!(S, merges)),
+        ("mesh_x", mesh + offset_of!(T, group_count_x)),
+        ("mesh_y", mesh + offset_of!(T, group_count_y)),
+        ("mesh_z", mesh + offset_of!(T, group_count_z)),
+    ];
+    assert_struct_layout(
+        &[("chunked_select", CHUNKED_SELECT_WGSL)],
+        "ChunkState",
+        &rust,
+        size_of::<S>(),
+    );
+    assert_eq!(offset_of!(S, dispatch), 0);
 }
 
 #[test]

@@ -13,7 +13,7 @@ $bin info | head -20
 # Every method the harness has (brute, UDLOD, PGM, tessellation, GeoMipMapping) in one run,
 # with the sweeps: UDLOD's tau, PGM's grid scale and row warp (plain vs warped grid, issue 16),
 # tessellation's target edge size in pixels (fractional_odd, 64-sample patches),
-# GeoMipMapping's distance factor. (GPU chunked LOD, issue 16 item 2, is not in the harness yet.)
+# GeoMipMapping's distance factor. (GPU chunked LOD, issue 16 item 2: scripts/device/chunked.sh.)
 $bin eval --config config/ci.toml --width 1920 --height 1080 --frames 240 --warmup 20 \
   --methods brute,udlod,pgm,tessellation,geomipmap --sweep tau_px=1,2,4 \
   --sweep grid_scale=0.5,1 --sweep warp_rows=0,1 --sweep edge_px=1,2,4,8,16 \

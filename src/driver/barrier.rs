@@ -84,6 +84,8 @@ pub enum MemoryAccess {
     PreviousFrame,
     IndirectRead,
     VertexShaderRead,
+    /// Storage reads of task and mesh stages (only with `VK_EXT_mesh_shader` enabled).
+    MeshShaderRead,
     TransferWrite,
     HostRead,
     HostWrite,
@@ -103,6 +105,10 @@ impl MemoryAccess {
             MemoryAccess::PreviousFrame => (S::ALL_COMMANDS, A::MEMORY_READ | A::MEMORY_WRITE),
             MemoryAccess::IndirectRead => (S::DRAW_INDIRECT, A::INDIRECT_COMMAND_READ),
             MemoryAccess::VertexShaderRead => (S::VERTEX_SHADER, A::SHADER_STORAGE_READ),
+            MemoryAccess::MeshShaderRead => (
+                S::TASK_SHADER_EXT | S::MESH_SHADER_EXT,
+                A::SHADER_STORAGE_READ,
+            ),
             MemoryAccess::TransferWrite => (S::COPY, A::TRANSFER_WRITE),
             MemoryAccess::HostRead => (S::HOST, A::HOST_READ),
             MemoryAccess::HostWrite => (S::HOST, A::HOST_WRITE),
@@ -119,6 +125,9 @@ impl MemoryAccess {
             MemoryAccess::PreviousFrame => (S::ALL_COMMANDS, A::MEMORY_READ | A::MEMORY_WRITE),
             MemoryAccess::IndirectRead => (S::DRAW_INDIRECT, A::INDIRECT_COMMAND_READ),
             MemoryAccess::VertexShaderRead => (S::VERTEX_SHADER, A::SHADER_READ),
+            MemoryAccess::MeshShaderRead => {
+                (S::TASK_SHADER_EXT | S::MESH_SHADER_EXT, A::SHADER_READ)
+            }
             MemoryAccess::TransferWrite => (S::TRANSFER, A::TRANSFER_WRITE),
             MemoryAccess::HostRead => (S::HOST, A::HOST_READ),
             MemoryAccess::HostWrite => (S::HOST, A::HOST_WRITE),

@@ -65,7 +65,8 @@ pub enum Feature {
     TessellationShader,
     /// `VkPhysicalDeviceFeatures::geometryShader`.
     GeometryShader,
-    /// `VkPhysicalDeviceMeshShaderFeaturesEXT::meshShader` (`VK_EXT_mesh_shader`).
+    /// `VkPhysicalDeviceMeshShaderFeaturesEXT::meshShader` with `taskShader`
+    /// (`VK_EXT_mesh_shader`).
     MeshShader,
 }
 
@@ -227,13 +228,22 @@ pub(crate) fn describe(
 
         let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
         let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
+        let mut fmesh = vk::PhysicalDeviceMeshShaderFeaturesEXT::default();
         let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f12);
         let is_13 = props.api_version >= vk::API_VERSION_1_3;
         if is_13 {
             f2 = f2.push_next(&mut f13);
         }
+        let mesh_ext = ash::ext::mesh_shader::NAME.to_string_lossy();
+        let has_mesh_ext = extensions.iter().any(|e| *e == mesh_ext);
+        if has_mesh_ext {
+            f2 = f2.push_next(&mut fmesh);
+        }
         instance.get_physical_device_features2(pd, &mut f2);
         let f = f2.features;
+        // Task and mesh stages both (the chunked method's mesh path uses the two).
+        let mesh_shader =
+            has_mesh_ext && fmesh.task_shader == vk::TRUE && fmesh.mesh_shader == vk::TRUE;
 
         let name = props
             .device_name_as_c_str()
@@ -288,7 +298,7 @@ pub(crate) fn describe(
             timestamp_period_ns: props.limits.timestamp_period,
             tessellation_shader: f.tessellation_shader == vk::TRUE,
             geometry_shader: f.geometry_shader == vk::TRUE,
-            mesh_shader: info.has_extension(ash::ext::mesh_shader::NAME),
+            mesh_shader,
             external_memory_host: info.has_extension(ash::ext::external_memory_host::NAME),
             texture_compression_bc: f.texture_compression_bc == vk::TRUE,
             texture_compression_etc2: f.texture_compression_etc2 == vk::TRUE,

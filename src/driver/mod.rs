@@ -131,19 +131,27 @@ impl Gpu {
             .queue_priorities(&priorities)];
         // Zero-copy ring publishing imports the ring's slots as buffers (host_memory.rs).
         let external_memory_host = offered.external_memory_host;
-        let extensions = [ash::ext::external_memory_host::NAME.as_ptr()];
-        let extensions = if external_memory_host {
-            &extensions[..]
-        } else {
-            &[]
-        };
+        let mut extensions = Vec::new();
+        if external_memory_host {
+            extensions.push(ash::ext::external_memory_host::NAME.as_ptr());
+        }
+        // Task + mesh shaders (the chunked method's mesh path) where offered and not masked.
+        let mut fmesh = vk::PhysicalDeviceMeshShaderFeaturesEXT::default()
+            .task_shader(true)
+            .mesh_shader(true);
+        if offered.mesh_shader {
+            extensions.push(ash::ext::mesh_shader::NAME.as_ptr());
+        }
         let mut create = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
-            .enabled_extension_names(extensions)
+            .enabled_extension_names(&extensions)
             .enabled_features(&base)
             .push_next(&mut f12);
         if info.api_version >= vk::API_VERSION_1_3 {
             create = create.push_next(&mut f13);
+        }
+        if offered.mesh_shader {
+            create = create.push_next(&mut fmesh);
         }
         let device =
             unsafe { instance.raw.create_device(physical, &create, None) }.vk("vkCreateDevice")?;

@@ -124,6 +124,43 @@ pub fn tessellated_terrain_pipeline(
     build_terrain_pipeline(gpu, formats, desc, Some(tessellation))
 }
 
+/// A terrain pipeline drawn by task + mesh shaders (GLSL, entry points `main`) with the
+/// fragment stage `desc.fragment_entry` of `desc.spv` (`desc.vertex_entry` and `topology`
+/// are unused). The device must have `meshShader` enabled (check with `Gpu::require` first).
+pub fn mesh_terrain_pipeline(
+    gpu: &Arc<Gpu>,
+    formats: &TargetFormats,
+    desc: &TerrainPipelineDesc<'_>,
+    task_spv: &[u8],
+    mesh_spv: &[u8],
+) -> Result<Pipeline> {
+    let mut modules = Modules {
+        gpu,
+        raw: Vec::new(),
+    };
+    let mut stages = Vec::new();
+    for (stage, spv, entry) in [
+        (vk::ShaderStageFlags::TASK_EXT, task_spv, c"main"),
+        (vk::ShaderStageFlags::MESH_EXT, mesh_spv, c"main"),
+        (
+            vk::ShaderStageFlags::FRAGMENT,
+            desc.spv,
+            desc.fragment_entry,
+        ),
+    ] {
+        let m = modules.add(spv)?;
+        stages.push(
+            vk::PipelineShaderStageCreateInfo::default()
+                .stage(stage)
+                .module(m)
+                .name(entry),
+        );
+    }
+    let result = create_graphics(gpu, formats, desc, &stages, Geometry::Mesh);
+    drop(modules);
+    result
+}
+
 /// Shader modules destroyed on drop (pipeline creation copies what it needs).
 struct Modules<'a> {
     gpu: &'a Gpu,
@@ -152,7 +189,6 @@ fn build_terrain_pipeline(
     desc: &TerrainPipelineDesc<'_>,
     tessellation: Option<&TessellationStages<'_>>,
 ) -> Result<Pipeline> {
-    let d = &gpu.device;
     let mut modules = Modules {
         gpu,
         raw: Vec::new(),
@@ -185,6 +221,34 @@ fn build_terrain_pipeline(
             );
         }
     }
+    let geometry = match tessellation {
+        Some(t) => Geometry::Tessellated(t.control_points),
+        None => Geometry::Vertex,
+    };
+    let result = create_graphics(gpu, formats, desc, &stages, geometry);
+    drop(modules);
+    result
+}
+
+/// How primitives reach the rasterizer.
+#[derive(Clone, Copy)]
+enum Geometry {
+    Vertex,
+    /// Tessellation stages with this many control points per patch.
+    Tessellated(u32),
+    /// Task + mesh stages: no vertex input or input assembly state.
+    Mesh,
+}
+
+/// The fixed-function state every terrain pipeline shares, around `stages`.
+fn create_graphics(
+    gpu: &Arc<Gpu>,
+    formats: &TargetFormats,
+    desc: &TerrainPipelineDesc<'_>,
+    stages: &[vk::PipelineShaderStageCreateInfo<'_>],
+    geometry: Geometry,
+) -> Result<Pipeline> {
+    let d = &gpu.device;
     let layout = unsafe {
         d.create_pipeline_layout(
             &vk::PipelineLayoutCreateInfo::default().set_layouts(desc.set_layouts),
@@ -195,7 +259,10 @@ fn build_terrain_pipeline(
     let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
     let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(desc.topology);
     let tessellation_state = vk::PipelineTessellationStateCreateInfo::default()
-        .patch_control_points(tessellation.map_or(0, |t| t.control_points));
+        .patch_control_points(match geometry {
+            Geometry::Tessellated(n) => n,
+            _ => 0,
+        });
     let viewport = vk::PipelineViewportStateCreateInfo::default()
         .viewport_count(1)
         .scissor_count(1);
@@ -225,9 +292,7 @@ fn build_terrain_pipeline(
         .color_attachment_formats(&color_formats)
         .depth_attachment_format(formats.depth);
     let mut info = vk::GraphicsPipelineCreateInfo::default()
-        .stages(&stages)
-        .vertex_input_state(&vertex_input)
-        .input_assembly_state(&assembly)
+        .stages(stages)
         .viewport_state(&viewport)
         .rasterization_state(&raster)
         .multisample_state(&multisample)
@@ -235,8 +300,19 @@ fn build_terrain_pipeline(
         .color_blend_state(&blend)
         .dynamic_state(&dynamic)
         .layout(layout);
-    if tessellation.is_some() {
-        info = info.tessellation_state(&tessellation_state);
+    match geometry {
+        Geometry::Mesh => {}
+        Geometry::Vertex => {
+            info = info
+                .vertex_input_state(&vertex_input)
+                .input_assembly_state(&assembly);
+        }
+        Geometry::Tessellated(_) => {
+            info = info
+                .vertex_input_state(&vertex_input)
+                .input_assembly_state(&assembly)
+                .tessellation_state(&tessellation_state);
+        }
     }
     if gpu.modern {
         info = info.push_next(&mut rendering);
@@ -244,7 +320,6 @@ fn build_terrain_pipeline(
         info = info.render_pass(formats.render_pass).subpass(0);
     }
     let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
-    drop(modules);
     match result {
         Ok(p) => Ok(Pipeline {
             gpu: gpu.clone(),

@@ -17,28 +17,39 @@ use crate::slots::ViewSlot;
 
 /// Descriptor set 0, shared by every terrain shader (`shaders/include/terrain_common.wgsl` and
 /// `shaders/include/clipmap.wgsl`); every stage may read every binding.
-pub const TERRAIN_SET: &[Binding] = {
+pub const TERRAIN_SET: &[Binding] = &terrain_set(vk::ShaderStageFlags::empty());
+
+/// [`TERRAIN_SET`] readable by task and mesh stages too: the set 0 of a device with
+/// `VK_EXT_mesh_shader` enabled (those stage bits are not valid without it).
+pub const TERRAIN_SET_MESH: &[Binding] = &terrain_set(stages(
+    vk::ShaderStageFlags::TASK_EXT,
+    vk::ShaderStageFlags::MESH_EXT,
+));
+
+/// The set 0 table; `extra` stages on top of every graphics stage and compute.
+const fn terrain_set(extra: vk::ShaderStageFlags) -> [Binding; 10] {
     use vk::DescriptorType as T;
     // Tessellation stages too (hardware tessellation's GLSL stages read the heights).
-    const ALL: vk::ShaderStageFlags = stages(
+    const GRAPHICS: vk::ShaderStageFlags = stages(
         vk::ShaderStageFlags::ALL_GRAPHICS,
         vk::ShaderStageFlags::COMPUTE,
     );
-    &[
-        Binding::new(0, T::UNIFORM_BUFFER, ALL, "frame"),
-        Binding::new(1, T::SAMPLED_IMAGE, ALL, "height_tex"),
-        Binding::new(2, T::SAMPLED_IMAGE, ALL, "normal_tex"),
-        Binding::new(3, T::SAMPLED_IMAGE, ALL, "albedo_tex"),
-        Binding::new(4, T::SAMPLER, ALL, "linear_sampler"),
+    let all = stages(GRAPHICS, extra);
+    [
+        Binding::new(0, T::UNIFORM_BUFFER, all, "frame"),
+        Binding::new(1, T::SAMPLED_IMAGE, all, "height_tex"),
+        Binding::new(2, T::SAMPLED_IMAGE, all, "normal_tex"),
+        Binding::new(3, T::SAMPLED_IMAGE, all, "albedo_tex"),
+        Binding::new(4, T::SAMPLER, all, "linear_sampler"),
         // The chunked clipmap: height atlas, the view slot's quadtree, shading atlases.
-        Binding::new(5, T::SAMPLED_IMAGE, ALL, "atlas_height"),
-        Binding::new(6, T::STORAGE_BUFFER, ALL, "clipmap"),
-        Binding::new(7, T::SAMPLED_IMAGE, ALL, "atlas_normal"),
-        Binding::new(8, T::SAMPLED_IMAGE, ALL, "atlas_albedo"),
+        Binding::new(5, T::SAMPLED_IMAGE, all, "atlas_height"),
+        Binding::new(6, T::STORAGE_BUFFER, all, "clipmap"),
+        Binding::new(7, T::SAMPLED_IMAGE, all, "atlas_normal"),
+        Binding::new(8, T::SAMPLED_IMAGE, all, "atlas_albedo"),
         // The geolocation lattice (src/geo/lattice.rs); a placeholder node in a flat world.
-        Binding::new(9, T::STORAGE_BUFFER, ALL, "geo_lattice"),
+        Binding::new(9, T::STORAGE_BUFFER, all, "geo_lattice"),
     ]
-};
+}
 
 /// The facts about the data set that methods and uniforms need.
 #[derive(Clone, Debug)]
@@ -186,7 +197,12 @@ impl TerrainGpu {
         clipmap: &crate::clipmap::gpu::ClipmapGpu,
         lattice: &Buffer,
     ) -> Result<(DescriptorSets, Vec<Buffer>)> {
-        let descriptors = DescriptorSets::new(gpu, TERRAIN_SET, slots)?;
+        let table = if gpu.enabled.mesh_shader {
+            TERRAIN_SET_MESH
+        } else {
+            TERRAIN_SET
+        };
+        let descriptors = DescriptorSets::new(gpu, table, slots)?;
         let mut uniforms = Vec::with_capacity(slots);
         for slot in 0..slots {
             let ubo = Buffer::new(

@@ -3,12 +3,14 @@
 
 pub mod blocks;
 pub mod brute;
+pub mod chunked;
 pub mod geomipmap;
 pub mod pgm;
 pub mod sweep;
 pub mod tessellation;
 pub mod udlod;
 
+pub use chunked::settings::ChunkedSettings;
 pub use geomipmap::settings::GeomipmapSettings;
 pub use pgm::settings::PgmSettings;
 pub use tessellation::settings::TessellationSettings;
@@ -41,6 +43,10 @@ pub enum MethodKind {
     /// GeoMipMapping: blocks of 2^n + 1 samples, per-block level from the 3D distance, border
     /// permutations against cracks, no morphing (Tabakovic's ATLOD).
     Geomipmap,
+    /// GPU chunked LOD (Hedberg 2022): the chunk quadtree selected in compute by projected
+    /// error (naive walk or concurrent binary tree), edge patching through a LOD map, one
+    /// chunk mesh instanced per chunk.
+    Chunked,
 }
 
 impl MethodKind {
@@ -50,6 +56,7 @@ impl MethodKind {
         MethodKind::Pgm,
         MethodKind::Tessellation,
         MethodKind::Geomipmap,
+        MethodKind::Chunked,
     ];
 
     pub fn parse(name: &str) -> Result<Self> {
@@ -72,6 +79,7 @@ impl MethodKind {
             MethodKind::Pgm => "pgm",
             MethodKind::Tessellation => "tessellation",
             MethodKind::Geomipmap => "geomipmap",
+            MethodKind::Chunked => "chunked",
         }
     }
 }
@@ -87,6 +95,7 @@ pub enum MethodConfig {
     Pgm(PgmSettings),
     Tessellation(TessellationSettings),
     Geomipmap(GeomipmapSettings),
+    Chunked(ChunkedSettings),
 }
 
 impl Default for MethodConfig {
@@ -121,6 +130,7 @@ impl MethodConfig {
             MethodConfig::Pgm(_) => MethodKind::Pgm,
             MethodConfig::Tessellation(_) => MethodKind::Tessellation,
             MethodConfig::Geomipmap(_) => MethodKind::Geomipmap,
+            MethodConfig::Chunked(_) => MethodKind::Chunked,
         }
     }
 
@@ -132,6 +142,7 @@ impl MethodConfig {
             MethodKind::Pgm => MethodConfig::Pgm(PgmSettings::default()),
             MethodKind::Tessellation => MethodConfig::Tessellation(TessellationSettings::default()),
             MethodKind::Geomipmap => MethodConfig::Geomipmap(GeomipmapSettings::default()),
+            MethodKind::Chunked => MethodConfig::Chunked(ChunkedSettings::default()),
         }
     }
 
@@ -151,6 +162,7 @@ impl MethodConfig {
             MethodConfig::Pgm(s) => s.validate(),
             MethodConfig::Tessellation(s) => s.validate(),
             MethodConfig::Geomipmap(s) => s.validate(),
+            MethodConfig::Chunked(s) => s.validate(),
         }
     }
 
@@ -179,6 +191,7 @@ impl MethodConfig {
             MethodKind::Pgm => keys(PgmSettings::SWEEP),
             MethodKind::Tessellation => keys(TessellationSettings::SWEEP),
             MethodKind::Geomipmap => keys(GeomipmapSettings::SWEEP),
+            MethodKind::Chunked => keys(ChunkedSettings::SWEEP),
         }
     }
 
@@ -192,6 +205,7 @@ impl MethodConfig {
                 sweep::apply(TessellationSettings::SWEEP, s, key, value)
             }
             MethodConfig::Geomipmap(s) => sweep::apply(GeomipmapSettings::SWEEP, s, key, value),
+            MethodConfig::Chunked(s) => sweep::apply(ChunkedSettings::SWEEP, s, key, value),
         }
     }
 }
@@ -279,5 +293,6 @@ pub fn create(config: &MethodConfig, ctx: &MethodContext<'_>) -> Result<Box<dyn 
         MethodConfig::Pgm(s) => Box::new(pgm::Pgm::new(ctx, s)?),
         MethodConfig::Tessellation(s) => Box::new(tessellation::Tessellation::new(ctx, s)?),
         MethodConfig::Geomipmap(s) => Box::new(geomipmap::Geomipmap::new(ctx, s)?),
+        MethodConfig::Chunked(s) => Box::new(chunked::Chunked::new(ctx, s)?),
     })
 }

@@ -1,0 +1,398 @@
+//! GPU chunked LOD (Hedberg 2022), validation on: the GPU's render list against the CPU
+//! reference (naive walk; the CBT after it has converged), crack pixels over 200 poses with
+//! edge patching against the same poses without it (the control), and the level differences
+//! edge patching must cover. Error, popping and swimming are measured by `vkterrain eval`
+//! (docs/chunked.md).
+
+mod common;
+
+use std::collections::{BTreeMap, HashSet};
+
+use vkterrain::dataset::Heightmap;
+use vkterrain::dataset::procedural::{self, ProceduralParams};
+use vkterrain::lod::chunked::select::{self, ChunkParams};
+use vkterrain::lod::chunked::{ChunkedSettings, Traversal};
+use vkterrain::lod::udlod::select::{Levels, Tile};
+use vkterrain::lod::{MethodConfig, MethodKind};
+use vkterrain::readback::{CollectSink, OwnedFrame};
+use vkterrain::render::{FrameRequest, Renderer};
+use vkterrain::scene::Camera;
+use vkterrain::slots::ViewSlot;
+
+use common::poses::poses;
+
+const W: u32 = 160;
+const H: u32 = 100;
+
+fn terrain(size: u32) -> Heightmap {
+    procedural::generate(&ProceduralParams {
+        size,
+        spacing: 30.0,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
+fn settings(traversal: Traversal) -> ChunkedSettings {
+    ChunkedSettings {
+        traversal,
+        chunk_quads: 8,
+        ..Default::default()
+    }
+}
+
+/// Renders each camera `frames` times (one frame slot, so a CBT advances every frame) and
+/// returns the GPU's render list after the last frame of each.
+fn gpu_chunks(
+    data: &Heightmap,
+    cameras: &[Camera],
+    lod: &ChunkedSettings,
+    frames: usize,
+) -> Vec<HashSet<Tile>> {
+    let gpu = common::gpu(false);
+    let mut out = Vec::new();
+    {
+        let mut r = Renderer::new(&gpu, data, lod.clone(), common::options(W, H, 1)).unwrap();
+        let mut sink = CollectSink::default();
+        for cam in cameras {
+            for _ in 0..frames {
+                r.render(*cam, &mut sink).unwrap();
+            }
+            r.finish(&mut sink).unwrap();
+            let list = r.method().debug_tiles(ViewSlot(0)).unwrap().unwrap();
+            let set: HashSet<Tile> = list.iter().map(|&[x, y, lod]| Tile { x, y, lod }).collect();
+            assert_eq!(set.len(), list.len(), "duplicate chunks on the GPU");
+            let counters: std::collections::HashMap<_, _> =
+                r.method().counters(ViewSlot(0)).into_iter().collect();
+            assert_eq!(counters["overflow"], 0);
+            out.push(set);
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    out
+}
+
+fn cpu_chunks(
+    data: &Heightmap,
+    levels: &Levels,
+    lod: &ChunkedSettings,
+    cam: &Camera,
+) -> HashSet<Tile> {
+    let _ = data;
+    let p = ChunkParams::new(levels, lod, cam, cam.position, W, H);
+    select::select_chunks(levels, &p).into_iter().collect()
+}
+
+/// Poses whose reference selections differ, for the control of each comparison.
+fn differing(a: &[HashSet<Tile>], b: &[HashSet<Tile>]) -> usize {
+    a.iter().zip(b).filter(|(x, y)| x != y).count()
+}
+
+#[test]
+fn naive_gpu_selection_equals_cpu_reference() {
+    let data = terrain(257);
+    let cams = poses(&data, 40);
+    let lod = settings(Traversal::Naive);
+    let levels = Levels::new(&data, lod.chunk_quads).unwrap();
+    let gpu = gpu_chunks(&data, &cams, &lod, 1);
+    let cpu: Vec<_> = cams
+        .iter()
+        .map(|c| cpu_chunks(&data, &levels, &lod, c))
+        .collect();
+    for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+        let only_gpu: Vec<_> = g.difference(c).collect();
+        let only_cpu: Vec<_> = c.difference(g).collect();
+        assert!(
+            only_gpu.is_empty() && only_cpu.is_empty(),
+            "pose {i}: GPU-only {only_gpu:?}, CPU-only {only_cpu:?}"
+        );
+    }
+    // Control: a perturbed reference (threshold 1.5x) differs on several poses, so the
+    // comparison can see a wrong selection.
+    let perturbed = ChunkedSettings {
+        error_px: lod.error_px * 1.5,
+        ..lod.clone()
+    };
+    let off: Vec<_> = cams
+        .iter()
+        .map(|c| cpu_chunks(&data, &levels, &perturbed, c))
+        .collect();
+    let n = differing(&gpu, &off);
+    assert!(n >= 3, "perturbed reference differs on only {n} poses");
+    println!(
+        "naive: a 1.5x threshold changes the selection on {n} of {} poses",
+        cams.len()
+    );
+    let refined: usize = cpu
+        .iter()
+        .map(|s| s.iter().filter(|t| t.lod < levels.root_lod - 2).count())
+        .sum();
+    assert!(refined > 0, "no pose refines below the start level");
+}
+
+/// The CBT moves one split/merge step per frame: after as many frames as the tree is deep
+/// (plus one) on one pose it holds the naive walk's chunks; after a single frame (from the
+/// previous pose's tree) it does not, on some poses (the control).
+#[test]
+fn cbt_converges_to_the_naive_selection() {
+    let data = terrain(257);
+    let cams = poses(&data, 30);
+    let lod = settings(Traversal::Cbt);
+    let levels = Levels::new(&data, lod.chunk_quads).unwrap();
+    let depth = levels.root_lod as usize;
+    let converged = gpu_chunks(&data, &cams, &lod, depth + 1);
+    let cpu: Vec<_> = cams
+        .iter()
+        .map(|c| cpu_chunks(&data, &levels, &lod, c))
+        .collect();
+    for (i, (g, c)) in converged.iter().zip(&cpu).enumerate() {
+        let only_gpu: Vec<_> = g.difference(c).collect();
+        let only_cpu: Vec<_> = c.difference(g).collect();
+        assert!(
+            only_gpu.is_empty() && only_cpu.is_empty(),
+            "pose {i}: CBT-only {only_gpu:?}, naive-only {only_cpu:?}"
+        );
+    }
+    let one_step = gpu_chunks(&data, &cams, &lod, 1);
+    let n = differing(&one_step, &cpu);
+    assert!(
+        n > 0,
+        "one CBT step per pose already equals the naive walk everywhere"
+    );
+    println!(
+        "cbt: one step per pose differs from the naive walk on {n} of {} poses",
+        cams.len()
+    );
+}
+
+/// Crack pixels: the method shows sky where brute force shows terrain, with the method's own
+/// terrain on both sides (left and right, or above and below); a coarser silhouette is not
+/// counted (the sky there joins the sky above), a crack between chunks is.
+fn cracks(reference: &OwnedFrame, method: &OwnedFrame) -> usize {
+    let (r, m) = (
+        reference.depth.as_ref().unwrap(),
+        method.depth.as_ref().unwrap(),
+    );
+    let (w, h) = (reference.width as usize, reference.height as usize);
+    let t = |x: usize, y: usize| m[y * w + x] > 0.0;
+    let mut n = 0;
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            let crack = !t(x, y)
+                && r[y * w + x] > 0.0
+                && ((t(x - 1, y) && t(x + 1, y)) || (t(x, y - 1) && t(x, y + 1)));
+            n += crack as usize;
+        }
+    }
+    n
+}
+
+fn render(data: &Heightmap, method: impl Into<MethodConfig>, cams: &[Camera]) -> Vec<OwnedFrame> {
+    let gpu = common::gpu(false);
+    let mut sink = CollectSink::default();
+    {
+        let mut r = Renderer::new(&gpu, data, method, common::options(96, 64, 2)).unwrap();
+        for c in cams {
+            r.render(
+                FrameRequest {
+                    camera: *c,
+                    sky: Some([1.0, 0.0, 1.0]),
+                    lod_viewer: None,
+                },
+                &mut sink,
+            )
+            .unwrap();
+        }
+        r.finish(&mut sink).unwrap();
+    }
+    common::assert_no_validation_messages(&gpu);
+    sink.frames
+}
+
+/// Crack pixels over 200 poses per largest level difference between drawn neighbours:
+/// `(poses, crack px with edge patching, crack px without)` by level jump.
+fn crack_survey(data: &Heightmap, cams: &[Camera], quads: u32) -> BTreeMap<u32, [usize; 3]> {
+    let lod = |stitch| ChunkedSettings {
+        stitch,
+        error_px: 1.0,
+        chunk_quads: quads,
+        ..settings(Traversal::Naive)
+    };
+    let levels = Levels::new(data, quads).unwrap();
+    let brute = render(data, MethodKind::Brute, cams);
+    let stitched = render(data, lod(true), cams);
+    let unstitched = render(data, lod(false), cams);
+    let mut by_jump: BTreeMap<u32, [usize; 3]> = BTreeMap::new();
+    for (i, b) in brute.iter().enumerate() {
+        let p = ChunkParams::new(&levels, &lod(true), &cams[i], cams[i].position, 96, 64);
+        let jump = select::largest_level_jump(&levels, &select::select_chunks(&levels, &p));
+        let (c, cu) = (cracks(b, &stitched[i]), cracks(b, &unstitched[i]));
+        if c > 0 {
+            println!(
+                "quads {quads} pose {i} kind {} jump {jump}: {c} crack px ({cu} unstitched)",
+                i % 5
+            );
+        }
+        let e = by_jump.entry(jump).or_default();
+        e[0] += 1;
+        e[1] += c;
+        e[2] += cu;
+    }
+    println!(
+        "chunked quads {quads}: level jump -> [poses, crack px, crack px unstitched]: {by_jump:?}"
+    );
+    by_jump
+}
+
+/// Edge patching closes every crack where neighbours are at most log2(chunk_quads) levels
+/// apart: no crack pixel on a pose whose largest level jump is 1..=log2(quads), while the
+/// same poses crack without it (the control). Poses with one level everywhere (jump 0) can
+/// show a coarse ridge's one-pixel notch that no edge causes (measured: 1 px, pose 58, also
+/// without patching); at most 2 are allowed there.
+#[test]
+fn watertight_over_200_poses_and_cracks_without_edge_patching() {
+    let data = terrain(129);
+    let cams = poses(&data, 200);
+    let quads = 8;
+    let survey = crack_survey(&data, &cams, quads);
+    let limit = quads.trailing_zeros();
+    let covered = |j: &u32| (1..=limit).contains(j);
+    let patched: usize = survey
+        .iter()
+        .filter(|(j, _)| covered(j))
+        .map(|(_, v)| v[1])
+        .sum();
+    let control: usize = survey
+        .iter()
+        .filter(|(j, _)| covered(j))
+        .map(|(_, v)| v[2])
+        .sum();
+    let poses_with_jumps: usize = survey
+        .iter()
+        .filter(|(j, _)| covered(j))
+        .map(|(_, v)| v[0])
+        .sum();
+    assert_eq!(
+        patched, 0,
+        "crack px where edge patching covers the level jump: {survey:?}"
+    );
+    assert!(
+        control >= 20,
+        "edge patching off shows only {control} crack px: {survey:?}"
+    );
+    assert!(
+        poses_with_jumps >= 20,
+        "only {poses_with_jumps} poses have level jumps"
+    );
+    let flat = survey.get(&0).map_or(0, |v| v[1]);
+    assert!(flat <= 2, "{flat} crack px on poses without a level jump");
+}
+
+/// Beyond log2(chunk_quads) levels edge patching is not guaranteed (Hedberg): with 2-quad
+/// chunks (limit 1) poses with jumps of 2 occur. Measured (docs/chunked.md): 29 such poses,
+/// 0 crack px; 2 crack px on the 123 poses with jump 1 (grazing poses 21 and 71, 3 each
+/// without patching; not yet explained). Asserted: jumps beyond the limit occur, patching
+/// leaves at most a tenth of the control's crack pixels.
+#[test]
+fn crack_survey_beyond_the_patching_limit() {
+    let data = terrain(129);
+    let cams = poses(&data, 200);
+    let survey = crack_survey(&data, &cams, 2);
+    let beyond: usize = survey
+        .iter()
+        .filter(|(j, _)| **j > 1)
+        .map(|(_, v)| v[0])
+        .sum();
+    assert!(beyond > 0, "no pose beyond the limit: {survey:?}");
+    let with: usize = survey.values().map(|v| v[1]).sum();
+    let without: usize = survey.values().map(|v| v[2]).sum();
+    assert!(without >= 20 && with * 10 <= without, "{survey:?}");
+}
+
+/// Fewer triangles than brute force, fewer still for a larger threshold.
+#[test]
+fn triangles_fall_with_the_threshold() {
+    let data = terrain(257);
+    let cams = poses(&data, 10);
+    let tri = |method: MethodConfig| -> u64 {
+        render(&data, method, &cams)
+            .iter()
+            .map(|f| f.triangles)
+            .sum()
+    };
+    let fine = tri(ChunkedSettings {
+        error_px: 1.0,
+        ..settings(Traversal::Naive)
+    }
+    .into());
+    let coarse = tri(ChunkedSettings {
+        error_px: 8.0,
+        ..settings(Traversal::Naive)
+    }
+    .into());
+    let full = tri(MethodKind::Brute.into());
+    assert!(coarse < fine && fine < full, "{coarse} {fine} {full}");
+}
+
+/// `draw = "mesh"` on a device without task + mesh shaders (masked, or not offered, as on
+/// lavapipe) is a one-line error naming the feature and the extension; where the device has
+/// them, the mesh path draws the instanced path's picture (depth equal within a ULP-scale
+/// tolerance: the GLSL port of the placement) and other methods still run.
+#[test]
+fn mesh_draw_needs_mesh_shaders_or_matches_instancing() {
+    use vkterrain::driver::{Gpu, GpuOptions};
+    let data = terrain(129);
+    let mesh = ChunkedSettings {
+        draw: vkterrain::lod::chunked::ChunkDraw::Mesh,
+        ..settings(Traversal::Naive)
+    };
+    let masked = Gpu::new(&GpuOptions {
+        validation: true,
+        mask_features: vec!["meshShader".into()],
+        ..GpuOptions::default()
+    })
+    .unwrap();
+    let e = Renderer::new(&masked, &data, mesh.clone(), common::options(96, 64, 2))
+        .err()
+        .expect("draw = mesh without meshShader must fail")
+        .to_string();
+    let prefix = "method chunked with draw = \"mesh\" (VK_EXT_mesh_shader) needs the Vulkan feature meshShader, which is ";
+    assert!(e.starts_with(prefix) && !e.contains('\n'), "{e}");
+    // Control: the instanced path runs on the same device.
+    drop(
+        Renderer::new(
+            &masked,
+            &data,
+            settings(Traversal::Naive),
+            common::options(96, 64, 2),
+        )
+        .expect("instanced chunked needs no mesh shaders"),
+    );
+    common::assert_no_validation_messages(&masked);
+    let gpu = common::gpu(false);
+    if !gpu.enabled.mesh_shader {
+        let e = Renderer::new(&gpu, &data, mesh, common::options(96, 64, 2))
+            .err()
+            .expect("a device without mesh shaders must refuse draw = mesh")
+            .to_string();
+        assert!(e.starts_with(prefix) && e.contains("not offered"), "{e}");
+        return;
+    }
+    drop(gpu);
+    let cams = poses(&data, 20);
+    let a = render(&data, settings(Traversal::Naive), &cams);
+    let b = render(&data, mesh, &cams);
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        let (dx, dy) = (x.depth.as_ref().unwrap(), y.depth.as_ref().unwrap());
+        let differ = dx
+            .iter()
+            .zip(dy)
+            .filter(|(p, q)| (**p - **q).abs() > 1e-6)
+            .count();
+        assert!(
+            differ * 1000 <= dx.len(),
+            "pose {i}: {differ} depth pixels differ"
+        );
+        assert_eq!(x.triangles, y.triangles, "pose {i}");
+    }
+}
