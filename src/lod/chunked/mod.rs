@@ -11,6 +11,8 @@
 //! per frame (`shaders/chunked_select.wgsl`). The CPU reference is [`select`]; the chunk
 //! statistics are UDLOD's ([`Levels`], the same per-tile min/max and errors).
 
+#[cfg(feature = "test-support")]
+pub mod probe;
 mod record;
 pub mod select;
 pub mod settings;
@@ -202,8 +204,9 @@ pub struct Chunked {
     indices: Buffer,
     index_count: u32,
     slots: Vec<SlotBuffers>,
-    /// Set 1 of every slot (`SlotBuffers::set`); kept alive for them.
-    _sets: DescriptorSets,
+    /// Set 1 of every slot (`SlotBuffers::set`).
+    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
+    sets: DescriptorSets,
     pipelines: Pipelines,
     /// The mesh-shader entry points (`draw = "mesh"`).
     mesh: Option<ash::ext::mesh_shader::Device>,
@@ -354,7 +357,7 @@ impl Chunked {
             indices,
             index_count: grid.len() as u32,
             slots,
-            _sets: sets,
+            sets,
             pipelines,
             mesh,
         })
