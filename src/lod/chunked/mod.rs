@@ -260,23 +260,7 @@ impl Chunked {
         let gpu = ctx.gpu;
         settings.validate()?;
         let settings = settings.clone();
-        let (stats, spacing) = match ctx.data {
-            Terrain::Grid(h) => (
-                TileStats::compute(&**h, settings.chunk_quads, &|_| {})?,
-                h.spacing,
-            ),
-            Terrain::Pyramid(p) => (p.tile_stats(settings.chunk_quads)?, p.spacing()),
-        };
-        let levels = Levels::from_stats(stats, spacing);
-        if levels.levels() > UDLOD_MAX_LEVELS {
-            return Err(Error::invalid(
-                "chunked",
-                format!(
-                    "{} levels exceed the maximum of {UDLOD_MAX_LEVELS}; raise chunk_quads",
-                    levels.levels()
-                ),
-            ));
-        }
+        let levels = Self::chunk_levels(ctx, &settings)?;
         let depths = Depths::new(&levels, &settings);
         let cbt = Self::cbt_layout(gpu, &settings, depths)?;
         let table = match settings.draw {
@@ -361,6 +345,28 @@ impl Chunked {
             pipelines,
             mesh,
         })
+    }
+
+    /// The chunk quadtree's statistics (a pyramid's stored ones, else computed from level 0).
+    fn chunk_levels(ctx: &MethodContext<'_>, settings: &ChunkedSettings) -> Result<Levels> {
+        let (stats, spacing) = match ctx.data {
+            Terrain::Grid(h) => (
+                TileStats::compute(&**h, settings.chunk_quads, &|_| {})?,
+                h.spacing,
+            ),
+            Terrain::Pyramid(p) => (p.tile_stats(settings.chunk_quads)?, p.spacing()),
+        };
+        let levels = Levels::from_stats(stats, spacing);
+        if levels.levels() > UDLOD_MAX_LEVELS {
+            return Err(Error::invalid(
+                "chunked",
+                format!(
+                    "{} levels exceed the maximum of {UDLOD_MAX_LEVELS}; raise chunk_quads",
+                    levels.levels()
+                ),
+            ));
+        }
+        Ok(levels)
     }
 
     /// The CBT of this tree depth, or a one-line error when it cannot be one buffer.
