@@ -452,3 +452,60 @@ fn placement_wgsl_glsl_and_cpu_agree() {
         "only {snapped} vertices snapped: the comparison saw no patching"
     );
 }
+
+/// The CLI selects the method (`--method chunked` renders: the control) and a config asking
+/// for the mesh path with `meshShader` masked (or absent, as on lavapipe) exits 1 with one
+/// `error:` line naming the feature and the extension.
+#[test]
+fn cli_renders_chunked_and_names_the_missing_mesh_shader() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = common::cli::ci_config();
+    let out = dir.path().join("render");
+    let ok = common::cli::run(&[
+        "render",
+        "--config",
+        &config,
+        "--method",
+        "chunked",
+        "--frames",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&ok.stdout);
+    assert!(
+        ok.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    assert!(stdout.contains("method:          chunked"), "{stdout}");
+    let scenarios = common::cli::shipped_config("scenarios/default.toml");
+    let text = std::fs::read_to_string(&config)
+        .unwrap()
+        .replace("name = \"brute\"", "name = \"chunked\"\ndraw = \"mesh\"")
+        .replace(
+            "\"scenarios/default.toml\"",
+            &format!("{:?}", scenarios.display().to_string()),
+        );
+    assert!(
+        text.contains("draw = \"mesh\""),
+        "ci.toml's [method] changed: {text}"
+    );
+    let mesh_config = dir.path().join("mesh.toml");
+    std::fs::write(&mesh_config, text).unwrap();
+    let masked_out = dir.path().join("masked");
+    let masked = common::cli::command()
+        .env("VKTERRAIN_MASK_FEATURES", "meshShader")
+        .args([
+            "render",
+            "--config",
+            mesh_config.to_str().unwrap(),
+            "--frames",
+            "2",
+        ])
+        .args(["--out", masked_out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    common::cli::assert_one_line_error(&masked, &["chunked", "meshShader", "VK_EXT_mesh_shader"]);
+    assert!(!masked_out.exists(), "a failed render left output");
+}
