@@ -267,7 +267,8 @@ fn cbt_set(n: u32, d: u32, on: bool) {
 
 @compute @workgroup_size(1)
 fn cbt_begin() {
-    let leaves = cbt_heap[1];
+    // The root's sum (its bit when the tree is one chunk deep: depth 0).
+    let leaves = cbt_sum(1u, 0u);
     state.current_count = leaves;
     set_dispatch(leaves);
 }

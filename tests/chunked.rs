@@ -396,3 +396,116 @@ fn mesh_draw_needs_mesh_shaders_or_matches_instancing() {
         assert_eq!(x.triangles, y.triangles, "pose {i}");
     }
 }
+
+/// Edge patching's placement is one function in three languages: the WGSL the vertex stage
+/// runs, the GLSL port the mesh stage runs (the mesh path cannot run on lavapipe, its
+/// placement can) and the CPU mirror over the CPU's LOD map of the GPU's chunks; all equal on
+/// every edge vertex of every drawn chunk over 30 poses. Control: without patching the mirror
+/// differs on some of those vertices (the probes saw snapping happen).
+#[test]
+fn placement_wgsl_glsl_and_cpu_agree() {
+    use vkterrain::lod::chunked::probe::Port;
+    let data = terrain(257);
+    let cams = poses(&data, 30);
+    let lod = settings(Traversal::Naive);
+    let levels = Levels::new(&data, lod.chunk_quads).unwrap();
+    let q = lod.chunk_quads;
+    let gpu = common::gpu(false);
+    let (mut checked, mut snapped) = (0, 0);
+    {
+        let mut r = Renderer::new(&gpu, &data, lod.clone(), common::options(W, H, 1)).unwrap();
+        let mut sink = CollectSink::default();
+        for cam in &cams {
+            r.render(*cam, &mut sink).unwrap();
+            r.finish(&mut sink).unwrap();
+            let chunks: Vec<Tile> = r
+                .method()
+                .debug_tiles(ViewSlot(0))
+                .unwrap()
+                .unwrap()
+                .into_iter()
+                .map(|[x, y, lod]| Tile { x, y, lod })
+                .collect();
+            let map = select::lod_map(&levels, &chunks);
+            let inputs: Vec<(Tile, [u32; 2])> = chunks
+                .iter()
+                .flat_map(|&t| {
+                    (0..=q)
+                        .flat_map(move |i| [[i, 0], [i, q], [0, i], [q, i]].map(|local| (t, local)))
+                })
+                .collect();
+            let wgsl = r.probe_chunk_samples(0, Port::Wgsl, &inputs).unwrap();
+            let glsl = r.probe_chunk_samples(0, Port::Glsl, &inputs).unwrap();
+            for (k, &(t, local)) in inputs.iter().enumerate() {
+                let cpu = select::chunk_sample(&levels, &map, t, local, true);
+                assert_eq!(wgsl[k], cpu, "WGSL vs CPU at {t:?} {local:?}");
+                assert_eq!(glsl[k], cpu, "GLSL port vs CPU at {t:?} {local:?}");
+                snapped += (select::chunk_sample(&levels, &map, t, local, false) != cpu) as usize;
+            }
+            checked += inputs.len();
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    println!("placement: {checked} edge vertices agree, {snapped} of them snapped");
+    assert!(
+        snapped >= 10,
+        "only {snapped} vertices snapped: the comparison saw no patching"
+    );
+}
+
+/// The CLI selects the method (`--method chunked` renders: the control) and a config asking
+/// for the mesh path with `meshShader` masked (or absent, as on lavapipe) exits 1 with one
+/// `error:` line naming the feature and the extension.
+#[test]
+fn cli_renders_chunked_and_names_the_missing_mesh_shader() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = common::cli::ci_config();
+    let out = dir.path().join("render");
+    let ok = common::cli::run(&[
+        "render",
+        "--config",
+        &config,
+        "--method",
+        "chunked",
+        "--frames",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&ok.stdout);
+    assert!(
+        ok.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    assert!(stdout.contains("method:          chunked"), "{stdout}");
+    let scenarios = common::cli::shipped_config("scenarios/default.toml");
+    let text = std::fs::read_to_string(&config)
+        .unwrap()
+        .replace("name = \"brute\"", "name = \"chunked\"\ndraw = \"mesh\"")
+        .replace(
+            "\"scenarios/default.toml\"",
+            &format!("{:?}", scenarios.display().to_string()),
+        );
+    assert!(
+        text.contains("draw = \"mesh\""),
+        "ci.toml's [method] changed: {text}"
+    );
+    let mesh_config = dir.path().join("mesh.toml");
+    std::fs::write(&mesh_config, text).unwrap();
+    let masked_out = dir.path().join("masked");
+    let masked = common::cli::command()
+        .env("VKTERRAIN_MASK_FEATURES", "meshShader")
+        .args([
+            "render",
+            "--config",
+            mesh_config.to_str().unwrap(),
+            "--frames",
+            "2",
+        ])
+        .args(["--out", masked_out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    common::cli::assert_one_line_error(&masked, &["chunked", "meshShader", "VK_EXT_mesh_shader"]);
+    assert!(!masked_out.exists(), "a failed render left output");
+}

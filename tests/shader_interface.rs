@@ -8,8 +8,8 @@ use std::mem::{offset_of, size_of};
 use ash::vk;
 use vkterrain::driver::descriptors::{Binding, PROBE_SET};
 use vkterrain::driver::shaders::{
-    BRUTE_WGSL, CHUNKED_SELECT_WGSL, CHUNKED_WGSL, CLIPMAP_PROBE_WGSL, EVAL_METRICS_WGSL,
-    GEOMIPMAP_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL,
+    BRUTE_WGSL, CHUNKED_PROBE_WGSL, CHUNKED_SELECT_WGSL, CHUNKED_WGSL, CLIPMAP_PROBE_WGSL,
+    EVAL_METRICS_WGSL, GEOMIPMAP_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL,
 };
 use vkterrain::eval::gpu::EVAL_SET;
 use vkterrain::frame::FrameUniforms;
@@ -43,6 +43,11 @@ fn shader_sets() -> ShaderSets {
     let chunked = ("CHUNKED_SET", vkterrain::lod::chunked::CHUNKED_SET);
     vec![
         ("chunked", CHUNKED_WGSL, vec![(0, terrain), (1, chunked)]),
+        (
+            "chunked_probe",
+            CHUNKED_PROBE_WGSL,
+            vec![(0, terrain), (1, chunked), (2, probe)],
+        ),
         (
             "chunked_select",
             CHUNKED_SELECT_WGSL,
@@ -152,6 +157,21 @@ fn udlod_uniforms_match_the_wgsl_struct() {
     ];
     let shaders = composed_shaders();
     assert_struct_layout(&shaders[1..3], "Udlod", &rust, size_of::<UdlodUniforms>());
+}
+
+#[test]
+fn chunk_probe_record_matches_the_wgsl_struct() {
+    use vkterrain::lod::chunked::probe::ChunkProbe as P;
+    assert_struct_layout(
+        &[("chunked_probe", CHUNKED_PROBE_WGSL)],
+        "ChunkProbe",
+        &[
+            ("chunk", offset_of!(P, chunk)),
+            ("local", offset_of!(P, local)),
+            ("sample", offset_of!(P, sample)),
+        ],
+        size_of::<P>(),
+    );
 }
 
 #[test]

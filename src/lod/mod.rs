@@ -271,6 +271,12 @@ pub trait LodMethod {
         Ok(None)
     }
     #[cfg(feature = "test-support")]
+    /// Tests only: the method's own descriptor set 1 of `slot` (layout, set), for probes that
+    /// evaluate its shader functions through it (`None`: the method has none to probe).
+    fn probe_set(&self, _slot: ViewSlot) -> Option<(vk::DescriptorSetLayout, vk::DescriptorSet)> {
+        None
+    }
+    #[cfg(feature = "test-support")]
     /// Tests only: the method's vertex morph evaluated on the GPU for `(tile, local vertex)`
     /// pairs through set 0 `frame` (layout, set) and the method's own set of `slot`, as the last
     /// completed frame left them (`None`: the method has no morph).

@@ -104,6 +104,27 @@ impl Renderer {
             })
     }
 
+    /// Tests: chunked LOD's vertex placement (`chunk_sample`, WGSL or the GLSL port) for each
+    /// `(chunk, local vertex)` through the set 0 and method set 1 view `view` had in the last
+    /// rendered frame. Call after [`Renderer::finish`]; waits for the GPU. An error for a
+    /// method without a set to probe.
+    pub fn probe_chunk_samples(
+        &self,
+        view: usize,
+        port: crate::lod::chunked::probe::Port,
+        inputs: &[(Tile, [u32; 2])],
+    ) -> Result<Vec<[i32; 2]>> {
+        let slot = self.last_view_slot("probe_chunk_samples", view)?;
+        let frame = (self.terrain.descriptors.layout, self.terrain.set(slot));
+        let set = self.method.probe_set(slot).ok_or_else(|| {
+            Error::invalid(
+                "probe_chunk_samples",
+                format!("method {} has no set to probe", self.method.name()),
+            )
+        })?;
+        crate::lod::chunked::probe::probe(&self.gpu, frame, set, port, inputs)
+    }
+
     /// The view slot view `view` used in the last rendered frame, once that frame is done.
     fn last_view_slot(&self, what: &str, view: usize) -> Result<ViewSlot> {
         if self.next_frame == 0 || !self.in_flight.is_empty() {

@@ -1,5 +1,5 @@
 // GLSL port of shaders/include/chunked_common.wgsl and of the vertex placement of
-// shaders/chunked.wgsl (LOD-map lookup and edge patching), for the task and mesh stages of the
+// shaders/include/chunked_sample.wgsl (LOD-map lookup and edge patching), for the task and mesh stages of the
 // chunked method's mesh path. The same integer arithmetic; change both files together.
 
 layout(set = 1, binding = 0, std140) uniform Chunked {
@@ -25,7 +25,7 @@ layout(set = 1, binding = 6, std430) readonly buffer LodMap {
     uint cells[];
 } lod_map;
 
-// `map_level` of shaders/chunked.wgsl.
+// `map_level` of shaders/include/chunked_sample.wgsl.
 uint map_level(ivec2 c) {
     ivec2 size = ivec2(chunked.lists.zw);
     if (c.x < 0 || c.y < 0 || c.x >= size.x || c.y >= size.y) {
@@ -38,7 +38,7 @@ int snap_down(int v, uint level) {
     return (v >> level) << level;
 }
 
-// `chunk_sample` of shaders/chunked.wgsl: the sample a chunk vertex stands on after edge
+// `chunk_sample` of shaders/include/chunked_sample.wgsl: the sample a chunk vertex stands on after edge
 // patching (before clamping to the data).
 ivec2 chunk_sample(uvec4 t, uvec2 local) {
     uint quads = chunked.sizes.x;

@@ -11,6 +11,8 @@
 //! per frame (`shaders/chunked_select.wgsl`). The CPU reference is [`select`]; the chunk
 //! statistics are UDLOD's ([`Levels`], the same per-tile min/max and errors).
 
+#[cfg(feature = "test-support")]
+pub mod probe;
 mod record;
 pub mod select;
 pub mod settings;
@@ -202,8 +204,9 @@ pub struct Chunked {
     indices: Buffer,
     index_count: u32,
     slots: Vec<SlotBuffers>,
-    /// Set 1 of every slot (`SlotBuffers::set`); kept alive for them.
-    _sets: DescriptorSets,
+    /// Set 1 of every slot (`SlotBuffers::set`).
+    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
+    sets: DescriptorSets,
     pipelines: Pipelines,
     /// The mesh-shader entry points (`draw = "mesh"`).
     mesh: Option<ash::ext::mesh_shader::Device>,
@@ -257,23 +260,7 @@ impl Chunked {
         let gpu = ctx.gpu;
         settings.validate()?;
         let settings = settings.clone();
-        let (stats, spacing) = match ctx.data {
-            Terrain::Grid(h) => (
-                TileStats::compute(&**h, settings.chunk_quads, &|_| {})?,
-                h.spacing,
-            ),
-            Terrain::Pyramid(p) => (p.tile_stats(settings.chunk_quads)?, p.spacing()),
-        };
-        let levels = Levels::from_stats(stats, spacing);
-        if levels.levels() > UDLOD_MAX_LEVELS {
-            return Err(Error::invalid(
-                "chunked",
-                format!(
-                    "{} levels exceed the maximum of {UDLOD_MAX_LEVELS}; raise chunk_quads",
-                    levels.levels()
-                ),
-            ));
-        }
+        let levels = Self::chunk_levels(ctx, &settings)?;
         let depths = Depths::new(&levels, &settings);
         let cbt = Self::cbt_layout(gpu, &settings, depths)?;
         let table = match settings.draw {
@@ -354,10 +341,32 @@ impl Chunked {
             indices,
             index_count: grid.len() as u32,
             slots,
-            _sets: sets,
+            sets,
             pipelines,
             mesh,
         })
+    }
+
+    /// The chunk quadtree's statistics (a pyramid's stored ones, else computed from level 0).
+    fn chunk_levels(ctx: &MethodContext<'_>, settings: &ChunkedSettings) -> Result<Levels> {
+        let (stats, spacing) = match ctx.data {
+            Terrain::Grid(h) => (
+                TileStats::compute(&**h, settings.chunk_quads, &|_| {})?,
+                h.spacing,
+            ),
+            Terrain::Pyramid(p) => (p.tile_stats(settings.chunk_quads)?, p.spacing()),
+        };
+        let levels = Levels::from_stats(stats, spacing);
+        if levels.levels() > UDLOD_MAX_LEVELS {
+            return Err(Error::invalid(
+                "chunked",
+                format!(
+                    "{} levels exceed the maximum of {UDLOD_MAX_LEVELS}; raise chunk_quads",
+                    levels.levels()
+                ),
+            ));
+        }
+        Ok(levels)
     }
 
     /// The CBT of this tree depth, or a one-line error when it cannot be one buffer.

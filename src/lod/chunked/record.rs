@@ -232,4 +232,9 @@ impl LodMethod for Chunked {
     fn debug_tiles(&self, slot: ViewSlot) -> Result<Option<Vec<[u32; 3]>>> {
         self.debug_chunks(slot).map(Some)
     }
+
+    #[cfg(feature = "test-support")]
+    fn probe_set(&self, slot: ViewSlot) -> Option<(vk::DescriptorSetLayout, vk::DescriptorSet)> {
+        Some((self.sets.layout, self.slots[slot.index()].set))
+    }
 }

@@ -207,6 +207,54 @@ pub fn lod_map(levels: &Levels, chunks: &[Tile]) -> Vec<u32> {
     map
 }
 
+/// The sample vertex `local` of chunk `t` stands on after edge patching, before clamping to
+/// the data: the CPU mirror of `chunk_sample` (`shaders/include/chunked_sample.wgsl` and its
+/// GLSL port), the same integer operations, with `map` the LOD map ([`lod_map`]).
+pub fn chunk_sample(
+    levels: &Levels,
+    map: &[u32],
+    t: Tile,
+    local: [u32; 2],
+    stitch: bool,
+) -> [i32; 2] {
+    let quads = levels.grid_size;
+    let mut s = [
+        ((t.x * quads + local[0]) << t.lod) as i32,
+        ((t.y * quads + local[1]) << t.lod) as i32,
+    ];
+    if !stitch {
+        return s;
+    }
+    let (nx, ny) = levels.tiles_per_side[0];
+    let level_at = |c: [i32; 2]| -> u32 {
+        if c[0] < 0 || c[1] < 0 || c[0] >= nx as i32 || c[1] >= ny as i32 {
+            0
+        } else {
+            map[(c[1] as u32 * nx + c[0] as u32) as usize]
+        }
+    };
+    let side = 1i32 << t.lod;
+    let lo = [t.x as i32 * side, t.y as i32 * side];
+    let cell = [0, 1].map(|i| (s[i] / quads as i32).clamp(lo[i], lo[i] + side - 1));
+    // Axis 0 edges (west/east) snap y; axis 1 edges (south/north) snap x.
+    for (axis, along) in [(0usize, 1usize), (1, 0)] {
+        if local[axis] == 0 || local[axis] == quads {
+            let across = if local[axis] == 0 {
+                lo[axis] - 1
+            } else {
+                lo[axis] + side
+            };
+            let mut c = cell;
+            c[axis] = across;
+            let l = level_at(c);
+            if l > t.lod {
+                s[along] = (s[along] >> l) << l;
+            }
+        }
+    }
+    s
+}
+
 /// The largest level difference between two drawn chunks that share an edge (edge patching
 /// is exact up to log2(chunk_quads); beyond, Hedberg: "cannot be guaranteed").
 pub fn largest_level_jump(levels: &Levels, chunks: &[Tile]) -> u32 {
