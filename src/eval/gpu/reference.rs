@@ -211,7 +211,8 @@ impl ReferenceSurface {
     }
 
     /// The tiles whose boxes (their samples widened by one, the data's widened height range)
-    /// intersect the view's frustum: a quadtree descent from the whole tile grid.
+    /// intersect the view's frustum: a quadtree descent from the whole tile grid; on the earth
+    /// every tile's curved box ([`earth_boxes`]).
     pub fn visible_tiles(&self, view: &ViewCone) -> Vec<(u32, u32)> {
         let frustum = Frustum::of(view);
         if let Some(boxes) = &self.earth {
@@ -381,6 +382,41 @@ impl Frustum {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geo::{EnuFrame, Geodetic, WGS84};
+    use glam::DVec2;
+
+    /// Every point of the lattice surface over a tile, at any height of the range, lies in the
+    /// tile's earth box; negative control: boxes built for height 0 only miss raised points.
+    #[test]
+    fn earth_boxes_hold_the_curved_surface() {
+        let frame = EnuFrame::new(&WGS84, Geodetic::new(46.5, 8.0, 0.0));
+        let (w, h) = (300u32, 200u32);
+        let lattice = Lattice::anchored_plane(w, h, 200.0, frame).unwrap();
+        let tiles = (
+            (w - 1).div_ceil(EVAL_REF_TILE),
+            (h - 1).div_ceil(EVAL_REF_TILE),
+        );
+        let boxes = earth_boxes(&lattice, tiles, (w, h), (-50.0, 3000.0));
+        let flat = earth_boxes(&lattice, tiles, (w, h), (0.0, 0.0));
+        let inside = |b: &(DVec3, DVec3), p: DVec3| p.cmpge(b.0).all() && p.cmple(b.1).all();
+        let mut missed_by_flat = 0;
+        for j in 0..60 {
+            for i in 0..90 {
+                let s = DVec2::new(i as f64 * 3.31 + 0.2, j as f64 * 3.29 + 0.4);
+                let key = (s.x as u32 / EVAL_REF_TILE, s.y as u32 / EVAL_REF_TILE);
+                let k = (key.1 * tiles.0 + key.0) as usize;
+                for z in [-50.0, 0.0, 1234.5, 3000.0] {
+                    let p = lattice.position(s, z);
+                    assert!(inside(&boxes[k], p), "{s} at {z} m outside {:?}", boxes[k]);
+                    missed_by_flat += usize::from(!inside(&flat[k], p));
+                }
+            }
+        }
+        assert!(missed_by_flat > 1000, "{missed_by_flat}");
+        // The far corner (60 x 40 km from the origin) curves ~100 m below the tangent plane.
+        let last = boxes.last().unwrap();
+        assert!(last.0.z < -100.0, "{last:?}");
+    }
 
     /// The frustum test keeps every point a camera sees and drops what is behind it.
     #[test]
