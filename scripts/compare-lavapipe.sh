@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=${1:-target/release/vkterrain}
-new_env=$(scripts/lavapipe.sh)
+new_env=$(VKTERRAIN_LAVAPIPE=25 scripts/lavapipe.sh)
 [ -n "$new_env" ] || { echo "error: scripts/lavapipe.sh provides no other lavapipe here" >&2; exit 1; }
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
