@@ -44,5 +44,5 @@ for c in $CASES; do
     --sweep distance_factor=1,4,8 --sweep error_px=1,4,16 --flip-every 60 \
     --out "$KEEP/$c" --force >"$KEEP/$c.log" 2>&1 || { echo "eval $c failed:"; tail -5 "$KEEP/$c.log"; }
   echo "wall $(( $(date +%s) - s )) s"
-  [ -f "$KEEP/$c/summary.csv" ] && column -s, -t <"$KEEP/$c/summary.csv" | cut -c1-260
+  [ -f "$KEEP/$c/summary.csv" ] && grep -A40 "^variant" "$KEEP/$c.log" | grep -v "^evaluated\|^wrote"
 done
