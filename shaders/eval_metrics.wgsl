@@ -558,11 +558,9 @@ fn blocks_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     partials[b] = Partial(vec4<f32>(sums.xy, ssim, select(0.0, 1.0, window)), maxes, counts);
 }
 
-// Sums the blocks' partials into stats.totals (one workgroup).
-var<workgroup> red_sq: array<vec2<u32>, EVAL_REDUCE_WORKGROUP>;
-var<workgroup> red_sum2: array<vec4<f32>, EVAL_REDUCE_WORKGROUP>;
-var<workgroup> red_max2: array<vec4<f32>, EVAL_REDUCE_WORKGROUP>;
-var<workgroup> red_cnt2: array<vec4<u32>, EVAL_REDUCE_WORKGROUP>;
+// Sums the blocks' partials into stats.totals in two passes without workgroup barriers:
+// llvmpipe builds compute shaders with barriers as coroutines, and Mesa 25's LLVM took minutes
+// to build the frames of the former barrier tree (docs/architecture.md "Which lavapipe").
 
 // a + b for 64-bit values as (low, high) u32 pairs.
 fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
@@ -570,8 +568,11 @@ fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
     return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
 }
 
+// Pass 1 (one workgroup): invocation `li` sums partials li, li + W, li + 2W, ... and stores
+// the sum in partials[li]: only invocation `li` reads that entry, so no barrier is needed.
+// The buffer holds at least W entries; those past the blocks' count become zero partials.
 @compute @workgroup_size(EVAL_REDUCE_WORKGROUP)
-fn reduce_main(@builtin(local_invocation_index) li: u32) {
+fn fold_main(@builtin(local_invocation_index) li: u32) {
     var sums = vec4<f32>(0.0);
     var maxes = vec4<f32>(0.0);
     var counts = vec4<u32>(0u);
@@ -583,24 +584,30 @@ fn reduce_main(@builtin(local_invocation_index) li: u32) {
         counts += vec4<u32>(p.counts.xy, 0u, p.counts.w);
         sq = add64(sq, vec2<u32>(p.counts.z, 0u));
     }
-    red_sum2[li] = sums;
-    red_max2[li] = maxes;
-    red_cnt2[li] = counts;
-    red_sq[li] = sq;
-    for (var stride = EVAL_REDUCE_WORKGROUP / 2u; stride > 0u; stride >>= 1u) {
-        workgroupBarrier();
-        if li < stride {
-            red_sum2[li] += red_sum2[li + stride];
-            red_max2[li] = max(red_max2[li], red_max2[li + stride]);
-            red_cnt2[li] += red_cnt2[li + stride];
-            red_sq[li] = add64(red_sq[li], red_sq[li + stride]);
-        }
+    // The 64-bit square sum: its low word in counts.z as the blocks' own, its high word
+    // bit-cast into maxes.z (unused by the blocks; pass 2 reads it as bits, never as a max).
+    let folded_maxes = vec4<f32>(maxes.xy, bitcast<f32>(sq.y), 0.0);
+    partials[li] = Partial(sums, folded_maxes, vec4<u32>(counts.xy, sq.x, counts.w));
+}
+
+// Pass 2 (one invocation): the W folded partials into stats.totals.
+@compute @workgroup_size(1)
+fn reduce_main() {
+    var sums = vec4<f32>(0.0);
+    var maxes = vec4<f32>(0.0);
+    var counts = vec4<u32>(0u);
+    var sq = vec2<u32>(0u);
+    for (var i = 0u; i < EVAL_REDUCE_WORKGROUP; i += 1u) {
+        let p = partials[i];
+        sums += p.sums;
+        maxes = max(maxes, vec4<f32>(p.maxes.xy, 0.0, 0.0));
+        counts += vec4<u32>(p.counts.xy, 0u, p.counts.w);
+        sq = add64(sq, vec2<u32>(p.counts.z, bitcast<u32>(p.maxes.z)));
     }
-    workgroupBarrier();
-    if li == 0u {
-        let s = red_sum2[0];
-        let m = red_max2[0];
-        let c = red_cnt2[0];
+    {
+        let s = sums;
+        let m = maxes;
+        let c = counts;
         stats.totals.metres_sum = s.x;
         stats.totals.pixels_sum = s.y;
         stats.totals.ssim_sum = s.z;
@@ -610,8 +617,8 @@ fn reduce_main(@builtin(local_invocation_index) li: u32) {
         stats.totals.error_count = c.x;
         stats.totals.holes = c.y;
         stats.totals.popping_count = c.w;
-        stats.totals.sq_lo = red_sq[0].x;
-        stats.totals.sq_hi = red_sq[0].y;
+        stats.totals.sq_lo = sq.x;
+        stats.totals.sq_hi = sq.y;
     }
 }
 

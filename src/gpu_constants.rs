@@ -86,7 +86,8 @@ shared_constants! {
     EVAL_NO_ERROR_PX: f32 = 3.0e38;
     /// Threads per workgroup of the swimming and seeding passes.
     EVAL_POINT_WORKGROUP: u32 = 64;
-    /// Threads of the one workgroup that sums the per-workgroup partials.
+    /// Invocations of the fold pass summing the 8x8 blocks' partials (one workgroup, no
+    /// barriers), then summed by one invocation (shaders/eval_metrics.wgsl `fold_main`).
     EVAL_REDUCE_WORKGROUP: u32 = 256;
     /// Evaluator on the earth: most Newton iterations inverting the geolocation lattice per
     /// point (camera-relative f32, docs/eval.md "On the earth"; converged after 3-4 from the

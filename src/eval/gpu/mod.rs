@@ -33,7 +33,9 @@ use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, compute_pipeline};
 use crate::error::{Error, Result};
 use crate::geo::Lattice;
-use crate::gpu_constants::{EVAL_HIST_BINS, EVAL_NO_ERROR_PX, EVAL_POINT_WORKGROUP, EVAL_TILE_PX};
+use crate::gpu_constants::{
+    EVAL_HIST_BINS, EVAL_NO_ERROR_PX, EVAL_POINT_WORKGROUP, EVAL_REDUCE_WORKGROUP, EVAL_TILE_PX,
+};
 use crate::render::analysis::{AnalysisFrame, FrameAnalysis};
 use crate::slots::FrameSlot;
 
@@ -88,6 +90,7 @@ pub struct EvalShared {
     next_set: AtomicUsize,
     pixels: Pipeline,
     blocks: Pipeline,
+    fold: Pipeline,
     reduce: Pipeline,
     seed: Pipeline,
     swim: Pipeline,
@@ -166,6 +169,7 @@ impl EvalShared {
             zeros,
             pixels: compute_pipeline(gpu, spv, c"pixels_main", &layouts)?,
             blocks: compute_pipeline(gpu, spv, c"blocks_main", &layouts)?,
+            fold: compute_pipeline(gpu, spv, c"fold_main", &layouts)?,
             reduce: compute_pipeline(gpu, spv, c"reduce_main", &layouts)?,
             seed: compute_pipeline(gpu, spv, c"seed_main", &layouts)?,
             swim: compute_pipeline(gpu, spv, c"swim_main", &layouts)?,
@@ -343,7 +347,8 @@ impl GpuAnalysis {
         )?;
         let partials = device(
             "eval partials",
-            groups.0 as u64 * groups.1 as u64 * PARTIAL_BYTES,
+            // At least one entry per invocation of the fold pass, which writes them all.
+            (groups.0 as u64 * groups.1 as u64).max(EVAL_REDUCE_WORKGROUP as u64) * PARTIAL_BYTES,
             vk::BufferUsageFlags::empty(),
         )?;
         let stats_size = stats_bytes(max_points(shared.frames));
@@ -607,6 +612,13 @@ impl FrameAnalysis for GpuAnalysis {
             &s.blocks,
             (blocks.div_ceil(EVAL_POINT_WORKGROUP), 1, 1),
         );
+        b.memory(
+            cmd,
+            MemoryAccess::ComputeWrite,
+            MemoryAccess::ComputeReadWrite,
+        );
+        // Two passes without workgroup barriers (shaders/eval_metrics.wgsl `fold_main`).
+        self.dispatch(cmd, &s.fold, (1, 1, 1));
         b.memory(
             cmd,
             MemoryAccess::ComputeWrite,
