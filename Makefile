@@ -14,10 +14,9 @@ CARGO ?= cargo
 # The shared real data (never committed): ../shared/data by default.
 SHARED ?= ../shared
 export VKTERRAIN_SHARED_DATA ?= $(abspath $(SHARED)/data)
-# `make test VKTERRAIN_LAVAPIPE=25` (and the CI benchmarks) run on lavapipe from Mesa 25.0.7:
-# on Debian 12 the pinned bookworm-backports driver, unpacked into target/lavapipe-25, nothing
-# installed (scripts/lavapipe.sh). CI stays on the system's Mesa (docs/architecture.md
-# "Which lavapipe" says why).
+# Tests and CI's benchmarks run on lavapipe from Mesa >= 24: on Debian 12 (Mesa 22.3) the
+# pinned bookworm-backports Mesa 25.0.7, unpacked into target/lavapipe-25, nothing installed
+# (scripts/lavapipe.sh; docs/architecture.md "Which lavapipe"). VKTERRAIN_LAVAPIPE=system opts out.
 LAVAPIPE = lvp_env=$$(scripts/lavapipe.sh) && env $$lvp_env
 
 .PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap bench-ring bench-ring-fuzz bench-preprocess bench-startup fuzz data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test

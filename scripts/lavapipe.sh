@@ -1,19 +1,17 @@
 #!/usr/bin/env bash
-# Prints the environment (VK_ICD_FILENAMES=..., LD_LIBRARY_PATH=...) under which tests and the
-# CI benchmarks run on lavapipe from Mesa 25.0.7 when asked to (VKTERRAIN_LAVAPIPE=25), else
-# nothing (the system's Vulkan drivers).
+# Prints the environment (VKTERRAIN_LAVAPIPE=25 VK_ICD_FILENAMES=... LD_LIBRARY_PATH=...)
+# under which `make test` and the CI benchmarks run on lavapipe from Mesa 25.0.7, or nothing
+# when the system's Mesa is new enough (>= 24) or VKTERRAIN_LAVAPIPE=system asks for it.
 #
-# Why opt-in (docs/architecture.md, "Which lavapipe"): Debian 12 ships Mesa 22.3, whose lavapipe
-# has no VK_EXT_mesh_shader and renders the methods about 2x slower than Mesa 25.0 from
-# bookworm-backports; but Mesa 25's lavapipe compiles our largest shaders so slowly on a cold
-# shader cache that a clipmap + two-view evaluation waits over 60 s for the GPU (measured), so
-# CI stays on the system's Mesa. Installing the backport system-wide would replace the
-# machine's Mesa for every program, so on Debian 12 this script downloads the pinned packages
-# with apt-get (the package registry; its own lists directory, nothing installed) and unpacks
-# them into target/lavapipe-25 once.
+# Why (docs/architecture.md, "Which lavapipe"): Debian 12 ships Mesa 22.3, whose lavapipe has
+# no VK_EXT_mesh_shader and renders the methods about 2x slower than Mesa 25.0 from
+# bookworm-backports. Installing the backport system-wide would replace the machine's Mesa for
+# every program, so on Debian 12 this script downloads the pinned packages with apt-get (the
+# package registry; its own lists directory, nothing installed) and unpacks them into
+# target/lavapipe-25 once. Elsewhere (Ubuntu 24.04 ships Mesa 24) the system's driver is used.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-[ "${VKTERRAIN_LAVAPIPE:-system}" = 25 ] || exit 0
+[ "${VKTERRAIN_LAVAPIPE:-25}" = system ] && exit 0
 
 # Pinned: the versions the tests were last run with (2026-11-30).
 MESA=25.0.7-2~bpo12+1
@@ -22,7 +20,7 @@ DIR=${VKTERRAIN_LAVAPIPE_DIR:-$PWD/target/lavapipe-25}
 LIB=$DIR/root/usr/lib/x86_64-linux-gnu
 ICD=$DIR/lvp_icd.json
 
-emit() { echo "VK_ICD_FILENAMES=$ICD LD_LIBRARY_PATH=$LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"; }
+emit() { echo "VKTERRAIN_LAVAPIPE=25 VK_ICD_FILENAMES=$ICD LD_LIBRARY_PATH=$LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"; }
 [ -f "$ICD" ] && [ -f "$LIB/libvulkan_lvp.so" ] && { emit; exit 0; }
 
 installed=$(dpkg-query -W -f='${Version}' mesa-vulkan-drivers 2>/dev/null || true)

@@ -370,8 +370,8 @@ fn mesh_draw_needs_mesh_shaders_or_matches_instancing() {
     );
     common::assert_no_validation_messages(&masked);
     let gpu = common::gpu(false);
-    // `make test VKTERRAIN_LAVAPIPE=25` runs on lavapipe from Mesa 25, which has mesh shaders:
-    // there the comparison below must run, not the refusal.
+    // `make test` (CI) runs on lavapipe from Mesa 25 and sets VKTERRAIN_LAVAPIPE=25
+    // (scripts/lavapipe.sh): there the comparison below must run, not the refusal.
     assert!(
         gpu.enabled.mesh_shader || std::env::var("VKTERRAIN_LAVAPIPE").as_deref() != Ok("25"),
         "VKTERRAIN_LAVAPIPE=25 promises lavapipe from Mesa 25 (scripts/lavapipe.sh), with mesh shaders"
