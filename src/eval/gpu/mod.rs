@@ -64,6 +64,12 @@ pub const EVAL_SET: &[Binding] = {
 };
 
 const TOTALS_BYTES: u64 = size_of::<Totals>() as u64;
+
+/// One partial per 8x8 block, and at least one per invocation of the fold pass (which
+/// writes them all: shaders/eval_metrics.wgsl `fold_main`).
+fn partials_bytes(groups: (u32, u32)) -> u64 {
+    (groups.0 as u64 * groups.1 as u64).max(EVAL_REDUCE_WORKGROUP as u64) * PARTIAL_BYTES
+}
 const HIST_BYTES: u64 = 3 * EVAL_HIST_BINS as u64 * 4;
 
 /// Frame size and views of an evaluation.
@@ -347,8 +353,7 @@ impl GpuAnalysis {
         )?;
         let partials = device(
             "eval partials",
-            // At least one entry per invocation of the fold pass, which writes them all.
-            (groups.0 as u64 * groups.1 as u64).max(EVAL_REDUCE_WORKGROUP as u64) * PARTIAL_BYTES,
+            partials_bytes(groups),
             vk::BufferUsageFlags::empty(),
         )?;
         let stats_size = stats_bytes(max_points(shared.frames));

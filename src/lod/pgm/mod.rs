@@ -406,13 +406,19 @@ pub struct Pgm {
 }
 
 impl Pgm {
-    pub fn new(ctx: &MethodContext<'_>, settings: &PgmSettings) -> Result<Self> {
+    /// PGM casts its screen grid onto the flat plane: on the ellipsoid it is a one-line error.
+    fn refuse_the_earth(ctx: &MethodContext<'_>) -> Result<()> {
         if ctx.terrain.info.lattice.is_some() {
             return Err(Error::invalid(
                 "method pgm",
                 "its screen grid is cast onto the flat plane, not onto the ellipsoid: set [render] earth = \"flat\" to draw this data set with it",
             ));
         }
+        Ok(())
+    }
+
+    pub fn new(ctx: &MethodContext<'_>, settings: &PgmSettings) -> Result<Self> {
+        Self::refuse_the_earth(ctx)?;
         let gpu = ctx.gpu;
         let settings = settings.clone();
         settings.validate()?;
