@@ -269,3 +269,56 @@ fn xyz_dataset_config_parses_with_its_keys_beside_kind() {
         "{e}"
     );
 }
+
+/// `kind = "procedural"` takes the generator's character from the config (Hedberg's smooth /
+/// average / uneven maps, config/hedberg_*.toml): each key changes the heights, the defaults
+/// are the built-in terrain, and a non-positive height or feature size is a one-line error.
+#[test]
+fn procedural_config_sets_style_height_and_feature_size() {
+    use vkterrain::config::Config;
+    let tmp = tempfile::tempdir().unwrap();
+    let load = |extra: &str| {
+        let path = tmp.path().join("p.toml");
+        std::fs::write(
+            &path,
+            format!("[dataset]\nkind = \"procedural\"\nsize = 65\n{extra}"),
+        )
+        .unwrap();
+        let config = Config::load(Some(&path))?;
+        config.validate()?;
+        config.dataset.load(|p| p.to_path_buf())
+    };
+    let plain = load("").unwrap();
+    let builtin = procedural::generate(&ProceduralParams {
+        size: 65,
+        ..Default::default()
+    })
+    .unwrap();
+    assert_eq!(plain.heights, builtin.heights);
+    assert_eq!(plain.name, builtin.name);
+    for extra in [
+        "style = \"alpine\"\n",
+        "max_height = 600.0\n",
+        "feature_size = 40000.0\n",
+    ] {
+        let other = load(extra).unwrap();
+        assert_ne!(other.heights, plain.heights, "{extra}");
+        assert_ne!(other.name, plain.name, "the description names {extra}");
+    }
+    let low = load("max_height = 600.0\n").unwrap();
+    assert!(low.height_range().1 <= 600.0);
+    for bad in ["max_height = 0.0\n", "feature_size = -1.0\n"] {
+        let e = load(bad).unwrap_err().to_string();
+        assert!(
+            e.contains("must be positive") && !e.contains('\n'),
+            "{bad}: {e}"
+        );
+    }
+    assert!(load("style = \"lunar\"\n").is_err());
+    for map in ["smooth", "average", "uneven"] {
+        let c = format!("config/hedberg_{map}.toml");
+        Config::load(Some(&manifest(&c)))
+            .and_then(|c| c.validate())
+            .unwrap_or_else(|e| panic!("{c}: {e}"));
+    }
+}

@@ -161,6 +161,25 @@ fn classic(params: &ProceduralParams, x: f64, y: f64) -> f64 {
     params.max_height * shaped.powf(1.6)
 }
 
+/// The data set's description: size, seed and spacing, and whatever differs from the defaults.
+fn describe(params: &ProceduralParams) -> String {
+    let d = ProceduralParams::default();
+    let mut text = format!(
+        "procedural size={} seed={} spacing={} m",
+        params.size, params.seed, params.spacing
+    );
+    if params.style != d.style {
+        text += &format!(" style={:?}", params.style).to_lowercase();
+    }
+    if params.max_height != d.max_height {
+        text += &format!(" max_height={} m", params.max_height);
+    }
+    if params.feature_size != d.feature_size {
+        text += &format!(" feature_size={} m", params.feature_size);
+    }
+    text
+}
+
 /// Generates the whole grid.
 pub fn generate(params: &ProceduralParams) -> Result<Heightmap> {
     let n = params.size as usize;
@@ -172,10 +191,7 @@ pub fn generate(params: &ProceduralParams) -> Result<Heightmap> {
         }
     }
     Heightmap::new(
-        format!(
-            "procedural size={} seed={} spacing={} m",
-            params.size, params.seed, params.spacing
-        ),
+        describe(params),
         params.size,
         params.size,
         params.spacing,

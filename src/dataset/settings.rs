@@ -34,8 +34,28 @@ pub struct ProceduralConfig {
     pub seed: u64,
     /// Sample spacing in metres.
     pub spacing: f64,
+    /// The terrain's character (`classic`, the tests' terrain, or `alpine`).
+    pub style: procedural::Style,
+    /// Height of the tallest possible peak in metres.
+    pub max_height: f64,
+    /// Wavelength of the largest features in metres (larger: smoother terrain).
+    pub feature_size: f64,
     /// Where sample (0, 0) lies on the earth; none: a flat world (`docs/coordinates.md`).
     pub anchor: Option<Anchor>,
+}
+
+impl ProceduralConfig {
+    /// The generator's parameters.
+    pub fn params(&self) -> procedural::ProceduralParams {
+        procedural::ProceduralParams {
+            size: self.size,
+            seed: self.seed,
+            spacing: self.spacing,
+            max_height: self.max_height,
+            feature_size: self.feature_size,
+            style: self.style,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -113,6 +133,9 @@ impl Default for ProceduralConfig {
             size: p.size,
             seed: p.seed,
             spacing: p.spacing,
+            style: p.style,
+            max_height: p.max_height,
+            feature_size: p.feature_size,
             anchor: None,
         }
     }
@@ -172,7 +195,9 @@ impl DatasetConfig {
                         format!("{} is outside 2..={MAX_SIDE}", p.size),
                     ));
                 }
-                positive("dataset.spacing", p.spacing)
+                positive("dataset.spacing", p.spacing)?;
+                positive("dataset.max_height", p.max_height)?;
+                positive("dataset.feature_size", p.feature_size)
             }
             DatasetConfig::Png16(p) => {
                 positive("dataset.spacing", p.spacing)?;
@@ -224,12 +249,7 @@ impl DatasetConfig {
         grid: tiles::LoadGrid,
     ) -> Result<Heightmap> {
         match self {
-            DatasetConfig::Procedural(p) => procedural::generate(&procedural::ProceduralParams {
-                size: p.size,
-                seed: p.seed,
-                spacing: p.spacing,
-                ..Default::default()
-            }),
+            DatasetConfig::Procedural(p) => procedural::generate(&p.params()),
             DatasetConfig::Png16(p) => load_png16(
                 &resolve(&p.path),
                 p.spacing,
