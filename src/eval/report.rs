@@ -88,18 +88,19 @@ fn frames_csv(eval: &Evaluation) -> String {
 
 fn frames_csv_of(rows: &[FrameRow]) -> String {
     let mut csv = String::from(
-        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles\n",
+        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,gpu_eval_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles\n",
     );
     for r in rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5},{},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{:.3},{:.5},{:.5},{},{},{}",
             csv_field(&r.variant),
             csv_field(&r.method),
             r.frame,
             r.gpu_ms,
             r.gpu_prepass_ms,
             r.gpu_terrain_ms,
+            r.gpu_eval_ms,
             r.cpu_record_ms,
             r.triangles,
             r.error.pixels.mean,
