@@ -3,13 +3,13 @@
 // its depth gives, the exact level-0 surface there (the reference tiles: the full-resolution
 // triangle mesh brute force draws), the height and screen-space errors, popping against the
 // previous frame, holes against the reference frame, the PSNR and SSIM terms; per tracked
-// world point the swimming observation; for the reference frame the swim seeds. The
-// per-pixel pass (one invocation per pixel, no workgroup memory or barriers: on a CPU device
-// such as lavapipe each workgroup is then plain SIMD code) writes the error image and the
-// per-pixel terms; a per-block pass (one invocation per 8x8 block) counts them into the
-// histograms (one atomic add per run of equal bins), sums them, counts holes and computes the
-// block's SSIM window; two reducing passes sum the blocks: the host reads kilobytes. Mirrors
-// src/eval/metrics.rs; tests/eval_gpu.rs proves both equal.
+// world point the swimming observation; for the reference frame the swim seeds. Histograms
+// are accumulated with atomics by the per-pixel pass (one invocation per pixel, no workgroup
+// memory or barriers: on a CPU device such as lavapipe each workgroup is then plain SIMD
+// code), which writes the error images; a per-block pass (one invocation per 8x8 block)
+// sums them, counts holes and computes the block's SSIM window; one reducing workgroup sums
+// the blocks: the host reads kilobytes. Mirrors src/eval/metrics.rs; tests/eval_gpu.rs proves
+// both equal.
 
 struct EvalView {
     // xyz: camera right (world); w: focal length (px).
@@ -121,10 +121,8 @@ const TILE_SIDE: u32 = EVAL_REF_TILE + 1u;
 @group(0) @binding(8) var<storage, read_write> error_image: array<f32>;
 @group(0) @binding(9) var<storage, read_write> partials: array<Partial>;
 @group(0) @binding(10) var<storage, read_write> stats: Stats;
-// Per pixel of this frame, where error_image is not NO_ERROR: x |height error| (m), y the
-// popping value (px; NO_ERROR where popping is not measured). The per-block pass counts both
-// into the histograms.
-@group(0) @binding(11) var<storage, read_write> pixel_terms: array<vec2<f32>>;
+// |height error| (m) per pixel of this frame (where error_image is not NO_ERROR).
+@group(0) @binding(11) var<storage, read_write> metres_image: array<f32>;
 // The renderer's geolocation lattice (three vec4 per node: hi, lo, up; one placeholder node
 // in a flat world), the same data the vertex shaders place the terrain with.
 @group(0) @binding(12) var<storage, read> geo_lattice: array<vec4<f32>>;
@@ -390,28 +388,8 @@ fn hist_bin(value: f32) -> u32 {
     return u32(min(b, f32(EVAL_HIST_BINS - 1u)));
 }
 
-// A run of equal histogram bins met by one block: counted with one atomic add when the bin
-// changes (neighbouring pixels mostly share a bin, and per-pixel atomics on one bin contend:
-// on lavapipe they were about a third of the analysis).
-struct BinRun {
-    bin: u32,
-    count: u32,
-}
-
-fn flush_run(hist: u32, run: BinRun) {
-    if run.count > 0u {
-        atomicAdd(&stats.hist[hist * EVAL_HIST_BINS + run.bin], run.count);
-    }
-}
-
-// Counts `value` into histogram `hist` through the block's run of that histogram.
-fn count_in(hist: u32, run: BinRun, value: f32) -> BinRun {
-    let b = hist_bin(value);
-    if b == run.bin {
-        return BinRun(b, run.count + 1u);
-    }
-    flush_run(hist, run);
-    return BinRun(b, 1u);
+fn count_in(hist: u32, value: f32) {
+    atomicAdd(&stats.hist[hist * EVAL_HIST_BINS + hist_bin(value)], 1u);
 }
 
 fn luma(c: u32) -> f32 {
@@ -486,9 +464,8 @@ fn is_hole(i: u32) -> bool {
 }
 
 // Per pixel (one invocation each, no workgroup memory or barriers: a CPU device runs it as
-// plain SIMD loops): the error image and the per-pixel terms (height error, popping) that the
-// per-block pass counts. The z dimension is the view (its uniforms are the same in every
-// invocation).
+// plain SIMD loops): the errors into the histograms, the error and metre images, popping.
+// The z dimension is the view (its uniforms are the same in every invocation).
 @compute @workgroup_size(EVAL_TILE_PX, EVAL_TILE_PX)
 fn pixels_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let v = gid.z;
@@ -505,19 +482,19 @@ fn pixels_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let e = pixel_error(v, view, gid.x, y, d);
     let previous = error_image[i];
     error_image[i] = e.signed_px;
-    var popping = NO_ERROR;
+    metres_image[i] = e.metres;
     if e.counted {
+        count_in(0u, e.metres);
+        count_in(1u, e.pixels);
         let interior = x >= 1u && y >= 1u && x + 1u < w && y + 1u < hgt;
         if frame.size.w == 1u && interior && previous != NO_ERROR && continuous(i, d) {
-            popping = abs(e.signed_px - previous);
+            count_in(2u, abs(e.signed_px - previous));
         }
     }
-    pixel_terms[i] = vec2<f32>(e.metres, popping);
 }
 
-// Per 8x8 block of the frame (one invocation each, after pixels_main): the histograms (runs
-// of equal bins, one atomic add each), sums and maxima of the errors, holes, squared RGB
-// differences, and the block's SSIM window.
+// Per 8x8 block of the frame (one invocation each, after pixels_main): sums and maxima of
+// the errors, holes, squared RGB differences, and the block's SSIM window.
 @compute @workgroup_size(EVAL_POINT_WORKGROUP)
 fn blocks_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let b = gid.x;
@@ -533,23 +510,14 @@ fn blocks_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var counts = vec4<u32>(0u);
     var sa = 0.0;
     var sb = 0.0;
-    var metres_run = BinRun(0u, 0u);
-    var pixels_run = BinRun(0u, 0u);
-    var popping_run = BinRun(0u, 0u);
     for (var y = origin.y; y < end.y; y += 1u) {
         let inner_y = y >= 1u && y + 1u < hgt;
         for (var x = origin.x; x < end.x; x += 1u) {
             let i = y * w + x;
             let e = error_image[i];
             if e != NO_ERROR {
-                let terms = pixel_terms[i];
-                let m = terms.x;
+                let m = metres_image[i];
                 let p = abs(e);
-                metres_run = count_in(0u, metres_run, m);
-                pixels_run = count_in(1u, pixels_run, p);
-                if terms.y != NO_ERROR {
-                    popping_run = count_in(2u, popping_run, terms.y);
-                }
                 sums.x += m;
                 sums.y += p;
                 maxes.x = max(maxes.x, m);
@@ -566,9 +534,6 @@ fn blocks_main(@builtin(global_invocation_id) gid: vec3<u32>) {
             sb += luma(c);
         }
     }
-    flush_run(0u, metres_run);
-    flush_run(1u, pixels_run);
-    flush_run(2u, popping_run);
     // SSIM of the block's window (metrics::ssim): means first, then centred moments.
     let window = origin.x + EVAL_TILE_PX <= w && origin.y + EVAL_TILE_PX <= hgt;
     var ssim = 0.0;

@@ -57,7 +57,7 @@ pub const EVAL_SET: &[Binding] = {
         Binding::new(8, T::STORAGE_BUFFER, C, "error_image"),
         Binding::new(9, T::STORAGE_BUFFER, C, "partials"),
         Binding::new(10, T::STORAGE_BUFFER, C, "stats"),
-        Binding::new(11, T::STORAGE_BUFFER, C, "pixel_terms"),
+        Binding::new(11, T::STORAGE_BUFFER, C, "metres_image"),
         // The renderer's geolocation lattice (a placeholder node in a flat world).
         Binding::new(12, T::STORAGE_BUFFER, C, "geo_lattice"),
     ]
@@ -273,7 +273,7 @@ pub struct GpuAnalysis {
     depth: vk::Buffer,
     color: vk::Buffer,
     error_image: Buffer,
-    _pixel_terms: Buffer,
+    _metres_image: Buffer,
     _partials: Buffer,
     stats: Buffer,
     stats_host: Buffer,
@@ -346,9 +346,9 @@ impl GpuAnalysis {
         };
         let copy_usage = vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::TRANSFER_SRC;
         let error_image = device("eval error image", pixels * 4, copy_usage)?;
-        let pixel_terms = device(
-            "eval per-pixel terms (height error, popping)",
-            pixels * 8,
+        let metres_image = device(
+            "eval height error image",
+            pixels * 4,
             vk::BufferUsageFlags::empty(),
         )?;
         let partials = device(
@@ -401,7 +401,7 @@ impl GpuAnalysis {
                 ("error_image", buffer(error_image.raw)),
                 ("partials", buffer(partials.raw)),
                 ("stats", buffer(stats.raw)),
-                ("pixel_terms", buffer(pixel_terms.raw)),
+                ("metres_image", buffer(metres_image.raw)),
                 ("geo_lattice", buffer(shared.lattice_nodes.raw)),
             ],
         )?;
@@ -414,7 +414,7 @@ impl GpuAnalysis {
             depth,
             color,
             error_image,
-            _pixel_terms: pixel_terms,
+            _metres_image: metres_image,
             _partials: partials,
             stats,
             stats_host,
