@@ -5,9 +5,13 @@
 // passes the other way round. Tiles that do not split go to the final list; `finish` writes
 // the indexed indirect draw (one instance per final tile).
 //
-// Capacity: a split first reserves 3 more final-list entries (a split turns one would-be leaf
-// into four), then 4 temporary slots; if either is full the tile is drawn as it is (refusing
-// to split is safe: coarser, never holes) and `overflow` counts it.
+// Capacity: a pass splits only if its worst case fits: every parent splitting (3 more
+// final-list entries each: a split turns one would-be leaf into four, and 4 temporary slots).
+// Otherwise no tile of that pass splits, so the whole view stops one level early: coarser,
+// but a selection whose finest level is that pass's, crack-free like any other. Refusing
+// single tiles instead left neighbours two levels apart without a morph between them: cracks
+// (docs/udlod.md "Capacity"). `overflow` counts the tiles that wanted to split and could not;
+// each split still reserves its entries (atomics), which the worst-case check guarantees.
 
 //!include terrain_common.wgsl
 //!include udlod_common.wgsl
@@ -32,6 +36,8 @@ struct TilingState {
     culled: atomic<u32>,
     // Passes begun this frame (the state is zero-filled before the first).
     passes_started: u32,
+    // 1 when this pass's worst case fits the lists (every parent splitting), else 0.
+    splits_allowed: u32,
 }
 
 @group(1) @binding(1) var<storage, read_write> state: TilingState;
@@ -57,6 +63,11 @@ fn prepare() {
         parents = atomicLoad(&state.child_count);
     }
     state.parent_count = parents;
+    // The worst case: every parent splits (3 more final entries each; parents and children
+    // share the temporary list).
+    let leaves = atomicLoad(&state.reserved_leaves);
+    let fits = leaves + 3u * parents <= udlod.sizes.z && 5u * parents <= udlod.sizes.w;
+    state.splits_allowed = select(0u, 1u, fits);
     atomicStore(&state.child_count, 0u);
     state.dispatch_x = (parents + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;
     state.dispatch_y = 1u;
@@ -190,7 +201,11 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>) {
     // Split on the smallest scaled distance over the tile: the field's minimum (its corners)
     // times the distance to the nearest point (mirrors `tile_splits` in select.rs).
     if t.lod > 0u && field_range(t.x, t.y, t.lod).x * tile_distance(t) < udlod.split[t.lod].x {
-        let base = reserve_split(parents);
+        // (Not `select`: it evaluates both operands, and reserving has side effects.)
+        var base = -1;
+        if state.splits_allowed != 0u {
+            base = reserve_split(parents);
+        }
         if base >= 0 {
             for (var k = 0u; k < 4u; k++) {
                 let child = Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u);

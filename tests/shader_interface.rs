@@ -276,6 +276,7 @@ fn tiling_state_matches_the_wgsl_struct() {
         ("overflow", offset_of!(TilingState, overflow)),
         ("culled", offset_of!(TilingState, culled)),
         ("passes_started", offset_of!(TilingState, passes_started)),
+        ("splits_allowed", offset_of!(TilingState, splits_allowed)),
     ];
     assert_struct_layout(
         &[("udlod_tiling", UDLOD_TILING_WGSL)],

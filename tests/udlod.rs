@@ -282,53 +282,69 @@ fn neighbours_differ_by_at_most_one_level_and_edges_coincide_after_morphing_at(g
     for cam in poses(&data, 200) {
         let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
         let tiles = select::select_tiles(&levels, &p);
-        let cells = leaf_levels(&tiles);
-        for (&(x, y), &l) in &cells {
-            for (nx, ny) in [(x + 1, y), (x, y + 1)] {
-                if let Some(&m) = cells.get(&(nx, ny)) {
-                    assert!(
-                        l.abs_diff(m) <= 1,
-                        "grid {grid} {cam:?}: leaf cells ({x},{y}) lod {l} and ({nx},{ny}) lod {m}"
-                    );
-                }
-            }
-        }
-        // Every vertex on a tile's edge must land exactly on the polyline of the neighbour's
-        // edge: where the neighbour is coarser, it lands on one of the neighbour's vertices.
-        let g = lod.grid_size;
-        let by_tile: HashSet<Tile> = tiles.iter().copied().collect();
-        for t in &tiles {
-            if t.lod + 1 > levels.root_lod {
-                continue;
-            }
-            // The east neighbour at the next coarser level, if that is what is drawn there.
-            let coarse = Tile {
-                x: t.x.div_ceil(2),
-                y: t.y / 2,
-                lod: t.lod + 1,
-            };
-            if (t.x & 1) == 1 && by_tile.contains(&coarse) {
-                for j in 0..=g {
-                    let fine = select::morphed_vertex(&levels, &p, *t, [g, j]);
-                    // The coarse tile's west edge: vertices at its local x = 0.
-                    let on_coarse: Vec<_> = (0..=g)
-                        .map(|k| select::morphed_vertex(&levels, &p, coarse, [0, k]))
-                        .map(|v| (v.cell, v.frac))
-                        .collect();
-                    let fine = (fine.cell, fine.frac);
-                    assert!(
-                        on_coarse.iter().any(|c| c == &fine),
-                        "{cam:?}: fine tile {t:?} edge vertex {j} at {fine:?} is not a vertex of coarse {coarse:?}"
-                    );
-                    checked_edges += 1;
-                }
-            }
-        }
+        checked_edges += check_levels_and_edges(&levels, &p, &tiles, grid)
+            .unwrap_or_else(|e| panic!("grid {grid} {cam:?}: {e}"));
     }
     assert!(
         checked_edges > 100,
         "grid {grid}: too few coarse/fine edges checked: {checked_edges}"
     );
+}
+
+/// Leaf cells of neighbouring tiles differ by at most one level, and every vertex on a tile's
+/// east edge lands, after morphing, exactly on a vertex of a coarser east neighbour's edge.
+/// Returns the coarse/fine edge vertices checked.
+fn check_levels_and_edges(
+    levels: &Levels,
+    p: &SelectionParams,
+    tiles: &[Tile],
+    g: u32,
+) -> Result<usize, String> {
+    let cells = leaf_levels(tiles);
+    for (&(x, y), &l) in &cells {
+        for (nx, ny) in [(x + 1, y), (x, y + 1)] {
+            if let Some(&m) = cells.get(&(nx, ny))
+                && l.abs_diff(m) > 1
+            {
+                return Err(format!(
+                    "leaf cells ({x},{y}) lod {l} and ({nx},{ny}) lod {m}"
+                ));
+            }
+        }
+    }
+    // Every vertex on a tile's edge must land exactly on the polyline of the neighbour's
+    // edge: where the neighbour is coarser, it lands on one of the neighbour's vertices.
+    let by_tile: HashSet<Tile> = tiles.iter().copied().collect();
+    let mut checked = 0;
+    for t in tiles {
+        if t.lod + 1 > levels.root_lod {
+            continue;
+        }
+        // The east neighbour at the next coarser level, if that is what is drawn there.
+        let coarse = Tile {
+            x: t.x.div_ceil(2),
+            y: t.y / 2,
+            lod: t.lod + 1,
+        };
+        if (t.x & 1) == 1 && by_tile.contains(&coarse) {
+            // The coarse tile's west edge: vertices at its local x = 0.
+            let on_coarse: Vec<_> = (0..=g)
+                .map(|k| select::morphed_vertex(levels, p, coarse, [0, k]))
+                .map(|v| (v.cell, v.frac))
+                .collect();
+            for j in 0..=g {
+                let fine = select::morphed_vertex(levels, p, *t, [g, j]);
+                let fine = (fine.cell, fine.frac);
+                if !on_coarse.iter().any(|c| c == &fine) {
+                    return Err(format!(
+                        "fine tile {t:?} edge vertex {j} at {fine:?} is not a vertex of coarse {coarse:?}"
+                    ));
+                }
+                checked += 1;
+            }
+        }
+    }
+    Ok(checked)
 }
 
 #[test]
@@ -521,4 +537,99 @@ fn watertight_over_200_poses_at(grid: u32) {
         terrain_px > 200 * 96 * 64 / 4,
         "the poses should mostly see terrain: {terrain_px}"
     );
+}
+
+/// A tile budget too small for the view (`max_tiles`) stops the refinement of the whole view
+/// at the first pass whose worst case does not fit (docs/udlod.md "Capacity"): the GPU's tiles
+/// of an overflowing frame still cover the data set exactly once, neighbours differ by at most
+/// one level and shared edges coincide after morphing (the CPU mirror's vertices). Refusing
+/// single tiles, as the prepass did before, broke this on most overflowing poses (the
+/// negative control, run by hand against the old prepass: see the commit message).
+#[test]
+fn an_overflowing_tile_budget_keeps_the_selection_crack_free() {
+    let data = terrain(257, 30.0);
+    let cams = poses(&data, 120);
+    for max_tiles in [48, 96, 160] {
+        overflowing_budget_at(&data, &cams, max_tiles);
+    }
+}
+
+fn overflowing_budget_at(data: &Heightmap, cams: &[Camera], max_tiles: u32) {
+    let grid = 8;
+    let lod = UdlodSettings {
+        cull: false,
+        max_tiles,
+        ..settings(grid)
+    };
+    let levels = Levels::new(data, grid).unwrap();
+    let gpu = common::gpu(false);
+    let (mut overflowing, mut broken, mut edges) = (0, Vec::new(), 0);
+    {
+        let mut r = Renderer::new(&gpu, data, lod.clone(), common::options(W, H, 1)).unwrap();
+        let mut sink = CollectSink::default();
+        for cam in cams {
+            r.render(*cam, &mut sink).unwrap();
+            r.finish(&mut sink).unwrap();
+            if r.method().budget_overflow(ViewSlot(0)) == 0 {
+                continue;
+            }
+            overflowing += 1;
+            let tiles: Vec<Tile> = r
+                .method()
+                .debug_tiles(ViewSlot(0))
+                .unwrap()
+                .unwrap()
+                .into_iter()
+                .map(|[x, y, lod]| Tile { x, y, lod })
+                .collect();
+            assert!(tiles.len() <= lod.max_tiles as usize);
+            let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
+            let covered = covers_exactly_once(&levels, &tiles);
+            match covered.and_then(|_| check_levels_and_edges(&levels, &p, &tiles, grid)) {
+                Ok(n) => edges += n,
+                Err(e) => broken.push(e),
+            }
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    println!(
+        "max_tiles {}: {overflowing} of {} poses overflow, {} broken, {edges} coarse/fine edge vertices checked",
+        lod.max_tiles,
+        cams.len(),
+        broken.len()
+    );
+    assert!(
+        overflowing >= cams.len() / 4,
+        "max_tiles {max_tiles} should overflow on many poses: {overflowing} of {}",
+        cams.len()
+    );
+    assert!(
+        broken.is_empty(),
+        "max_tiles {max_tiles}, {} poses: {}",
+        broken.len(),
+        broken[0]
+    );
+    assert!(
+        max_tiles < 100 || edges > 100,
+        "max_tiles {max_tiles}: too few coarse/fine edges checked: {edges}"
+    );
+}
+
+/// Whether the tiles' level-0 cells cover the data set's level-0 tiles exactly once.
+fn covers_exactly_once(levels: &Levels, tiles: &[Tile]) -> Result<(), String> {
+    let cells = leaf_levels(tiles);
+    let area: u64 = tiles.iter().map(|t| 1u64 << (2 * t.lod)).sum();
+    let inside = cells
+        .keys()
+        .filter(|&&(x, y)| levels.inside(Tile { x, y, lod: 0 }))
+        .count() as u64;
+    let (nx, ny) = levels.tiles_per_side[0];
+    let want = nx as u64 * ny as u64;
+    if inside != want || cells.len() as u64 != area {
+        return Err(format!(
+            "tiles cover {inside} of {want} level-0 tiles ({} cells, {area} with overlaps)",
+            cells.len()
+        ));
+    }
+    Ok(())
 }

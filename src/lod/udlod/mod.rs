@@ -59,6 +59,7 @@ pub struct TilingState {
     pub overflow: u32,
     pub culled: u32,
     pub passes_started: u32,
+    pub splits_allowed: u32,
 }
 
 /// Descriptor set 1 (`shaders/include/udlod_common.wgsl`, `shaders/udlod_tiling.wgsl`,

@@ -35,7 +35,7 @@ impl Default for UdlodSettings {
             grid_size: 8,
             tau_px: 1.0,
             morph_range: 0.2,
-            max_tiles: 16384,
+            max_tiles: 65536,
             morph: true,
             cull: true,
             error_field_max: 1024.0,
