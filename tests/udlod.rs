@@ -591,32 +591,40 @@ fn earth_selections(
 /// reference (the flat box on the earth) differs from the GPU on some poses.
 #[test]
 fn gpu_selection_equals_cpu_reference_on_the_earth() {
-    let (data, lattice) = common::poses::anchored_ci(513, 60.0);
-    let cams = common::poses::earth_poses(&data, &lattice, 60);
-    let (mut exact, mut flat_differs, mut culled) = (0, 0, 0);
-    for grid in grids() {
-        for (i, s) in earth_selections(&data, &lattice, &cams, &settings(grid))
-            .iter()
-            .enumerate()
-        {
-            assert!(
-                s.strict.is_subset(&s.gpu) && s.gpu.is_subset(&s.lenient),
-                "grid {grid} pose {i} {:?}: GPU-only {:?}, strict-only {:?}",
-                cams[i],
-                s.gpu.difference(&s.lenient).collect::<Vec<_>>(),
-                s.strict.difference(&s.gpu).collect::<Vec<_>>()
-            );
-            exact += (s.gpu == s.cpu) as usize;
-            flat_differs += (s.gpu != s.flat_box) as usize;
-            culled += s.culled;
+    for (name, (data, lattice)) in [
+        ("anchored CI terrain", common::poses::anchored_ci(513, 60.0)),
+        ("60 N geographic grid", common::poses::geographic_60n(257)),
+    ] {
+        let cams = common::poses::earth_poses(&data, &lattice, 60);
+        let (mut exact, mut flat_differs, mut culled) = (0, 0, 0);
+        for grid in grids() {
+            for (i, s) in earth_selections(&data, &lattice, &cams, &settings(grid))
+                .iter()
+                .enumerate()
+            {
+                assert!(
+                    s.strict.is_subset(&s.gpu) && s.gpu.is_subset(&s.lenient),
+                    "{name} grid {grid} pose {i} {:?}: GPU-only {:?}, strict-only {:?}",
+                    cams[i],
+                    s.gpu.difference(&s.lenient).collect::<Vec<_>>(),
+                    s.strict.difference(&s.gpu).collect::<Vec<_>>()
+                );
+                exact += (s.gpu == s.cpu) as usize;
+                flat_differs += (s.gpu != s.flat_box) as usize;
+                culled += s.culled;
+            }
         }
+        let total = grids().len() * cams.len();
+        println!(
+            "udlod on the earth, {name}: {total} selections, {exact} equal to the CPU \
+             reference, {flat_differs} differ from the flat-box reference; {culled} tiles \
+             culled on the GPU"
+        );
+        assert!(exact * 10 >= total * 9, "{name}: {exact} of {total} exact");
+        assert!(culled > 0, "{name}");
+        assert!(
+            flat_differs > 0,
+            "{name}: the flat box agreed on every pose"
+        );
     }
-    let total = grids().len() * cams.len();
-    println!(
-        "udlod on the earth: {total} selections, {exact} equal to the CPU reference, \
-         {flat_differs} differ from the flat-box reference; {culled} tiles culled on the GPU"
-    );
-    assert!(exact * 10 >= total * 9, "{exact} of {total} exact");
-    assert!(culled > 0);
-    assert!(flat_differs > 0, "the flat box agreed on every pose");
 }

@@ -70,6 +70,29 @@ pub fn anchored_ci(size: u32, spacing: f64) -> (Heightmap, std::sync::Arc<Lattic
     (data, std::sync::Arc::new(lattice))
 }
 
+/// A native geographic grid at 60 N (`size` samples of 3 arc seconds per side, from 8 E, 60 N):
+/// east-west samples lie half as far apart as north-south ones. Heights from the procedural
+/// generator; `spacing` (the one LOD metric) the smallest metric spacing, the east-west one at
+/// the poleward edge, as a geographic data set's (docs/coordinates.md, "Native grids").
+pub fn geographic_60n(size: u32) -> (Heightmap, std::sync::Arc<Lattice>) {
+    let step = 1.0 / 1200.0;
+    let lattice = Lattice::geographic(size, size, [8.0, 60.0], [step, step]).unwrap();
+    let north = 60.0 + (size - 1) as f64 * step;
+    let ew = WGS84.prime_vertical_radius(north) * north.to_radians().cos() * step.to_radians();
+    let ns = WGS84.meridian_radius(60.0) * step.to_radians();
+    let mut data = vkterrain::dataset::procedural::generate(
+        &vkterrain::dataset::procedural::ProceduralParams {
+            size,
+            spacing: ew,
+            seed: 3,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    data.axis_spacing = [ew, ns];
+    (data, std::sync::Arc::new(lattice))
+}
+
 /// Where the renderer measures LOD distances from on the earth (`Renderer::grid_viewer`):
 /// the sample position under the world point `p` in grid metres, and its height.
 pub fn grid_viewer(lattice: &Lattice, spacing: f64, p: DVec3) -> DVec3 {
