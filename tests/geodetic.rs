@@ -1001,7 +1001,9 @@ fn the_earth_culling_box_holds_its_terrain() {
         }
         (n, worst)
     };
-    let cases: [(&Lattice, [i32; 2], [i32; 2], [f64; 2]); 6] = [
+    // (lattice, corner c0, corner c1, heights)
+    type Case<'a> = (&'a Lattice, [i32; 2], [i32; 2], [f64; 2]);
+    let cases: [Case; 6] = [
         (&centred, [0, 0], [2400, 240], [0.0, 2000.0]),
         (&high, [0, 0], [2400, 240], [0.0, 2000.0]),
         (&high, [1200, 0], [2400, 240], [-400.0, 9000.0]),

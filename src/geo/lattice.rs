@@ -68,7 +68,12 @@ fn curve_radius(max_lat_deg: f64) -> f64 {
     let r = GEO_MIN_RADIUS as f64 * max_lat_deg.to_radians().cos();
     // Round down to an f32 so CPU and GPU grow boxes by the same radius.
     let f = r as f32;
-    let f = if f as f64 > r { f.next_down() } else { f };
+    // (r > 0: the next f32 below is one bit pattern down.)
+    let f = if f as f64 > r {
+        f32::from_bits(f.to_bits() - 1)
+    } else {
+        f
+    };
     f as f64
 }
 
