@@ -97,18 +97,18 @@ fn tile_distance(t: Tile) -> f32 {
 fn tile_culled(t: Tile) -> bool {
     let span = i32(udlod.sizes.x << t.lod);
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
-    let lo = relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
-    let hi = relative_xy(min(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span), last));
-    let mm = tile_min_max(t) - vec2<f32>(frame.camera_offset.z);
     let margin = -1e-3 * (f32(span) * frame.camera_offset.w);
-    let box_lo = vec3<f32>(lo, mm.x);
-    let box_hi = vec3<f32>(hi, mm.y);
     if frame.lattice.x != 0u {
         // On the earth: the curved box (`earth_box`, the one every method culls with there).
         let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);
         let b = earth_box(c0, min(c0 + vec2<i32>(span), last), tile_min_max(t));
         return box_outside(udlod.frustum, b, -margin);
     }
+    let lo = relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
+    let hi = relative_xy(min(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span), last));
+    let mm = tile_min_max(t) - vec2<f32>(frame.camera_offset.z);
+    let box_lo = vec3<f32>(lo, mm.x);
+    let box_hi = vec3<f32>(hi, mm.y);
     for (var i = 0u; i < 6u; i++) {
         let pl = udlod.frustum[i];
         let p = vec3<f32>(select(box_lo.x, box_hi.x, pl.x >= 0.0), select(box_lo.y, box_hi.y, pl.y >= 0.0), select(box_lo.z, box_hi.z, pl.z >= 0.0));

@@ -167,11 +167,13 @@ fn differing_px(a: &OwnedFrame, b: &OwnedFrame) -> usize {
         .count()
 }
 
-/// On the earth (the CI terrain anchored at 46.5 N) culling loses no block: over 78 poses,
+/// On the earth (the CI terrain anchored at 46.5 N, and a native geographic grid at 60 N whose
+/// east-west spacing is half the north-south) culling loses no block: over 78 poses each,
 /// among them views along the data's edges (the edge near a side plane) and from 40-150 km
 /// away, the image with culling on equals the image with culling off pixel for pixel (colour
 /// and depth), while culling drops blocks. Control: the old grid-frame box (`cull_box =
-/// "grid"`) loses visible blocks on some poses.
+/// "grid"`) loses visible blocks on some poses (measured: 1 of the anchored terrain's, 39 of
+/// the geographic grid's).
 #[test]
 fn culling_on_the_earth_loses_no_block() {
     let mut grid_total = 0;

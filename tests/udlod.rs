@@ -523,8 +523,7 @@ fn watertight_over_200_poses_at(grid: u32) {
     );
 }
 
-/// The GPU's tiles and the CPU reference's on the earth (the CI terrain anchored at 46.5 N):
-/// per pose the GPU's list and three references with the curved boxes (as is, and with the
+/// The GPU's tiles and the CPU reference's on the earth: per pose the GPU's list and three references with the curved boxes (as is, and with the
 /// boundary moved by the GPU's f32 rounding band either way: `EarthCull::rounding`), and the
 /// old reference with the flat box.
 struct EarthSelections {
@@ -584,7 +583,10 @@ fn earth_selections(
 }
 
 /// On the earth the GPU's tiles are the CPU reference's: both cull with the curved box
-/// (`earth_box` in WGSL, `Lattice::rect_box` in f64). The two round differently, so on every
+/// (`earth_box` in WGSL, `Lattice::rect_box` in f64). Two terrains: the CI terrain anchored at
+/// 46.5 N and a native geographic grid at 60 N (east-west spacing half the north-south); 78
+/// poses each (`earth_poses`: views along the edges and from 40-150 km among them), every grid
+/// size of `grids()`. The two round differently, so on every
 /// pose the GPU's set must lie between the reference with the boundary moved 1e-5 of the
 /// box's distance inwards and outwards (a tile culled only in the strict one removes its
 /// subtree, nothing else), and on most poses equal the reference exactly. Control: the old
