@@ -92,11 +92,18 @@ fn chunk_splits(t: Chunk) -> bool {
     return chunk_error[chunk_index(t)] * chunked.params.y > chunked.params.x * d;
 }
 
-// Sphere wholly outside a frustum plane (mirrors `chunk_culled`). Off on the earth: the
-// spheres are flat-world ones (docs/chunked.md).
+// Sphere wholly outside a frustum plane (mirrors `chunk_culled`). On the earth the curved
+// box every method culls with there (`earth_box`), with UDLOD's margin (docs/chunked.md).
 fn chunk_culled(t: Chunk) -> bool {
-    if chunked.params.z < 0.5 || frame.lattice.x != 0u {
+    if chunked.params.z < 0.5 {
         return false;
+    }
+    if frame.lattice.x != 0u {
+        let span = i32(chunked.sizes.x << t.lod);
+        let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+        let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);
+        let b = earth_box(c0, min(c0 + vec2<i32>(span), last), min_max[chunk_index(t)]);
+        return box_outside(chunked.frustum, b, 1e-3 * (f32(span) * frame.camera_offset.w));
     }
     let s = chunk_sphere(t);
     for (var i = 0u; i < 6u; i++) {

@@ -103,36 +103,23 @@ fn tile_distance(t: Tile) -> f32 {
     return length(vec3<f32>(d, udlod.viewer.z));
 }
 
-// Box (rectangle clamped to the data x the tile's min/max height) against the frustum.
+// Box (rectangle clamped to the data x the tile's min/max height) against the frustum; on
+// the earth the curved box (mirrors `tile_culled` in src/lod/udlod/select.rs).
 fn tile_culled(t: Tile) -> bool {
     let span = i32(udlod.sizes.x << t.lod);
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+    let margin = -1e-3 * (f32(span) * frame.camera_offset.w);
+    if frame.lattice.x != 0u {
+        // On the earth: the curved box (`earth_box`, the one every method culls with there).
+        let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);
+        let b = earth_box(c0, min(c0 + vec2<i32>(span), last), tile_min_max(t));
+        return box_outside(udlod.frustum, b, -margin);
+    }
     let lo = relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
     let hi = relative_xy(min(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span), last));
     let mm = tile_min_max(t) - vec2<f32>(frame.camera_offset.z);
-    let margin = -1e-3 * (f32(span) * frame.camera_offset.w);
-    var box_lo = vec3<f32>(lo, mm.x);
-    var box_hi = vec3<f32>(hi, mm.y);
-    if frame.lattice.x != 0u {
-        // On the earth: the box around the tile's corners at its lowest and highest height
-        // through the lattice, grown by the sagitta of its diagonal (the curved surface bulges
-        // up to d^2 / (8 R) out of the corners' hull; R >= GEO_MIN_RADIUS).
-        let raw = tile_min_max(t);
-        let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);
-        let c1 = min(c0 + vec2<i32>(span), last);
-        box_lo = vec3<f32>(3.0e38);
-        box_hi = vec3<f32>(-3.0e38);
-        for (var k = 0u; k < 8u; k++) {
-            let c = vec2<i32>(select(c0.x, c1.x, (k & 1u) != 0u), select(c0.y, c1.y, (k & 2u) != 0u));
-            let p = relative_position(c, vec2<f32>(0.0), select(raw.x, raw.y, k >= 4u));
-            box_lo = min(box_lo, p);
-            box_hi = max(box_hi, p);
-        }
-        let d = length(box_hi.xy - box_lo.xy);
-        let bulge = vec3<f32>(d * d / (8.0 * GEO_MIN_RADIUS) + 1e-3 * d);
-        box_lo -= bulge;
-        box_hi += bulge;
-    }
+    let box_lo = vec3<f32>(lo, mm.x);
+    let box_hi = vec3<f32>(hi, mm.y);
     for (var i = 0u; i < 6u; i++) {
         let pl = udlod.frustum[i];
         let p = vec3<f32>(select(box_lo.x, box_hi.x, pl.x >= 0.0), select(box_lo.y, box_hi.y, pl.y >= 0.0), select(box_lo.z, box_hi.z, pl.z >= 0.0));

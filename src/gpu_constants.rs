@@ -41,7 +41,8 @@ shared_constants! {
     /// so per-instance overhead is negligible.
     BRUTE_CHUNK_QUADS: u32 = 128;
     /// Below the smallest radius of curvature of the WGS84 ellipsoid (the meridian radius at
-    /// the equator, 6,335,439 m): culling bounds grow by a curved surface's sagitta with it.
+    /// the equator, 6,335,439 m): culling boxes on the earth grow by the sagitta over it times
+    /// `cos(max latitude)` (`Lattice::curve_radius`, uploaded per lattice).
     GEO_MIN_RADIUS: f32 = 6.3e6;
     /// Chunked LOD's mesh path: quads per side of the block one mesh workgroup emits (a chunk
     /// of more quads is split into blocks: 81 vertices and 128 triangles per workgroup, within

@@ -515,3 +515,104 @@ fn cli_renders_chunked_and_names_the_missing_mesh_shader() {
     common::cli::assert_one_line_error(&masked, &["chunked", "meshShader", "VK_EXT_mesh_shader"]);
     assert!(!masked_out.exists(), "a failed render left output");
 }
+
+/// The GPU's render list on the earth after one frame per pose, and its `culled` counter.
+fn gpu_chunks_on_earth(
+    data: &Heightmap,
+    lattice: &std::sync::Arc<vkterrain::geo::Lattice>,
+    cameras: &[Camera],
+    lod: &ChunkedSettings,
+) -> Vec<(HashSet<Tile>, u64)> {
+    let gpu = common::gpu(false);
+    let mut out = Vec::new();
+    {
+        let options = common::options(W, H, 1);
+        let mut r =
+            Renderer::with_world(&gpu, data, lod.clone(), options, None, Some(lattice)).unwrap();
+        let mut sink = CollectSink::default();
+        for cam in cameras {
+            r.render(*cam, &mut sink).unwrap();
+            r.finish(&mut sink).unwrap();
+            let list = r.method().debug_tiles(ViewSlot(0)).unwrap().unwrap();
+            let set: HashSet<Tile> = list.iter().map(|&[x, y, lod]| Tile { x, y, lod }).collect();
+            assert_eq!(set.len(), list.len(), "duplicate chunks on the GPU");
+            let counters: std::collections::HashMap<_, _> =
+                r.method().counters(ViewSlot(0)).into_iter().collect();
+            assert_eq!(counters["overflow"], 0);
+            out.push((set, counters["culled"]));
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    out
+}
+
+/// On the earth chunked LOD culls with the curved box every method culls with there (it culled
+/// nothing before): the GPU's render list (naive walk) lies, on every pose, between the CPU
+/// reference with the box boundary moved by 1e-5 of its distance inwards and outwards (the
+/// GPU rounds in f32, the reference in f64), and equals the reference itself on most poses.
+/// Culling drops chunks: fewer are drawn than with culling off. Control: the flat world's
+/// bounding spheres in the reference differ from the GPU on some poses.
+#[test]
+fn naive_gpu_selection_equals_cpu_reference_on_the_earth() {
+    for (name, (data, lattice)) in [
+        ("anchored CI terrain", common::poses::anchored_ci(513, 60.0)),
+        ("60 N geographic grid", common::poses::geographic_60n(257)),
+    ] {
+        let cams = common::poses::earth_poses(&data, &lattice, 60);
+        let lod = settings(Traversal::Naive);
+        let levels = Levels::new(&data, lod.chunk_quads).unwrap();
+        let gpu = gpu_chunks_on_earth(&data, &lattice, &cams, &lod);
+        let no_cull = ChunkedSettings {
+            cull: false,
+            ..lod.clone()
+        };
+        let gpu_all = gpu_chunks_on_earth(&data, &lattice, &cams, &no_cull);
+        let (mut exact, mut sphere_differs, mut culled) = (0, 0, 0);
+        let (mut drawn, mut drawn_all) = (0, 0);
+        for (i, (cam, (g, c))) in cams.iter().zip(&gpu).enumerate() {
+            let viewer = common::poses::grid_viewer(&lattice, data.spacing, cam.position);
+            let flat = ChunkParams::new(&levels, &lod, cam, viewer, W, H);
+            let earth = flat.clone().on_earth(lattice.clone(), cam.position);
+            let sel = |p: &ChunkParams| -> HashSet<Tile> {
+                select::select_chunks(&levels, p).into_iter().collect()
+            };
+            let band = |rounding: f64| {
+                let mut p = earth.clone();
+                p.earth.as_mut().unwrap().rounding = rounding;
+                sel(&p)
+            };
+            let (strict, lenient) = (band(1e-5), band(-1e-5));
+            assert!(
+                strict.is_subset(g) && g.is_subset(&lenient),
+                "{name} pose {i} {cam:?}: GPU-only {:?}, strict-only {:?}",
+                g.difference(&lenient).collect::<Vec<_>>(),
+                strict.difference(g).collect::<Vec<_>>()
+            );
+            exact += (*g == sel(&earth)) as usize;
+            sphere_differs += (*g != sel(&flat)) as usize;
+            culled += c;
+            drawn += g.len();
+            drawn_all += gpu_all[i].0.len();
+            assert_eq!(gpu_all[i].1, 0, "culled with culling off");
+        }
+        println!(
+            "chunked on the earth, {name}: {exact} of {} poses equal the CPU reference, {sphere_differs} \
+             differ from the flat spheres' reference; {culled} chunks culled, {drawn} drawn \
+             ({drawn_all} with culling off)",
+            cams.len()
+        );
+        assert!(
+            exact * 10 >= cams.len() * 9,
+            "{name}: {exact} of {} exact",
+            cams.len()
+        );
+        assert!(
+            culled > 0 && drawn < drawn_all,
+            "{name}: {culled} culled, {drawn} vs {drawn_all}"
+        );
+        assert!(
+            sphere_differs > 0,
+            "{name}: the flat spheres agreed on every pose"
+        );
+    }
+}

@@ -955,3 +955,86 @@ fn udlod_through_the_clipmap_is_watertight_on_a_native_geographic_grid() {
     common::assert_no_validation_messages(&gpu);
     std::fs::remove_dir_all(&tmp).ok();
 }
+
+/// The one culling box on the earth (`Lattice::rect_box`, twin of WGSL `earth_box`) holds the
+/// terrain it stands for: every point of the rectangle at every height between its bounds,
+/// through the lattice, on a 2 x 0.2 degree geographic grid at 70 N (rows along parallels:
+/// their middles bulge equatorward by `d^2 tan(lat) / 8R`; world frame at its corner and on
+/// its middle meridian) and on the CI terrain anchored at 46.5 N, for the whole grid and
+/// smaller rectangles. Controls: the corners' box without growth, and the box grown with the
+/// surface's radius alone (`GEO_MIN_RADIUS`, no `cos(lat)`), miss points of the 70 N grid's
+/// whole rectangle in the centred frame.
+#[test]
+fn the_earth_culling_box_holds_its_terrain() {
+    use vkterrain::geo::{EnuFrame, Geodetic, WGS84};
+    use vkterrain::gpu_constants::GEO_MIN_RADIUS;
+    let high = Lattice::geographic(2401, 241, [20.0, 70.0], [1.0 / 1200.0, 1.0 / 1200.0]).unwrap();
+    // The same grid in a world frame on its middle meridian: there a row's middle is its most
+    // equatorward point, outside the corners' box (the frame at a corner sees rows run
+    // monotonically).
+    let centred = Lattice::new(
+        2401,
+        241,
+        5,
+        EnuFrame::new(&WGS84, Geodetic::new(70.1, 21.0, 0.0)),
+        |c, r| Ok((70.0 + r / 1200.0, 20.0 + c / 1200.0)),
+    )
+    .unwrap();
+    let frame = EnuFrame::new(&WGS84, Geodetic::new(46.5, 8.0, 0.0));
+    let ci = Lattice::anchored_plane(513, 513, 60.0, frame).unwrap();
+    // Points of `c0..=c1` x heights outside `b` (by more than 1 mm), and the worst excess.
+    let misses = |l: &Lattice, c0: [i32; 2], c1: [i32; 2], h: [f64; 2], lo: DVec3, hi: DVec3| {
+        let (mut n, mut worst) = (0, 0.0f64);
+        for i in 0..=48 {
+            for j in 0..=48 {
+                for k in 0..=2 {
+                    let s = DVec2::new(
+                        c0[0] as f64 + (c1[0] - c0[0]) as f64 * i as f64 / 48.0,
+                        c0[1] as f64 + (c1[1] - c0[1]) as f64 * j as f64 / 48.0,
+                    );
+                    let p = l.position(s, h[0] + (h[1] - h[0]) * k as f64 / 2.0);
+                    let out = (lo - p).max(p - hi).max_element();
+                    worst = worst.max(out);
+                    n += (out > 1e-3) as usize;
+                }
+            }
+        }
+        (n, worst)
+    };
+    // (lattice, corner c0, corner c1, heights)
+    type Case<'a> = (&'a Lattice, [i32; 2], [i32; 2], [f64; 2]);
+    let cases: [Case; 6] = [
+        (&centred, [0, 0], [2400, 240], [0.0, 2000.0]),
+        (&high, [0, 0], [2400, 240], [0.0, 2000.0]),
+        (&high, [1200, 0], [2400, 240], [-400.0, 9000.0]),
+        (&high, [37, 11], [37 + 256, 11 + 128], [100.0, 150.0]),
+        (&ci, [0, 0], [512, 512], [0.0, 3000.0]),
+        (&ci, [256, 128], [512, 256], [500.0, 800.0]),
+    ];
+    for (l, c0, c1, h) in cases {
+        let b = l.rect_box(c0, c1, h);
+        let (n, worst) = misses(l, c0, c1, h, b.lo, b.hi);
+        assert_eq!(
+            n, 0,
+            "{c0:?}..{c1:?} {h:?}: {n} points outside by up to {worst} m"
+        );
+    }
+    // Controls on the 70 N grid's whole rectangle, centred frame.
+    let (l, c0, c1, h) = cases[0];
+    let b = l.rect_box(c0, c1, h);
+    let d = (b.hi.truncate() - b.lo.truncate()).length();
+    let grown = |r: f64| d * d / (8.0 * r) + 1e-3 * d;
+    let bulge = grown(l.curve_radius());
+    let hull = (b.lo + DVec3::splat(bulge), b.hi - DVec3::splat(bulge));
+    let (n_hull, w_hull) = misses(l, c0, c1, h, hull.0, hull.1);
+    let g = DVec3::splat(grown(GEO_MIN_RADIUS as f64));
+    let (n_flat_r, w_flat_r) = misses(l, c0, c1, h, hull.0 - g, hull.1 + g);
+    println!(
+        "70 N, 2 x 0.2 degrees: curve radius {:.0} m, growth {bulge:.1} m; corners' box misses \
+         {n_hull} points (by up to {w_hull:.1} m), growth over GEO_MIN_RADIUS ({:.1} m) misses \
+         {n_flat_r} (by up to {w_flat_r:.1} m)",
+        l.curve_radius(),
+        g.x
+    );
+    assert!(n_hull > 0 && n_flat_r > 0, "{n_hull} {n_flat_r}");
+}

@@ -633,3 +633,111 @@ fn covers_exactly_once(levels: &Levels, tiles: &[Tile]) -> Result<(), String> {
     }
     Ok(())
 }
+
+/// The GPU's tiles and the CPU reference's on the earth: per pose the GPU's list and three references with the curved boxes (as is, and with the
+/// boundary moved by the GPU's f32 rounding band either way: `EarthCull::rounding`), and the
+/// old reference with the flat box.
+struct EarthSelections {
+    gpu: HashSet<Tile>,
+    cpu: HashSet<Tile>,
+    strict: HashSet<Tile>,
+    lenient: HashSet<Tile>,
+    flat_box: HashSet<Tile>,
+    culled: u64,
+}
+
+fn earth_selections(
+    data: &Heightmap,
+    lattice: &std::sync::Arc<vkterrain::geo::Lattice>,
+    cameras: &[Camera],
+    lod: &UdlodSettings,
+) -> Vec<EarthSelections> {
+    let gpu = common::gpu(false);
+    let levels = Levels::new(data, lod.grid_size).unwrap();
+    let mut out = Vec::new();
+    {
+        let options = common::options(W, H, 1);
+        let mut r =
+            Renderer::with_world(&gpu, data, lod.clone(), options, None, Some(lattice)).unwrap();
+        let mut sink = CollectSink::default();
+        for cam in cameras {
+            r.render(*cam, &mut sink).unwrap();
+            r.finish(&mut sink).unwrap();
+            let list = r.method().debug_tiles(ViewSlot(0)).unwrap().unwrap();
+            let g: HashSet<Tile> = list.iter().map(|&[x, y, lod]| Tile { x, y, lod }).collect();
+            assert_eq!(g.len(), list.len(), "duplicate tiles on the GPU");
+            let counters: HashMap<_, _> = r.method().counters(ViewSlot(0)).into_iter().collect();
+            assert_eq!(counters["overflow"], 0);
+            let viewer = common::poses::grid_viewer(lattice, data.spacing, cam.position);
+            let flat = SelectionParams::new(&levels, data, lod, cam, viewer, W, H);
+            let earth = flat.clone().on_earth(lattice.clone(), cam.position);
+            let sel = |p: &SelectionParams| -> HashSet<Tile> {
+                select::select_tiles(&levels, p).into_iter().collect()
+            };
+            let band = |rounding: f64| {
+                let mut p = earth.clone();
+                p.earth.as_mut().unwrap().rounding = rounding;
+                sel(&p)
+            };
+            out.push(EarthSelections {
+                gpu: g,
+                cpu: sel(&earth),
+                strict: band(1e-5),
+                lenient: band(-1e-5),
+                flat_box: sel(&flat),
+                culled: counters["culled"],
+            });
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    out
+}
+
+/// On the earth the GPU's tiles are the CPU reference's: both cull with the curved box
+/// (`earth_box` in WGSL, `Lattice::rect_box` in f64). Two terrains: the CI terrain anchored at
+/// 46.5 N and a native geographic grid at 60 N (east-west spacing half the north-south); 78
+/// poses each (`earth_poses`: views along the edges and from 40-150 km among them), every grid
+/// size of `grids()`. The two round differently, so on every
+/// pose the GPU's set must lie between the reference with the boundary moved 1e-5 of the
+/// box's distance inwards and outwards (a tile culled only in the strict one removes its
+/// subtree, nothing else), and on most poses equal the reference exactly. Control: the old
+/// reference (the flat box on the earth) differs from the GPU on some poses.
+#[test]
+fn gpu_selection_equals_cpu_reference_on_the_earth() {
+    for (name, (data, lattice)) in [
+        ("anchored CI terrain", common::poses::anchored_ci(513, 60.0)),
+        ("60 N geographic grid", common::poses::geographic_60n(257)),
+    ] {
+        let cams = common::poses::earth_poses(&data, &lattice, 60);
+        let (mut exact, mut flat_differs, mut culled) = (0, 0, 0);
+        for grid in grids() {
+            for (i, s) in earth_selections(&data, &lattice, &cams, &settings(grid))
+                .iter()
+                .enumerate()
+            {
+                assert!(
+                    s.strict.is_subset(&s.gpu) && s.gpu.is_subset(&s.lenient),
+                    "{name} grid {grid} pose {i} {:?}: GPU-only {:?}, strict-only {:?}",
+                    cams[i],
+                    s.gpu.difference(&s.lenient).collect::<Vec<_>>(),
+                    s.strict.difference(&s.gpu).collect::<Vec<_>>()
+                );
+                exact += (s.gpu == s.cpu) as usize;
+                flat_differs += (s.gpu != s.flat_box) as usize;
+                culled += s.culled;
+            }
+        }
+        let total = grids().len() * cams.len();
+        println!(
+            "udlod on the earth, {name}: {total} selections, {exact} equal to the CPU \
+             reference, {flat_differs} differ from the flat-box reference; {culled} tiles \
+             culled on the GPU"
+        );
+        assert!(exact * 10 >= total * 9, "{name}: {exact} of {total} exact");
+        assert!(culled > 0, "{name}");
+        assert!(
+            flat_differs > 0,
+            "{name}: the flat box agreed on every pose"
+        );
+    }
+}

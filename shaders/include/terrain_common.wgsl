@@ -15,7 +15,7 @@ struct Frame {
     // rgb: haze (sky) colour, linear; w: 1 / haze distance in metres (0: no haze).
     haze: vec4<f32>,
     // The geolocation lattice (src/geo/lattice.rs): x samples per node (0: flat world), y/z
-    // nodes per row/column.
+    // nodes per row/column, w: bits of the f32 curve radius (metres; `earth_box`).
     lattice: vec4<u32>,
     // xyz: the camera's world position split into f32 hi and lo parts.
     camera_hi: vec4<f32>,
@@ -109,6 +109,46 @@ fn relative_position(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec3<f3
     let p = mix(mix(p00, p10, f.x), mix(p01, p11, f.x), f.y);
     let up = mix(mix(u00, u10, f.x), mix(u01, u11, f.x), f.y);
     return p + height_m * up;
+}
+
+// An axis-aligned camera-relative box (metres).
+struct Box3 {
+    lo: vec3<f32>,
+    hi: vec3<f32>,
+}
+
+// On the earth: the camera-relative box around the terrain over the grid rectangle from sample
+// c0 to sample c1 (inclusive) between heights.x..heights.y: the box around the rectangle's
+// corners at both heights through the lattice, grown on every axis by the sagitta of its
+// horizontal diagonal d over the lattice's curve radius, d^2 / (8 R), plus 1e-3 d. The one
+// definition every method culls with on the earth; `Lattice::rect_box` in
+// src/geo/lattice.rs is its CPU twin (f64), proven to decide as this one in tests/udlod.rs
+// and tests/chunked.rs.
+fn earth_box(c0: vec2<i32>, c1: vec2<i32>, heights: vec2<f32>) -> Box3 {
+    var lo = vec3<f32>(3.0e38);
+    var hi = vec3<f32>(-3.0e38);
+    for (var k = 0u; k < 8u; k++) {
+        let c = vec2<i32>(select(c0.x, c1.x, (k & 1u) != 0u), select(c0.y, c1.y, (k & 2u) != 0u));
+        let p = relative_position(c, vec2<f32>(0.0), select(heights.x, heights.y, k >= 4u));
+        lo = min(lo, p);
+        hi = max(hi, p);
+    }
+    let d = length(hi.xy - lo.xy);
+    let bulge = vec3<f32>(d * d / (8.0 * bitcast<f32>(frame.lattice.w)) + 1e-3 * d);
+    return Box3(lo - bulge, hi + bulge);
+}
+
+// Is the box wholly outside one of the planes (dot(n, p) + offset >= 0 inside) by more than
+// `slack` metres? The corner farthest along each normal decides (`WorldBox::outside`).
+fn box_outside(planes: array<vec4<f32>, 6>, b: Box3, slack: f32) -> bool {
+    for (var i = 0u; i < 6u; i++) {
+        let pl = planes[i];
+        let p = select(b.lo, b.hi, pl.xyz >= vec3<f32>(0.0));
+        if pl.x * p.x + pl.y * p.y + pl.z * p.z + pl.w < -slack {
+            return true;
+        }
+    }
+    return false;
 }
 
 // Clip position of a surface point given in sample units (integer cell + fraction) and metres.

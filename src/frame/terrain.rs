@@ -60,8 +60,9 @@ pub struct TerrainInfo {
     pub spacing: f64,
     pub min_height: f32,
     pub max_height: f32,
-    /// The geolocation lattice's `[step, nodes per row, nodes per column]`; None: flat world.
-    pub lattice: Option<[u32; 3]>,
+    /// The geolocation lattice's `[step, nodes per row, nodes per column, curve radius]` (the
+    /// last the f32 bits of [`crate::geo::Lattice::curve_radius`]); None: flat world.
+    pub lattice: Option<[u32; 4]>,
 }
 
 /// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.
@@ -143,7 +144,10 @@ impl TerrainGpu {
             spacing: data.spacing(),
             min_height,
             max_height,
-            lattice: lattice.map(|l| [l.step, l.nodes[0], l.nodes[1]]),
+            lattice: lattice.map(|l| {
+                let radius = (l.curve_radius() as f32).to_bits();
+                [l.step, l.nodes[0], l.nodes[1], radius]
+            }),
         };
 
         let d = &gpu.device;

@@ -27,7 +27,7 @@ pub struct FrameUniforms {
     /// rgb: the haze colour (linear); w: 1 / haze distance in metres (0: no haze).
     pub haze: [f32; 4],
     /// The geolocation lattice (src/geo/lattice.rs): x samples per node (0: no lattice, the
-    /// flat world), y/z nodes per row/column.
+    /// flat world), y/z nodes per row/column, w the f32 bits of its curve radius (culling).
     pub lattice: [u32; 4],
     /// The camera's world position split into f32 `hi` and `lo` parts (xyz).
     pub camera_hi: [f32; 4],
@@ -43,7 +43,7 @@ impl FrameUniforms {
         let cell_y = (camera.position.y / spacing).floor();
         let view_proj = camera.projection(aspect) * camera.view_rotation();
         let (hi, lo) = crate::geo::lattice::split(camera.position);
-        let lattice = data.lattice.unwrap_or([0; 3]);
+        let lattice = data.lattice.unwrap_or([0; 4]);
         FrameUniforms {
             view_proj: view_proj.to_cols_array(),
             camera_cell: [cell_x as i32, cell_y as i32, 0, 0],
@@ -65,7 +65,7 @@ impl FrameUniforms {
                     0.0
                 },
             ],
-            lattice: [lattice[0], lattice[1], lattice[2], 0],
+            lattice,
             camera_hi: [hi[0], hi[1], hi[2], 0.0],
             camera_lo: [lo[0], lo[1], lo[2], 0.0],
         }

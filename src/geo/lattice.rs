@@ -10,11 +10,14 @@
 //! precision anywhere. [`Lattice::position`] is the CPU mirror: the same lattice data and the
 //! same formula, in f64. docs/coordinates.md ("Geodetic geometry") derives the error budget.
 
+use std::sync::Arc;
+
 use glam::{DVec2, DVec3};
 
 use super::ellipsoid::{Geodetic, WGS84};
 use super::frame::EnuFrame;
 use crate::error::{Error, Result};
+use crate::gpu_constants::GEO_MIN_RADIUS;
 
 /// Largest lattice cell side (metres) [`Lattice::step_for`] aims for: the sagitta of the
 /// diagonal, `(sqrt(2) * 500)^2 / (8 * 6.3e6)`, is 1.0 cm.
@@ -35,6 +38,10 @@ pub struct Lattice {
     /// World positions (f64, height 0) and unit up vectors, row-major.
     positions: Vec<DVec3>,
     ups: Vec<DVec3>,
+    /// A lower bound (metres, an f32 value) of the radius of curvature of the surface and of
+    /// the grid's lines on it: culling boxes grow by a curve's sagitta over it
+    /// ([`Lattice::rect_box`]).
+    curve_radius: f64,
 }
 
 /// The ellipsoid normal (unit, ECEF) at a geodetic latitude/longitude.
@@ -49,6 +56,96 @@ pub fn split(v: DVec3) -> ([f32; 3], [f32; 3]) {
     let hi = v.as_vec3();
     let lo = (v - hi.as_dvec3()).as_vec3();
     (hi.to_array(), lo.to_array())
+}
+
+/// The smallest radius of curvature of a grid on the ellipsoid up to latitude `max_lat_deg`,
+/// rounded down to an f32 (the GPU's copy is the same number): the surface curves with radius
+/// at least [`GEO_MIN_RADIUS`]; a parallel (a geographic grid's row) is a circle of radius
+/// `N cos(lat)`, bending in the surface by `tan(lat) / N` as well, so its curvature is at most
+/// `1 / (GEO_MIN_RADIUS cos(lat))`. Grids in projected coordinates bend less (their lines
+/// are nearly geodesics); they take the same bound.
+fn curve_radius(max_lat_deg: f64) -> f64 {
+    let r = GEO_MIN_RADIUS as f64 * max_lat_deg.to_radians().cos();
+    // Round down to an f32 so CPU and GPU grow boxes by the same radius.
+    let f = r as f32;
+    // (r > 0: the next f32 below is one bit pattern down.)
+    let f = if f as f64 > r {
+        f32::from_bits(f.to_bits() - 1)
+    } else {
+        f
+    };
+    f as f64
+}
+
+/// An axis-aligned box (metres): its lowest and highest corner.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorldBox {
+    pub lo: DVec3,
+    pub hi: DVec3,
+}
+
+impl WorldBox {
+    /// Is the box wholly outside one of `planes` (`(normal, offset)`, `dot(normal, p) +
+    /// offset >= 0` inside, in the box's frame) by more than `slack` metres? The box corner
+    /// farthest along each plane's normal decides (`box_outside` in
+    /// `shaders/include/terrain_common.wgsl`).
+    pub fn outside(&self, planes: &[[f32; 4]; 6], slack: f64) -> bool {
+        planes.iter().any(|p| {
+            let n = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let v = DVec3::select(n.cmpge(DVec3::ZERO), self.hi, self.lo);
+            n.dot(v) + (p[3] as f64) < -slack
+        })
+    }
+
+    /// The box moved by `-origin` (camera-relative boxes).
+    pub fn relative_to(&self, origin: DVec3) -> WorldBox {
+        WorldBox {
+            lo: self.lo - origin,
+            hi: self.hi - origin,
+        }
+    }
+}
+
+/// Culling on the earth: the lattice the terrain is drawn through and the camera's world
+/// position (the frustum planes are camera-relative).
+#[derive(Clone, Debug)]
+pub struct EarthCull {
+    pub lattice: Arc<Lattice>,
+    pub camera: DVec3,
+    /// 0 in the renderer. Tests comparing with the GPU's f32 decisions move the decision by
+    /// this fraction of the box's distance from the camera (positive: culls more), bracketing
+    /// the GPU's rounding (relative f32 errors of a few 1e-7).
+    pub rounding: f64,
+}
+
+impl EarthCull {
+    pub fn new(lattice: Arc<Lattice>, camera: DVec3) -> Self {
+        EarthCull {
+            lattice,
+            camera,
+            rounding: 0.0,
+        }
+    }
+
+    /// Is the terrain over the grid rectangle `c0..=c1` between `heights` (metres) wholly
+    /// outside one of the camera-relative `planes` by more than `slack` metres? The box is
+    /// [`Lattice::rect_box`]; `earth_box` and `box_outside` in
+    /// `shaders/include/terrain_common.wgsl` decide the same on the GPU.
+    pub fn outside(
+        &self,
+        planes: &[[f32; 4]; 6],
+        c0: [i32; 2],
+        c1: [i32; 2],
+        heights: [f32; 2],
+        slack: f64,
+    ) -> bool {
+        let b = self
+            .lattice
+            .rect_box(c0, c1, [heights[0] as f64, heights[1] as f64])
+            .relative_to(self.camera);
+        let far = b.lo.abs().max(b.hi.abs()).length();
+        b.outside(planes, slack - self.rounding * far)
+    }
 }
 
 impl Lattice {
@@ -86,6 +183,7 @@ impl Lattice {
         let count = nodes[0] as usize * nodes[1] as usize;
         let mut positions = Vec::with_capacity(count);
         let mut ups = Vec::with_capacity(count);
+        let mut max_lat: f64 = 0.0;
         for j in 0..nodes[1] {
             for i in 0..nodes[0] {
                 let (lat, lon) = locate((i * step) as f64, (j * step) as f64)?;
@@ -99,6 +197,7 @@ impl Lattice {
                         ),
                     ));
                 }
+                max_lat = max_lat.max(lat.abs());
                 positions.push(frame.to_local(WGS84.to_ecef(Geodetic::new(lat, lon, 0.0))));
                 ups.push(frame.rotate_to_local(normal_ecef(lat, lon)));
             }
@@ -109,6 +208,7 @@ impl Lattice {
             frame,
             positions,
             ups,
+            curve_radius: curve_radius(max_lat),
         })
     }
 
@@ -206,6 +306,43 @@ impl Lattice {
         let p = lerp(lerp(p00, p10, f.x), lerp(p01, p11, f.x), f.y);
         let u = lerp(lerp(u00, u10, f.x), lerp(u01, u11, f.x), f.y);
         p + u * height
+    }
+
+    /// The radius [`Lattice::rect_box`] grows boxes by the sagitta over (metres; an f32
+    /// value, uploaded as `frame.lattice.w`).
+    pub fn curve_radius(&self) -> f64 {
+        self.curve_radius
+    }
+
+    /// The world box around the terrain over the grid rectangle from sample `c0` to sample
+    /// `c1` (inclusive corners, `c0 <= c1`) between heights `heights[0]..heights[1]` on the
+    /// earth: the box around the rectangle's four corners at both heights through the lattice
+    /// ([`Lattice::position`]), grown on every axis by the sagitta of its horizontal diagonal
+    /// `d`, `d^2 / (8 R)` with `R` = [`Lattice::curve_radius`] (between its corners the curved
+    /// surface and the grid's lines bulge at most that far out of their hull), plus `1e-3 d`
+    /// (the lattice's 1 cm interpolation error, the up vector's tilt times the height, and f32
+    /// rounding on the GPU). Every method culls on the earth with this box: UDLOD and chunked
+    /// LOD on the GPU through its WGSL twin `earth_box` (`shaders/include/terrain_common.wgsl`)
+    /// and in their CPU references, GeoMipMapping on the CPU (docs/coordinates.md, "Culling
+    /// with curvature").
+    pub fn rect_box(&self, c0: [i32; 2], c1: [i32; 2], heights: [f64; 2]) -> WorldBox {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for k in 0..8 {
+            let c = DVec2::new(
+                if k & 1 != 0 { c1[0] } else { c0[0] } as f64,
+                if k & 2 != 0 { c1[1] } else { c0[1] } as f64,
+            );
+            let p = self.position(c, heights[(k >= 4) as usize]);
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        let d = (hi.truncate() - lo.truncate()).length();
+        let bulge = DVec3::splat(d * d / (8.0 * self.curve_radius) + 1e-3 * d);
+        WorldBox {
+            lo: lo - bulge,
+            hi: hi + bulge,
+        }
     }
 
     /// Where world point `p` lies over the lattice: the sample position `s` whose surface

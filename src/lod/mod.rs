@@ -11,7 +11,7 @@ pub mod tessellation;
 pub mod udlod;
 
 pub use chunked::settings::ChunkedSettings;
-pub use geomipmap::settings::GeomipmapSettings;
+pub use geomipmap::settings::{CullBox, GeomipmapSettings};
 pub use pgm::settings::PgmSettings;
 pub use tessellation::settings::TessellationSettings;
 pub use udlod::settings::UdlodSettings;
@@ -231,6 +231,9 @@ pub struct MethodContext<'a> {
     pub data: &'a crate::dataset::Terrain,
     pub formats: TargetFormats,
     pub slots: usize,
+    /// The geolocation lattice the terrain is drawn through (None: the flat world): methods
+    /// that cull on the CPU, or mirror the GPU's culling there, need it for the curved boxes.
+    pub lattice: Option<&'a std::sync::Arc<crate::geo::Lattice>>,
 }
 
 /// One LOD method. Per frame the renderer calls `update` (host side, slot free), then records

@@ -215,7 +215,7 @@ pub struct Renderer {
     pub world: Option<(crate::geo::EnuFrame, u32)>,
     /// The geolocation lattice the terrain is drawn through (None: the flat world), and the
     /// grid's nominal spacing: LOD viewers are carried into the grid's frame through it.
-    lattice: Option<(crate::geo::Lattice, f64)>,
+    lattice: Option<(Arc<crate::geo::Lattice>, f64)>,
 }
 
 impl Renderer {
@@ -261,6 +261,7 @@ impl Renderer {
         let layout = options.layout();
         let clipmap = ClipmapStage::new(gpu, clipmap, layout)?;
         let terrain = TerrainGpu::new(gpu, &data, layout.view_slots(), &clipmap.device, lattice)?;
+        let lattice = lattice.map(|l| Arc::new(l.clone()));
         let pass = TerrainPass::new(gpu)?;
         let method = crate::lod::create(
             &method,
@@ -270,6 +271,7 @@ impl Renderer {
                 data: &data,
                 formats: pass.formats,
                 slots: layout.view_slots(),
+                lattice: lattice.as_ref(),
             },
         )?;
         let slots = layout
@@ -277,7 +279,7 @@ impl Renderer {
             .map(|f| FrameResources::new(gpu, &pass, options.extent(), options.readback_depth, f))
             .collect::<Result<Vec<_>>>()?;
         let readback_path = slots[0].readback.path();
-        let lattice = lattice.map(|l| (l.clone(), data.spacing()));
+        let lattice = lattice.map(|l| (l, data.spacing()));
         Ok(Renderer {
             gpu: gpu.clone(),
             options,

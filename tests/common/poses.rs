@@ -3,6 +3,7 @@
 
 use glam::DVec3;
 use vkterrain::dataset::Heightmap;
+use vkterrain::geo::{EnuFrame, Geodetic, Lattice, WGS84};
 use vkterrain::scene::Camera;
 
 /// `n` poses over `data`; UDLOD's and GeoMipMapping's tests stand the low cameras on the
@@ -49,4 +50,108 @@ pub fn poses_over(data: &Heightmap, n: usize, ground_of: impl Fn(f64, f64) -> f6
             }
         })
         .collect()
+}
+
+/// The CI terrain's shape (513 samples, 60 m) as a procedural grid anchored on the earth at
+/// 46.5 N 8 E (config/ci_earth.toml): its far corner lies ~140 m below the tangent plane at
+/// sample (0, 0). Returns the grid and its lattice (shared, as the methods hold it).
+pub fn anchored_ci(size: u32, spacing: f64) -> (Heightmap, std::sync::Arc<Lattice>) {
+    let data = vkterrain::dataset::procedural::generate(
+        &vkterrain::dataset::procedural::ProceduralParams {
+            size,
+            spacing,
+            seed: 1,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let frame = EnuFrame::new(&WGS84, Geodetic::new(46.5, 8.0, 0.0));
+    let lattice = Lattice::anchored_plane(size, size, spacing, frame).unwrap();
+    (data, std::sync::Arc::new(lattice))
+}
+
+/// A native geographic grid at 60 N (`size` samples of 3 arc seconds per side, from 8 E, 60 N):
+/// east-west samples lie half as far apart as north-south ones. Heights from the procedural
+/// generator; `spacing` (the one LOD metric) the smallest metric spacing, the east-west one at
+/// the poleward edge, as a geographic data set's (docs/coordinates.md, "Native grids").
+pub fn geographic_60n(size: u32) -> (Heightmap, std::sync::Arc<Lattice>) {
+    let step = 1.0 / 1200.0;
+    let lattice = Lattice::geographic(size, size, [8.0, 60.0], [step, step]).unwrap();
+    let north = 60.0 + (size - 1) as f64 * step;
+    let ew = WGS84.prime_vertical_radius(north) * north.to_radians().cos() * step.to_radians();
+    let ns = WGS84.meridian_radius(60.0) * step.to_radians();
+    let mut data = vkterrain::dataset::procedural::generate(
+        &vkterrain::dataset::procedural::ProceduralParams {
+            size,
+            spacing: ew,
+            seed: 3,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    data.axis_spacing = [ew, ns];
+    (data, std::sync::Arc::new(lattice))
+}
+
+/// Where the renderer measures LOD distances from on the earth (`Renderer::grid_viewer`):
+/// the sample position under the world point `p` in grid metres, and its height.
+pub fn grid_viewer(lattice: &Lattice, spacing: f64, p: DVec3) -> DVec3 {
+    let (s, h) = lattice.sample_at(p);
+    DVec3::new(s.x * spacing, s.y * spacing, h)
+}
+
+/// Culling poses on the earth: `n` of [`poses`] carried onto the ellipsoid through `lattice`
+/// (a grid point `(x, y)` at height `z` goes to `lattice.position(x, y, z)`), then 12 views
+/// along the data's edges (from each corner 100 m above the ground, 3 degrees down, along an
+/// edge and 40 degrees to either side of it: the edge near a side plane of the frustum), and
+/// 6 from far away (40, 90 and 150 km from the centre, 2-10 km up, looking at it).
+pub fn earth_poses(data: &Heightmap, lattice: &Lattice, n: usize) -> Vec<Camera> {
+    let s = data.spacing;
+    let on_earth = |x: f64, y: f64, z: f64| lattice.position(glam::DVec2::new(x / s, y / s), z);
+    let mut out: Vec<Camera> = poses(data, n)
+        .into_iter()
+        .map(|mut c| {
+            c.position = on_earth(c.position.x, c.position.y, c.position.z);
+            c
+        })
+        .collect();
+    let (ex, ey) = data.extent();
+    // Corner, and the yaw along the edge that leaves it.
+    for (x, y, yaw) in [
+        (0.0, 0.0, 90.0),
+        (ex, 0.0, 0.0),
+        (ex, ey, 270.0),
+        (0.0, ey, 180.0),
+    ] {
+        for turn in [-40.0, 0.0, 40.0] {
+            out.push(Camera {
+                position: on_earth(x, y, data.height_at(x, y) + 100.0),
+                yaw_deg: yaw + turn,
+                pitch_deg: -3.0,
+                near: 0.25,
+                ..Camera::default()
+            });
+        }
+    }
+    for (k, (d, z)) in [(40e3, 2e3), (90e3, 5e3), (150e3, 10e3)]
+        .into_iter()
+        .enumerate()
+    {
+        for side in [0.0, 1.0] {
+            let a = (35.0 + 140.0 * side + 20.0 * k as f64).to_radians();
+            let (x, y) = (0.5 * ex + d * a.sin(), 0.5 * ey + d * a.cos());
+            let yaw = (a.to_degrees() + 180.0) % 360.0;
+            // Down towards the centre (the curvature drops it further: d^2 / 2R).
+            let drop = d * d / (2.0 * 6.371e6);
+            out.push(Camera {
+                position: on_earth(x, y, z),
+                yaw_deg: yaw,
+                pitch_deg: -((z + drop) / d).atan().to_degrees(),
+                near: 1.0,
+                far: 400e3,
+                ..Camera::default()
+            });
+        }
+    }
+    out
 }

@@ -198,6 +198,8 @@ pub struct Chunked {
     settings: ChunkedSettings,
     levels: Levels,
     depths: Depths,
+    /// The geolocation lattice (None: the flat world), for the CPU reference's curved boxes.
+    lattice: Option<Arc<crate::geo::Lattice>>,
     cbt: CbtLayout,
     _min_max: Buffer,
     _errors: Buffer,
@@ -335,6 +337,7 @@ impl Chunked {
             settings,
             levels,
             depths,
+            lattice: ctx.lattice.cloned(),
             cbt,
             _min_max: min_max,
             _errors: errors,
@@ -491,14 +494,18 @@ impl Chunked {
     /// The selection inputs for a view, exactly as uploaded (tests use them for the CPU
     /// reference).
     pub fn params(&self, view: &ViewState) -> ChunkParams {
-        ChunkParams::new(
+        let p = ChunkParams::new(
             &self.levels,
             &self.settings,
             &view.camera,
             view.lod_viewer,
             view.width,
             view.height,
-        )
+        );
+        match &self.lattice {
+            Some(l) => p.on_earth(l.clone(), view.camera.position),
+            None => p,
+        }
     }
 
     fn read_counters(&self, slot: ViewSlot) -> ChunkState {

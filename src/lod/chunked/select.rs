@@ -6,9 +6,12 @@
 //! `chunk_splits`, `chunk_culled`) is written in f32 in the same order; `tests/chunked.rs`
 //! compares the GPU's render list against [`select_chunks`].
 
+use std::sync::Arc;
+
 use glam::{DVec3, Vec3};
 
 use super::settings::ChunkedSettings;
+use crate::geo::{EarthCull, Lattice};
 use crate::lod::udlod::select::{Levels, Tile, frustum_planes};
 use crate::scene::Camera;
 
@@ -52,6 +55,9 @@ pub struct ChunkParams {
     pub spacing: f32,
     pub frustum: [[f32; 4]; 6],
     pub cull: bool,
+    /// On the earth: the lattice and the camera's world position; chunks are then culled
+    /// with the curved boxes instead of the flat world's bounding spheres (None: flat).
+    pub earth: Option<EarthCull>,
     pub error_px: f32,
     pub focal_px: f32,
     pub depths: Depths,
@@ -83,10 +89,18 @@ impl ChunkParams {
             spacing: s as f32,
             frustum: frustum_planes(camera, width as f64 / height as f64),
             cull: settings.cull,
+            earth: None,
             error_px: settings.error_px as f32,
             focal_px: camera.focal_px(height) as f32,
             depths: Depths::new(levels, settings),
         }
+    }
+
+    /// These inputs on the earth: chunks are culled with the curved boxes of `lattice`
+    /// (`camera`: the camera's world position, as the frame uniforms carry it).
+    pub fn on_earth(mut self, lattice: Arc<Lattice>, camera: DVec3) -> Self {
+        self.earth = Some(EarthCull::new(lattice, camera));
+        self
     }
 
     /// Camera-relative metres of a sample position (`relative_xy` in the shaders).
@@ -136,8 +150,19 @@ pub fn chunk_splits(levels: &Levels, p: &ChunkParams, t: Tile) -> bool {
     levels.tile_error(t) * p.focal_px > p.error_px * d
 }
 
-/// Is the chunk's bounding sphere wholly outside one frustum plane?
+/// Is the chunk's bounding sphere wholly outside one frustum plane? On the earth: is its
+/// curved box ([`EarthCull::outside`], UDLOD's box with UDLOD's margin of 1e-3 of the chunk's
+/// side; f64, deciding as the GPU's f32 `earth_box` except within the GPU's rounding of the
+/// boundary, which tests/chunked.rs brackets)?
 pub fn chunk_culled(levels: &Levels, p: &ChunkParams, t: Tile) -> bool {
+    if let Some(earth) = &p.earth {
+        let span = (levels.grid_size << t.lod) as i32;
+        let (w, h) = (levels.width as i32 - 1, levels.height as i32 - 1);
+        let c0 = [t.x as i32 * span, t.y as i32 * span];
+        let c1 = [(c0[0] + span).min(w), (c0[1] + span).min(h)];
+        let margin = 1e-3 * (span as f32 * p.spacing);
+        return earth.outside(&p.frustum, c0, c1, levels.tile_min_max(t), margin as f64);
+    }
     let (c, r) = chunk_sphere(levels, p, t);
     p.frustum
         .iter()

@@ -24,9 +24,10 @@ use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
 use crate::error::Result;
 use crate::frame::ViewState;
+use crate::geo::EarthCull;
 pub use crate::gpu_constants::GEOMIPMAP_BLOCK_QUADS as BLOCK_QUADS;
 use crate::slots::ViewSlot;
-use settings::GeomipmapSettings;
+use settings::{CullBox, GeomipmapSettings};
 
 /// Levels 0 (every sample) to 5 (the block's four corners).
 pub const LEVELS: u32 = BLOCK_QUADS.trailing_zeros() + 1;
@@ -176,6 +177,11 @@ pub struct Geomipmap {
     lists: Vec<List>,
     bounds: BlockBounds,
     spacing: f64,
+    /// The data's last sample per axis (blocks past it are clamped to it).
+    last: [i32; 2],
+    /// The geolocation lattice (None: the flat world, or the grid-frame box asked for): blocks
+    /// are culled with its curved boxes.
+    lattice: Option<Arc<crate::geo::Lattice>>,
     draws: Vec<Vec<Draw>>,
     triangles: Vec<u64>,
 }
@@ -226,14 +232,37 @@ impl Geomipmap {
             lists,
             bounds,
             spacing: ctx.terrain.info.spacing,
+            last: [
+                ctx.terrain.info.width as i32 - 1,
+                ctx.terrain.info.height as i32 - 1,
+            ],
+            lattice: ctx
+                .lattice
+                .filter(|_| settings.cull_box == CullBox::Lattice)
+                .cloned(),
             draws: vec![Vec::new(); ctx.slots],
             triangles: vec![0; ctx.slots],
         })
     }
 
-    /// Whether block `(i, j)`'s box lies wholly outside one frustum plane.
-    fn culled(&self, planes: &[[f32; 4]; 6], eye: DVec3, i: u32, j: u32) -> bool {
+    /// Whether block `(i, j)`'s box lies wholly outside one frustum plane. On the earth the
+    /// box is the curved one every method culls with there ([`EarthCull::outside`], with
+    /// UDLOD's margin of 1e-3 of the block's side); on the flat world the grid-frame box.
+    fn culled(
+        &self,
+        planes: &[[f32; 4]; 6],
+        earth: Option<&EarthCull>,
+        eye: DVec3,
+        i: u32,
+        j: u32,
+    ) -> bool {
         let width = BLOCK_QUADS as f64 * self.spacing;
+        if let Some(earth) = earth {
+            let q = BLOCK_QUADS as i32;
+            let c0 = [i as i32 * q, j as i32 * q];
+            let c1 = [(c0[0] + q).min(self.last[0]), (c0[1] + q).min(self.last[1])];
+            return earth.outside(planes, c0, c1, self.bounds.get(i, j), 1e-3 * width);
+        }
         let [lo, hi] = self.bounds.get(i, j);
         let lo = DVec3::new(i as f64 * width, j as f64 * width, lo as f64) - eye;
         let hi = DVec3::new((i + 1) as f64 * width, (j + 1) as f64 * width, hi as f64) - eye;
@@ -263,13 +292,19 @@ impl LodMethod for Geomipmap {
             self.settings.distance_factor,
         );
         let planes = frustum_planes(&view.camera, view.width as f64 / view.height as f64);
+        let earth = self
+            .lattice
+            .as_ref()
+            .map(|l| EarthCull::new(l.clone(), view.camera.position));
         let (cols, rows) = (self.bounds.cols, self.bounds.rows);
         let mut draws = std::mem::take(&mut self.draws[slot.index()]);
         draws.clear();
         let mut triangles = 0u64;
         for j in 0..rows {
             for i in 0..cols {
-                if self.settings.cull && self.culled(&planes, view.camera.position, i, j) {
+                if self.settings.cull
+                    && self.culled(&planes, earth.as_ref(), view.camera.position, i, j)
+                {
                     continue;
                 }
                 let block = j * cols + i;

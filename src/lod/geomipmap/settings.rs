@@ -14,9 +14,23 @@ pub struct GeomipmapSettings {
     pub distance_factor: f64,
     /// Frustum culling of blocks on the CPU (per-block height bounds).
     pub cull: bool,
+    /// Which box culling tests on the earth (the flat world has one box).
+    pub cull_box: CullBox,
     /// Border permutations against a coarser neighbour (off: an ablation showing the
     /// T-junction cracks they close; tests use it as the watertightness check's control).
     pub stitch: bool,
+}
+
+/// The box a block is culled with on the earth (config `cull_box`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CullBox {
+    /// The curved box every method culls with on the earth (`Lattice::rect_box`).
+    Lattice,
+    /// The grid-frame box (`x = col * spacing`, `y = row * spacing`) tested against the
+    /// world-frame camera: an ablation, what GeoMipMapping did before, wrong on the earth
+    /// (the grid frame bends away from the world frame); tests use it as a control.
+    Grid,
 }
 
 impl Default for GeomipmapSettings {
@@ -24,6 +38,7 @@ impl Default for GeomipmapSettings {
         GeomipmapSettings {
             distance_factor: 2.0,
             cull: true,
+            cull_box: CullBox::Lattice,
             stitch: true,
         }
     }

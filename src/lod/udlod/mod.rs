@@ -107,6 +107,8 @@ pub struct Udlod {
     /// Level-0 heights for the reference height under the LOD viewer (shared with the
     /// caller: the grid's `Arc`, or the pyramid reader with its bounded node cache).
     heights: Terrain,
+    /// The geolocation lattice (None: the flat world), for the CPU reference's curved boxes.
+    lattice: Option<Arc<crate::geo::Lattice>>,
     /// The split field of the last key asked for (per-tile split distances).
     field: Option<Arc<SplitField>>,
     /// GPU mirror of `levels.min_max` (kept alive for the descriptor sets).
@@ -276,6 +278,7 @@ impl Udlod {
             gpu: gpu.clone(),
             settings,
             heights: ctx.data.clone(),
+            lattice: ctx.lattice.cloned(),
             levels,
             field: None,
             _min_max: min_max,
@@ -319,7 +322,7 @@ impl Udlod {
                 .heights
                 .bilinear(view.lod_viewer.x, view.lod_viewer.y)?,
         };
-        Ok(SelectionParams::with_reference(
+        let p = SelectionParams::with_reference(
             &self.levels,
             field,
             z_ref,
@@ -328,7 +331,11 @@ impl Udlod {
             view.lod_viewer,
             view.width,
             view.height,
-        ))
+        );
+        Ok(match &self.lattice {
+            Some(l) => p.on_earth(l.clone(), view.camera.position),
+            None => p,
+        })
     }
 
     fn read_counters(&self, slot: ViewSlot) -> TilingState {

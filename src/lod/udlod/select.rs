@@ -16,6 +16,7 @@ use super::settings::UdlodSettings;
 use crate::dataset::stats::{TileStats, level_interpolate};
 use crate::dataset::{Heightmap, Level0};
 use crate::error::Result;
+use crate::geo::{EarthCull, Lattice};
 use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
 use crate::scene::Camera;
 
@@ -412,6 +413,9 @@ pub struct SelectionParams {
     pub field: Arc<SplitField>,
     pub frustum: [[f32; 4]; 6],
     pub cull: bool,
+    /// On the earth: the lattice and the camera's world position, for the curved boxes
+    /// (None: the flat world's boxes).
+    pub earth: Option<EarthCull>,
     /// Fraction of each level's range over which vertices morph.
     pub morph_range: f32,
     /// Vertex morphing on (off: every morph factor is 0).
@@ -473,9 +477,17 @@ impl SelectionParams {
             field,
             frustum: frustum_planes(camera, width as f64 / height as f64),
             cull: settings.cull,
+            earth: None,
             morph_range: settings.morph_range as f32,
             morph: settings.morph,
         }
+    }
+
+    /// These inputs on the earth: tiles are culled with the curved boxes of `lattice`
+    /// (`camera`: the camera's world position, as the frame uniforms carry it).
+    pub fn on_earth(mut self, lattice: Arc<Lattice>, camera: DVec3) -> Self {
+        self.earth = Some(EarthCull::new(lattice, camera));
+        self
     }
 
     /// Camera-relative metres of a sample position (integer cell, as the shaders compute it).
@@ -513,22 +525,30 @@ pub fn tile_splits(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
 }
 
 /// Is the tile's box (rectangle clamped to the data x min/max height) outside the frustum?
+/// On the earth the curved box ([`EarthCull::outside`], in f64: it decides as the GPU's f32
+/// `earth_box` except within the GPU's rounding of the boundary; tests/udlod.rs brackets it).
 pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
     let span = (levels.grid_size << t.lod) as i32;
     let (w, h) = (levels.width as i32 - 1, levels.height as i32 - 1);
-    let lo = p.relative([t.x as i32 * span, t.y as i32 * span]);
-    let hi = p.relative([
+    let c0 = [t.x as i32 * span, t.y as i32 * span];
+    let c1 = [
         ((t.x as i32 + 1) * span).min(w),
         ((t.y as i32 + 1) * span).min(h),
-    ]);
+    ];
+    // A margin of 1e-3 of the box size keeps rounding from culling a touching box.
+    let margin = 1e-3 * (span as f32 * p.spacing);
+    if let Some(earth) = &p.earth {
+        return earth.outside(&p.frustum, c0, c1, levels.tile_min_max(t), margin as f64);
+    }
+    let lo = p.relative(c0);
+    let hi = p.relative(c1);
     let [zmin, zmax] = levels.tile_min_max(t);
     let (zlo, zhi) = (zmin - p.camera_z, zmax - p.camera_z);
     p.frustum.iter().any(|pl| {
         let x = if pl[0] >= 0.0 { hi[0] } else { lo[0] };
         let y = if pl[1] >= 0.0 { hi[1] } else { lo[1] };
         let z = if pl[2] >= 0.0 { zhi } else { zlo };
-        // A margin of 1e-3 of the box size keeps rounding from culling a touching box.
-        pl[0] * x + pl[1] * y + pl[2] * z + pl[3] < -1e-3 * (span as f32 * p.spacing)
+        pl[0] * x + pl[1] * y + pl[2] * z + pl[3] < -margin
     })
 }
 
