@@ -854,6 +854,15 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
     let mut renderer = config
         .open_renderer(&gpu, &terrain, options)
         .expect("renderer");
+    // Frames report the camera's height above the ellipsoid (world heights are ellipsoidal on
+    // the geoid-lifted lattice); the flat world's renderer reports it in EGM96, as before.
+    use vkterrain::output::ring::layout::{DATUM_EGM96, DATUM_ELLIPSOID};
+    assert_eq!(renderer.world.map(|w| w.1), Some(DATUM_ELLIPSOID));
+    let flat_renderer = flat
+        .open_renderer(&gpu, &flat.open_terrain().unwrap(), flat.render_options())
+        .unwrap();
+    assert_eq!(flat_renderer.world.map(|w| w.1), Some(DATUM_EGM96));
+    drop(flat_renderer);
     let camera = Camera {
         position: enu(lat0, lon0, 42.2, 1.2, 5000.0),
         yaw_deg: 45.0,
