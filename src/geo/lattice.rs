@@ -299,8 +299,8 @@ impl Lattice {
         (s, height)
     }
 
-    /// The largest distance between the lattice's interpolated surface and the true ellipsoid
-    /// surface over `locate`'s points, measured at every sample of a `probe_step` grid (tests
+    /// The largest distance between the interpolated surface of a lattice on the ellipsoid
+    /// (not [`Lattice::on_datum`]) and the true ellipsoid surface over `locate`'s points, measured at every sample of a `probe_step` grid (tests
     /// and docs: the interpolation part of the error budget).
     pub fn max_interpolation_error(
         &self,
