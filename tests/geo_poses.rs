@@ -523,3 +523,35 @@ fn grid_keyframes_over_egm96_terrain_keep_their_height_above_the_geoid() {
     println!("the flat world's earth: {h_old:.2} m above the drawn geoid");
     assert!(h_old < 1960.0, "{h_old}");
 }
+
+/// EGM2008 heights on the ellipsoid need PROJ's EGM2008 grid (`egm08_25.gtx`, which Debian's
+/// `proj-data` does not ship): without it opening the lattice is a one-line error naming the
+/// geoid, never a lattice at `N = 0`; with it the lattice is lifted by `N08` (about +50 m
+/// there, like EGM96's).
+#[cfg(feature = "gdal")]
+#[test]
+fn egm2008_heights_without_their_grid_are_a_one_line_error() {
+    use std::sync::Arc;
+    use vkterrain::dataset::Terrain;
+    use vkterrain::dataset::geoid::{Geoid, GeoidModel};
+    let terrain = Terrain::from(Arc::new(ramp()));
+    let placement = anchored_placement(datum::EGM2008);
+    match Geoid::new(GeoidModel::Egm2008) {
+        Err(_) => {
+            let e = placement.lattice(&terrain).unwrap_err().to_string();
+            println!("{e}");
+            assert!(
+                e.contains("EGM2008") && e.contains("egm08_25.gtx") && !e.contains('\n'),
+                "{e}"
+            );
+            assert!(e.len() < 400, "{} bytes: {e}", e.len());
+        }
+        Ok(_) => {
+            let l = placement.lattice(&terrain).unwrap();
+            assert!(l.datum_heights().iter().all(|n| (n - 50.0).abs() < 5.0));
+        }
+    }
+    // EGM96 heights there: lifted by N96.
+    let l = anchored_placement(datum::EGM96).lattice(&terrain).unwrap();
+    assert!(l.datum_heights().iter().all(|n| (n - 50.7).abs() < 1.0));
+}

@@ -38,6 +38,14 @@ impl GeoidModel {
         }
     }
 
+    /// PROJ's grid file of this geoid.
+    pub fn grid(self) -> &'static str {
+        match self {
+            GeoidModel::Egm96 => "egm96_15.gtx",
+            GeoidModel::Egm2008 => "egm08_25.gtx",
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             GeoidModel::Egm96 => "EGM96",
@@ -78,7 +86,21 @@ impl Geoid {
         to.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
         let mut options = CoordTransformOptions::new().map_err(err)?;
         options.set_ballpark_allowed(false).map_err(err)?;
-        let to_orthometric = CoordTransform::new_with_options(&from, &to, &options).map_err(err)?;
+        // PROJ's own message quotes both CRSs in full WKT (kilobytes): say what is missing.
+        let to_orthometric =
+            CoordTransform::new_with_options(&from, &to, &options).map_err(|e| {
+                let gdal = e.to_string().replace('\n', " ");
+                let gdal: String = gdal.chars().take(100).collect();
+                Error::invalid(
+                    &what,
+                    format!(
+                        "PROJ finds no transformation to {} heights (EPSG:{}): is its grid {} installed (Debian's proj-data ships EGM96's only)? PROJ: {gdal}...",
+                        model.name(),
+                        model.vertical_epsg(),
+                        model.grid()
+                    ),
+                )
+            })?;
         let geoid = Geoid {
             model,
             to_orthometric,
