@@ -226,3 +226,59 @@ fn udlod_on_the_earth_stays_within_tau() {
     assert_eq!(measured[1].holes, 0);
     common::assert_no_validation_messages(&gpu);
 }
+
+/// The exact surface follows the lattice onto the heights' datum (issue 14: heights above a
+/// geoid lie at `H + N` of their own position): the grid of `curvature_is_measured_where_it_matters`
+/// with its lattice lifted by a made-up smooth undulation (40 m, rising 20 m per degree north
+/// and 10 m per degree east: ~18 m across the 102 km grid, steeper than EGM96 almost anywhere),
+/// brute force drawn on it and measured on it reads ~0. Negative control: drawn with the
+/// camera's undulation everywhere (a constant lift, the placement before issue 14's geoid
+/// lattice) but measured on the lifted surface, the far terrain is metres off.
+#[test]
+fn the_exact_surface_carries_the_lattice_datum() {
+    let gpu = common::gpu(false);
+    let (data, lattice) = anchored(513, 5, 200.0);
+    let n = |lat: f64, lon: f64| 40.0 + 20.0 * (lat - 46.5) + 10.0 * (lon - 8.0);
+    let lifted = lattice
+        .clone()
+        .on_datum(|pts| Ok(pts.iter().map(|[la, lo]| n(*la, *lo)).collect()))
+        .unwrap();
+    let n_camera = n(lifted.node_lat_lon(0, 0)[0], lifted.node_lat_lon(0, 0)[1]);
+    let at_camera = lattice
+        .on_datum(|pts| Ok(vec![n_camera; pts.len()]))
+        .unwrap();
+    let cameras: Vec<Camera> = [(45.0, -3.0), (30.0, -2.0)]
+        .into_iter()
+        .map(|(yaw_deg, pitch_deg)| Camera {
+            position: DVec3::new(3000.0, 3000.0, 4000.0),
+            yaw_deg,
+            pitch_deg,
+            near: 10.0,
+            far: 160_000.0,
+            ..Camera::default()
+        })
+        .collect();
+    let brute = MethodConfig::Brute {};
+    let measured = measure(
+        &gpu,
+        &data,
+        Some(&lifted),
+        &[(brute.clone(), Some(&lifted)), (brute, Some(&at_camera))],
+        &cameras,
+        (640, 360),
+    );
+    let (m, px) = measured[0].summaries();
+    println!("brute force on the lifted lattice, evaluated on it: {m:?} m, {px:?} px");
+    assert_eq!(
+        measured[0].missing, 0,
+        "every pixel found its reference tile"
+    );
+    assert!(m.count > 100_000, "{m:?}");
+    assert!(m.p999 < 0.25 && px.p999 < 0.01, "{m:?} m, {px:?} px");
+    let (m, px) = measured[1].summaries();
+    println!(
+        "brute force lifted by the camera's N, evaluated on the lifted lattice: {m:?} m, {px:?} px"
+    );
+    assert!(m.p99 > 3.0, "{m:?} m, {px:?} px");
+    common::assert_no_validation_messages(&gpu);
+}

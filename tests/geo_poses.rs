@@ -20,6 +20,10 @@ fn ramp() -> Heightmap {
 }
 
 fn anchored(vertical_datum: &str) -> Earth {
+    Earth::new(anchored_placement(vertical_datum))
+}
+
+fn anchored_placement(vertical_datum: &str) -> Placement {
     let frame = world_frame(
         None,
         Some(Anchor {
@@ -29,11 +33,11 @@ fn anchored(vertical_datum: &str) -> Earth {
     )
     .unwrap()
     .unwrap();
-    Earth::new(Placement {
+    Placement {
         frame,
         georef: None,
         vertical_datum: vertical_datum.into(),
-    })
+    }
 }
 
 fn pose(lat: f64, lon: f64, h: f64, r: HeightRef) -> GeoPose {
@@ -371,4 +375,183 @@ fn extra_views_are_rig_offsets_in_the_local_frame_on_the_earth() {
     assert!((flat.pitch_deg + 5.0).abs() > 0.3, "{flat:?}");
     // Without a world frame `apply_on` is `apply`.
     assert_eq!(rig.apply_on(&main, None), rig.apply(&main));
+}
+
+/// Drawn on the ellipsoid, the lattice carries the terrain's geoid, so world heights are
+/// ellipsoidal: a camera by ellipsoidal height `h` is at `h` above the ellipsoid at its own
+/// position, by MSL height `H` at `H + N96` there, by ground height at the terrain there plus
+/// the terrain's undulation plus `h`, over EGM96 and ellipsoidal terrain alike; the reported
+/// pose gives `h` back. Negative control: the flat world's earth (heights in the terrain's
+/// datum) puts the same ellipsoidal camera `N` lower.
+#[cfg(feature = "gdal")]
+#[test]
+fn on_the_lattice_poses_keep_their_ellipsoidal_height() {
+    let data = ramp();
+    let template = Camera::default();
+    let (lat, lon) = (46.51, 8.02);
+    let height_at = |e: &Earth, c: &Camera| WGS84.to_geodetic(e.frame().to_ecef(c.position)).height;
+    let n = anchored(datum::EGM96).msl_undulation(lat, lon).unwrap();
+    for terrain_datum in [datum::EGM96, datum::ELLIPSOID, datum::LOCAL] {
+        let earth = Earth::on_lattice(anchored_placement(terrain_datum));
+        assert!(earth.ellipsoidal_world());
+        let by_ellipsoid = earth
+            .camera(
+                &pose(lat, lon, 3000.0, HeightRef::Ellipsoid),
+                &data,
+                &template,
+            )
+            .unwrap();
+        assert!((height_at(&earth, &by_ellipsoid) - 3000.0).abs() < 1e-6);
+        let by_msl = earth
+            .camera(
+                &pose(lat, lon, 3000.0 - n, HeightRef::Msl),
+                &data,
+                &template,
+            )
+            .unwrap();
+        assert!(
+            same_camera(&by_ellipsoid, &by_msl, 1e-6),
+            "{terrain_datum}: {by_ellipsoid:?} vs {by_msl:?}"
+        );
+        let back = earth.pose(&by_msl).unwrap();
+        assert!((back.height_m - 3000.0).abs() < 1e-6, "{back:?}");
+        // Ground: the ramp is 100 + x / 30 m in the terrain's datum, lifted by its undulation.
+        let at = WGS84.to_geodetic(earth.frame().to_ecef(DVec3::new(1500.0, 1200.0, 0.0)));
+        let ground = earth
+            .camera(
+                &pose(at.lat_deg, at.lon_deg, 250.0, HeightRef::Ground),
+                &data,
+                &template,
+            )
+            .unwrap();
+        let n_there = earth.terrain_undulation(at.lat_deg, at.lon_deg).unwrap();
+        let want = 150.0 + n_there + 250.0;
+        let got = height_at(&earth, &ground);
+        assert!(
+            (got - want).abs() < 1e-3,
+            "{terrain_datum}: ground camera at {got} m, want {want}"
+        );
+        assert_eq!(n_there == 0.0, terrain_datum != datum::EGM96, "{n_there}");
+        // A grid height in the terrain's datum gains the terrain's undulation.
+        let z = earth.terrain_to_world(lat, lon, 700.0).unwrap();
+        assert_eq!(
+            z,
+            700.0
+                + if terrain_datum == datum::EGM96 {
+                    n
+                } else {
+                    0.0
+                }
+        );
+    }
+    // Negative control: the flat world's earth lowers the ellipsoidal camera into EGM96
+    // heights at the camera.
+    let old = anchored(datum::EGM96)
+        .camera(
+            &pose(lat, lon, 3000.0, HeightRef::Ellipsoid),
+            &data,
+            &template,
+        )
+        .unwrap();
+    let new = Earth::on_lattice(anchored_placement(datum::EGM96))
+        .camera(
+            &pose(lat, lon, 3000.0, HeightRef::Ellipsoid),
+            &data,
+            &template,
+        )
+        .unwrap();
+    let dz = old.position.distance(new.position);
+    assert!((dz - n).abs() < 1e-6, "{dz} vs N = {n}");
+}
+
+/// Grid keyframes over EGM96 terrain drawn on the ellipsoid (a flat 500 m grid anchored at
+/// 46.5 N 8 E, 100 km across, its lattice lifted onto EGM96 through PROJ): the keyframe camera
+/// is where the lattice puts its grid position and height (within 2 cm), and half-way between
+/// two keyframes 20 km apart its height above the drawn surface is the keyframes' within the
+/// geoid's departure from linear (heights interpolate above the ellipsoid). Negative control:
+/// the flat world's earth leaves the camera at its height above the ellipsoid, N (about 50 m)
+/// too low over the geoid-lifted terrain.
+#[cfg(feature = "gdal")]
+#[test]
+fn grid_keyframes_over_egm96_terrain_keep_their_height_above_the_geoid() {
+    use glam::DVec2;
+    use std::sync::Arc;
+    use vkterrain::dataset::Terrain;
+    let data = Heightmap::new("flat", 1001, 1001, 100.0, vec![500.0; 1001 * 1001]).unwrap();
+    let placement = anchored_placement(datum::EGM96);
+    let terrain = Terrain::from(Arc::new(data.clone()));
+    let lattice = placement.lattice(&terrain).unwrap();
+    let n = lattice.datum_heights();
+    let (lo, hi) = n
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
+    println!(
+        "EGM96 over the lattice: {lo:.2} .. {hi:.2} m over {} nodes",
+        n.len()
+    );
+    assert!(lo > 40.0 && hi < 60.0 && hi - lo > 1.0, "{lo} .. {hi}");
+    let text = r#"
+        name = "grid"
+        frames = 31
+        fps = 30.0
+        [[keyframe]]
+        t = 0.0
+        position = [80000.0, 40000.0, 2000.0]
+        yaw = 30.0
+        pitch = -20.0
+        [[keyframe]]
+        t = 1.0
+        position = [80000.0, 60000.0, 2000.0]
+        yaw = 30.0
+        pitch = -20.0
+    "#;
+    let file: ScenarioFile = toml::from_str(text).unwrap();
+    let earth = Earth::on_lattice(placement.clone());
+    let s = Scenario::resolve_on(&file, &data, Some(&earth), true).unwrap();
+    let expected = lattice.position(DVec2::new(800.0, 400.0), 2000.0);
+    let miss = s.camera(0).position.distance(expected);
+    assert!(
+        miss < 0.02,
+        "keyframe camera {miss} m from the lattice's point"
+    );
+    let (_, h_mid) = lattice.sample_at(s.camera(15).position);
+    println!("keyframe miss {miss:.4} m; half-way {h_mid:.3} m above the drawn geoid");
+    assert!((h_mid - 2000.0).abs() < 0.1, "{h_mid}");
+    // Negative control: the flat world's earth.
+    let old = Scenario::resolve_on(&file, &data, Some(&Earth::new(placement)), true).unwrap();
+    let (_, h_old) = lattice.sample_at(old.camera(0).position);
+    println!("the flat world's earth: {h_old:.2} m above the drawn geoid");
+    assert!(h_old < 1960.0, "{h_old}");
+}
+
+/// EGM2008 heights on the ellipsoid need PROJ's EGM2008 grid (`egm08_25.gtx`, which Debian's
+/// `proj-data` does not ship): without it opening the lattice is a one-line error naming the
+/// geoid, never a lattice at `N = 0`; with it the lattice is lifted by `N08` (about +50 m
+/// there, like EGM96's).
+#[cfg(feature = "gdal")]
+#[test]
+fn egm2008_heights_without_their_grid_are_a_one_line_error() {
+    use std::sync::Arc;
+    use vkterrain::dataset::Terrain;
+    use vkterrain::dataset::geoid::{Geoid, GeoidModel};
+    let terrain = Terrain::from(Arc::new(ramp()));
+    let placement = anchored_placement(datum::EGM2008);
+    match Geoid::new(GeoidModel::Egm2008) {
+        Err(_) => {
+            let e = placement.lattice(&terrain).unwrap_err().to_string();
+            println!("{e}");
+            assert!(
+                e.contains("EGM2008") && e.contains("egm08_25.gtx") && !e.contains('\n'),
+                "{e}"
+            );
+            assert!(e.len() < 400, "{} bytes: {e}", e.len());
+        }
+        Ok(_) => {
+            let l = placement.lattice(&terrain).unwrap();
+            assert!(l.datum_heights().iter().all(|n| (n - 50.0).abs() < 5.0));
+        }
+    }
+    // EGM96 heights there: lifted by N96.
+    let l = anchored_placement(datum::EGM96).lattice(&terrain).unwrap();
+    assert!(l.datum_heights().iter().all(|n| (n - 50.7).abs() < 1.0));
 }

@@ -91,6 +91,36 @@ fn pixel_of_clip(clip: [f32; 4], width: u32, height: u32) -> DVec2 {
     )
 }
 
+/// EGM96 undulations `N` (metres, geoid above the ellipsoid) at `(lat, lon)` points, straight
+/// from PROJ through GDAL's OSR (`EPSG:4979 -> EPSG:4326+5773`, `H = h - N`), pinned by
+/// `cs2cs`'s value at 42.5 N 1.5 E.
+#[cfg(feature = "gdal")]
+fn egm96_undulations(points: &[(f64, f64)]) -> Vec<f64> {
+    use gdal::spatial_ref::{AxisMappingStrategy, CoordTransform, SpatialRef};
+    let mut from = SpatialRef::from_epsg(4979).unwrap();
+    let mut to = SpatialRef::from_definition("EPSG:4326+5773").unwrap();
+    from.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
+    to.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
+    let t = CoordTransform::new(&from, &to).unwrap();
+    let mut x: Vec<f64> = [1.5]
+        .into_iter()
+        .chain(points.iter().map(|p| p.1))
+        .collect();
+    let mut y: Vec<f64> = [42.5]
+        .into_iter()
+        .chain(points.iter().map(|p| p.0))
+        .collect();
+    let mut z = vec![0.0; x.len()];
+    t.transform_coords(&mut x, &mut y, &mut z).unwrap();
+    // `echo 42.5 1.5 0 | cs2cs EPSG:4979 EPSG:4326+5773` gives -52.828.
+    assert!(
+        (z[0] + 52.828).abs() < 0.001,
+        "EGM96 at 42.5 N 1.5 E: {}",
+        -z[0]
+    );
+    z[1..].iter().map(|v| -v).collect()
+}
+
 // ---- Rendering helpers ---------------------------------------------------------------------
 
 /// A geographic grid: sample (col, row) at latitude `lat0 + row * d`, longitude
@@ -482,6 +512,109 @@ fn landmark_spikes_project_where_f64_geodesy_puts_them() {
     common::assert_no_validation_messages(&gpu);
 }
 
+/// Issue 14 rendered: landmark spikes on a synthetic geographic grid whose heights are above
+/// EGM96 (Himalaya, 28 N 85 E, where the geoid rises ~12 m per 55 km northwards), its lattice
+/// lifted by vkterrain's geoid (`Lattice::on_datum` with `Geoid::undulations`), seen by a camera
+/// given by ellipsoidal height 10-50 km away: each tip projects within 0.5 px of f64 geodesy at
+/// `(lat, lon, H + N96)` (`N` straight from PROJ here). Negative control: the placement before
+/// (lattice on the ellipsoid, the camera's height converted with its own `N`) misses the
+/// spikes 50 km away by more than 1 px.
+#[cfg(feature = "gdal")]
+#[test]
+fn landmarks_above_the_geoid_project_where_their_ellipsoidal_height_puts_them() {
+    use vkterrain::dataset::geoid::{Geoid, GeoidModel};
+    let gpu = common::gpu(false);
+    let (size, d) = (257u32, 0.002);
+    let (w, h) = (1024u32, 768u32);
+    let (lat0, lon0) = (28.0, 85.0);
+    let spikes = [
+        ([64i32, 64i32], 1500.0),
+        ([200, 40], 800.0),
+        ([128, 220], 2500.0),
+    ];
+    let heights = |la: f64, lo: f64| {
+        for (s, hgt) in spikes {
+            let (sl, so) = (lat0 + s[1] as f64 * d, lon0 + s[0] as f64 * d);
+            if (la - sl).abs() < d / 2.0 && (lo - so).abs() < d / 2.0 {
+                return hgt;
+            }
+        }
+        20.0
+    };
+    let data = geographic(size, lat0, lon0, d, &heights);
+    let on_ellipsoid = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
+    let geoid = Geoid::new(GeoidModel::Egm96).unwrap();
+    let lattice = on_ellipsoid
+        .clone()
+        .on_datum(|pts| geoid.undulations(pts))
+        .unwrap();
+    let spike_at = |s: [i32; 2]| (lat0 + s[1] as f64 * d, lon0 + s[0] as f64 * d);
+    let n_spikes = egm96_undulations(&spikes.map(|(s, _)| spike_at(s)));
+    for dist_km in [10.0, 50.0] {
+        // South-west of the first spike, 3 km up plus the earth's drop, aimed beside it.
+        let (slat, slon) = spike_at(spikes[0].0);
+        let tip = enu(lat0, lon0, slat, slon, spikes[0].1 + n_spikes[0]);
+        let dist = dist_km * 1000.0;
+        let m = metres_per_deg_lat(slat);
+        let clat = slat - dist * 0.6 / m;
+        let clon = slon - dist * 0.8 / (m * slat.to_radians().cos());
+        let calt = 3000.0 + dist * dist / (2.0 * 6.37e6);
+        let n_camera = egm96_undulations(&[(clat, clon)])[0];
+        let pos = enu(lat0, lon0, clat, clon, calt);
+        let to = tip - pos;
+        let camera = Camera {
+            position: pos,
+            yaw_deg: to.x.atan2(to.y).to_degrees() + 0.4,
+            pitch_deg: (to.z / to.truncate().length()).atan().to_degrees() - 0.3,
+            vfov_deg: 5.0,
+            near: 1.0,
+            far: 1e6,
+            ..Camera::default()
+        };
+        // Before: the camera's height in EGM96 at the camera, the terrain on the ellipsoid.
+        let before = Camera {
+            position: enu(lat0, lon0, clat, clon, calt - n_camera),
+            ..camera
+        };
+        let geo = render(
+            &gpu,
+            &data,
+            MethodKind::Brute,
+            Some(&lattice),
+            (w, h),
+            &[camera],
+        );
+        let old = render(
+            &gpu,
+            &data,
+            MethodKind::Brute,
+            Some(&on_ellipsoid),
+            (w, h),
+            &[before],
+        );
+        let pts: Vec<_> = spikes.iter().map(|(s, _)| (*s, [0.0f32, 0.0])).collect();
+        let got = probe(&geo.renderer, TERRAIN_PROBE_SPV, c"probe_main", &pts);
+        let got_old = probe(&old.renderer, TERRAIN_PROBE_SPV, c"probe_main", &pts);
+        let mut worst_old = 0.0f64;
+        for (k, (s, hs)) in spikes.iter().enumerate() {
+            let (la, lo) = spike_at(*s);
+            let expected = pixel_of(&camera, enu(lat0, lon0, la, lo, hs + n_spikes[k]), w, h);
+            let err = (pixel_of_clip(got[k].clip, w, h) - expected).length();
+            let err_old = (pixel_of_clip(got_old[k].clip, w, h) - expected).length();
+            println!(
+                "{dist_km} km, spike {k}: N {:.2} m (camera {n_camera:.2} m), expected {expected:.2}: err {err:.4} px; the camera's N: {err_old:.2} px",
+                n_spikes[k]
+            );
+            assert!(err <= 0.5, "{dist_km} km, spike {k}: {err} px");
+            worst_old = worst_old.max(err_old);
+        }
+        if dist_km >= 50.0 {
+            assert!(worst_old > 1.0, "negative control: {worst_old} px");
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+}
+
 /// A camera moving 1 mm per frame along its view axis, far from the world origin: the centre
 /// pixel's view depth changes by 1 mm +- 0.2 mm per frame and no pixel is sky.
 fn precision_at(gpu: &Arc<Gpu>, lat0: f64, lon0: f64, cam_lat: f64, cam_lon: f64) {
@@ -658,9 +791,13 @@ fn udlod_renders_the_earth_like_brute_force() {
 /// `.hgt.zip` (its latitude/longitude from GDAL's geotransform), the renderer's vertex there
 /// (`sample_height` and `project` of set 0, what brute force draws) has exactly the source
 /// height (0 m), and where it is in view it projects where f64 geodesy puts that
-/// latitude/longitude/height within 0.5 px. Voids (-32768) have no source height and are
-/// counted apart. Negative control: the same data loaded for the flat world is resampled
-/// east-west (fewer columns: source samples are lost).
+/// latitude/longitude at the ellipsoidal height `H + N96` (SRTM's heights are above EGM96; `N`
+/// from PROJ here) within 0.5 px. In metres (the CPU mirror `Lattice::position` of the same
+/// lattice, proven equal to the GPU's in the first test), every sample lies within 2 cm of
+/// that point, the ones 30+ km from the camera too. Voids (-32768) have no source height and
+/// are counted apart. Negative controls: the same data loaded for the flat world is resampled
+/// east-west (fewer columns: source samples are lost); the undulation taken at the camera
+/// (before issue 14's geoid lattice) misses samples 30+ km away by more than a metre.
 #[cfg(feature = "gdal")]
 #[test]
 fn every_source_sample_is_a_vertex_where_it_lies() {
@@ -717,6 +854,15 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
     let mut renderer = config
         .open_renderer(&gpu, &terrain, options)
         .expect("renderer");
+    // Frames report the camera's height above the ellipsoid (world heights are ellipsoidal on
+    // the geoid-lifted lattice); the flat world's renderer reports it in EGM96, as before.
+    use vkterrain::output::ring::layout::{DATUM_EGM96, DATUM_ELLIPSOID};
+    assert_eq!(renderer.world.map(|w| w.1), Some(DATUM_ELLIPSOID));
+    let flat_renderer = flat
+        .open_renderer(&gpu, &flat.open_terrain().unwrap(), flat.render_options())
+        .unwrap();
+    assert_eq!(flat_renderer.world.map(|w| w.1), Some(DATUM_EGM96));
+    drop(flat_renderer);
     let camera = Camera {
         position: enu(lat0, lon0, 42.2, 1.2, 5000.0),
         yaw_deg: 45.0,
@@ -746,12 +892,31 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
         }
     }
     let got = probe(&renderer, TERRAIN_PROBE_SPV, c"probe_main", &pts);
+    let geoid = egm96_undulations(&expected.iter().map(|e| (e.0, e.1)).collect::<Vec<_>>());
+    let lattice = config
+        .open_lattice(&terrain, vkterrain::render::EarthGeometry::Ellipsoid)
+        .unwrap()
+        .expect("SRTM on the ellipsoid");
+    let n_camera = egm96_undulations(&[(42.2, 1.2)])[0];
     let (w, h) = (320u32, 200u32);
     let (mut voids, mut height_misses, mut in_view, mut worst_px) = (0, 0, 0, 0.0f64);
-    for (g, &(lat, lon, src_h)) in got.iter().zip(&expected) {
+    let (mut worst_m, mut worst_far_m, mut far, mut camera_n_far_m) = (0.0f64, 0.0f64, 0, 0.0f64);
+    for (k, (g, &(lat, lon, src_h))) in got.iter().zip(&expected).enumerate() {
         if src_h == -32768 {
             voids += 1;
             continue;
+        }
+        // In metres: the lattice's point (CPU mirror) against f64 geodesy at H + N.
+        let n = geoid[k];
+        let exact = enu(lat0, lon0, lat, lon, src_h as f64 + n);
+        let s = DVec2::new(pts[k].0[0] as f64, pts[k].0[1] as f64);
+        let miss = (lattice.position(s, src_h as f64) - exact).length();
+        worst_m = worst_m.max(miss);
+        if (exact - camera.position).length() > 30_000.0 {
+            far += 1;
+            worst_far_m = worst_far_m.max(miss);
+            // The old placement: every height converted with the camera's undulation.
+            camera_n_far_m = camera_n_far_m.max((n - n_camera).abs());
         }
         if g.heights[0] != src_h as f32 {
             height_misses += 1;
@@ -761,13 +926,18 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
             continue;
         }
         in_view += 1;
-        let want = pixel_of(&camera, enu(lat0, lon0, lat, lon, src_h as f64), w, h);
+        let want = pixel_of(&camera, exact, w, h);
         worst_px = worst_px.max((px - want).length());
     }
     println!(
-        "{} source samples: {voids} voids, {height_misses} heights differ; {in_view} in view, worst {worst_px:.4} px from f64 geodesy",
+        "{} source samples: {voids} voids, {height_misses} heights differ; {in_view} in view, worst {worst_px:.4} px from f64 geodesy at H + N96",
         sw * sh
     );
+    println!(
+        "lattice on EGM96 against f64 geodesy at H + N96: worst {worst_m:.4} m, {far} samples 30+ km from the camera worst {worst_far_m:.4} m; the camera's undulation ({n_camera:.3} m) there would miss by up to {camera_n_far_m:.3} m"
+    );
+    assert!(worst_m < 0.02 && far > 100_000, "{worst_m} m ({far} far)");
+    assert!(camera_n_far_m > 1.0, "negative control: {camera_n_far_m} m");
     assert_eq!(height_misses, 0, "source heights not reproduced");
     assert!(voids < sw * sh / 100, "{voids} voids");
     // A named landmark: Pica d'Estats (3,143 m; 42 deg 39' 59" N, 1 deg 23' 51" E, as
@@ -880,7 +1050,11 @@ fn udlod_through_the_clipmap_is_watertight_on_a_native_geographic_grid() {
             let pose = earth
                 .grid_pose(&grid, c.position, c.yaw_deg, c.pitch_deg, c.roll_deg)
                 .unwrap();
-            earth.camera_at(&pose, c.position.z, &template).unwrap()
+            // The pose's height is in the terrain's datum (EGM96): the world's is ellipsoidal.
+            let z = earth
+                .terrain_to_world(pose.lat_deg, pose.lon_deg, c.position.z)
+                .unwrap();
+            earth.camera_at(&pose, z, &template).unwrap()
         })
         .collect();
     let (mut holes, mut frames_total) = (0usize, 0usize);

@@ -13,7 +13,7 @@ use crate::dataset::{NodeStore, PyramidReader, Terrain};
 use crate::driver::Gpu;
 use crate::error::Result;
 use crate::geo::{EnuFrame, Lattice};
-use crate::output::ring::layout::datum_code;
+use crate::output::ring::layout::{DATUM_ELLIPSOID, datum_code};
 use crate::render::{EarthGeometry, RenderOptions, Renderer};
 use crate::scene::{Earth, Scenario};
 
@@ -91,7 +91,15 @@ impl Config {
             self.open_clipmap()?,
             lattice.as_ref(),
         )?;
-        renderer.world = placement.map(|p| (p.frame, datum_code(&p.vertical_datum)));
+        // The frames' camera heights: above the ellipsoid where the lattice carries the
+        // terrain's datum (world heights are ellipsoidal there), else in the terrain's datum.
+        renderer.world = placement.map(|p| {
+            let code = match &lattice {
+                Some(_) if p.lattice_on_datum() => DATUM_ELLIPSOID,
+                _ => datum_code(&p.vertical_datum),
+            };
+            (p.frame, code)
+        });
         Ok(renderer)
     }
 
@@ -135,7 +143,14 @@ impl Config {
     /// The data set's place on the earth, for poses given by latitude/longitude; `None`: a flat
     /// world.
     pub fn open_earth(&self) -> Result<Option<Earth>> {
-        Ok(self.dataset.placement(|p| self.resolve(p))?.map(Earth::new))
+        let on_lattice = self.render.earth == EarthGeometry::Ellipsoid;
+        Ok(self.dataset.placement(|p| self.resolve(p))?.map(|p| {
+            if on_lattice {
+                Earth::on_lattice(p)
+            } else {
+                Earth::new(p)
+            }
+        }))
     }
 
     /// The data set's node store (`tiles` or `xyz`), read node by node.

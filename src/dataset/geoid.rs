@@ -38,6 +38,14 @@ impl GeoidModel {
         }
     }
 
+    /// PROJ's grid file of this geoid.
+    pub fn grid(self) -> &'static str {
+        match self {
+            GeoidModel::Egm96 => "egm96_15.gtx",
+            GeoidModel::Egm2008 => "egm08_25.gtx",
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             GeoidModel::Egm96 => "EGM96",
@@ -78,7 +86,21 @@ impl Geoid {
         to.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
         let mut options = CoordTransformOptions::new().map_err(err)?;
         options.set_ballpark_allowed(false).map_err(err)?;
-        let to_orthometric = CoordTransform::new_with_options(&from, &to, &options).map_err(err)?;
+        // PROJ's own message quotes both CRSs in full WKT (kilobytes): say what is missing.
+        let to_orthometric =
+            CoordTransform::new_with_options(&from, &to, &options).map_err(|e| {
+                let gdal = e.to_string().replace('\n', " ");
+                let gdal: String = gdal.chars().take(100).collect();
+                Error::invalid(
+                    &what,
+                    format!(
+                        "PROJ finds no transformation to {} heights (EPSG:{}): is its grid {} installed (Debian's proj-data ships EGM96's only)? PROJ: {gdal}...",
+                        model.name(),
+                        model.vertical_epsg(),
+                        model.grid()
+                    ),
+                )
+            })?;
         let geoid = Geoid {
             model,
             to_orthometric,
@@ -102,22 +124,41 @@ impl Geoid {
     /// The geoid's height above the WGS84 ellipsoid at a latitude/longitude (degrees), metres.
     #[cfg(feature = "gdal")]
     pub fn undulation(&self, lat_deg: f64, lon_deg: f64) -> Result<f64> {
-        let (mut x, mut y, mut z) = ([lon_deg], [lat_deg], [0.0]);
+        let n = self.undulations(&[[lat_deg, lon_deg]])?;
+        Ok(n[0])
+    }
+
+    /// [`Geoid::undulation`] at many `[lat, lon]` points (degrees) in one PROJ call (the
+    /// geolocation lattice's nodes: one transformation of the whole batch, not one per node).
+    #[cfg(not(feature = "gdal"))]
+    pub fn undulations(&self, _points: &[[f64; 2]]) -> Result<Vec<f64>> {
+        Err(Error::invalid(self.model.name(), "no PROJ"))
+    }
+
+    /// [`Geoid::undulation`] at many `[lat, lon]` points (degrees) in one PROJ call (the
+    /// geolocation lattice's nodes: one transformation of the whole batch, not one per node).
+    #[cfg(feature = "gdal")]
+    pub fn undulations(&self, points: &[[f64; 2]]) -> Result<Vec<f64>> {
+        let where_ = |k: usize| match points.get(k) {
+            Some([lat, lon]) if points.len() == 1 => format!("at {lat}, {lon}"),
+            Some([lat, lon]) => format!("at {lat}, {lon} (one of {} points)", points.len()),
+            None => format!("at {} points", points.len()),
+        };
+        let what = |k: usize| format!("geoid {} {}", self.model.name(), where_(k));
+        let mut x: Vec<f64> = points.iter().map(|p| p[1]).collect();
+        let mut y: Vec<f64> = points.iter().map(|p| p[0]).collect();
+        let mut z = vec![0.0; points.len()];
         self.to_orthometric
             .transform_coords(&mut x, &mut y, &mut z)
-            .map_err(|e| {
-                Error::invalid(
-                    format!("geoid {} at {lat_deg}, {lon_deg}", self.model.name()),
-                    e.to_string().replace('\n', " "),
-                )
-            })?;
-        if !z[0].is_finite() || z[0].abs() > 200.0 {
+            .map_err(|e| Error::invalid(what(usize::MAX), e.to_string().replace('\n', " ")))?;
+        // H = h - N with h = 0.
+        if let Some(k) = z.iter().position(|v| !v.is_finite() || v.abs() > 200.0) {
             return Err(Error::invalid(
-                format!("geoid {} at {lat_deg}, {lon_deg}", self.model.name()),
-                format!("PROJ gave an undulation of {} m", -z[0]),
+                what(k),
+                format!("PROJ gave an undulation of {} m", -z[k]),
             ));
         }
-        Ok(-z[0])
+        Ok(z.into_iter().map(|v| -v).collect())
     }
 }
 
@@ -138,5 +179,12 @@ mod tests {
         // Swiss Alps (46.5 N 8 E): PROJ's own cs2cs gives H = -50.68 m for h = 0.
         let alps = g.undulation(46.5, 8.0).unwrap();
         assert!((alps - 50.68).abs() < 0.01, "{alps}");
+        // The batch gives the single points' values, in order.
+        let batch = g
+            .undulations(&[[0.0, 0.0], [5.0, 78.0], [46.5, 8.0]])
+            .unwrap();
+        assert_eq!(batch, vec![n, low, alps]);
+        let e = g.undulations(&[[0.0, 0.0], [f64::NAN, 1.0]]).unwrap_err();
+        assert!(!e.to_string().contains('\n'), "{e}");
     }
 }

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 #[cfg(not(feature = "gdal"))]
 use super::crs::CrsKind;
 use super::crs::Georef;
+use super::geoid::{Geoid, GeoidModel};
 use super::level0::{Level0, Terrain};
 use super::settings::{Anchor, DatasetConfig};
 use super::tiles::Dataset;
@@ -156,14 +157,30 @@ impl DatasetConfig {
 }
 
 impl Placement {
+    /// The geoid the data set's heights are measured from (`vertical_datum` `egm96`,
+    /// `unknown`: EGM96; `egm2008`); none for ellipsoidal and local heights.
+    pub fn geoid_model(&self) -> Option<GeoidModel> {
+        GeoidModel::of_datum(&self.vertical_datum)
+    }
+
+    /// Whether [`Placement::lattice`] draws the heights on their datum's own zero surface (the
+    /// geoid for MSL heights), so that world positions are exact geodetic positions with
+    /// ellipsoidal heights: always, except EGM96/EGM2008 heights in a build without PROJ,
+    /// which has no geoid (the heights are then drawn above the ellipsoid, and poses convert
+    /// with the undulation taken at the camera: docs/coordinates.md "Datums").
+    pub fn lattice_on_datum(&self) -> bool {
+        self.geoid_model().is_none() || cfg!(feature = "gdal")
+    }
+
     /// The geolocation lattice of `data` (docs/coordinates.md, "Geodetic geometry"): a
     /// georeferenced grid's samples where PROJ puts them (sample `(c, r)` of `data` is the
     /// native sample `(c, r) * data.source_step()`), an anchored local grid's samples dropped
-    /// onto the ellipsoid from the tangent plane (`Lattice::anchored_plane`).
+    /// onto the ellipsoid from the tangent plane (`Lattice::anchored_plane`); each node on the
+    /// zero surface of the heights' datum ([`Placement::lift`]).
     pub fn lattice(&self, data: &Terrain) -> Result<Lattice> {
         let (w, h) = (data.width(), data.height());
         let Some((georef, _)) = &self.georef else {
-            return Lattice::anchored_plane(w, h, data.spacing(), self.frame);
+            return self.lift(Lattice::anchored_plane(w, h, data.spacing(), self.frame)?);
         };
         let locator = SampleLocator::new(georef)?;
         let [sx, sy] = data.source_step();
@@ -180,9 +197,40 @@ impl Placement {
         let ew = along_row(0.0)?.max(along_row(last_r)?);
         let ns = (metres(0.0, last_r)? - metres(0.0, 0.0)?).length() / last_r;
         let step = Lattice::step_for(w, h, ew.max(ns));
-        Lattice::new(w, h, step, self.frame, |c, r| {
+        self.lift(Lattice::new(w, h, step, self.frame, |c, r| {
             locator.lat_lon(c * sx, r * sy)
-        })
+        })?)
+    }
+
+    /// `lattice` (on the ellipsoid) moved onto the zero surface of the heights' datum: for
+    /// heights above a geoid every node is lifted by the undulation PROJ gives there (one
+    /// batch; a missing grid is PROJ's one-line error, never `N = 0`). Ellipsoidal and local
+    /// heights: unchanged. Without PROJ: unchanged, with a warning (see
+    /// [`Placement::lattice_on_datum`]).
+    pub fn lift(&self, lattice: Lattice) -> Result<Lattice> {
+        let Some(model) = self.geoid_model() else {
+            return Ok(lattice);
+        };
+        if !self.lattice_on_datum() {
+            tracing::warn!(
+                geoid = model.name(),
+                "no PROJ in this build: heights above the geoid are drawn above the ellipsoid (off by the undulation's change from the camera)"
+            );
+            return Ok(lattice);
+        }
+        let started = std::time::Instant::now();
+        let geoid = Geoid::new(model)?;
+        let lifted = lattice.on_datum(|points| geoid.undulations(points))?;
+        let n = lifted.datum_heights();
+        tracing::debug!(
+            geoid = model.name(),
+            nodes = n.len(),
+            min_m = n.iter().copied().fold(f64::INFINITY, f64::min),
+            max_m = n.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            ms = started.elapsed().as_secs_f64() * 1e3,
+            "geolocation lattice on the geoid"
+        );
+        Ok(lifted)
     }
 }
 

@@ -1,8 +1,12 @@
 //! The geolocation lattice: where the terrain's samples lie in the world frame, for the GPU.
 //!
 //! Every `step`-th sample (and one node past the last sample on each axis) the CPU computes in
-//! f64 the world-frame position of the sample at height 0 on the ellipsoid and the unit up
-//! vector there (the ellipsoid normal, rotated into the world frame). Positions are stored
+//! f64 the world-frame position of the sample at height 0 of the data set's vertical datum
+//! (the ellipsoid point, lifted along the normal by the datum's height above the ellipsoid:
+//! the geoid undulation `N` for heights above mean sea level, [`Lattice::on_datum`]; 0 for
+//! ellipsoidal and local heights) and the unit up vector there (the ellipsoid normal, rotated
+//! into the world frame). A sample of height `h` then lies at ellipsoidal height `h + N`,
+//! with `N` bilinear between nodes. Positions are stored
 //! as split doubles (`hi = f32(p)`, `lo = f32(p - hi)`) relative to the world origin. The vertex
 //! shaders (`relative_position` in `shaders/include/terrain_common.wgsl` and its GLSL port)
 //! interpolate the lattice bilinearly at the sample position, add `height * up` and subtract
@@ -35,13 +39,17 @@ pub struct Lattice {
     pub nodes: [u32; 2],
     /// The world frame the positions are in.
     pub frame: EnuFrame,
-    /// World positions (f64, height 0) and unit up vectors, row-major.
+    /// World positions (f64, height 0 of the datum) and unit up vectors, row-major.
     positions: Vec<DVec3>,
     ups: Vec<DVec3>,
     /// A lower bound (metres, an f32 value) of the radius of curvature of the surface and of
     /// the grid's lines on it: culling boxes grow by a curve's sagitta over it
     /// ([`Lattice::rect_box`]).
     curve_radius: f64,
+    /// Each node's geodetic latitude/longitude (degrees) and the datum's height above the
+    /// ellipsoid there (metres; 0 until [`Lattice::on_datum`]).
+    lat_lon: Vec<[f64; 2]>,
+    datum: Vec<f64>,
 }
 
 /// The ellipsoid normal (unit, ECEF) at a geodetic latitude/longitude.
@@ -184,6 +192,7 @@ impl Lattice {
         let mut positions = Vec::with_capacity(count);
         let mut ups = Vec::with_capacity(count);
         let mut max_lat: f64 = 0.0;
+        let mut lat_lon = Vec::with_capacity(count);
         for j in 0..nodes[1] {
             for i in 0..nodes[0] {
                 let (lat, lon) = locate((i * step) as f64, (j * step) as f64)?;
@@ -200,6 +209,7 @@ impl Lattice {
                 max_lat = max_lat.max(lat.abs());
                 positions.push(frame.to_local(WGS84.to_ecef(Geodetic::new(lat, lon, 0.0))));
                 ups.push(frame.rotate_to_local(normal_ecef(lat, lon)));
+                lat_lon.push([lat, lon]);
             }
         }
         Ok(Lattice {
@@ -209,7 +219,50 @@ impl Lattice {
             positions,
             ups,
             curve_radius: curve_radius(max_lat),
+            datum: vec![0.0; lat_lon.len()],
+            lat_lon,
         })
+    }
+
+    /// The lattice on a vertical datum whose zero surface lies `height_above_ellipsoid(points)`
+    /// metres above the ellipsoid at each node's latitude/longitude (`[lat, lon]` degrees, all
+    /// nodes in one call so PROJ can transform them as one batch): every node moves along its
+    /// ellipsoid normal to that surface; the up vectors stay the ellipsoid normals. For heights
+    /// above the EGM96 geoid that is the undulation `N96` (`dataset::geoid`), so a sample of
+    /// orthometric height `H` lies at ellipsoidal height `H + N` (`N` bilinear between nodes).
+    pub fn on_datum(
+        mut self,
+        height_above_ellipsoid: impl FnOnce(&[[f64; 2]]) -> Result<Vec<f64>>,
+    ) -> Result<Self> {
+        let n = height_above_ellipsoid(&self.lat_lon)?;
+        if n.len() != self.lat_lon.len() || n.iter().any(|v| !v.is_finite()) {
+            return Err(Error::invalid(
+                "geolocation lattice",
+                format!(
+                    "the vertical datum gave {} finite heights for {} nodes",
+                    n.iter().filter(|v| v.is_finite()).count(),
+                    self.lat_lon.len()
+                ),
+            ));
+        }
+        for ((p, [lat, lon]), h) in self.positions.iter_mut().zip(&self.lat_lon).zip(&n) {
+            *p = self
+                .frame
+                .to_local(WGS84.to_ecef(Geodetic::new(*lat, *lon, *h)));
+        }
+        self.datum = n;
+        Ok(self)
+    }
+
+    /// The vertical datum's height above the ellipsoid at each node (row-major; all 0 unless
+    /// built [`Lattice::on_datum`]).
+    pub fn datum_heights(&self) -> &[f64] {
+        &self.datum
+    }
+
+    /// Node `(i, j)`'s geodetic latitude and longitude (degrees).
+    pub fn node_lat_lon(&self, i: u32, j: u32) -> [f64; 2] {
+        self.lat_lon[j as usize * self.nodes[0] as usize + i as usize]
     }
 
     /// A grid with `spacing` in metres and no georeferencing, anchored at `frame`'s origin:
@@ -347,9 +400,11 @@ impl Lattice {
 
     /// Where world point `p` lies over the lattice: the sample position `s` whose surface
     /// normal line passes through `p`, and `p`'s height above the lattice surface along it
-    /// (`position(s, height) == p`). Gauss-Newton on the CPU mirror: the mapping is smooth and
-    /// nearly linear, so a few iterations reach 1e-9 samples; points outside the grid
-    /// extrapolate from the edge cells. The renderer measures LOD distances from this point.
+    /// (`position(s, height) == p`): a height in the data set's vertical datum, as the
+    /// terrain's heights are (the lattice surface is the datum's zero, [`Lattice::on_datum`]).
+    /// Gauss-Newton on the CPU mirror: the mapping is smooth and nearly linear, so a few
+    /// iterations reach 1e-9 samples; points outside the grid extrapolate from the edge
+    /// cells. The renderer measures LOD distances from this point.
     pub fn sample_at(&self, p: DVec3) -> (DVec2, f64) {
         let mut s = DVec2::new(
             (self.nodes[0] - 1) as f64 * self.step as f64 / 2.0,
@@ -381,8 +436,8 @@ impl Lattice {
         (s, height)
     }
 
-    /// The largest distance between the lattice's interpolated surface and the true ellipsoid
-    /// surface over `locate`'s points, measured at every sample of a `probe_step` grid (tests
+    /// The largest distance between the interpolated surface of a lattice on the ellipsoid
+    /// (not [`Lattice::on_datum`]) and the true ellipsoid surface over `locate`'s points, measured at every sample of a `probe_step` grid (tests
     /// and docs: the interpolation part of the error budget).
     pub fn max_interpolation_error(
         &self,
@@ -453,6 +508,64 @@ mod tests {
             assert!((got - s).length() < 1e-6, "{s} -> {got}");
             assert!((got_h - h).abs() < 1e-6, "{h} -> {got_h}");
         }
+    }
+
+    #[test]
+    fn on_datum_lifts_every_node_along_its_normal() {
+        let (w, h, d) = (601u32, 401u32, 1.0 / 1200.0);
+        let flat = Lattice::geographic(w, h, [7.5, 46.0], [d, d]).unwrap();
+        // A smooth made-up undulation (metres) with a slope like the geoid's in mountains.
+        let n = |lat: f64, lon: f64| 48.0 + 3.0 * (lat - 46.0) - 2.0 * (lon - 7.5);
+        let lifted = flat
+            .clone()
+            .on_datum(|pts| Ok(pts.iter().map(|[la, lo]| n(*la, *lo)).collect()))
+            .unwrap();
+        assert_eq!((lifted.step, lifted.nodes), (flat.step, flat.nodes));
+        // A sample of height 1000 in the datum lies at ellipsoidal height 1000 + N: within the
+        // sagitta bound of the lattice on the ellipsoid (1 cm for these 460 m cells; N is
+        // linear here, so its interpolation adds nothing measurable).
+        for (c, r) in [(0.0, 0.0), (300.0, 200.0), (123.0, 77.0), (600.0, 400.0)] {
+            let (lat, lon) = (46.0 + r * d, 7.5 + c * d);
+            let want =
+                lifted
+                    .frame
+                    .to_local(WGS84.to_ecef(Geodetic::new(lat, lon, 1000.0 + n(lat, lon))));
+            let got = lifted.position(DVec2::new(c, r), 1000.0);
+            assert!((got - want).length() < 1e-2, "({c}, {r}): {got} vs {want}");
+            // Negative control: the lattice on the ellipsoid misses by N.
+            let miss = (flat.position(DVec2::new(c, r), 1000.0) - want).length();
+            assert!((miss - n(lat, lon)).abs() < 1e-2, "{miss}");
+            // The inverse gives the height in the datum, not above the ellipsoid.
+            let (s, back) = lifted.sample_at(got);
+            assert!((s - DVec2::new(c, r)).length() < 1e-6 && (back - 1000.0).abs() < 1e-6);
+        }
+        assert_eq!(
+            lifted.node_lat_lon(1, 0),
+            [46.0, 7.5 + lifted.step as f64 * d]
+        );
+        let spread = lifted
+            .datum_heights()
+            .iter()
+            .copied()
+            .fold(f64::MIN, f64::max)
+            - lifted
+                .datum_heights()
+                .iter()
+                .copied()
+                .fold(f64::MAX, f64::min);
+        assert!(spread > 1.0 && flat.datum_heights().iter().all(|v| *v == 0.0));
+        // A datum that answers for fewer nodes, or NaN, is a one-line error.
+        let e = flat
+            .clone()
+            .on_datum(|_| Ok(vec![1.0]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nodes") && !e.contains('\n'), "{e}");
+        let e = flat
+            .on_datum(|p| Ok(vec![f64::NAN; p.len()]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("finite"), "{e}");
     }
 
     #[test]

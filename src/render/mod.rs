@@ -437,7 +437,8 @@ impl Renderer {
 
     /// Where LOD distances are measured from, in the grid's frame (`x = col * spacing`,
     /// `y = row * spacing`, `z` = height): on the flat world the world point itself; on the
-    /// earth the sample position under it and its height above the ellipsoid
+    /// earth the sample position under it and its height above the lattice surface (the
+    /// terrain's datum: the lattice lies on its zero surface)
     /// ([`crate::geo::Lattice::sample_at`]), so every method's and the clipmap's distances and
     /// reference heights refer to the samples actually below the viewer (docs/coordinates.md).
     fn grid_viewer(&self, world: glam::DVec3) -> glam::DVec3 {

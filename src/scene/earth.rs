@@ -1,17 +1,15 @@
 //! Cameras placed on the earth: [`GeoPose`] (WGS84 latitude/longitude, a height above the
 //! ellipsoid, mean sea level or the ground, heading/pitch/roll in the local NED frame) <->
-//! [`Camera`] in the data set's world frame, with the heights brought into the terrain's
-//! vertical datum (`docs/coordinates.md` "Datums").
+//! [`Camera`] in the data set's world frame (`docs/coordinates.md` "Datums").
 //!
-//! **One datum for poses and terrain.** The world frame's heights are the terrain's: a sample
-//! of height `h` lies `h` metres along the ellipsoid normal above its grid position. So a
-//! pose's height is converted into the terrain's datum at the pose: for EGM96 terrain (SRTM)
-//! a height above mean sea level is used as it is and a height above the ellipsoid loses the
-//! undulation `N` there; for terrain in ellipsoidal or local heights, an MSL height gains `N`.
-//! The geoid is evaluated at the camera, so the terrain's heights are taken as if the geoid
-//! were parallel to the ellipsoid across the view (EGM96 slopes are below ~1e-4 in most places:
-//! < 5 m at 50 km; see the docs).
-
+//! **The world's heights.** Drawn on the ellipsoid ([`Earth::on_lattice`]), the geolocation
+//! lattice places the terrain's heights on their datum's own zero surface (EGM96 heights on
+//! the geoid, `N(lat, lon)` at every node), so world positions are exact geodetic positions:
+//! a pose's height is brought to the ellipsoid at the pose (an MSL height gains `N96` there,
+//! a ground height the terrain's undulation). In the flat world ([`Earth::new`]), and for
+//! geoid heights in a build without PROJ, the world's heights are the terrain's: a pose's
+//! height is converted into the terrain's datum at the camera, so terrain far from it is off
+//! by the undulation's change from there (EGM96: < 5 m at 50 km in most places).
 use std::cell::OnceCell;
 
 use glam::DVec3;
@@ -30,6 +28,9 @@ pub struct Earth {
     pub placement: Placement,
     /// The geoid of the terrain's heights (none: ellipsoidal or local heights).
     terrain_geoid: Option<GeoidModel>,
+    /// World heights are above the ellipsoid (the terrain drawn on its datum's surface by the
+    /// lattice); false: in the terrain's datum (the flat world; geoid heights without PROJ).
+    ellipsoidal_world: bool,
     egm96: OnceCell<std::result::Result<Geoid, String>>,
     terrain: OnceCell<std::result::Result<Geoid, String>>,
     /// WGS 84 -> the grid's CRS (georeferenced data).
@@ -37,9 +38,23 @@ pub struct Earth {
 }
 
 impl Earth {
+    /// The earth of the flat world: world heights are the terrain's (module doc).
     pub fn new(placement: Placement) -> Self {
+        Self::with_heights(placement, false)
+    }
+
+    /// The earth of a terrain drawn on the ellipsoid through `placement`'s lattice
+    /// (`Placement::lattice`): world heights are above the ellipsoid wherever the lattice
+    /// carries the terrain's datum (`Placement::lattice_on_datum`).
+    pub fn on_lattice(placement: Placement) -> Self {
+        let ellipsoidal = placement.lattice_on_datum();
+        Self::with_heights(placement, ellipsoidal)
+    }
+
+    fn with_heights(placement: Placement, ellipsoidal_world: bool) -> Self {
         Earth {
             terrain_geoid: GeoidModel::of_datum(&placement.vertical_datum),
+            ellipsoidal_world,
             placement,
             egm96: OnceCell::new(),
             terrain: OnceCell::new(),
@@ -114,8 +129,8 @@ impl Earth {
     /// sample, its heading turned by the grid north's own true heading there (meridian
     /// convergence of a projected grid, zero for a geographic one). Its `height_m` is `z`, in
     /// the terrain's datum, which is how the lattice draws the terrain's heights: place it with
-    /// [`Earth::camera_at`]`(pose, z, ..)` (no geoid needed). Scenarios use it so that
-    /// keyframes given on the grid keep their place over the terrain on the ellipsoid.
+    /// [`Earth::camera_at`]`(pose, `[`Earth::terrain_to_world`]`(..), ..)`. Scenarios use it so
+    /// that keyframes given on the grid keep their place over the terrain on the ellipsoid.
     pub fn grid_pose<D: Level0 + ?Sized>(
         &self,
         data: &D,
@@ -152,29 +167,50 @@ impl Earth {
             .map_err(|e| Error::invalid("height_ref = \"ground\"", e.clone()))
     }
 
-    /// The pose's height in the world frame's (the terrain's) datum; `data` answers ground
-    /// heights.
+    /// The pose's height in the world's datum (above the ellipsoid, or in the terrain's datum
+    /// in the flat world: module doc); `data` answers ground heights.
     pub fn world_height<D: Level0 + ?Sized>(&self, pose: &GeoPose, data: &D) -> Result<f64> {
         let (lat, lon) = (pose.lat_deg, pose.lon_deg);
+        if self.ellipsoidal_world {
+            return match pose.height_ref {
+                HeightRef::Ellipsoid => Ok(pose.height_m),
+                HeightRef::Msl => Ok(pose.height_m + self.msl_undulation(lat, lon)?),
+                HeightRef::Ground => self.terrain_to_world(lat, lon, self.ground(pose, data)?),
+            };
+        }
         match pose.height_ref {
             HeightRef::Ellipsoid => Ok(pose.height_m - self.terrain_undulation(lat, lon)?),
             HeightRef::Msl if self.terrain_geoid == Some(GeoidModel::Egm96) => Ok(pose.height_m),
             HeightRef::Msl => Ok(pose.height_m + self.msl_undulation(lat, lon)?
                 - self.terrain_undulation(lat, lon)?),
-            HeightRef::Ground => {
-                let (x, y) = self.grid_position(data, lat, lon)?;
-                let (ex, ey) = data.extent();
-                if !(-1e-6 * ex..=ex * (1.0 + 1e-6)).contains(&x)
-                    || !(-1e-6 * ey..=ey * (1.0 + 1e-6)).contains(&y)
-                {
-                    return Err(Error::invalid(
-                        "height_ref = \"ground\"",
-                        format!("{lat} deg, {lon} deg lies outside the data set: no ground there"),
-                    ));
-                }
-                Ok(data.bilinear(x, y)? + pose.height_m)
-            }
+            HeightRef::Ground => self.ground(pose, data),
         }
+    }
+
+    /// The world's height (above the ellipsoid, or the terrain's datum in the flat world) of a
+    /// point `height` metres above the terrain's datum at a place (grid keyframes).
+    pub fn terrain_to_world(&self, lat_deg: f64, lon_deg: f64, height: f64) -> Result<f64> {
+        if self.ellipsoidal_world && self.terrain_geoid.is_some() {
+            Ok(height + self.terrain_undulation(lat_deg, lon_deg)?)
+        } else {
+            Ok(height)
+        }
+    }
+
+    /// A ground pose's height in the terrain's datum: the terrain there plus `height_m`.
+    fn ground<D: Level0 + ?Sized>(&self, pose: &GeoPose, data: &D) -> Result<f64> {
+        let (lat, lon) = (pose.lat_deg, pose.lon_deg);
+        let (x, y) = self.grid_position(data, lat, lon)?;
+        let (ex, ey) = data.extent();
+        if !(-1e-6 * ex..=ex * (1.0 + 1e-6)).contains(&x)
+            || !(-1e-6 * ey..=ey * (1.0 + 1e-6)).contains(&y)
+        {
+            return Err(Error::invalid(
+                "height_ref = \"ground\"",
+                format!("{lat} deg, {lon} deg lies outside the data set: no ground there"),
+            ));
+        }
+        Ok(data.bilinear(x, y)? + pose.height_m)
     }
 
     /// The camera of a pose (`template` gives the field of view and clip planes).
@@ -189,8 +225,8 @@ impl Earth {
         self.camera_at(pose, h, template)
     }
 
-    /// The camera of `pose` at `world_height` metres in the terrain's datum (its own
-    /// `height_m`/`height_ref` unused).
+    /// The camera of `pose` at `world_height` metres in the world's datum
+    /// ([`Earth::world_height`]; its own `height_m`/`height_ref` unused).
     pub fn camera_at(
         &self,
         pose: &GeoPose,
@@ -213,11 +249,19 @@ impl Earth {
     /// The WGS84 pose of a camera, its height above the ellipsoid.
     pub fn pose(&self, camera: &Camera) -> Result<GeoPose> {
         let mut p = GeoPose::from_world(self.frame(), &camera.into());
-        p.height_m += self.terrain_undulation(p.lat_deg, p.lon_deg)?;
+        if !self.ellipsoidal_world {
+            p.height_m += self.terrain_undulation(p.lat_deg, p.lon_deg)?;
+        }
         Ok(p)
     }
 
-    /// The world position of a geodetic point whose height is in the terrain's datum.
+    /// Whether world heights are above the ellipsoid (module doc): the datum of the heights
+    /// [`GeoPose::from_world`] reads back from world positions.
+    pub fn ellipsoidal_world(&self) -> bool {
+        self.ellipsoidal_world
+    }
+
+    /// The world position of a geodetic point whose height is in the world's datum.
     pub fn world_position(&self, at: Geodetic) -> DVec3 {
         self.frame().to_local(WGS84.to_ecef(at))
     }

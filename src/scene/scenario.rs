@@ -150,7 +150,8 @@ struct Key {
     yaw: f64,
     pitch: f64,
     roll: f64,
-    /// A WGS84 keyframe, its height in the world frame's datum (`height_ref` ellipsoid).
+    /// A WGS84 keyframe, its height in the world's datum (above the ellipsoid on the lattice,
+    /// `Earth::world_height`), interpolated linearly between keys.
     geo: Option<GeoPose>,
 }
 
@@ -168,7 +169,10 @@ impl Key {
         template: &Camera,
     ) -> Result<Key> {
         let c = match world_height {
-            Some(h) => earth.camera_at(pose, h, template)?,
+            Some(h) => {
+                let h = earth.terrain_to_world(pose.lat_deg, pose.lon_deg, h)?;
+                earth.camera_at(pose, h, template)?
+            }
             None => earth.camera(pose, data, template)?,
         };
         let height = WGS84.to_geodetic(earth.frame().to_ecef(c.position)).height;

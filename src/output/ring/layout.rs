@@ -134,7 +134,9 @@ pub struct FrameMeta {
     pub triangles: u64,
     /// The datum of `height_m` below: [`DATUM_NONE`] (no world frame on the earth: the WGS84
     /// fields are NaN), [`DATUM_ELLIPSOID`], [`DATUM_EGM96`] or [`DATUM_EGM2008`] (the
-    /// terrain's datum: the pose's height is measured like the terrain's heights).
+    /// world's datum: the ellipsoid when the terrain is drawn on it through the lattice, which
+    /// carries the terrain's geoid; the terrain's datum in the flat world and in a build
+    /// without PROJ).
     pub height_datum: u32,
     pub _reserved1: u32,
     /// The camera on the earth (WGS84 latitude/longitude, degrees).
