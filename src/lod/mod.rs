@@ -231,6 +231,9 @@ pub struct MethodContext<'a> {
     pub data: &'a crate::dataset::Terrain,
     pub formats: TargetFormats,
     pub slots: usize,
+    /// The geolocation lattice the terrain is drawn through (None: the flat world), for
+    /// methods whose CPU side needs the earth's geometry (PGM's auxiliary camera).
+    pub lattice: Option<&'a crate::geo::Lattice>,
 }
 
 /// One LOD method. Per frame the renderer calls `update` (host side, slot free), then records

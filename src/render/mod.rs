@@ -270,6 +270,7 @@ impl Renderer {
                 data: &data,
                 formats: pass.formats,
                 slots: layout.view_slots(),
+                lattice,
             },
         )?;
         let slots = layout
