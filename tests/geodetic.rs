@@ -1059,3 +1059,64 @@ fn udlod_through_the_clipmap_is_watertight_on_a_native_geographic_grid() {
     common::assert_no_validation_messages(&gpu);
     std::fs::remove_dir_all(&tmp).ok();
 }
+
+/// PGM's reference sphere on the CPU (`lod::pgm::earth::Sphere`, the shader's formula in f64):
+/// a ray that meets the sphere lands where the textbook quadratic (written out here, in the
+/// plane of the ray) puts it; the horizon is at `sqrt(2 a R)`-ish; distances fall steadily
+/// with the depression and join continuously at the horizon, where rays above it take
+/// distances out to the largest one. Negative control: the rays just above the horizon lie
+/// beyond it (cutting them all at the largest distance would jump there).
+#[test]
+fn pgm_reference_sphere_hits_and_joins_at_the_horizon() {
+    use vkterrain::lod::pgm::earth::Sphere;
+    let d_max = 200_000.0;
+    for (radius, height) in [
+        (6_371_500.0, 10.0),
+        (6_372_000.0, 3000.0),
+        (6_400_000.0, 2.0),
+    ] {
+        let sphere = Sphere { radius, height };
+        let e_h = sphere.horizon_depression();
+        let d_h = sphere.horizon_distance();
+        let approx = (2.0 * height * radius).sqrt();
+        assert!((d_h - approx).abs() < 1e-3 * approx, "{d_h} vs {approx}");
+        // The oracle: camera at (0, R + a), ray (cos e, -sin e); |p| = R, nearer root.
+        for e_deg in [90.0, 60.0, 20.0, 5.0, 1.0, 0.2] {
+            let e = f64::to_radians(e_deg);
+            if e <= e_h {
+                continue;
+            }
+            let (c, b) = (radius + height, -(radius + height) * e.sin());
+            let t = -b - (b * b - (c * c - radius * radius)).sqrt();
+            let (x, y) = (t * e.cos(), c - t * e.sin());
+            let want = (radius * x.atan2(y)).min(d_max);
+            let got = sphere.distance(e.sin(), d_max);
+            assert!(
+                (got - want).abs() <= 1e-6 * want + 1e-6,
+                "e {e_deg}: {got} vs {want}"
+            );
+        }
+        // Continuous at the horizon, falling with the depression everywhere.
+        let below = sphere.distance((e_h * (1.0 + 1e-9)).sin(), d_max);
+        let above = sphere.distance((e_h * (1.0 - 1e-9)).sin(), d_max);
+        assert!((below - d_h).abs() < 0.01 * d_h && (above - d_h).abs() < 0.01 * d_h);
+        let mut last = f64::INFINITY;
+        for k in 0..=2000 {
+            let s = -0.05 + 1.05 * k as f64 / 2000.0;
+            let dist = sphere.distance(s, d_max);
+            assert!(
+                dist <= last + 1e-6 && dist <= d_max,
+                "s {s}: {dist} after {last}"
+            );
+            last = dist;
+        }
+        assert_eq!(sphere.distance(-0.01, d_max), d_max);
+        assert!(sphere.distance(1.0, d_max) < 1e-6);
+        // Negative control: halfway between the horizon and the horizontal the distance lies
+        // strictly between the horizon's and the largest (not cut at either).
+        if d_h < d_max {
+            let mid = sphere.distance((0.5 * e_h).sin(), d_max);
+            assert!(mid > 1.001 * d_h && mid < 0.999 * d_max, "{mid} {d_h}");
+        }
+    }
+}
