@@ -9,6 +9,7 @@
 //!   pixels on screen).
 //! - UDLOD on the earth stays within tau at the 99.9th percentile on the CI terrain (anchored)
 //!   and has no holes.
+//! - PGM on the earth errs as on the flat world (p99.9 against the same flight drawn flat).
 //!
 //! Validation (incl. synchronization) on.
 
