@@ -4,7 +4,7 @@
 //! `target/bench/eval.json`.
 //!
 //! Each case is evaluated on its configured earth (`[render] earth`: a data set with a world
-//! frame on the ellipsoid by default, where PGM, which refuses the earth, is left out).
+//! frame on the ellipsoid by default, where PGM is not run yet: see `run_case`).
 //!
 //! `VKTERRAIN_EVAL_SHORT=1` is the CI version (the procedural CI terrain at 320x180, flat and
 //! anchored on the earth, a few minutes at most). It asserts correctness, never absolute times: UDLOD has no holes, its
@@ -156,8 +156,9 @@ fn run_case(root: &str, case: &Case, short: bool) -> anyhow::Result<Option<Evalu
         }
     };
     let gpu = p.config.open_gpu()?;
-    // PGM casts its grid onto the flat plane and refuses the earth (docs/coordinates.md):
-    // on the ellipsoid the case compares brute force and UDLOD.
+    // On the ellipsoid the case compares brute force and UDLOD: PGM draws on the earth since
+    // its grid meets the curved surface (docs/pgm.md, "On the earth"), but its earth cases
+    // (CI time, the swimming assertion there) are not added yet.
     let on_earth = p.config.render.earth == vkterrain::render::EarthGeometry::Ellipsoid
         && p.config.world_frame()?.is_some();
     let methods: &[MethodKind] = if on_earth {

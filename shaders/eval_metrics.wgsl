@@ -244,109 +244,30 @@ fn grid_point(v: u32, rel: vec3<f32>) -> GridPoint {
     return GridPoint(GridPos(view.cell.xy + vec2<i32>(fl), q - fl), rel.z);
 }
 
-// Camera-relative position of lattice node `node` for view v (hi parts subtracted first, then
-// lo parts: terrain_common.wgsl's lattice_relative with the view's camera).
-fn lattice_rel(v: u32, node: vec2<i32>) -> vec3<f32> {
-    let i = 3 * (node.y * i32(frame.lattice.y) + node.x);
-    let view = frame.views[v];
-    return (geo_lattice[i].xyz - view.cam_hi.xyz) + (geo_lattice[i + 1].xyz - view.cam_lo.xyz);
-}
-
-fn lattice_up(node: vec2<i32>) -> vec3<f32> {
-    return geo_lattice[3 * (node.y * i32(frame.lattice.y) + node.x) + 2].xyz;
-}
-
-// The lattice cell (lower node) of a sample cell, clamped like the vertex shaders'.
-fn lattice_cell(cell: vec2<i32>) -> vec2<i32> {
-    let l = i32(frame.lattice.x);
-    let c = vec2<i32>(floor(vec2<f32>(cell) / f32(l)));
-    return clamp(c, vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
-}
-
-// One lattice cell of view v: corners (camera-relative) and up vectors.
-struct Patch {
-    p00: vec3<f32>,
-    p10: vec3<f32>,
-    p01: vec3<f32>,
-    p11: vec3<f32>,
-    u00: vec3<f32>,
-    u10: vec3<f32>,
-    u01: vec3<f32>,
-    u11: vec3<f32>,
-}
-
-fn patch_of(v: u32, n: vec2<i32>) -> Patch {
-    let x = vec2<i32>(1, 0);
-    let y = vec2<i32>(0, 1);
-    return Patch(
-        lattice_rel(v, n), lattice_rel(v, n + x), lattice_rel(v, n + y), lattice_rel(v, n + x + y),
-        lattice_up(n), lattice_up(n + x), lattice_up(n + y), lattice_up(n + x + y),
-    );
-}
-
-fn bilerp(a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, d: vec3<f32>, f: vec2<f32>) -> vec3<f32> {
-    return mix(mix(a, b, f.x), mix(c, d, f.x), f.y);
-}
+// The lattice helpers and their inverse (lattice_invert) are shared with PGM.
+//!include lattice_inverse.wgsl
 
 // Camera-relative position (view v) of the surface point at sample cell + frac and height h:
 // the vertex shaders' relative_position on the earth.
 fn lattice_position(v: u32, cell: vec2<i32>, frac: vec2<f32>, h: f32) -> vec3<f32> {
     let l = i32(frame.lattice.x);
-    let n = lattice_cell(cell);
+    let n = lattice_cell_of(cell);
     let f = (vec2<f32>(cell - n * l) + frac) / f32(l);
-    let q = patch_of(v, n);
-    return bilerp(q.p00, q.p10, q.p01, q.p11, f) + h * bilerp(q.u00, q.u10, q.u01, q.u11, f);
+    let view = frame.views[v];
+    let q = lattice_patch(n, view.cam_hi.xyz, view.cam_lo.xyz);
+    return lattice_bilerp(q.p00, q.p10, q.p01, q.p11, f) + h * lattice_bilerp(q.u00, q.u10, q.u01, q.u11, f);
 }
 
 // The inverse of lattice_position (Lattice::sample_at on the CPU): the sample position and
-// height whose surface point is the camera-relative `rel`. Newton on the bilinear patch
-// `P(f) + h U(f) = rel` of the current lattice cell, in camera-relative f32, starting from
-// the camera's own sample position and height; after each step the estimate moves into the
-// cell it lies in (outside the lattice the edge cells extrapolate, as the vertex shaders do).
-// docs/eval.md ("On the earth") derives the precision.
+// height whose surface point is the camera-relative `rel`, starting from the camera's own
+// sample position and height (lattice_invert in include/lattice_inverse.wgsl).
 fn lattice_inverse(v: u32, rel: vec3<f32>) -> GridPoint {
     let view = frame.views[v];
-    let l = i32(frame.lattice.x);
-    let fl = f32(l);
-    let last = vec2<i32>(frame.lattice.yz) - vec2<i32>(2);
-    var n = lattice_cell(view.cell.xy);
-    var f = (vec2<f32>(view.cell.xy - n * l) + view.offset.xy / frame.params.x) / fl;
-    var q = patch_of(v, n);
-    // Height relative to the camera's: the camera's absolute height is added at the end.
-    var dz = 0.0;
-    let h_cam = view.offset.z + view.offset.w;
-    // A residual this small is the f32 model's own noise (docs/eval.md, "On the earth").
-    let tolerance = 5e-7 * length(rel) + 1e-4;
-    for (var k = 0u; k < EVAL_LATTICE_ITERATIONS; k += 1u) {
-        let m = clamp(n + vec2<i32>(floor(f)), vec2<i32>(0), last);
-        if any(m != n) {
-            f -= vec2<f32>(m - n);
-            n = m;
-            q = patch_of(v, n);
-        }
-        let h = h_cam + dz;
-        let u = bilerp(q.u00, q.u10, q.u01, q.u11, f);
-        let r = rel - (bilerp(q.p00, q.p10, q.p01, q.p11, f) + h * u);
-        if dot(r, r) <= tolerance * tolerance {
-            break;
-        }
-        let ux = mix(q.u10 - q.u00, q.u11 - q.u01, f.y);
-        let uy = mix(q.u01 - q.u00, q.u11 - q.u10, f.x);
-        let jx = mix(q.p10 - q.p00, q.p11 - q.p01, f.y) + h * ux;
-        let jy = mix(q.p01 - q.p00, q.p11 - q.p10, f.x) + h * uy;
-        // Solve [jx jy u] d = r (Cramer's rule).
-        let c = cross(jy, u);
-        let det = dot(jx, c);
-        if abs(det) < 1e-30 {
-            break;
-        }
-        let d = vec3<f32>(dot(r, c), dot(jx, cross(r, u)), dot(jx, cross(jy, r))) / det;
-        f += d.xy;
-        dz += d.z;
-    }
-    let s = f * fl;
-    let cell = floor(s);
-    return GridPoint(GridPos(n * l + vec2<i32>(cell), s - cell), dz);
+    let hit = lattice_invert(
+        view.cam_hi.xyz, view.cam_lo.xyz, view.cell.xy, view.offset.xy / frame.params.x,
+        view.offset.z + view.offset.w, rel, EVAL_LATTICE_ITERATIONS,
+    );
+    return GridPoint(GridPos(hit.cell, hit.frac), hit.dz);
 }
 
 // The up vector (unit length on the earth) at sample cell + frac; the flat world's is z.
@@ -355,11 +276,11 @@ fn up_at(cell: vec2<i32>, frac: vec2<f32>) -> vec3<f32> {
         return vec3<f32>(0.0, 0.0, 1.0);
     }
     let l = i32(frame.lattice.x);
-    let n = lattice_cell(cell);
+    let n = lattice_cell_of(cell);
     let f = (vec2<f32>(cell - n * l) + frac) / f32(l);
     let x = vec2<i32>(1, 0);
     let y = vec2<i32>(0, 1);
-    return normalize(bilerp(lattice_up(n), lattice_up(n + x), lattice_up(n + y), lattice_up(n + x + y), f));
+    return normalize(lattice_bilerp(lattice_node_up(n), lattice_node_up(n + x), lattice_node_up(n + y), lattice_node_up(n + x + y), f));
 }
 
 // Whether a sample position lies on the data, at least EVAL_EDGE_BAND samples inside its

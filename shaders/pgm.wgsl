@@ -6,6 +6,7 @@
 // so vertices slide over the terrain ("swimming"). See src/lod/pgm.rs and docs/pgm.md.
 
 //!include terrain_common.wgsl
+//!include lattice_inverse.wgsl
 
 // Mirrors `PgmUniforms` in src/lod/pgm.rs; a test proves the layouts equal.
 struct Pgm {
@@ -18,6 +19,19 @@ struct Pgm {
     drow: vec4<f32>,
     // x: columns, y: rows, z: rows per instanced band, w: mip levels of `height_mips`.
     grid: vec4<u32>,
+    // On the earth (docs/pgm.md, "On the earth"; zero on the flat world): xyz: the up vector
+    // at the camera's sample (world axes, as the directions above); w: radius of the
+    // reference sphere (m), 0 on the flat world.
+    earth: vec4<f32>,
+    // xyz: columns per world metre at the camera; w: the reference height (m).
+    to_col: vec4<f32>,
+    // xyz: rows per world metre at the camera; w: sine of the sphere's horizon depression.
+    to_row: vec4<f32>,
+    // xy: the sample cell under the camera.
+    cam_cell: vec4<i32>,
+    // xy: the camera's sample position within it; z: the horizon's surface distance (m);
+    // w: its depression angle (rad).
+    cam_frac: vec4<f32>,
 }
 
 @group(1) @binding(0) var<uniform> pgm: Pgm;
@@ -57,13 +71,59 @@ fn ground_offset(g: vec2<i32>) -> vec2<f32> {
     return dir.xy * (d / flat_len);
 }
 
-@vertex
-fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
-    let cols = pgm.grid.x;
-    let g = vec2<i32>(
-        i32(vertex % cols),
-        i32(min(instance * pgm.grid.z + vertex / cols, pgm.grid.y - 1u)),
-    );
+// On the earth: the camera-relative world point on the reference sphere that the ray of grid
+// vertex `g` stands for, at surface distance `dist` along the sphere in the ray's azimuth:
+// where the ray meets the sphere, no farther than the largest distance; a ray above the
+// sphere's horizon takes a distance between the horizon's and the largest, logarithmic in its
+// depression angle (earth::Sphere::distance on the CPU is the same formula in f64).
+fn earth_ground_point(g: vec2<i32>) -> vec3<f32> {
+    let t = vec2<f32>(f32(g.x) / f32(pgm.grid.x - 1u), row_fraction(g.y));
+    let d = normalize(pgm.dir0.xyz + pgm.dcol.xyz * t.x + pgm.drow.xyz * t.y);
+    let up = pgm.earth.xyz;
+    let rho = pgm.earth.w;
+    let a = pgm.dir0.w;
+    let d_max = pgm.dcol.w;
+    // Sine of the ray's depression below the local horizontal, and its horizontal part.
+    let s = -dot(d, up);
+    let horizontal = d + s * up;
+    let hl = length(horizontal);
+    if hl == 0.0 {
+        return -a * up;
+    }
+    let sin_h = pgm.to_row.w;
+    var dist = d_max;
+    if s > sin_h {
+        // Along the ray: t^2 - 2 t (rho + a) s + a (2 rho + a) = 0, the nearer root in the
+        // form without cancellation; the discriminant factored by the horizon's sine.
+        let ra = rho + a;
+        let disc = ra * ra * (s - sin_h) * (s + sin_h);
+        let along = a * (2.0 * rho + a) / (ra * s + sqrt(disc));
+        dist = min(rho * atan2(along * hl, ra - along * s), d_max);
+    } else if pgm.cam_frac.z < d_max && s > 0.0 {
+        dist = d_max * exp(log(pgm.cam_frac.z / d_max) * asin(s) / pgm.cam_frac.w);
+    }
+    let phi = dist / rho;
+    let half = sin(0.5 * phi);
+    // rho (cos phi - 1) without cancellation: -2 rho sin^2(phi / 2).
+    return horizontal * (rho * sin(phi) / hl) - up * (a + 2.0 * rho * half * half);
+}
+
+// World metres to texels at the camera (the lattice's Jacobian there, inverted).
+fn earth_texels(e: vec3<f32>) -> f32 {
+    return length(vec2<f32>(dot(pgm.to_col.xyz, e), dot(pgm.to_row.xyz, e)));
+}
+
+// A sample position: integer cell + fraction.
+struct SamplePos {
+    cell: vec2<i32>,
+    frac: vec2<f32>,
+    // Mip level of the heights.
+    level: f32,
+}
+
+// The flat world: the ray's ground offset from the camera read as a grid offset from the
+// camera's cell (and the ablation `earth_projection = false` on the earth).
+fn flat_sample(g: vec2<i32>) -> SamplePos {
     let p = ground_offset(g);
     let spacing = frame.camera_offset.w;
     // Longest projected edge of the cells around the vertex, in texels -> mip level.
@@ -76,8 +136,44 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     // Sample position as integer cell + fraction (relative to the camera cell first).
     let t = frame.camera_offset.xy / spacing + p / spacing;
     let fl = floor(t);
-    let cell = frame.camera_cell.xy + vec2<i32>(fl);
-    let frac = t - fl;
+    return SamplePos(frame.camera_cell.xy + vec2<i32>(fl), t - fl, level);
+}
+
+// The earth: the ray's point on the reference sphere, mapped to the sample under it by the
+// lattice's inverse (from the first guess of the camera's Jacobian).
+fn earth_sample(g: vec2<i32>) -> SamplePos {
+    let p = earth_ground_point(g);
+    var longest = 0.0;
+    longest = max(longest, earth_texels(earth_ground_point(g + vec2<i32>(1, 0)) - p));
+    longest = max(longest, earth_texels(earth_ground_point(g - vec2<i32>(1, 0)) - p));
+    longest = max(longest, earth_texels(earth_ground_point(g + vec2<i32>(0, 1)) - p));
+    longest = max(longest, earth_texels(earth_ground_point(g - vec2<i32>(0, 1)) - p));
+    let level = clamp(log2(max(longest, 1.0)), 0.0, f32(pgm.grid.w - 1u));
+    let guess = pgm.cam_frac.xy + vec2<f32>(dot(pgm.to_col.xyz, p), dot(pgm.to_row.xyz, p));
+    let fl = floor(guess);
+    let hit = lattice_invert(
+        frame.camera_hi.xyz, frame.camera_lo.xyz, pgm.cam_cell.xy + vec2<i32>(fl), guess - fl,
+        pgm.to_col.w, p, PGM_LATTICE_ITERATIONS,
+    );
+    return SamplePos(hit.cell, hit.frac, level);
+}
+
+@vertex
+fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    let cols = pgm.grid.x;
+    let g = vec2<i32>(
+        i32(vertex % cols),
+        i32(min(instance * pgm.grid.z + vertex / cols, pgm.grid.y - 1u)),
+    );
+    var sp: SamplePos;
+    if pgm.earth.w == 0.0 {
+        sp = flat_sample(g);
+    } else {
+        sp = earth_sample(g);
+    }
+    let cell = sp.cell;
+    let frac = sp.frac;
+    let level = sp.level;
     // Outside the data the vertex keeps its position and takes the border's height (clamped
     // sample); the fragment stage cuts every triangle at the border, where brute force ends.
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);

@@ -95,6 +95,10 @@ shared_constants! {
     /// camera's lattice cell; the loop stops once the residual is f32 noise, 2^-21 of the
     /// point's distance).
     EVAL_LATTICE_ITERATIONS: u32 = 6;
+    /// PGM on the earth: most Newton iterations inverting the geolocation lattice per grid
+    /// vertex (`lattice_invert`, from the camera's Jacobian as the first guess; docs/pgm.md
+    /// "On the earth").
+    PGM_LATTICE_ITERATIONS: u32 = 6;
     /// Threads per workgroup of the UDLOD morph probe (tests: morphed vertices read back).
     UDLOD_PROBE_WORKGROUP: u32 = 64;
     /// Threads per workgroup of the terrain-helper probes (tests: WGSL vs GLSL helpers).

@@ -15,7 +15,7 @@ use vkterrain::dataset::Heightmap;
 use vkterrain::driver::Gpu;
 use vkterrain::driver::shaders::{TERRAIN_PROBE_COMP_SPV, TERRAIN_PROBE_SPV};
 use vkterrain::geo::Lattice;
-use vkterrain::lod::{MethodConfig, MethodKind, UdlodSettings};
+use vkterrain::lod::{MethodConfig, MethodKind, PgmSettings, UdlodSettings};
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer, TerrainProbePoint};
 use vkterrain::scene::Camera;
@@ -685,29 +685,133 @@ fn one_millimetre_moves_are_resolved_far_from_the_origin() {
     common::assert_no_validation_messages(&gpu);
 }
 
-/// PGM casts its screen grid onto the flat plane: on the earth it is a one-line error naming
-/// the way out, not a wrong picture.
+/// Pixels where `method` shows sky and brute force terrain at the pixel and its 8 neighbours
+/// (holes), and the pixels where brute force has terrain there (inside).
+fn holes_against(brute: &OwnedFrame, method: &OwnedFrame) -> (usize, usize) {
+    let (w, h) = (brute.width, brute.height);
+    let (mut holes, mut inside) = (0, 0);
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            let all_terrain = (0..9).all(|k| {
+                let (sx, sy) = (x + k % 3 - 1, y + k / 3 - 1);
+                brute.depth_at(sx, sy).unwrap() > 0.0
+            });
+            if all_terrain {
+                inside += 1;
+                if method.depth_at(x, y).unwrap() == 0.0 {
+                    holes += 1;
+                }
+            }
+        }
+    }
+    (holes, inside)
+}
+
+/// PGM on the earth (docs/pgm.md, "On the earth") covers what brute force covers on a native
+/// geographic grid (0.001 deg both ways at 46 N: 111 m north-south, 77 m east-west samples),
+/// over 48 poses: straight down from high up, ordinary flight, grazing near the ground, from
+/// outside the data, and high cameras (3-9 km) looking at the horizon, where the curved
+/// surface's far part drops below the tangent plane. Negative control: the flat world's
+/// projection on the earth (`earth_projection = false`, ground offsets read as grid offsets
+/// from the camera's world cell) leaves many such pixels.
 #[test]
-fn pgm_on_the_earth_is_a_one_line_error() {
+fn pgm_on_the_earth_covers_what_brute_force_covers() {
     let gpu = common::gpu(false);
-    let data = geographic(65, 46.0, 8.0, 0.001, &|_, _| 100.0);
-    let lattice = Lattice::geographic(65, 65, [8.0, 46.0], [0.001, 0.001]).unwrap();
-    let options = common::options(64, 64, 1);
-    let pgm = MethodConfig::from(MethodKind::Pgm);
-    let e = Renderer::with_world(
+    let (size, lat0, lon0, d) = (385u32, 46.0, 8.0, 0.001);
+    let hills = |la: f64, lo: f64| 900.0 + 300.0 * (la * 400.0).sin() * (lo * 300.0).cos();
+    let data = geographic(size, lat0, lon0, d, &hills);
+    let lattice = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
+    let last = (size - 1) as f64;
+    let n = 48;
+    let cameras: Vec<Camera> = (0..n)
+        .map(|i| {
+            let f = i as f64 / n as f64;
+            let u = (f * 7.31).fract();
+            let v = (f * 3.17 + 0.13).fract();
+            let mut s = DVec2::new(u * last, v * last);
+            let (above, pitch) = match i % 6 {
+                0 => (20_000.0, -90.0),
+                1 => (2.0 + 20.0 * u, -2.0 + 3.0 * v),
+                2 => {
+                    s = DVec2::new(-0.2 * last, v * last);
+                    (1500.0, -12.0)
+                }
+                3 | 4 => (3000.0 + 6000.0 * u, -3.0 * v),
+                _ => (50.0 + 2500.0 * u, -5.0 - 55.0 * v),
+            };
+            let ground = data.height_at(s.x * data.spacing, s.y * data.spacing);
+            Camera {
+                position: lattice.position(s, ground + above),
+                yaw_deg: if i % 6 == 2 {
+                    60.0 + 60.0 * u
+                } else {
+                    360.0 * v
+                },
+                pitch_deg: pitch,
+                near: 1.0,
+                far: 1e6,
+                ..Camera::default()
+            }
+        })
+        .collect();
+    let size_px = (160, 100);
+    let brute = render(
         &gpu,
         &data,
-        pgm.clone(),
-        options.clone(),
-        None,
+        MethodKind::Brute,
         Some(&lattice),
-    )
-    .err()
-    .expect("pgm on the ellipsoid")
-    .to_string();
-    assert!(e.contains("earth = \"flat\"") && !e.contains('\n'), "{e}");
-    // The flat world takes it (the control).
-    assert!(Renderer::with_world(&gpu, &data, pgm, options, None, None).is_ok());
+        size_px,
+        &cameras,
+    );
+    let on_earth = render(
+        &gpu,
+        &data,
+        MethodKind::Pgm,
+        Some(&lattice),
+        size_px,
+        &cameras,
+    );
+    let flat = PgmSettings {
+        earth_projection: false,
+        ..Default::default()
+    };
+    let flat = render(&gpu, &data, flat, Some(&lattice), size_px, &cameras);
+    let (mut holes, mut flat_holes, mut inside, mut horizon_inside) = (0, 0, 0, 0);
+    for (i, ((b, p), q)) in brute
+        .frames
+        .iter()
+        .zip(&on_earth.frames)
+        .zip(&flat.frames)
+        .enumerate()
+    {
+        let (h, ins) = holes_against(b, p);
+        let (fh, _) = holes_against(b, q);
+        println!(
+            "pose {i} {:?}: {h} holes of {ins}; flat projection {fh}",
+            cameras[i]
+        );
+        holes += h;
+        flat_holes += fh;
+        inside += ins;
+        if i % 6 == 3 || i % 6 == 4 {
+            horizon_inside += ins;
+            // The high cameras looking at the horizon: nothing lost.
+            assert!(h <= 2, "pose {i}: {h} holes of {ins}");
+        }
+    }
+    println!(
+        "PGM on the earth: {holes} holes of {inside} inside pixels ({horizon_inside} in the horizon views); the flat projection: {flat_holes}"
+    );
+    assert!(
+        inside > 48 * 160 * 100 / 3 && horizon_inside > 10_000,
+        "{inside} {horizon_inside}"
+    );
+    assert!(holes * 2000 <= inside, "{holes} holes of {inside}");
+    assert!(
+        flat_holes > 20 * holes.max(50),
+        "flat projection: {flat_holes}, earth: {holes}"
+    );
+    drop((brute, on_earth, flat));
     common::assert_no_validation_messages(&gpu);
 }
 
@@ -1211,4 +1315,65 @@ fn the_earth_culling_box_holds_its_terrain() {
         g.x
     );
     assert!(n_hull > 0 && n_flat_r > 0, "{n_hull} {n_flat_r}");
+}
+
+/// PGM's reference sphere on the CPU (`lod::pgm::earth::Sphere`, the shader's formula in f64):
+/// a ray that meets the sphere lands where the textbook quadratic (written out here, in the
+/// plane of the ray) puts it; the horizon is at `sqrt(2 a R)`-ish; distances fall steadily
+/// with the depression and join continuously at the horizon, where rays above it take
+/// distances out to the largest one. Negative control: the rays just above the horizon lie
+/// beyond it (cutting them all at the largest distance would jump there).
+#[test]
+fn pgm_reference_sphere_hits_and_joins_at_the_horizon() {
+    use vkterrain::lod::pgm::earth::Sphere;
+    let d_max = 200_000.0;
+    for (radius, height) in [
+        (6_371_500.0, 10.0),
+        (6_372_000.0, 3000.0),
+        (6_400_000.0, 2.0),
+    ] {
+        let sphere = Sphere { radius, height };
+        let e_h = sphere.horizon_depression();
+        let d_h = sphere.horizon_distance();
+        let approx = (2.0 * height * radius).sqrt();
+        assert!((d_h - approx).abs() < 1e-3 * approx, "{d_h} vs {approx}");
+        // The oracle: camera at (0, R + a), ray (cos e, -sin e); |p| = R, nearer root.
+        for e_deg in [90.0, 60.0, 20.0, 5.0, 1.0, 0.2] {
+            let e = f64::to_radians(e_deg);
+            if e <= e_h {
+                continue;
+            }
+            let (c, b) = (radius + height, -(radius + height) * e.sin());
+            let t = -b - (b * b - (c * c - radius * radius)).sqrt();
+            let (x, y) = (t * e.cos(), c - t * e.sin());
+            let want = (radius * x.atan2(y)).min(d_max);
+            let got = sphere.distance(e.sin(), d_max);
+            assert!(
+                (got - want).abs() <= 1e-6 * want + 1e-6,
+                "e {e_deg}: {got} vs {want}"
+            );
+        }
+        // Continuous at the horizon, falling with the depression everywhere.
+        let below = sphere.distance((e_h * (1.0 + 1e-9)).sin(), d_max);
+        let above = sphere.distance((e_h * (1.0 - 1e-9)).sin(), d_max);
+        assert!((below - d_h).abs() < 0.01 * d_h && (above - d_h).abs() < 0.01 * d_h);
+        let mut last = f64::INFINITY;
+        for k in 0..=2000 {
+            let s = -0.05 + 1.05 * k as f64 / 2000.0;
+            let dist = sphere.distance(s, d_max);
+            assert!(
+                dist <= last + 1e-6 && dist <= d_max,
+                "s {s}: {dist} after {last}"
+            );
+            last = dist;
+        }
+        assert_eq!(sphere.distance(-0.01, d_max), d_max);
+        assert!(sphere.distance(1.0, d_max) < 1e-6);
+        // Negative control: halfway between the horizon and the horizontal the distance lies
+        // strictly between the horizon's and the largest (not cut at either).
+        if d_h < d_max {
+            let mid = sphere.distance((0.5 * e_h).sin(), d_max);
+            assert!(mid > 1.001 * d_h && mid < 0.999 * d_max, "{mid} {d_h}");
+        }
+    }
 }

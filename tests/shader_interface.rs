@@ -119,6 +119,11 @@ fn pgm_uniforms_match_the_wgsl_struct() {
         ("dcol", offset_of!(PgmUniforms, dcol)),
         ("drow", offset_of!(PgmUniforms, drow)),
         ("grid", offset_of!(PgmUniforms, grid)),
+        ("earth", offset_of!(PgmUniforms, earth)),
+        ("to_col", offset_of!(PgmUniforms, to_col)),
+        ("to_row", offset_of!(PgmUniforms, to_row)),
+        ("cam_cell", offset_of!(PgmUniforms, cam_cell)),
+        ("cam_frac", offset_of!(PgmUniforms, cam_frac)),
     ];
     assert_struct_layout(&[("pgm", PGM_WGSL)], "Pgm", &rust, size_of::<PgmUniforms>());
 }

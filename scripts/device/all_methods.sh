@@ -7,8 +7,8 @@
 # prepared binary in .device-vk/ (../shared/device-vulkan/prepare.sh) and the data carried:
 #   CASES="s3 ipgm low"  needs out/datasets/pyrenees and .device-vk/data/ps_height_1k.png
 #   CASES="s1"           needs out/datasets/franconia (64 MiB carry limit: a second call)
-# All cases render the flat world (`--earth flat`): PGM refuses the ellipsoid, and one world
-# keeps the six methods comparable (docs/eval.md "On the earth" has the ellipsoid's effect).
+# All cases render the flat world (`--earth flat`), as when PGM refused the ellipsoid: one world
+# keeps the six methods and earlier runs comparable (docs/eval.md "On the earth" has the ellipsoid's effect).
 # Output: $OUT/all_methods/<case>/ (report.md, summary.csv, charts) and a summary per case.
 set -uo pipefail
 cd "$(dirname "$0")/../.."

@@ -95,8 +95,8 @@ for c in "${cases[@]}"; do
     'BEGIN { w = 1000 * (e - s) / (f * r); printf "    added by the evaluation (wall): %.1f ms per frame and renderer (eval %.1f - bench %.1f; includes start-up)\n", w - b / r, w, b / r }'
 done
 
-# The chart: Fischer S3, every method and sweep, frame time vs error (flat: PGM refuses
-# the earth; scripts/device/eval_earth.sh measures on the ellipsoid).
+# The chart: Fischer S3, every method and sweep, frame time vs error (flat, as when PGM
+# refused the earth; scripts/device/eval_earth.sh and pgm_earth.sh measure on the ellipsoid).
 if true; then
   s=$(date +%s.%N)
   "$BIN" eval --config "$S3CFG" --width "$W" --height "$H" --frames "$FRAMES" \

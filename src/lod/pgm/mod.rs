@@ -15,12 +15,13 @@
 //! of the grid is at or below the horizon and every grid ray meets the plane (rays at the
 //! horizon are cut at `max_distance`).
 
+pub mod earth;
 pub mod settings;
 
 use std::sync::Arc;
 
 use ash::vk;
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use gpu_allocator::MemoryLocation;
 
 use super::{LodMethod, MethodContext};
@@ -33,6 +34,7 @@ use crate::error::{Error, Result, VkResultExt};
 use crate::frame::ViewState;
 use crate::scene::Camera;
 use crate::slots::ViewSlot;
+use earth::{AuxEarth, Sphere};
 use settings::PgmSettings;
 
 /// Per-frame uniforms of set 1 (`Pgm` in `shaders/pgm.wgsl`; `tests/shader_interface.rs`
@@ -49,6 +51,20 @@ pub struct PgmUniforms {
     pub drow: [f32; 4],
     /// x: columns, y: rows, z: rows per instanced band, w: mip levels of the height texture.
     pub grid: [u32; 4],
+    /// On the earth (docs/pgm.md, "On the earth"; all zero on the flat world): xyz: the up
+    /// vector at the camera's sample (world axes; the directions above are world axes too);
+    /// w: radius of the reference sphere (m), 0 on the flat world.
+    pub earth: [f32; 4],
+    /// xyz: columns per world metre at the camera (`AuxEarth::to_sample`); w: the reference
+    /// height (m).
+    pub to_col: [f32; 4],
+    /// xyz: rows per world metre at the camera; w: sine of the sphere's horizon depression.
+    pub to_row: [f32; 4],
+    /// xy: the sample cell under the camera.
+    pub cam_cell: [i32; 4],
+    /// xy: the camera's sample position within that cell; z: the surface distance of the
+    /// sphere's horizon (m); w: its depression angle (rad).
+    pub cam_frac: [f32; 4],
 }
 
 /// The auxiliary camera of one frame: where the grid comes from.
@@ -63,6 +79,9 @@ pub struct AuxCamera {
     pub tan_y: [f64; 2],
     /// Ground distance at which rays at (or numerically above) the horizon are cut (m).
     pub max_distance: f64,
+    /// On the earth: the local frame its angles are in, and the reference sphere (None: the
+    /// flat world's reference plane, world axes).
+    pub earth: Option<AuxEarth>,
 }
 
 /// Widest image-plane tangent of the auxiliary view (about 83 degrees off its axis): keeps
@@ -83,6 +102,44 @@ impl AuxCamera {
         ground_z: f64,
         data_far: f64,
         s: &PgmSettings,
+    ) -> AuxCamera {
+        Self::fit(camera, aspect, ground_z, data_far, s, 0.0)
+    }
+
+    /// The auxiliary camera on the earth for `camera` (world axes) standing at `earth` (whose
+    /// `reference_m` is the reference height): [`AuxCamera::new`] in the local frame at the
+    /// camera's sample, over the reference sphere; `data_far` is the farthest surface
+    /// distance worth covering. Main-frustum directions above the sphere's horizon are
+    /// flattened onto the horizontal like those above it: terrain beyond the sphere's horizon
+    /// that rises into view can lie anywhere out to the largest distance.
+    pub fn on_earth(
+        camera: &Camera,
+        aspect: f64,
+        earth: AuxEarth,
+        data_far: f64,
+        s: &PgmSettings,
+    ) -> AuxCamera {
+        let local = earth.local_camera(camera);
+        let height = (local.position.z - earth.reference_m).max(s.min_height_m);
+        let sphere = Sphere {
+            radius: earth.sphere_radius(),
+            height,
+        };
+        let dip = sphere.horizon_depression().sin();
+        let mut aux = Self::fit(&local, aspect, earth.reference_m, data_far, s, dip);
+        aux.earth = Some(earth);
+        aux
+    }
+
+    /// [`AuxCamera::new`], flattening main-frustum directions whose depression sine is below
+    /// `dip` (0: those above the horizontal) onto the horizontal.
+    fn fit(
+        camera: &Camera,
+        aspect: f64,
+        ground_z: f64,
+        data_far: f64,
+        s: &PgmSettings,
+        dip: f64,
     ) -> AuxCamera {
         let half = s.fov_deg / 2.0;
         let pitch = camera.pitch_deg.min(-half);
@@ -111,7 +168,7 @@ impl AuxCamera {
                 _ => (-1.0, -s),
             };
             let mut d = mf + mr * (sx * tx) + mu * (sy * ty);
-            if d.z > 0.0 {
+            if d.z > 0.0 || (dip > 0.0 && d.z > -dip * d.length()) {
                 d.z = 0.0;
             }
             let Some(d) = d.try_normalize() else { continue };
@@ -149,7 +206,16 @@ impl AuxCamera {
             max_distance: data_far
                 .min(camera.far * (1.0 + tx * tx + ty * ty).sqrt())
                 .max(1.0),
+            earth: None,
         }
+    }
+
+    /// The reference sphere on the earth (None: the flat world).
+    pub fn sphere(&self) -> Option<Sphere> {
+        self.earth.map(|e| Sphere {
+            radius: e.sphere_radius(),
+            height: self.height,
+        })
     }
 
     /// Vertical field of view in degrees (for reports and tests).
@@ -187,9 +253,12 @@ impl AuxCamera {
             .unwrap_or_else(|| DVec3::new(up.x, up.y, 0.0).normalize_or_zero());
         let (y0, y1) = (self.tan_y[0], self.tan_y[1]);
         let near = self.height.min(self.max_distance);
+        let sphere = self.sphere();
         let log_dist = |y: f64| {
             let d = fwd + up * y;
-            let dist = if d.z < 0.0 {
+            let dist = if let Some(sphere) = sphere {
+                sphere.distance(-d.z / d.length(), self.max_distance)
+            } else if d.z < 0.0 {
                 self.height * d.dot(heading) / -d.z
             } else {
                 self.max_distance
@@ -236,16 +305,35 @@ impl AuxCamera {
             ..Camera::default()
         };
         let (r, u, f) = cam.basis();
-        let dir0 = f + r * self.tan_x[0] + u * self.tan_y[0];
-        let dcol = r * (self.tan_x[1] - self.tan_x[0]);
-        let drow = u * (self.tan_y[1] - self.tan_y[0]);
+        // On the earth the angles are the local frame's: directions turn into world axes.
+        let world = |v: DVec3| self.earth.map_or(v, |e| e.axes * v);
+        let dir0 = world(f + r * self.tan_x[0] + u * self.tan_y[0]);
+        let dcol = world(r * (self.tan_x[1] - self.tan_x[0]));
+        let drow = world(u * (self.tan_y[1] - self.tan_y[0]));
         let v4 = |v: DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
-        PgmUniforms {
+        let mut out = PgmUniforms {
             dir0: v4(dir0, self.height),
             dcol: v4(dcol, self.max_distance),
             drow: v4(drow, 0.0),
             grid: [grid[0], grid[1], band, mips],
+            ..Default::default()
+        };
+        if let (Some(e), Some(sphere)) = (self.earth, self.sphere()) {
+            let dip = sphere.horizon_depression();
+            let cell = e.sample.floor();
+            let frac = e.sample - cell;
+            out.earth = v4(e.axes.z_axis, sphere.radius);
+            out.to_col = v4(e.to_sample[0], e.reference_m);
+            out.to_row = v4(e.to_sample[1], dip.sin());
+            out.cam_cell = [cell.x as i32, cell.y as i32, 0, 0];
+            out.cam_frac = [
+                frac.x as f32,
+                frac.y as f32,
+                sphere.horizon_distance() as f32,
+                dip as f32,
+            ];
         }
+        out
     }
 }
 
@@ -401,24 +489,15 @@ pub struct Pgm {
     /// Bilinear height under the camera (the reference plane) needs the data on the CPU.
     data: Arc<Heightmap>,
     block_min: BlockMin,
+    /// The geolocation lattice on the earth (None: the flat world, or the flat projection
+    /// asked for by `earth_projection = false`).
+    lattice: Option<std::sync::Arc<crate::geo::Lattice>>,
     // Last: destroyed after everything that uses it.
     _raw: Raw,
 }
 
 impl Pgm {
-    /// PGM casts its screen grid onto the flat plane: on the ellipsoid it is a one-line error.
-    fn refuse_the_earth(ctx: &MethodContext<'_>) -> Result<()> {
-        if ctx.terrain.info.lattice.is_some() {
-            return Err(Error::invalid(
-                "method pgm",
-                "its screen grid is cast onto the flat plane, not onto the ellipsoid: set [render] earth = \"flat\" to draw this data set with it",
-            ));
-        }
-        Ok(())
-    }
-
     pub fn new(ctx: &MethodContext<'_>, settings: &PgmSettings) -> Result<Self> {
-        Self::refuse_the_earth(ctx)?;
         let gpu = ctx.gpu;
         let settings = settings.clone();
         settings.validate()?;
@@ -536,6 +615,7 @@ impl Pgm {
             _heights: heights,
             mips: levels.len() as u32,
             block_min: BlockMin::new(&data),
+            lattice: ctx.lattice.filter(|_| settings.earth_projection).cloned(),
             data,
             settings,
             _raw: raw,
@@ -544,6 +624,9 @@ impl Pgm {
 
     /// The auxiliary camera this method uses for `view`.
     pub fn aux_for(&self, view: &ViewState) -> AuxCamera {
+        if let Some(lattice) = &self.lattice {
+            return self.aux_on_earth(lattice, view);
+        }
         let cam = &view.camera;
         let p = cam.position;
         let (ex, ey) = self.data.extent();
@@ -562,6 +645,30 @@ impl Pgm {
             .map_or(under, |m| m.min(under));
         let aspect = view.width as f64 / view.height as f64;
         AuxCamera::new(cam, aspect, ground, far, &self.settings)
+    }
+
+    /// [`Pgm::aux_for`] on the earth: the reference height is found on the grid around the
+    /// sample under the camera, the largest distance is the farthest data corner's (a chord,
+    /// scaled to the reference sphere's radius, plus two samples).
+    fn aux_on_earth(&self, lattice: &crate::geo::Lattice, view: &ViewState) -> AuxCamera {
+        let cam = &view.camera;
+        let mut earth = AuxEarth::at(lattice, cam.position);
+        let spacing = self.data.spacing;
+        let g = earth.sample * spacing;
+        let under = self.data.height_at(g.x, g.y);
+        let radius = 4.0 * (earth.height_m - under).max(0.0);
+        earth.reference_m = self
+            .block_min
+            .min_near(g.x, g.y, radius)
+            .map_or(under, |m| m.min(under));
+        let (w, h) = ((self.data.width - 1) as f64, (self.data.height - 1) as f64);
+        let chord = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
+            .iter()
+            .map(|&(c, r)| (lattice.position(DVec2::new(c, r), 0.0) - cam.position).length())
+            .fold(0.0, f64::max);
+        let far = chord * earth.sphere_radius() / earth.radius_m + 2.0 * spacing;
+        let aspect = view.width as f64 / view.height as f64;
+        AuxCamera::on_earth(cam, aspect, earth, far, &self.settings)
     }
 }
 

@@ -22,6 +22,12 @@ pub struct PgmSettings {
     /// logarithm of the ground distance; `AuxCamera::row_fractions`); `false`: every row
     /// uniform in the image plane (the plain grid, which drops distant peaks seen from low).
     pub warp_rows: bool,
+    /// On the earth, each grid ray meets the curved reference surface and its point maps to
+    /// the sample under it through the geolocation lattice (docs/pgm.md, "On the earth");
+    /// `false`: an ablation, the flat world's projection (ground offsets in the world frame
+    /// read as grid offsets from the camera's world cell), the negative control of the
+    /// coverage test. No effect on the flat world.
+    pub earth_projection: bool,
 }
 
 impl Default for PgmSettings {
@@ -32,6 +38,7 @@ impl Default for PgmSettings {
             fov_deg: 90.0,
             min_height_m: 2.0,
             warp_rows: true,
+            earth_projection: true,
         }
     }
 }
@@ -67,6 +74,11 @@ impl PgmSettings {
             key: "warp_rows",
             help: "1: rows warped towards the horizon (default), 0: uniform in the image plane",
             apply: |s, v| s.warp_rows = v != 0.0,
+        },
+        Sweep {
+            key: "earth_projection",
+            help: "1: rays meet the curved surface on the earth (default), 0: the flat world's projection (ablation)",
+            apply: |s, v| s.earth_projection = v != 0.0,
         },
     ];
 
