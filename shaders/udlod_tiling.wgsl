@@ -5,13 +5,15 @@
 // passes the other way round. Tiles that do not split go to the final list; `finish` writes
 // the indexed indirect draw (one instance per final tile).
 //
-// Capacity: a pass splits only if its worst case fits: every parent splitting (3 more
-// final-list entries each: a split turns one would-be leaf into four, and 4 temporary slots).
-// Otherwise no tile of that pass splits, so the whole view stops one level early: coarser,
-// but a selection whose finest level is that pass's, crack-free like any other. Refusing
-// single tiles instead left neighbours two levels apart without a morph between them: cracks
-// (docs/udlod.md "Capacity"). `overflow` counts the tiles that wanted to split and could not;
-// each split still reserves its entries (atomics), which the worst-case check guarantees.
+// Capacity: a pass splits only if all of its splits fit (3 more final-list entries each: a
+// split turns one would-be leaf into four, and 4 temporary slots). The splits are known
+// before the pass: whoever writes a tile (the previous pass, or `prepare` for the root)
+// counts it in `split_requests` when it will want to split. Otherwise no tile of that pass
+// splits, so the whole view stops one level early: coarser, but a selection whose finest
+// level is that pass's, crack-free like any other. Refusing single tiles instead left
+// neighbours two levels apart without a morph between them: cracks (docs/udlod.md
+// "Capacity"). `overflow` counts the tiles that wanted to split and could not; each split
+// still reserves its entries (atomics), which the count guarantees.
 
 //!include terrain_common.wgsl
 //!include udlod_common.wgsl
@@ -36,8 +38,10 @@ struct TilingState {
     culled: atomic<u32>,
     // Passes begun this frame (the state is zero-filled before the first).
     passes_started: u32,
-    // 1 when this pass's worst case fits the lists (every parent splitting), else 0.
+    // 1 when this pass's splits fit the lists, else 0.
     splits_allowed: u32,
+    // Tiles written for the next pass that will want to split there.
+    split_requests: atomic<u32>,
 }
 
 @group(1) @binding(1) var<storage, read_write> state: TilingState;
@@ -51,23 +55,28 @@ fn prepare() {
     state.passes_started = pass_index + 1u;
     state.pass_index = pass_index;
     var parents: u32;
+    var requests: u32;
     if pass_index == 0u {
         // First pass: the root tile, read from the front.
-        temp_tiles[0] = Tile(0u, 0u, udlod.sizes.y, 0u);
+        let root = Tile(0u, 0u, udlod.sizes.y, 0u);
+        temp_tiles[0] = root;
         parents = 1u;
+        requests = select(0u, 1u, wants_split(root));
         atomicStore(&state.final_count, 0u);
         atomicStore(&state.reserved_leaves, 1u);
         atomicStore(&state.overflow, 0u);
         atomicStore(&state.culled, 0u);
     } else {
         parents = atomicLoad(&state.child_count);
+        requests = atomicLoad(&state.split_requests);
     }
     state.parent_count = parents;
-    // The worst case: every parent splits (3 more final entries each; parents and children
-    // share the temporary list).
+    // This pass's splits: 3 more final entries each; parents and children share the
+    // temporary list.
     let leaves = atomicLoad(&state.reserved_leaves);
-    let fits = leaves + 3u * parents <= udlod.sizes.z && 5u * parents <= udlod.sizes.w;
+    let fits = leaves + 3u * requests <= udlod.sizes.z && parents + 4u * requests <= udlod.sizes.w;
     state.splits_allowed = select(0u, 1u, fits);
+    atomicStore(&state.split_requests, 0u);
     atomicStore(&state.child_count, 0u);
     state.dispatch_x = (parents + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;
     state.dispatch_y = 1u;
@@ -176,18 +185,15 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let t = temp_tiles[parent_slot(id.x)];
-    let level = udlod.levels[t.lod];
-    if t.x >= level.y || t.y >= level.z {
-        // Outside the data set (a child of an edge tile).
+    if outside_data(t) {
+        // A child of an edge tile.
         return;
     }
     if udlod.params.w > 0.5 && tile_culled(t) {
         atomicAdd(&state.culled, 1u);
         return;
     }
-    // Split on the smallest scaled distance over the tile: the field's minimum (its corners)
-    // times the distance to the nearest point (mirrors `tile_splits` in select.rs).
-    if t.lod > 0u && field_range(t.x, t.y, t.lod).x * tile_distance(t) < udlod.split[t.lod].x {
+    if splits_by_distance(t) {
         // (Not `select`: it evaluates both operands, and reserving has side effects.)
         var base = -1;
         if state.splits_allowed != 0u {
@@ -197,12 +203,32 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>) {
             for (var k = 0u; k < 4u; k++) {
                 let child = Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u);
                 temp_tiles[child_slot(u32(base) + k)] = child;
+                if wants_split(child) {
+                    atomicAdd(&state.split_requests, 1u);
+                }
             }
             return;
         }
         atomicAdd(&state.overflow, 1u);
     }
     emit_final(t);
+}
+
+fn outside_data(t: Tile) -> bool {
+    let level = udlod.levels[t.lod];
+    return t.x >= level.y || t.y >= level.z;
+}
+
+// Split on the smallest scaled distance over the tile: the field's minimum (its corners)
+// times the distance to the nearest point (mirrors `tile_splits` in select.rs).
+fn splits_by_distance(t: Tile) -> bool {
+    return t.lod > 0u && field_range(t.x, t.y, t.lod).x * tile_distance(t) < udlod.split[t.lod].x;
+}
+
+// Whether `refine` will split tile t when the lists have room: inside the data, not culled,
+// and near enough.
+fn wants_split(t: Tile) -> bool {
+    return !outside_data(t) && !(udlod.params.w > 0.5 && tile_culled(t)) && splits_by_distance(t);
 }
 
 @compute @workgroup_size(1)

@@ -282,6 +282,7 @@ fn tiling_state_matches_the_wgsl_struct() {
         ("culled", offset_of!(TilingState, culled)),
         ("passes_started", offset_of!(TilingState, passes_started)),
         ("splits_allowed", offset_of!(TilingState, splits_allowed)),
+        ("split_requests", offset_of!(TilingState, split_requests)),
     ];
     assert_struct_layout(
         &[("udlod_tiling", UDLOD_TILING_WGSL)],

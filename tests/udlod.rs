@@ -540,7 +540,7 @@ fn watertight_over_200_poses_at(grid: u32) {
 }
 
 /// A tile budget too small for the view (`max_tiles`) stops the refinement of the whole view
-/// at the first pass whose worst case does not fit (docs/udlod.md "Capacity"): the GPU's tiles
+/// at the first pass whose splits do not fit (docs/udlod.md "Capacity"): the GPU's tiles
 /// of an overflowing frame still cover the data set exactly once, neighbours differ by at most
 /// one level and shared edges coincide after morphing (the CPU mirror's vertices). Refusing
 /// single tiles, as the prepass did before, broke this on most overflowing poses (the
@@ -549,7 +549,7 @@ fn watertight_over_200_poses_at(grid: u32) {
 fn an_overflowing_tile_budget_keeps_the_selection_crack_free() {
     let data = terrain(257, 30.0);
     let cams = poses(&data, 120);
-    for max_tiles in [48, 96, 160] {
+    for max_tiles in [32, 48, 64] {
         overflowing_budget_at(&data, &cams, max_tiles);
     }
 }
@@ -599,7 +599,7 @@ fn overflowing_budget_at(data: &Heightmap, cams: &[Camera], max_tiles: u32) {
         broken.len()
     );
     assert!(
-        overflowing >= cams.len() / 4,
+        overflowing >= cams.len() / 5,
         "max_tiles {max_tiles} should overflow on many poses: {overflowing} of {}",
         cams.len()
     );
@@ -610,7 +610,7 @@ fn overflowing_budget_at(data: &Heightmap, cams: &[Camera], max_tiles: u32) {
         broken[0]
     );
     assert!(
-        max_tiles < 100 || edges > 100,
+        max_tiles < 40 || edges > 100,
         "max_tiles {max_tiles}: too few coarse/fine edges checked: {edges}"
     );
 }

@@ -60,6 +60,7 @@ pub struct TilingState {
     pub culled: u32,
     pub passes_started: u32,
     pub splits_allowed: u32,
+    pub split_requests: u32,
 }
 
 /// Descriptor set 1 (`shaders/include/udlod_common.wgsl`, `shaders/udlod_tiling.wgsl`,
