@@ -8,7 +8,8 @@
 // Capacity: a pass splits only if all of its splits fit (3 more final-list entries each: a
 // split turns one would-be leaf into four, and 4 temporary slots). The splits are known
 // before the pass: whoever writes a tile (the previous pass, or `prepare` for the root)
-// counts it in `split_requests` when it will want to split. Otherwise no tile of that pass
+// decides it (`decided`: flags in `Tile.pad`) and counts it in `split_requests` when it will
+// want to split. Otherwise no tile of that pass
 // splits, so the whole view stops one level early: coarser, but a selection whose finest
 // level is that pass's, crack-free like any other. Refusing single tiles instead left
 // neighbours two levels apart without a morph between them: cracks (docs/udlod.md
@@ -58,10 +59,10 @@ fn prepare() {
     var requests: u32;
     if pass_index == 0u {
         // First pass: the root tile, read from the front.
-        let root = Tile(0u, 0u, udlod.sizes.y, 0u);
+        let root = decided(Tile(0u, 0u, udlod.sizes.y, 0u));
         temp_tiles[0] = root;
         parents = 1u;
-        requests = select(0u, 1u, wants_split(root));
+        requests = select(0u, 1u, root.pad == (TILE_DECIDED | TILE_SPLITS));
         atomicStore(&state.final_count, 0u);
         atomicStore(&state.reserved_leaves, 1u);
         atomicStore(&state.overflow, 0u);
@@ -184,16 +185,17 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= parents {
         return;
     }
+    // Decided when it was written (`decided`): outside the data, culled, splitting.
     let t = temp_tiles[parent_slot(id.x)];
-    if outside_data(t) {
+    if (t.pad & TILE_OUTSIDE) != 0u {
         // A child of an edge tile.
         return;
     }
-    if udlod.params.w > 0.5 && tile_culled(t) {
+    if (t.pad & TILE_CULLED) != 0u {
         atomicAdd(&state.culled, 1u);
         return;
     }
-    if splits_by_distance(t) {
+    if (t.pad & TILE_SPLITS) != 0u {
         // (Not `select`: it evaluates both operands, and reserving has side effects.)
         var base = -1;
         if state.splits_allowed != 0u {
@@ -201,9 +203,9 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         if base >= 0 {
             for (var k = 0u; k < 4u; k++) {
-                let child = Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u);
+                let child = decided(Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u));
                 temp_tiles[child_slot(u32(base) + k)] = child;
-                if wants_split(child) {
+                if child.pad == (TILE_DECIDED | TILE_SPLITS) {
                     atomicAdd(&state.split_requests, 1u);
                 }
             }
@@ -211,7 +213,7 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         atomicAdd(&state.overflow, 1u);
     }
-    emit_final(t);
+    emit_final(Tile(t.x, t.y, t.lod, 0u));
 }
 
 fn outside_data(t: Tile) -> bool {
@@ -225,10 +227,25 @@ fn splits_by_distance(t: Tile) -> bool {
     return t.lod > 0u && field_range(t.x, t.y, t.lod).x * tile_distance(t) < udlod.split[t.lod].x;
 }
 
-// Whether `refine` will split tile t when the lists have room: inside the data, not culled,
-// and near enough.
-fn wants_split(t: Tile) -> bool {
-    return !outside_data(t) && !(udlod.params.w > 0.5 && tile_culled(t)) && splits_by_distance(t);
+// Tile flags in `Tile.pad` of the temporary list: what `refine` will do with the tile, decided
+// by whoever writes it (so the next pass's splits are counted before it, and each tile's
+// culling box is built once).
+const TILE_DECIDED: u32 = 1u;
+const TILE_OUTSIDE: u32 = 2u;
+const TILE_CULLED: u32 = 4u;
+const TILE_SPLITS: u32 = 8u;
+
+// Tile t with its flags: outside the data, else culled, else splitting (near enough).
+fn decided(t: Tile) -> Tile {
+    var flags = TILE_DECIDED;
+    if outside_data(t) {
+        flags |= TILE_OUTSIDE;
+    } else if udlod.params.w > 0.5 && tile_culled(t) {
+        flags |= TILE_CULLED;
+    } else if splits_by_distance(t) {
+        flags |= TILE_SPLITS;
+    }
+    return Tile(t.x, t.y, t.lod, flags);
 }
 
 @compute @workgroup_size(1)
