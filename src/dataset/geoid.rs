@@ -76,6 +76,8 @@ impl Geoid {
         use gdal::spatial_ref::{
             AxisMappingStrategy, CoordTransform, CoordTransformOptions, SpatialRef,
         };
+        // GDAL's own stderr printing off: a missing grid is our one-line error, not PROJ's WKT.
+        super::gdal_in::init();
         let what = format!("geoid {}", model.name());
         let err =
             |e: gdal::errors::GdalError| Error::invalid(&what, e.to_string().replace('\n', " "));
