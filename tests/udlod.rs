@@ -741,3 +741,28 @@ fn gpu_selection_equals_cpu_reference_on_the_earth() {
         );
     }
 }
+
+/// The tile lists hold at most the full tree's leaves (4^root_lod tiles), whatever `max_tiles`
+/// says: on a 129² data set (16 x 16 tiles of 8 quads, root level 4: 256 leaves) a budget of
+/// 65,536 tiles allocates what a budget of 256 does, and a budget of 64 less.
+#[test]
+fn tile_lists_are_no_larger_than_the_full_tree() {
+    let data = terrain(129, 30.0);
+    let gpu = common::gpu(false);
+    let bytes = |max_tiles: u32| {
+        let lod = UdlodSettings {
+            max_tiles,
+            ..settings(8)
+        };
+        let before = gpu.allocated_bytes();
+        let r = Renderer::new(&gpu, &data, lod, common::options(W, H, 2)).unwrap();
+        let used = gpu.allocated_bytes() - before;
+        drop(r);
+        used
+    };
+    let (full, tree, small) = (bytes(65_536), bytes(256), bytes(64));
+    println!("UDLOD renderer device memory: max_tiles 65,536 {full} B, 256 {tree} B, 64 {small} B");
+    assert_eq!(full, tree);
+    assert!(small < tree, "{small} vs {tree}");
+    common::assert_no_validation_messages(&gpu);
+}

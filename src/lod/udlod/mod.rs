@@ -124,6 +124,8 @@ pub struct Udlod {
     refine: Pipeline,
     finish: Pipeline,
     draw: Pipeline,
+    /// Entries of the final tile list: `max_tiles`, at most the full tree's leaves.
+    final_capacity: u32,
     temp_capacity: u32,
 }
 
@@ -180,7 +182,10 @@ impl Udlod {
         )?;
         indices.write(index_bytes)?;
 
-        let final_capacity = settings.max_tiles;
+        // No selection reserves more leaves than the full tree over the root's square has
+        // (4^root_lod), so small data sets do not allocate the whole budget.
+        let full_tree = 1u64 << (2 * levels.root_lod).min(62);
+        let final_capacity = (settings.max_tiles as u64).min(full_tree) as u32;
         // Parents and children of one pass share the temporary list: a pass has at most
         // `4/3 * final_capacity + 1` children (every split reserved 3 final entries).
         let temp_capacity = 2 * final_capacity + 8;
@@ -291,6 +296,7 @@ impl Udlod {
             refine,
             finish,
             draw,
+            final_capacity,
             temp_capacity,
         })
     }
@@ -375,7 +381,7 @@ impl LodMethod for Udlod {
         u.sizes = [
             self.settings.grid_size,
             self.levels.root_lod,
-            self.settings.max_tiles,
+            self.final_capacity,
             self.temp_capacity,
         ];
         u.viewer = [p.viewer[0], p.viewer[1], p.viewer[2], 0.0];
