@@ -7,6 +7,7 @@
 
 //!include terrain_common.wgsl
 //!include lattice_inverse.wgsl
+//!include pgm_sphere.wgsl
 
 // Mirrors `PgmUniforms` in src/lod/pgm.rs; a test proves the layouts equal.
 struct Pgm {
@@ -73,9 +74,7 @@ fn ground_offset(g: vec2<i32>) -> vec2<f32> {
 
 // On the earth: the camera-relative world point on the reference sphere that the ray of grid
 // vertex `g` stands for, at surface distance `dist` along the sphere in the ray's azimuth:
-// where the ray meets the sphere, no farther than the largest distance; a ray above the
-// sphere's horizon takes a distance between the horizon's and the largest, logarithmic in its
-// depression angle (earth::Sphere::distance on the CPU is the same formula in f64).
+// `sphere_distance` (shaders/include/pgm_sphere.wgsl).
 fn earth_ground_point(g: vec2<i32>) -> vec3<f32> {
     let t = vec2<f32>(f32(g.x) / f32(pgm.grid.x - 1u), row_fraction(g.y));
     let d = normalize(pgm.dir0.xyz + pgm.dcol.xyz * t.x + pgm.drow.xyz * t.y);
@@ -90,18 +89,8 @@ fn earth_ground_point(g: vec2<i32>) -> vec3<f32> {
     if hl == 0.0 {
         return -a * up;
     }
-    let sin_h = pgm.to_row.w;
-    var dist = d_max;
-    if s > sin_h {
-        // Along the ray: t^2 - 2 t (rho + a) s + a (2 rho + a) = 0, the nearer root in the
-        // form without cancellation; the discriminant factored by the horizon's sine.
-        let ra = rho + a;
-        let disc = ra * ra * (s - sin_h) * (s + sin_h);
-        let along = a * (2.0 * rho + a) / (ra * s + sqrt(disc));
-        dist = min(rho * atan2(along * hl, ra - along * s), d_max);
-    } else if pgm.cam_frac.z < d_max && s > 0.0 {
-        dist = d_max * exp(log(pgm.cam_frac.z / d_max) * asin(s) / pgm.cam_frac.w);
-    }
+    let sphere = SphereView(rho, a, d_max, pgm.to_row.w, pgm.cam_frac.z, pgm.cam_frac.w);
+    let dist = sphere_distance(sphere, s, hl);
     let phi = dist / rho;
     let half = sin(0.5 * phi);
     // rho (cos phi - 1) without cancellation: -2 rho sin^2(phi / 2).

@@ -101,6 +101,9 @@ shared_constants! {
     PGM_LATTICE_ITERATIONS: u32 = 6;
     /// Threads per workgroup of the UDLOD morph probe (tests: morphed vertices read back).
     UDLOD_PROBE_WORKGROUP: u32 = 64;
+    /// Threads per workgroup of the PGM sphere probe (tests: reference-sphere distances read
+    /// back).
+    PGM_PROBE_WORKGROUP: u32 = 64;
     /// Threads per workgroup of the terrain-helper probes (tests: WGSL vs GLSL helpers).
     TERRAIN_PROBE_WORKGROUP: u32 = 64;
 }

@@ -823,3 +823,114 @@ fn warped_rows_keep_a_constant_relative_spacing_to_the_horizon() {
     assert!(w <= 1.03, "warped rows {w}");
     assert!(p > 10.0, "plain rows {p}");
 }
+
+/// Rays of many spheres, heights and largest distances, dense near each sphere's horizon.
+fn sphere_rays() -> Vec<pgm::probe::SphereRay> {
+    use pgm::earth::Sphere;
+    let mut rays = Vec::new();
+    for radius in [6_356_000.0, 6_371_000.0, 6_399_000.0] {
+        for height in [2.0, 100.0, 1_000.0, 10_000.0, 20_000.0] {
+            let sphere = Sphere { radius, height };
+            let sin_h = sphere.horizon_depression().sin();
+            for max_distance in [20_000.0, 200_000.0, 2_000_000.0] {
+                let sweep = (0..=400).map(|k| -0.05 + 1.05 * k as f64 / 400.0);
+                let near = (-40..=40).map(|k| sin_h * (1.0 + k as f64 * 1e-3));
+                for sin_depression in sweep.chain(near) {
+                    rays.push(pgm::probe::SphereRay {
+                        sphere,
+                        max_distance,
+                        sin_depression,
+                    });
+                }
+            }
+        }
+    }
+    rays
+}
+
+/// The ray with its inputs rounded to f32, as the GPU receives them.
+fn as_uploaded(r: &pgm::probe::SphereRay) -> pgm::probe::SphereRay {
+    let f = |v: f64| f64::from(v as f32);
+    pgm::probe::SphereRay {
+        sphere: pgm::earth::Sphere {
+            radius: f(r.sphere.radius),
+            height: f(r.sphere.height),
+        },
+        max_distance: f(r.max_distance),
+        sin_depression: f(r.sin_depression),
+    }
+}
+
+/// How far the f32 GPU may be from the f64 formula at the uploaded inputs: 1e-4 of the
+/// distance plus 1 cm, plus what a few f32 roundings of the ray's sine move it (near the
+/// horizon the distance is steep in the sine).
+fn sphere_tolerance(r: &pgm::probe::SphereRay, want: f64) -> f64 {
+    let ds = 8.0 * f64::from(f32::EPSILON) * r.sin_depression.abs().max(1e-3);
+    let at = |s: f64| r.sphere.distance(s, r.max_distance);
+    let steep = (at(r.sin_depression + ds) - at(r.sin_depression - ds)).abs();
+    1e-4 * want + 0.01 + steep
+}
+
+/// Rays whose GPU distance misses `oracle` (at the uploaded inputs) by more than the
+/// tolerance, with the worst miss.
+fn sphere_misses(
+    rays: &[pgm::probe::SphereRay],
+    gpu: &[f32],
+    oracle: impl Fn(&pgm::probe::SphereRay) -> f64,
+) -> (usize, String) {
+    let mut misses = 0;
+    let mut worst = (0.0f64, String::new());
+    for (r, &got) in rays.iter().zip(gpu) {
+        let r = as_uploaded(r);
+        let want = oracle(&r);
+        let miss = (f64::from(got) - want).abs();
+        let tol = sphere_tolerance(&r, want);
+        if miss > tol {
+            misses += 1;
+        }
+        if miss / tol > worst.0 {
+            worst = (
+                miss / tol,
+                format!("{r:?}: GPU {got} vs {want} (tolerance {tol})"),
+            );
+        }
+    }
+    (misses, worst.1)
+}
+
+#[test]
+fn the_gpu_sphere_distance_equals_the_cpu_one() {
+    let gpu = common::gpu(false);
+    let rays = sphere_rays();
+    let got = pgm::probe::sphere_distances(&gpu, &rays).unwrap();
+    common::assert_no_validation_messages(&gpu);
+    assert_eq!(got.len(), rays.len());
+    let exact = |r: &pgm::probe::SphereRay| r.sphere.distance(r.sin_depression, r.max_distance);
+    let (misses, worst) = sphere_misses(&rays, &got, exact);
+    eprintln!("exact: worst {worst}");
+    assert_eq!(misses, 0, "{misses} of {} rays; worst {worst}", rays.len());
+    // Negative controls: the same comparison resolves two plausible slips in either copy.
+    // Beyond the horizon, linear in the depression angle instead of logarithmic:
+    let linear = |r: &pgm::probe::SphereRay| {
+        let (e_h, d_h) = (r.sphere.horizon_depression(), r.sphere.horizon_distance());
+        let s = r.sin_depression;
+        if s > e_h.sin() || s <= 0.0 || d_h >= r.max_distance {
+            return exact(r);
+        }
+        d_h + (r.max_distance - d_h) * (1.0 - s.asin() / e_h)
+    };
+    let (misses, _) = sphere_misses(&rays, &got, linear);
+    eprintln!("linear: {misses} misses");
+    assert!(misses > 100, "linear interpolation passed: {misses} misses");
+    // Hits on the tangent plane (the flat world's distance) instead of the sphere:
+    let plane = |r: &pgm::probe::SphereRay| {
+        let s = r.sin_depression;
+        if s <= r.sphere.horizon_depression().sin() {
+            return exact(r);
+        }
+        (r.sphere.height * (1.0 - s * s).sqrt() / s).min(r.max_distance)
+    };
+    let (misses, _) = sphere_misses(&rays, &got, plane);
+    eprintln!("plane: {misses} misses");
+    assert!(misses > 100, "the tangent plane passed: {misses} misses");
+}

@@ -9,7 +9,8 @@ use ash::vk;
 use vkterrain::driver::descriptors::{Binding, PROBE_SET};
 use vkterrain::driver::shaders::{
     BRUTE_WGSL, CHUNKED_PROBE_WGSL, CHUNKED_SELECT_WGSL, CHUNKED_WGSL, CLIPMAP_PROBE_WGSL,
-    EVAL_METRICS_WGSL, GEOMIPMAP_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL, UDLOD_TILING_WGSL, UDLOD_WGSL,
+    EVAL_METRICS_WGSL, GEOMIPMAP_WGSL, PGM_PROBE_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL,
+    UDLOD_TILING_WGSL, UDLOD_WGSL,
 };
 use vkterrain::eval::gpu::EVAL_SET;
 use vkterrain::frame::FrameUniforms;
@@ -62,6 +63,7 @@ fn shader_sets() -> ShaderSets {
             vec![(0, terrain), (1, udlod)],
         ),
         ("pgm", PGM_WGSL, vec![(0, terrain), (1, pgm)]),
+        ("pgm_probe", PGM_PROBE_WGSL, vec![(0, probe)]),
         (
             "clipmap_probe",
             CLIPMAP_PROBE_WGSL,
@@ -419,6 +421,21 @@ fn udlod_probe_record_matches_the_wgsl_struct() {
         "ProbeVertex",
         &rust,
         size_of::<ProbeVertex>(),
+    );
+}
+
+#[test]
+fn pgm_probe_record_matches_the_wgsl_struct() {
+    use vkterrain::lod::pgm::probe::SphereProbe;
+    let rust = [
+        ("sphere", offset_of!(SphereProbe, sphere)),
+        ("horizon", offset_of!(SphereProbe, horizon)),
+    ];
+    assert_struct_layout(
+        &[("pgm_probe", PGM_PROBE_WGSL)],
+        "SphereProbe",
+        &rust,
+        size_of::<SphereProbe>(),
     );
 }
 

@@ -103,13 +103,22 @@ impl Sphere {
         self.radius * self.horizon_depression()
     }
 
+    /// The horizon's terms as the shaders read them (`SphereView` in
+    /// `shaders/include/pgm_sphere.wgsl`): its depression's sine, its surface distance (m) and
+    /// the depression angle (rad).
+    pub fn gpu_terms(&self) -> [f32; 3] {
+        let e_h = self.horizon_depression();
+        [e_h.sin() as f32, self.horizon_distance() as f32, e_h as f32]
+    }
+
     /// Surface distance (m, along the sphere) of the point a ray with depression sine `s`
     /// (`-dir.up` of the unit direction) stands for, at most `max_distance`: where it meets
     /// the sphere; a ray above the sphere's horizon (it misses) takes a distance between the
     /// horizon's (at the horizon) and `max_distance` (at the horizontal and above it),
     /// logarithmic in its depression angle, so rows towards the horizontal keep covering the
-    /// terrain beyond the sphere's horizon that rises into view. `pgm.wgsl`'s
-    /// `earth_ground_point` is the same formula in f32.
+    /// terrain beyond the sphere's horizon that rises into view. `sphere_distance` in
+    /// `shaders/include/pgm_sphere.wgsl` is the same formula in f32 (tests/pgm.rs
+    /// `the_gpu_sphere_distance_equals_the_cpu_one` proves them equal).
     pub fn distance(&self, s: f64, max_distance: f64) -> f64 {
         let (rho, a) = (self.radius, self.height);
         let e_h = self.horizon_depression();

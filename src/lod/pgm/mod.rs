@@ -16,6 +16,8 @@
 //! horizon are cut at `max_distance`).
 
 pub mod earth;
+#[cfg(feature = "test-support")]
+pub mod probe;
 pub mod settings;
 
 use std::sync::Arc;
@@ -319,19 +321,14 @@ impl AuxCamera {
             ..Default::default()
         };
         if let (Some(e), Some(sphere)) = (self.earth, self.sphere()) {
-            let dip = sphere.horizon_depression();
+            let [sin_h, d_h, e_h] = sphere.gpu_terms();
             let cell = e.sample.floor();
             let frac = e.sample - cell;
             out.earth = v4(e.axes.z_axis, sphere.radius);
             out.to_col = v4(e.to_sample[0], e.reference_m);
-            out.to_row = v4(e.to_sample[1], dip.sin());
+            out.to_row = v4(e.to_sample[1], f64::from(sin_h));
             out.cam_cell = [cell.x as i32, cell.y as i32, 0, 0];
-            out.cam_frac = [
-                frac.x as f32,
-                frac.y as f32,
-                sphere.horizon_distance() as f32,
-                dip as f32,
-            ];
+            out.cam_frac = [frac.x as f32, frac.y as f32, d_h, e_h];
         }
         out
     }
