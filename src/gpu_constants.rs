@@ -101,6 +101,10 @@ shared_constants! {
     PGM_LATTICE_ITERATIONS: u32 = 6;
     /// Threads per workgroup of the UDLOD morph probe (tests: morphed vertices read back).
     UDLOD_PROBE_WORKGROUP: u32 = 64;
+    /// PGM on the earth: grid vertices per side of the tile one workgroup of
+    /// `shaders/pgm_earth.wgsl` places (its sphere points, with a one-vertex halo, in workgroup
+    /// memory).
+    PGM_EARTH_TILE: u32 = 16;
     /// Threads per workgroup of the PGM sphere probe (tests: reference-sphere distances read
     /// back).
     PGM_PROBE_WORKGROUP: u32 = 64;

@@ -9,7 +9,7 @@ use ash::vk;
 use vkterrain::driver::descriptors::{Binding, PROBE_SET};
 use vkterrain::driver::shaders::{
     BRUTE_WGSL, CHUNKED_PROBE_WGSL, CHUNKED_SELECT_WGSL, CHUNKED_WGSL, CLIPMAP_PROBE_WGSL,
-    EVAL_METRICS_WGSL, GEOMIPMAP_WGSL, PGM_PROBE_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL,
+    EVAL_METRICS_WGSL, GEOMIPMAP_WGSL, PGM_EARTH_WGSL, PGM_PROBE_WGSL, PGM_WGSL, UDLOD_PROBE_WGSL,
     UDLOD_TILING_WGSL, UDLOD_WGSL,
 };
 use vkterrain::eval::gpu::EVAL_SET;
@@ -63,6 +63,7 @@ fn shader_sets() -> ShaderSets {
             vec![(0, terrain), (1, udlod)],
         ),
         ("pgm", PGM_WGSL, vec![(0, terrain), (1, pgm)]),
+        ("pgm_earth", PGM_EARTH_WGSL, vec![(0, terrain), (1, pgm)]),
         ("pgm_probe", PGM_PROBE_WGSL, vec![(0, probe)]),
         (
             "clipmap_probe",
@@ -421,6 +422,22 @@ fn udlod_probe_record_matches_the_wgsl_struct() {
         "ProbeVertex",
         &rust,
         size_of::<ProbeVertex>(),
+    );
+}
+
+#[test]
+fn pgm_earth_vertex_matches_the_wgsl_struct() {
+    use vkterrain::lod::pgm::EarthVertex;
+    let rust = [
+        ("cell", offset_of!(EarthVertex, cell)),
+        ("frac", offset_of!(EarthVertex, frac)),
+        ("level", offset_of!(EarthVertex, level)),
+    ];
+    assert_struct_layout(
+        &[("pgm", PGM_WGSL), ("pgm_earth", PGM_EARTH_WGSL)],
+        "EarthVertex",
+        &rust,
+        size_of::<EarthVertex>(),
     );
 }
 

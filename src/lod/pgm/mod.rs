@@ -29,15 +29,30 @@ use gpu_allocator::MemoryLocation;
 use super::{LodMethod, MethodContext};
 use crate::dataset::Heightmap;
 use crate::driver::Gpu;
-use crate::driver::descriptors::{Binding, DescriptorSets, Resource};
+use crate::driver::barrier::{Barriers, MemoryAccess};
+use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::{Buffer, Image};
-use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, terrain_pipeline};
+use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use crate::error::{Error, Result, VkResultExt};
 use crate::frame::ViewState;
+use crate::gpu_constants::PGM_EARTH_TILE;
 use crate::scene::Camera;
 use crate::slots::ViewSlot;
 use earth::{AuxEarth, Sphere};
 use settings::PgmSettings;
+
+/// One grid vertex placed on the earth (`EarthVertex` in `shaders/include/pgm_grid.wgsl`,
+/// written by `shaders/pgm_earth.wgsl`; `tests/shader_interface.rs` proves the layouts
+/// equal). Only its size is used on the host.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct EarthVertex {
+    pub cell: [i32; 2],
+    pub frac: [f32; 2],
+    /// Mip level of the heights.
+    pub level: f32,
+    pub _pad: f32,
+}
 
 /// Per-frame uniforms of set 1 (`Pgm` in `shaders/pgm.wgsl`; `tests/shader_interface.rs`
 /// proves the layouts equal).
@@ -457,17 +472,56 @@ impl Drop for Raw {
     }
 }
 
-/// Descriptor set 1 (`shaders/pgm.wgsl`): the uniforms, the height mip chain, its sampler.
+/// Descriptor set 1 (`shaders/pgm.wgsl`; on the earth `shaders/pgm_earth.wgsl` too): the
+/// uniforms, the height mip chain, its sampler, the row fractions, the grid vertices placed
+/// on the earth.
 pub const PGM_SET: &[Binding] = {
     use vk::DescriptorType as T;
     const V: vk::ShaderStageFlags = vk::ShaderStageFlags::VERTEX;
+    const VC: vk::ShaderStageFlags = stages(V, vk::ShaderStageFlags::COMPUTE);
     &[
-        Binding::new(0, T::UNIFORM_BUFFER, V, "pgm"),
+        Binding::new(0, T::UNIFORM_BUFFER, VC, "pgm"),
         Binding::new(1, T::SAMPLED_IMAGE, V, "height_mips"),
         Binding::new(2, T::SAMPLER, V, "mip_sampler"),
-        Binding::new(3, T::STORAGE_BUFFER, V, "row_t"),
+        Binding::new(3, T::STORAGE_BUFFER, VC, "row_t"),
+        Binding::new(4, T::STORAGE_BUFFER, VC, "earth_vertices"),
     ]
 };
+
+/// One view slot's buffers of set 1.
+struct SlotBuffers {
+    uniforms: Buffer,
+    row_t: Buffer,
+    earth_vertices: Buffer,
+}
+
+impl SlotBuffers {
+    fn new(gpu: &Arc<Gpu>, slot: usize, rows: u32, vertex_bytes: u64) -> Result<Self> {
+        Ok(SlotBuffers {
+            uniforms: Buffer::new(
+                gpu,
+                &format!("pgm uniforms {slot}"),
+                size_of::<PgmUniforms>() as u64,
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?,
+            row_t: Buffer::new(
+                gpu,
+                &format!("pgm row fractions {slot}"),
+                rows as u64 * 4,
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?,
+            earth_vertices: Buffer::new(
+                gpu,
+                &format!("pgm earth vertices {slot}"),
+                vertex_bytes,
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                MemoryLocation::GpuOnly,
+            )?,
+        })
+    }
+}
 
 pub struct Pgm {
     gpu: Arc<Gpu>,
@@ -480,6 +534,10 @@ pub struct Pgm {
     uniforms: Vec<Buffer>,
     /// Per slot: each row's fraction of the auxiliary view (`AuxCamera::row_fractions`).
     row_t: Vec<Buffer>,
+    /// Per slot: the grid vertices placed on the earth (a placeholder on the flat world).
+    _earth_vertices: Vec<Buffer>,
+    /// On the earth: the pass that places them (`shaders/pgm_earth.wgsl`).
+    earth_pass: Option<Pipeline>,
     sets: DescriptorSets,
     _heights: Image,
     mips: u32,
@@ -547,34 +605,29 @@ impl Pgm {
         .vk("vkCreateSampler")?;
         let sets = DescriptorSets::new(gpu, PGM_SET, ctx.slots)?;
         let [cols, rows] = settings.grid();
+        let lattice = ctx.lattice.filter(|_| settings.earth_projection).cloned();
+        let vertex_bytes = match lattice {
+            Some(_) => (cols * rows) as u64 * size_of::<EarthVertex>() as u64,
+            None => size_of::<EarthVertex>() as u64,
+        };
         let mut uniforms = Vec::with_capacity(ctx.slots);
         let mut row_t = Vec::with_capacity(ctx.slots);
+        let mut earth_vertices = Vec::with_capacity(ctx.slots);
         for i in 0..ctx.slots {
-            let rows_buf = Buffer::new(
-                gpu,
-                &format!("pgm row fractions {i}"),
-                rows as u64 * 4,
-                vk::BufferUsageFlags::STORAGE_BUFFER,
-                MemoryLocation::CpuToGpu,
-            )?;
-            let ubo = Buffer::new(
-                gpu,
-                &format!("pgm uniforms {i}"),
-                size_of::<PgmUniforms>() as u64,
-                vk::BufferUsageFlags::UNIFORM_BUFFER,
-                MemoryLocation::CpuToGpu,
-            )?;
+            let b = SlotBuffers::new(gpu, i, rows, vertex_bytes)?;
             sets.write(
                 i,
                 &[
-                    ("pgm", Resource::Buffer(ubo.raw)),
+                    ("pgm", Resource::Buffer(b.uniforms.raw)),
                     ("height_mips", Resource::Image(heights.view)),
                     ("mip_sampler", Resource::Sampler(raw.sampler)),
-                    ("row_t", Resource::Buffer(rows_buf.raw)),
+                    ("row_t", Resource::Buffer(b.row_t.raw)),
+                    ("earth_vertices", Resource::Buffer(b.earth_vertices.raw)),
                 ],
             )?;
-            uniforms.push(ubo);
-            row_t.push(rows_buf);
+            uniforms.push(b.uniforms);
+            row_t.push(b.row_t);
+            earth_vertices.push(b.earth_vertices);
         }
         let band = band_rows(cols, rows);
         let grid = band_indices(cols, band);
@@ -608,11 +661,21 @@ impl Pgm {
             band,
             uniforms,
             row_t,
+            _earth_vertices: earth_vertices,
+            earth_pass: match lattice {
+                Some(_) => Some(compute_pipeline(
+                    gpu,
+                    crate::driver::shaders::PGM_EARTH_SPV,
+                    c"prepare_earth",
+                    &[ctx.terrain.descriptors.layout, sets.layout],
+                )?),
+                None => None,
+            },
             sets,
             _heights: heights,
             mips: levels.len() as u32,
             block_min: BlockMin::new(&data),
-            lattice: ctx.lattice.filter(|_| settings.earth_projection).cloned(),
+            lattice,
             data,
             settings,
             _raw: raw,
@@ -681,6 +744,45 @@ impl LodMethod for Pgm {
         let rows = aux.row_fractions(grid[1], self.settings.warp_rows);
         self.row_t[slot.index()].write(bytemuck::cast_slice(&rows))?;
         self.uniforms[slot.index()].write(bytemuck::bytes_of(&u))
+    }
+
+    /// On the earth: places every grid vertex (`shaders/pgm_earth.wgsl`).
+    fn record_prepass(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        slot: ViewSlot,
+        frame_set: vk::DescriptorSet,
+    ) {
+        let Some(pass) = &self.earth_pass else {
+            return;
+        };
+        let d = &self.gpu.device;
+        let b = Barriers::new(&self.gpu);
+        let [cols, rows] = self.settings.grid();
+        // The slot's previous frame read the vertices in its vertex stage (same queue).
+        b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::ComputeWrite);
+        unsafe {
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pass.raw);
+            d.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                pass.layout,
+                0,
+                &[frame_set, self.sets.sets[slot.index()]],
+                &[],
+            );
+            d.cmd_dispatch(
+                cmd,
+                cols.div_ceil(PGM_EARTH_TILE),
+                rows.div_ceil(PGM_EARTH_TILE),
+                1,
+            );
+        }
+        b.memory(
+            cmd,
+            MemoryAccess::ComputeWrite,
+            MemoryAccess::VertexShaderRead,
+        );
     }
 
     fn record_draw(
