@@ -1382,3 +1382,65 @@ fn pgm_reference_sphere_hits_and_joins_at_the_horizon() {
         }
     }
 }
+
+/// Hardware tessellation's edge levels on a native geographic grid come from the edges' metric
+/// lengths through the lattice: at 60 N a 0.001-degree grid's east-west edges are half its
+/// north-south ones. Looking straight down from a height where an 8-sample patch's east-west
+/// edge spans 0.75 of the target length on screen, its north-south edge 1.5 and its diagonal
+/// 1.68, equal spacing gives every triangle patch outer levels (1, 2, 2) and inner level 2:
+/// exactly 5 triangles each. Negative control: the same data on the flat world (one square
+/// spacing, the north-south metres) measures the east-west edges twice as long and makes a
+/// different count.
+#[test]
+fn tessellation_measures_geographic_edges_in_metres() {
+    use vkterrain::lod::tessellation::settings::{Spacing, TessellationSettings};
+    let gpu = common::gpu(false);
+    let (size, lat0, lon0, d) = (65u32, 60.0, 10.0, 0.001);
+    let data = geographic(size, lat0, lon0, d, &|_, _| 0.0);
+    let lattice = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
+    let settings = TessellationSettings {
+        spacing: Spacing::Equal,
+        edge_px: 8.0,
+        patch_samples: 8,
+        cull: false,
+        ..Default::default()
+    };
+    let (w, h) = (200u32, 200u32);
+    let vfov_deg: f64 = 30.0;
+    let focal = h as f64 / (2.0 * (vfov_deg.to_radians() / 2.0).tan());
+    // Where an east-west patch edge is 0.75 x 8 px on screen (flat terrain, straight down:
+    // every edge lies at the camera's height in view depth).
+    let ew_patch_m = 8.0 * d * metres_per_deg_lon(lat0 + 0.032);
+    let above = ew_patch_m * focal / (0.75 * 8.0);
+    let centre = lattice.position(DVec2::new(32.0, 32.0), 0.0);
+    let camera = Camera {
+        position: centre + DVec3::Z * above,
+        pitch_deg: -90.0,
+        vfov_deg,
+        far: 1e6,
+        ..Camera::default()
+    };
+    let patches = 2 * 8 * 8;
+    let method = MethodConfig::Tessellation(settings);
+    let earth = render(
+        &gpu,
+        &data,
+        method.clone(),
+        Some(&lattice),
+        (w, h),
+        &[camera, camera],
+    );
+    let flat = render(&gpu, &data, method, None, (w, h), &[camera, camera]);
+    let (on_earth, on_flat) = (
+        earth.frames.last().unwrap().triangles,
+        flat.frames.last().unwrap().triangles,
+    );
+    println!("tessellated triangles: earth {on_earth}, flat world {on_flat} ({patches} patches)");
+    assert_eq!(on_earth, 5 * patches, "levels (1, 2, 2) / 2 in every patch");
+    assert_ne!(
+        on_flat, on_earth,
+        "the flat world's square spacing gave the same levels"
+    );
+    drop((earth, flat));
+    common::assert_no_validation_messages(&gpu);
+}

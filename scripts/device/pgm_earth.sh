@@ -7,10 +7,11 @@
 #
 # Needs: out/datasets/pyrenees carried (`make data-pyrenees`, a few MB) for Fischer S3.
 # Run there from the repository root: `bash scripts/device/pgm_earth.sh > $OUT/pgm_earth.txt 2>&1`.
+# BIN=path runs another build (an A/B of two builds: alternate them with ROUNDS=1).
 set -u
 . .device-vk/env.sh
 log() { echo "### $*"; }
-BIN=.device-vk/vkterrain
+BIN=${BIN:-.device-vk/vkterrain}
 TMP=$(mktemp -d)
 configs=()
 if [ -f out/datasets/pyrenees/manifest.json ]; then
@@ -22,7 +23,7 @@ else
 fi
 sed -e 's#"scenarios/#"'"$PWD"'/config/scenarios/#' config/ci_earth.toml >"$TMP/ci_earth.toml"
 configs+=("$TMP/ci_earth.toml")
-for round in 1 2; do
+for round in $(seq "${ROUNDS:-2}"); do
   for c in "${configs[@]}"; do
     for earth in ellipsoid flat; do
       log "round $round $(basename "$c" .toml) $earth: brute,pgm 1920x1080"

@@ -20,8 +20,14 @@ layout(location = 0) out vec2 out_grid[];
 
 // Level of the edge between corners a and b.
 float edge_level(int a, int b) {
-    // World-space edge: integer sample offsets times the spacing (exact), height difference.
-    vec3 d = vec3((in_grid[a] - in_grid[b]) * frame.camera_offset.w, in_height[a] - in_height[b]);
+    // World-space edge: on the flat world integer sample offsets times the spacing (exact) and
+    // the height difference; on the earth the chord between the corners through the lattice
+    // (a native geographic grid's samples are not square: east-west spacing shrinks with
+    // cos(lat), and the grid's one nominal spacing is only one of the two).
+    vec3 d = frame.lattice.x != 0u
+        ? relative_position(ivec2(in_grid[a]), vec2(0.0), in_height[a])
+            - relative_position(ivec2(in_grid[b]), vec2(0.0), in_height[b])
+        : vec3((in_grid[a] - in_grid[b]) * frame.camera_offset.w, in_height[a] - in_height[b]);
     float diameter = length(d);
     // View depth of the edge's midpoint (clip w is the view depth, and linear). The ablation
     // `edge_levels = "patch"` (tess.flags.y) uses the patch's centroid instead: the two patches
@@ -37,12 +43,28 @@ float edge_level(int a, int b) {
     return clamp(px / tess.params.x * tess.params.y, 1.0, tess.params.w);
 }
 
+// On the earth the surface between the corners bulges outward from their chords by up to the
+// sagitta d^2 / 8R of the patch's longest edge d over the lattice's curve radius (plus 1e-3 d,
+// as `earth_box` grows the other methods' boxes: docs/coordinates.md, "Culling with
+// curvature"); 0 on the flat world.
+float earth_bulge() {
+    if (frame.lattice.x == 0u) {
+        return 0.0;
+    }
+    vec3 p0 = relative_position(ivec2(in_grid[0]), vec2(0.0), 0.0);
+    vec3 p1 = relative_position(ivec2(in_grid[1]), vec2(0.0), 0.0);
+    vec3 p2 = relative_position(ivec2(in_grid[2]), vec2(0.0), 0.0);
+    float d = max(max(distance(p0, p1), distance(p1, p2)), distance(p2, p0));
+    return d * d / (8.0 * uintBitsToFloat(frame.lattice.w)) + 1e-3 * d;
+}
+
 // Whether all of the patch's prism lies outside one plane of the frustum (reversed-Z clip
 // space: 0 <= z <= w).
 bool outside_frustum() {
     vec2 lo = min(min(in_grid[0], in_grid[1]), in_grid[2]);
     ivec2 quad = ivec2(lo) / int(tess.grid.x);
-    vec2 b = patch_bounds.bounds[quad.y * int(tess.grid.z) + quad.x];
+    float bulge = earth_bulge();
+    vec2 b = patch_bounds.bounds[quad.y * int(tess.grid.z) + quad.x] + vec2(-bulge, bulge);
     bvec4 all_out_xy = bvec4(true);
     bvec2 all_out_z = bvec2(true);
     for (int i = 0; i < 3; i++) {
