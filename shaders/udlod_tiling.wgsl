@@ -104,12 +104,12 @@ fn tile_min_max(t: Tile) -> vec2<f32> {
 }
 
 // Distance from the LOD viewer to the nearest point of the tile's rectangle at the reference
-// height (mirrors `tile_distance` in src/lod/udlod/select.rs).
+// height, in the LOD metric (mirrors `tile_distance` in src/lod/udlod/select.rs).
 fn tile_distance(t: Tile) -> f32 {
     let span = i32(udlod.sizes.x << t.lod);
     let lo = viewer_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
     let hi = viewer_xy(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span));
-    let d = max(lo, min(vec2<f32>(0.0), hi));
+    let d = max(lo, min(vec2<f32>(0.0), hi)) * udlod.metric.xy;
     return length(vec3<f32>(d, udlod.viewer.z));
 }
 

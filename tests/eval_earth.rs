@@ -29,6 +29,7 @@ use vkterrain::lod::{MethodConfig, UdlodSettings};
 use vkterrain::readback::CollectSink;
 use vkterrain::render::Renderer;
 use vkterrain::scene::{Camera, Scenario};
+use vkterrain::slots::ViewSlot;
 
 /// What one renderer measured over all frames.
 struct Measured {
@@ -36,6 +37,8 @@ struct Measured {
     pixels: Histogram,
     holes: usize,
     missing: u32,
+    /// Triangles drawn, summed over the frames.
+    triangles: u64,
 }
 
 impl Measured {
@@ -104,6 +107,7 @@ fn measure(
             pixels: Histogram::default(),
             holes: 0,
             missing: 0,
+            triangles: 0,
         };
         runs.push((renderer, results, measured));
     }
@@ -126,6 +130,7 @@ fn measure(
             measured.pixels.merge(&m.pixels);
             measured.holes += m.holes;
             measured.missing += m.missing_reference;
+            measured.triangles += renderer.method().triangles(ViewSlot(0));
         }
     }
     let out = runs.into_iter().map(|(_, _, m)| m).collect();
@@ -340,5 +345,95 @@ fn pgm_on_the_earth_errs_as_on_the_flat_world() {
         "{earth_px:?}"
     );
     assert_eq!((earth[1].holes, flat[1].holes), (0, 0));
+    common::assert_no_validation_messages(&gpu);
+}
+
+/// Issue 14: on a native geographic grid (513 samples of 3 arc seconds from 46 N, east-west
+/// 0.69 times the north-south spacing; alpine procedural heights) UDLOD measures east-west
+/// and north-south distances each with its own smallest metric spacing. Eight long views
+/// (320x180, from the south edge, 6 degrees down, far 80 km) at tau 1 and 2 px: the per-axis
+/// metric draws at least 10 % fewer triangles than the one smallest spacing (`lod_metric =
+/// "smallest"`, the ablation: what UDLOD did before) and stays within tau at the 99.9th
+/// percentile (and above a quarter of it: the views do test the bound), without holes at tau
+/// 1 (at most one sky pixel a frame at tau 2); so does the ablation. Measured: 199,936
+/// against 281,344 triangles at tau 1 (p99.9 0.73 / 0.63 px), 97,536 against 119,296 at tau 2
+/// (1.31 / 1.15 px).
+#[test]
+fn udlod_per_axis_metric_on_a_geographic_grid_stays_within_tau() {
+    use vkterrain::lod::udlod::settings::LodMetric;
+    let gpu = common::gpu(false);
+    let (data, lattice) = common::poses::geographic_native(513, 46.0, 1, procedural::Style::Alpine);
+    let data = Arc::new(data);
+    // Long views from the south edge, 800 m above the highest peak, 6 degrees down, turning
+    // from north-north-east to east-north-east: the far terrain at coarse levels.
+    let ((ex, ey), (_, top)) = (data.extent(), data.height_range());
+    let cameras: Vec<Camera> = (0..8)
+        .map(|k| {
+            let grid = glam::DVec2::new((0.2 + 0.08 * k as f64) * ex, 0.05 * ey) / data.spacing;
+            Camera {
+                position: lattice.position(grid, top as f64 + 800.0),
+                yaw_deg: 10.0 + 8.0 * k as f64,
+                pitch_deg: -6.0,
+                near: 1.0,
+                far: 80_000.0,
+                ..Camera::default()
+            }
+        })
+        .collect();
+    let lattice = Arc::unwrap_or_clone(lattice);
+    for tau_px in [1.0, 2.0] {
+        let axis = UdlodSettings {
+            tau_px,
+            ..Default::default()
+        };
+        let smallest = UdlodSettings {
+            lod_metric: LodMetric::Smallest,
+            ..axis.clone()
+        };
+        let measured = measure(
+            &gpu,
+            &data,
+            Some(&lattice),
+            &[
+                (MethodConfig::Brute {}, Some(&lattice)),
+                (axis.into(), Some(&lattice)),
+                (smallest.into(), Some(&lattice)),
+            ],
+            &cameras,
+            (320, 180),
+        );
+        for (name, m) in ["brute force", "per axis", "smallest"]
+            .iter()
+            .zip(&measured)
+        {
+            println!(
+                "tau {tau_px}, {name}: {} triangles, {:?}, holes {}",
+                m.triangles,
+                m.summaries().1,
+                m.holes
+            );
+            assert_eq!(m.missing, 0, "{name}: every pixel found its reference tile");
+        }
+        for (name, m) in ["per axis", "smallest"].iter().zip(&measured[1..]) {
+            let (_, px) = m.summaries();
+            assert!(px.count > 100_000, "{name}: {px:?}");
+            // Not trivially within tau: the far terrain is drawn coarse.
+            assert!(px.p999 > 0.25 * tau_px, "{name}: {px:?}");
+            assert!(
+                px.p999 <= tau_px,
+                "{name}: p99.9 {} px > tau {tau_px}",
+                px.p999
+            );
+            // Cracks would be holes; at tau 2 the lowered far silhouette may uncover single
+            // sky pixels (docs/udlod.md, "Open issues"): at most one a frame.
+            let allowed = if tau_px <= 1.0 { 0 } else { cameras.len() };
+            assert!(m.holes <= allowed, "{name}: {} hole pixels", m.holes);
+        }
+        let (per_axis, one) = (measured[1].triangles, measured[2].triangles);
+        assert!(
+            per_axis as f64 <= 0.9 * one as f64,
+            "tau {tau_px}: per axis {per_axis} triangles, one spacing {one}"
+        );
+    }
     common::assert_no_validation_messages(&gpu);
 }

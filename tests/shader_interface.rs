@@ -162,6 +162,7 @@ fn udlod_uniforms_match_the_wgsl_struct() {
         ("params", offset_of!(UdlodUniforms, params)),
         ("viewer", offset_of!(UdlodUniforms, viewer)),
         ("counts", offset_of!(UdlodUniforms, counts)),
+        ("metric", offset_of!(UdlodUniforms, metric)),
     ];
     let shaders = composed_shaders();
     assert_struct_layout(&shaders[1..3], "Udlod", &rust, size_of::<UdlodUniforms>());

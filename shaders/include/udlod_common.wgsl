@@ -18,6 +18,10 @@ struct Udlod {
     viewer: vec4<f32>,
     // x: indices per tile (6 * quads^2).
     counts: vec4<u32>,
+    // xy: the LOD metric's stretch of the grid frame per axis (metres per sample along x and
+    // y, each a lower bound on the drawn surface, over the grid frame's spacing): exactly
+    // (1, 1) on square grids (`Levels::stretch` in src/lod/udlod/select.rs).
+    metric: vec4<f32>,
 }
 
 struct Tile {
@@ -37,7 +41,8 @@ fn relative_xy(sample: vec2<i32>) -> vec2<f32> {
     return vec2<f32>(sample - frame.camera_cell.xy) * frame.camera_offset.w - frame.camera_offset.xy;
 }
 
-// LOD-viewer-relative metres of an integer sample position.
+// LOD-viewer-relative grid-frame metres of an integer sample position (times `udlod.metric.xy`:
+// metres of the LOD metric).
 fn viewer_xy(sample: vec2<i32>) -> vec2<f32> {
     return relative_xy(sample) - udlod.viewer.xy;
 }

@@ -5,10 +5,11 @@
 
 // 0 = the tile's own grid, 1 = fully on the parent's grid (times the on/off switch
 // `udlod.params.z`). `d` is the distance from the LOD viewer to the un-morphed vertex at the
-// reference height, scaled by the parent level's split field; `parent_split` the parent
-// level's split distance; the morph runs over the last `morph_range` of it.
+// reference height in the LOD metric (`udlod.metric`), scaled by the parent level's split
+// field; `parent_split` the parent level's split distance; the morph runs over the last
+// `morph_range` of it.
 fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
-    let d = length(vec3<f32>(viewer_xy(sample), udlod.viewer.z));
+    let d = length(vec3<f32>(viewer_xy(sample) * udlod.metric.xy, udlod.viewer.z));
     let scaled = d * field_at(sample, lod + 1u);
     let parent_split = udlod.split[lod + 1u].x;
     let morph_range = udlod.params.y;

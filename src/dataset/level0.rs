@@ -498,6 +498,15 @@ impl Terrain {
         })
     }
 
+    /// Stated metres between level-0 samples along x and y (`Heightmap::axis_spacing`; the
+    /// pyramid's store's): `[spacing, spacing]` on square grids.
+    pub fn axis_spacing(&self) -> [f64; 2] {
+        match self {
+            Terrain::Grid(h) => h.axis_spacing,
+            Terrain::Pyramid(p) => p.store().spacing(),
+        }
+    }
+
     /// Minimum and maximum level-0 height (the pyramid's from its manifest).
     pub fn height_range(&self) -> (f32, f32) {
         match self {

@@ -361,6 +361,34 @@ impl Lattice {
         p + u * height
     }
 
+    /// The smallest metres per sample along the grid's columns (x) and rows (y) anywhere on
+    /// the lattice, at `height` metres (the drawn surface's, as the GPU stores the nodes).
+    /// Between nodes the lattice is bilinear, so along a node edge a sample step is a
+    /// `1 / step` share of the edge's chord: the minimum over all node edges is the minimum
+    /// over the grid. A geographic grid's east-west minimum lies on its poleward row, its
+    /// north-south one on its equator-most row. UDLOD's per-axis LOD metric
+    /// (`udlod::select::Levels::on_lattice`).
+    pub fn min_axis_spacing(&self, height: f64) -> [f64; 2] {
+        let [ni, nj] = self.nodes.map(|n| n as i64);
+        let at = |i: i64, j: i64| {
+            let (p, u) = self.node_position(i, j);
+            p + u * height
+        };
+        let mut min = [f64::INFINITY; 2];
+        for j in 0..nj {
+            for i in 0..ni {
+                let p = at(i, j);
+                if i + 1 < ni {
+                    min[0] = min[0].min((at(i + 1, j) - p).length());
+                }
+                if j + 1 < nj {
+                    min[1] = min[1].min((at(i, j + 1) - p).length());
+                }
+            }
+        }
+        min.map(|m| m / self.step as f64)
+    }
+
     /// The radius [`Lattice::rect_box`] grows boxes by the sagitta over (metres; an f32
     /// value, uploaded as `frame.lattice.w`).
     pub fn curve_radius(&self) -> f64 {

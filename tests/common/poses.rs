@@ -3,6 +3,7 @@
 
 use glam::DVec3;
 use vkterrain::dataset::Heightmap;
+use vkterrain::dataset::procedural::Style;
 use vkterrain::geo::{EnuFrame, Geodetic, Lattice, WGS84};
 use vkterrain::scene::Camera;
 
@@ -75,16 +76,27 @@ pub fn anchored_ci(size: u32, spacing: f64) -> (Heightmap, std::sync::Arc<Lattic
 /// generator; `spacing` (the one LOD metric) the smallest metric spacing, the east-west one at
 /// the poleward edge, as a geographic data set's (docs/coordinates.md, "Native grids").
 pub fn geographic_60n(size: u32) -> (Heightmap, std::sync::Arc<Lattice>) {
+    geographic_native(size, 60.0, 3, Style::Classic)
+}
+
+/// [`geographic_60n`] from latitude `lat0` (procedural heights of `seed` and `style`).
+pub fn geographic_native(
+    size: u32,
+    lat0: f64,
+    seed: u64,
+    style: Style,
+) -> (Heightmap, std::sync::Arc<Lattice>) {
     let step = 1.0 / 1200.0;
-    let lattice = Lattice::geographic(size, size, [8.0, 60.0], [step, step]).unwrap();
-    let north = 60.0 + (size - 1) as f64 * step;
+    let lattice = Lattice::geographic(size, size, [8.0, lat0], [step, step]).unwrap();
+    let north = lat0 + (size - 1) as f64 * step;
     let ew = WGS84.prime_vertical_radius(north) * north.to_radians().cos() * step.to_radians();
-    let ns = WGS84.meridian_radius(60.0) * step.to_radians();
+    let ns = WGS84.meridian_radius(lat0) * step.to_radians();
     let mut data = vkterrain::dataset::procedural::generate(
         &vkterrain::dataset::procedural::ProceduralParams {
             size,
             spacing: ew,
-            seed: 3,
+            seed,
+            style,
             ..Default::default()
         },
     )

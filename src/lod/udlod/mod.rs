@@ -30,7 +30,7 @@ use crate::frame::ViewState;
 use crate::gpu_constants::UDLOD_MAX_LEVELS;
 use crate::slots::ViewSlot;
 use select::{FieldKey, Levels, SelectionParams, SplitField};
-use settings::UdlodSettings;
+use settings::{LodMetric, UdlodSettings};
 
 /// Per-frame uniforms of set 1 (`Udlod` in `shaders/include/udlod_common.wgsl`).
 #[repr(C)]
@@ -43,6 +43,8 @@ pub struct UdlodUniforms {
     pub params: [f32; 4],
     pub viewer: [f32; 4],
     pub counts: [u32; 4],
+    /// xy: the LOD metric's stretch per axis ([`select::Levels::stretch`]).
+    pub metric: [f32; 4],
 }
 
 /// The tiling state the GPU keeps per slot (`TilingState` in `shaders/udlod_tiling.wgsl`).
@@ -143,7 +145,10 @@ impl Udlod {
             ),
             Terrain::Pyramid(p) => (p.tile_stats(settings.grid_size)?, p.spacing()),
         };
-        let levels = Levels::from_stats(stats, spacing);
+        let mut levels = Levels::from_stats(stats, spacing);
+        if let (Some(lattice), LodMetric::Axis) = (ctx.lattice, settings.lod_metric) {
+            levels = levels.on_lattice(ctx.data.axis_spacing(), lattice);
+        }
         // The morph reads the split distance one level past the root (never morphs).
         if levels.levels() >= UDLOD_MAX_LEVELS {
             return Err(Error::invalid(
@@ -392,6 +397,7 @@ impl LodMethod for Udlod {
             if p.cull { 1.0 } else { 0.0 },
         ];
         u.counts = [self.index_count, 0, 0, 0];
+        u.metric = [p.stretch[0], p.stretch[1], 0.0, 0.0];
         let s = &mut self.slots[slot.index()];
         if s.field_key != Some(p.field.key) {
             // This slot's previous frame has completed (the renderer waits for a slot before

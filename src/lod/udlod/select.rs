@@ -37,7 +37,14 @@ pub struct Levels {
     pub root_lod: u32,
     pub width: u32,
     pub height: u32,
+    /// Metres between samples in the grid frame (`x = col * spacing`, `y = row * spacing`)
+    /// the LOD viewer and the sample positions are given in.
     pub spacing: f64,
+    /// The LOD metric: metres per sample along x and y, each a lower bound of the drawn
+    /// surface's spacing along that axis anywhere on the grid, so LOD distances are never
+    /// longer than true ones. `[spacing, spacing]` except on a native non-square grid on the
+    /// earth ([`Levels::on_lattice`]).
+    pub metric: [f64; 2],
     /// Tiles per side of each level (only tiles that touch the data).
     pub tiles_per_side: Vec<(u32, u32)>,
     /// Offset of each level's entries in `min_max` and `tile_error`.
@@ -84,6 +91,7 @@ impl Levels {
             width: stats.width,
             height: stats.height,
             spacing,
+            metric: [spacing, spacing],
             tiles_per_side,
             level_offsets,
             min_max,
@@ -94,6 +102,39 @@ impl Levels {
 
     pub fn levels(&self) -> u32 {
         self.root_lod + 1
+    }
+
+    /// These levels with the LOD metric of a grid drawn through `lattice` whose stated
+    /// metres between samples are `axis_spacing`: on a native non-square grid (a geographic
+    /// one) each axis's smallest spacing on the drawn surface at the data's lowest height
+    /// (below the datum it shrinks) ([`Lattice::min_axis_spacing`]), so east-west and
+    /// north-south distances are each measured with their own lower bound. Square grids keep
+    /// `[spacing, spacing]`: their selection is unchanged bit for bit (docs/udlod.md,
+    /// "Per-axis metric on the earth").
+    pub fn on_lattice(mut self, axis_spacing: [f64; 2], lattice: &Lattice) -> Self {
+        if crate::dataset::tiles::is_square(axis_spacing) {
+            return self;
+        }
+        let lowest = self.min_max[self.tile_index(Tile {
+            x: 0,
+            y: 0,
+            lod: self.root_lod,
+        })][0];
+        self.metric = lattice.min_axis_spacing((lowest as f64).min(0.0));
+        self
+    }
+
+    /// The LOD metric as a stretch of the grid frame per axis, as the GPU gets it (f32;
+    /// exactly `[1, 1]` on square grids): a grid-frame offset times it is metres.
+    pub fn stretch(&self) -> [f32; 2] {
+        self.metric.map(|m| (m / self.spacing) as f32)
+    }
+
+    /// Diagonal of a level-`lod` tile in the LOD metric (the stretch as the GPU applies it):
+    /// `sqrt(2) * tile_extent(lod)` on square grids.
+    pub fn tile_diagonal(&self, lod: u32) -> f64 {
+        let [sx, sy] = self.stretch().map(|s| s as f64);
+        self.tile_extent(lod) * (sx * sx + sy * sy).sqrt()
     }
 
     /// Tile side in metres at `lod`.
@@ -221,9 +262,11 @@ const CHAIN_MARGIN: f64 = 1e-5;
 ///    [`worst_case_share`] of the grid size), so wherever `Q`'s geometry is drawn, unmorphed or blended into
 ///    its children's morph zone, it is at least that far away;
 /// 2. crack-free chain, for each child `P` (level `l - 1 >= 1`, which may split):
-///    `(1 - r) s_Q >= S_P + sqrt(2) extent(l - 1)`: where `P` split, every point of `P` is
-///    nearer than `S_P + sqrt(2) extent`, so a neighbour of `P`'s children at level `l - 1`
-///    is unmorphed there, and (with the split rule) neighbours differ by at most one level.
+///    `(1 - r) s_Q >= S_P + diagonal(l - 1)` (the tile's diagonal in the LOD metric,
+///    [`Levels::tile_diagonal`]; `sqrt(2) extent` on square grids): where `P` split, every
+///    point of `P` is nearer than `S_P + diagonal`, so a neighbour of `P`'s children at level
+///    `l - 1` is unmorphed there, and (with the split rule) neighbours differ by at most one
+///    level.
 ///
 /// Level 0 never splits, so level 1 has no chain term. Each corner takes the largest
 /// requirement of the tiles around it; `field_max` then raises small values to the level's
@@ -349,7 +392,7 @@ fn tile_requirement(levels: &Levels, key: &FieldKey, keep: f64, t: Tile, finer: 
     }
     let child_lod = t.lod - 1;
     let (cnx, _) = levels.tiles_per_side[child_lod as usize];
-    let diagonal = std::f64::consts::SQRT_2 * levels.tile_extent(child_lod);
+    let diagonal = levels.tile_diagonal(child_lod);
     let mut need = screen;
     for (dx, dy) in QUAD {
         let c = Tile {
@@ -409,6 +452,8 @@ pub struct SelectionParams {
     /// LOD viewer) minus the LOD viewer's height.
     pub viewer: [f32; 3],
     pub spacing: f32,
+    /// The LOD metric's stretch of the grid frame per axis ([`Levels::stretch`]).
+    pub stretch: [f32; 2],
     /// Per-tile split distances (split table and field as uploaded).
     pub field: Arc<SplitField>,
     pub frustum: [[f32; 4]; 6],
@@ -474,6 +519,7 @@ impl SelectionParams {
                 (z_ref - lod_viewer.z) as f32,
             ],
             spacing: s as f32,
+            stretch: levels.stretch(),
             field,
             frustum: frustum_planes(camera, width as f64 / height as f64),
             cull: settings.cull,
@@ -506,13 +552,13 @@ impl SelectionParams {
 }
 
 /// Distance from the LOD viewer to the nearest point of the tile's rectangle at the reference
-/// height.
+/// height, in the LOD metric (grid-frame offsets times [`SelectionParams::stretch`]).
 pub fn tile_distance(levels: &Levels, p: &SelectionParams, t: Tile) -> f32 {
     let span = (levels.grid_size << t.lod) as i32;
     let lo = p.from_viewer([t.x as i32 * span, t.y as i32 * span]);
     let hi = p.from_viewer([(t.x as i32 + 1) * span, (t.y as i32 + 1) * span]);
-    let dx = lo[0].max(0.0f32.min(hi[0]));
-    let dy = lo[1].max(0.0f32.min(hi[1]));
+    let dx = lo[0].max(0.0f32.min(hi[0])) * p.stretch[0];
+    let dy = lo[1].max(0.0f32.min(hi[1])) * p.stretch[1];
     Vec3::new(dx, dy, p.viewer[2]).length()
 }
 
@@ -591,7 +637,7 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
 /// `morph_factor` in `shaders/include/udlod_morph.wgsl`, operation for operation.
 pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
     let rel = p.from_viewer(sample);
-    let d = Vec3::new(rel[0], rel[1], p.viewer[2]).length();
+    let d = Vec3::new(rel[0] * p.stretch[0], rel[1] * p.stretch[1], p.viewer[2]).length();
     let scaled = d * p.field.at(levels, sample, lod + 1);
     let parent_split = p.field.split[lod as usize + 1];
     let on = if p.morph { 1.0 } else { 0.0 };

@@ -27,6 +27,24 @@ pub struct UdlodSettings {
     /// Draw without an index buffer (six vertex-shader runs per quad) instead of the shared
     /// indexed grid; kept for measurement (`benches/udlod.rs` compares the two).
     pub vertex_pulling: bool,
+    /// How LOD distances are measured on a native non-square grid on the earth (square grids
+    /// have one spacing either way).
+    pub lod_metric: LodMetric,
+}
+
+/// The LOD metric on a native non-square grid on the earth (config `lod_metric`;
+/// docs/udlod.md, "Per-axis metric on the earth").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LodMetric {
+    /// Each axis with its own smallest metric spacing on the drawn surface (east-west and
+    /// north-south apart).
+    #[default]
+    Axis,
+    /// Both axes with the grid's one smallest spacing (the east-west one at the poleward
+    /// edge): an ablation, what UDLOD did before; north-south up to `1 / cos(lat)` finer
+    /// than needed.
+    Smallest,
 }
 
 impl Default for UdlodSettings {
@@ -40,6 +58,7 @@ impl Default for UdlodSettings {
             cull: true,
             error_field_max: 1024.0,
             vertex_pulling: false,
+            lod_metric: LodMetric::Axis,
         }
     }
 }
