@@ -488,6 +488,36 @@ pub const PGM_SET: &[Binding] = {
     ]
 };
 
+/// PGM filters its height mips linearly: a one-line error where `format` cannot be.
+fn require_linear_filter(gpu: &Gpu, format: vk::Format) -> Result<()> {
+    let props = unsafe {
+        gpu.instance
+            .raw
+            .get_physical_device_format_properties(gpu.physical, format)
+    };
+    if !props
+        .optimal_tiling_features
+        .contains(vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR)
+    {
+        return Err(Error::invalid(
+            "pgm",
+            format!("the device cannot filter {format:?} textures linearly"),
+        ));
+    }
+    Ok(())
+}
+
+/// The compute pass that places the grid vertices on the earth (`shaders/pgm_earth.wgsl`),
+/// with set 0 and PGM's set 1.
+fn earth_pass(gpu: &Arc<Gpu>, ctx: &MethodContext<'_>, sets: &DescriptorSets) -> Result<Pipeline> {
+    compute_pipeline(
+        gpu,
+        crate::driver::shaders::PGM_EARTH_SPV,
+        c"prepare_earth",
+        &[ctx.terrain.descriptors.layout, sets.layout],
+    )
+}
+
 /// One view slot's buffers of set 1.
 struct SlotBuffers {
     uniforms: Buffer,
@@ -558,20 +588,7 @@ impl Pgm {
         settings.validate()?;
         let d = &gpu.device;
         let format = vk::Format::R32_SFLOAT;
-        let props = unsafe {
-            gpu.instance
-                .raw
-                .get_physical_device_format_properties(gpu.physical, format)
-        };
-        if !props
-            .optimal_tiling_features
-            .contains(vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR)
-        {
-            return Err(Error::invalid(
-                "pgm",
-                "the device cannot filter R32_SFLOAT textures linearly",
-            ));
-        }
+        require_linear_filter(gpu, format)?;
         let mut raw = Raw {
             gpu: gpu.clone(),
             sampler: vk::Sampler::null(),
@@ -663,12 +680,7 @@ impl Pgm {
             row_t,
             _earth_vertices: earth_vertices,
             earth_pass: match lattice {
-                Some(_) => Some(compute_pipeline(
-                    gpu,
-                    crate::driver::shaders::PGM_EARTH_SPV,
-                    c"prepare_earth",
-                    &[ctx.terrain.descriptors.layout, sets.layout],
-                )?),
+                Some(_) => Some(earth_pass(gpu, ctx, &sets)?),
                 None => None,
             },
             sets,
