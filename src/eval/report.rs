@@ -258,55 +258,63 @@ fn write_charts(eval: &Evaluation, dir: &Path) -> Result<Vec<usize>> {
     Ok(front)
 }
 
-/// Side-by-side images: reference | method | screen-space error | FLIP error map.
+/// Side-by-side images: reference | method | screen-space error | FLIP error map; encoded in
+/// parallel on the rayon pool (each a 4 x frame-width PNG).
 fn write_images(eval: &Evaluation, dir: &Path) -> Result<Vec<(String, u64, String)>> {
-    let mut links = Vec::new();
-    for img in &eval.images {
-        let (w, h) = (img.width, img.height);
-        let n = (w * h) as usize;
-        let flip = img
-            .flip
-            .clone()
-            .unwrap_or_else(|| super::flip::magma_rgba(&vec![0.0; n], w, h));
-        let panels = 4u32;
-        let mut out = vec![0u8; n * 4 * panels as usize];
-        for y in 0..h {
-            for x in 0..w {
-                let i = (y * w + x) as usize;
-                let src = i * 4;
-                let e = img.error_px[i];
-                let error = (e < EVAL_NO_ERROR_PX).then_some(e as f64);
-                for (panel, px) in [
-                    (
-                        0,
-                        [
-                            img.reference[src],
-                            img.reference[src + 1],
-                            img.reference[src + 2],
-                        ],
-                    ),
-                    (
-                        1,
-                        [img.method[src], img.method[src + 1], img.method[src + 2]],
-                    ),
-                    (2, heat(error, 2.0)),
-                    (3, [flip[src], flip[src + 1], flip[src + 2]]),
-                ] {
-                    let dst = ((y * panels * w + panel * w + x) * 4) as usize;
-                    out[dst..dst + 3].copy_from_slice(&px);
-                    out[dst + 3] = 255;
-                }
+    use rayon::prelude::*;
+    eval.images
+        .par_iter()
+        .map(|img| {
+            let name = format!(
+                "images/{}_f{:04}.png",
+                img.variant.replace([' ', '=', ','], "_"),
+                img.frame
+            );
+            write_png(&dir.join(&name), 4 * img.width, img.height, &panels(img))?;
+            Ok((img.variant.clone(), img.frame, name))
+        })
+        .collect()
+}
+
+/// The four panels of one image frame side by side, RGBA8.
+fn panels(img: &super::run::ImageFrame) -> Vec<u8> {
+    let (w, h) = (img.width, img.height);
+    let n = (w * h) as usize;
+    let flip = img
+        .flip
+        .clone()
+        .unwrap_or_else(|| super::flip::magma_rgba(&vec![0.0; n], w, h));
+    let panels = 4u32;
+    let mut out = vec![0u8; n * 4 * panels as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let src = i * 4;
+            let e = img.error_px[i];
+            let error = (e < EVAL_NO_ERROR_PX).then_some(e as f64);
+            for (panel, px) in [
+                (
+                    0,
+                    [
+                        img.reference[src],
+                        img.reference[src + 1],
+                        img.reference[src + 2],
+                    ],
+                ),
+                (
+                    1,
+                    [img.method[src], img.method[src + 1], img.method[src + 2]],
+                ),
+                (2, heat(error, 2.0)),
+                (3, [flip[src], flip[src + 1], flip[src + 2]]),
+            ] {
+                let dst = ((y * panels * w + panel * w + x) * 4) as usize;
+                out[dst..dst + 3].copy_from_slice(&px);
+                out[dst + 3] = 255;
             }
         }
-        let name = format!(
-            "images/{}_f{:04}.png",
-            img.variant.replace([' ', '=', ','], "_"),
-            img.frame
-        );
-        write_png(&dir.join(&name), panels * w, h, &out)?;
-        links.push((img.variant.clone(), img.frame, name));
     }
-    Ok(links)
+    out
 }
 
 fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)]) -> String {

@@ -543,27 +543,14 @@ impl Run {
         }
         self.swim.extend_to(gpu.swim.len());
         self.swim.record(&gpu.swim);
-        let mut spawned = 0;
-        let flip = if is_reference && flip_frame {
+        let (flip, spawned) = if is_reference && flip_frame {
             // The reference against itself: identical images.
-            Some(FlipStats::default())
-        } else if flip_frame {
-            let (r, m) = (reference.rgba.clone(), rgba.clone());
-            let (w, h) = (setup.options.width, setup.options.height);
-            let with_map = setup.image_frames.contains(&k);
-            let tx = flip_tx.clone();
-            if let Some(r) = r {
-                rayon::spawn(move || {
-                    let map = flip::error_map(&r, &m, w, h);
-                    let stats = FlipStats::of(&map);
-                    let colours = with_map.then(|| flip::magma_rgba(&map, w, h));
-                    let _ = tx.send((index, k, stats, colours));
-                });
-                spawned = 1;
-            }
-            None
+            (Some(FlipStats::default()), 0)
+        } else if flip_frame && let Some(r) = reference.rgba.clone() {
+            spawn_flip(setup, (r, rgba.clone()), index, k, flip_tx);
+            (None, 1)
         } else {
-            None
+            (None, 0)
         };
         if let Some(error_px) = gpu.error_image.clone()
             && let Some(r) = &reference.rgba
@@ -607,6 +594,33 @@ impl Run {
         });
         Ok(spawned)
     }
+}
+
+/// FLIP of frame `k` of run `index` (reference and method RGBA) on the rayon pool; the result
+/// arrives on `flip_tx`. The last frame's FLIP is the run's tail (nothing overlaps it): in
+/// strips over the pool. Earlier ones run whole, one per worker, beside the rendering (on
+/// lavapipe the same cores render).
+fn spawn_flip(
+    setup: &EvalSetup<'_>,
+    (r, m): (Arc<Vec<u8>>, Arc<Vec<u8>>),
+    index: usize,
+    k: u64,
+    flip_tx: &Sender<FlipDone>,
+) {
+    let (w, h) = (setup.options.width, setup.options.height);
+    let with_map = setup.image_frames.contains(&k);
+    let last = k + 1 == setup.frames as u64;
+    let tx = flip_tx.clone();
+    rayon::spawn(move || {
+        let map = if last {
+            flip::error_map_parallel(&r, &m, w, h)
+        } else {
+            flip::error_map(&r, &m, w, h)
+        };
+        let stats = FlipStats::of(&map);
+        let colours = with_map.then(|| flip::magma_rgba(&map, w, h));
+        let _ = tx.send((index, k, stats, colours));
+    });
 }
 
 /// The triangle oracle's count for frame `k` of a UDLOD run at its tau (`eval::oracle`): on at
