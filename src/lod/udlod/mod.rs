@@ -132,12 +132,11 @@ pub struct Udlod {
 }
 
 impl Udlod {
-    pub fn new(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Self> {
-        let gpu = ctx.gpu;
-        let settings = settings.clone();
-        settings.validate()?;
-        // Tile statistics: a pyramid's stored ones (start-up reads no level 0), else computed
-        // from level 0 in parallel; the same bits either way.
+    /// The quadtree's levels: tile statistics from a pyramid's stored ones (start-up reads no
+    /// level 0), else computed from level 0 in parallel (the same bits either way); on the
+    /// earth with `lod_metric = "axis"` the per-axis metric; a one-line error for a tree deeper
+    /// than the shaders hold.
+    fn build_levels(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Levels> {
         let (stats, spacing) = match ctx.data {
             Terrain::Grid(h) => (
                 TileStats::compute(&**h, settings.grid_size, &|_| {})?,
@@ -160,6 +159,14 @@ impl Udlod {
                 ),
             ));
         }
+        Ok(levels)
+    }
+
+    pub fn new(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Self> {
+        let gpu = ctx.gpu;
+        let settings = settings.clone();
+        settings.validate()?;
+        let levels = Self::build_levels(ctx, &settings)?;
         let sets = DescriptorSets::new(gpu, UDLOD_SET, ctx.slots)?;
         let mm_bytes: &[u8] = bytemuck::cast_slice(&levels.min_max);
         let mut min_max = Buffer::new(
