@@ -389,6 +389,19 @@ impl Lattice {
         min.map(|m| m / self.step as f64)
     }
 
+    /// The LOD metric of a grid drawn through this lattice whose stated metres between
+    /// samples are `axis_spacing` and whose lowest height is `lowest` (m): on a native
+    /// non-square grid (a geographic one) each axis's smallest spacing on the drawn surface at
+    /// the lowest height where that lies below the datum ([`Lattice::min_axis_spacing`]); None
+    /// on a square grid, whose one spacing stays the metric. UDLOD's
+    /// (`udlod::select::Levels::on_lattice`) and GeoMipMapping's distances.
+    pub fn lod_metric(&self, axis_spacing: [f64; 2], lowest: f64) -> Option<[f64; 2]> {
+        if crate::dataset::tiles::is_square(axis_spacing) {
+            return None;
+        }
+        Some(self.min_axis_spacing(lowest.min(0.0)))
+    }
+
     /// The radius [`Lattice::rect_box`] grows boxes by the sagitta over (metres; an f32
     /// value, uploaded as `frame.lattice.w`).
     pub fn curve_radius(&self) -> f64 {

@@ -88,18 +88,31 @@ fn signed_area2(t: [u16; 3]) -> i64 {
     (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0)
 }
 
-/// Per-block levels for a viewer: level 0 within `factor` block widths of the block's box,
-/// one more per doubling of the distance, at most `LEVELS - 1`; then lowered until neighbours
-/// differ by at most one level.
-pub fn select_levels(bounds: &BlockBounds, spacing: f64, viewer: DVec3, factor: f64) -> Vec<u32> {
+/// Per-block levels for a viewer (grid frame: `x = col * spacing`, `y = row * spacing`):
+/// level 0 within `factor` block widths (`BLOCK_QUADS * spacing`) of the block's box, one more
+/// per doubling of the distance, at most `LEVELS - 1`; then lowered until neighbours differ by
+/// at most one level. Distances are measured with the grid frame's x and y offsets times
+/// `stretch` (`[1, 1]` except on a native non-square grid on the earth, where each axis is
+/// measured with its own smallest metric spacing: [`Lattice::lod_metric`]).
+///
+/// [`Lattice::lod_metric`]: crate::geo::Lattice::lod_metric
+pub fn select_levels(
+    bounds: &BlockBounds,
+    spacing: f64,
+    stretch: [f64; 2],
+    viewer: DVec3,
+    factor: f64,
+) -> Vec<u32> {
     let width = BLOCK_QUADS as f64 * spacing;
     let (cols, rows) = (bounds.cols, bounds.rows);
+    let s = DVec3::new(stretch[0], stretch[1], 1.0);
+    let viewer = viewer * s;
     let mut levels = Vec::with_capacity((cols * rows) as usize);
     for j in 0..rows {
         for i in 0..cols {
             let [lo, hi] = bounds.get(i, j);
-            let lo_xy = DVec3::new(i as f64 * width, j as f64 * width, lo as f64);
-            let hi_xy = DVec3::new((i + 1) as f64 * width, (j + 1) as f64 * width, hi as f64);
+            let lo_xy = DVec3::new(i as f64 * width, j as f64 * width, lo as f64) * s;
+            let hi_xy = DVec3::new((i + 1) as f64 * width, (j + 1) as f64 * width, hi as f64) * s;
             let d = viewer.clamp(lo_xy, hi_xy).distance(viewer);
             let ratio = d / (factor * width);
             let level = if ratio < 1.0 {
@@ -168,6 +181,15 @@ struct Draw {
     block: u32,
 }
 
+/// The grid frame's stretch per axis for the LOD distances ([`select_levels`]): on the earth
+/// the lattice's per-axis metric over the grid frame's spacing, else `[1, 1]`.
+fn lod_stretch(ctx: &MethodContext<'_>) -> [f64; 2] {
+    let info = &ctx.terrain.info;
+    ctx.lattice
+        .and_then(|l| l.lod_metric(ctx.data.axis_spacing(), info.min_height as f64))
+        .map_or([1.0, 1.0], |m| m.map(|m| m / info.spacing))
+}
+
 pub struct Geomipmap {
     gpu: Arc<Gpu>,
     settings: GeomipmapSettings,
@@ -177,6 +199,8 @@ pub struct Geomipmap {
     lists: Vec<List>,
     bounds: BlockBounds,
     spacing: f64,
+    /// The LOD metric's stretch of the grid frame per axis (see [`select_levels`]).
+    stretch: [f64; 2],
     /// The data's last sample per axis (blocks past it are clamped to it).
     last: [i32; 2],
     /// The geolocation lattice (None: the flat world, or the grid-frame box asked for): blocks
@@ -232,6 +256,7 @@ impl Geomipmap {
             lists,
             bounds,
             spacing: ctx.terrain.info.spacing,
+            stretch: lod_stretch(ctx),
             last: [
                 ctx.terrain.info.width as i32 - 1,
                 ctx.terrain.info.height as i32 - 1,
@@ -288,6 +313,7 @@ impl LodMethod for Geomipmap {
         let levels = select_levels(
             &self.bounds,
             self.spacing,
+            self.stretch,
             view.lod_viewer,
             self.settings.distance_factor,
         );
@@ -415,6 +441,56 @@ mod tests {
         }
     }
 
+    /// On a native geographic grid at 60 N (north-south samples twice as far apart as
+    /// east-west) the per-axis metric measures north-south distances with their own spacing:
+    /// no block is finer than with the one smallest spacing on both axes, and blocks north and
+    /// south of the viewer are coarser. Control: a square grid has no per-axis metric.
+    #[test]
+    fn geographic_grids_measure_each_axis_with_its_own_spacing() {
+        use crate::geo::Lattice;
+        let step = 1.0 / 1200.0;
+        let lattice = Lattice::geographic(257, 257, [8.0, 60.0], [step, step]).unwrap();
+        let ns = crate::geo::WGS84.meridian_radius(60.0) * f64::to_radians(step);
+        let top = 60.0 + 256.0 * step;
+        let ew = crate::geo::WGS84.prime_vertical_radius(top)
+            * top.to_radians().cos()
+            * step.to_radians();
+        let metric = lattice.lod_metric([ew, ns], 0.0).expect("non-square");
+        let stretch = metric.map(|m| m / ew);
+        assert!((stretch[0] - 1.0).abs() < 1e-3, "{stretch:?}");
+        assert!((stretch[1] - ns / ew).abs() < 1e-3 * ns / ew, "{stretch:?}");
+        assert!(lattice.lod_metric([ew, ew], 0.0).is_none());
+        let data =
+            crate::dataset::procedural::generate(&crate::dataset::procedural::ProceduralParams {
+                size: 257,
+                spacing: ew,
+                ..Default::default()
+            })
+            .unwrap();
+        let bounds = BlockBounds::new(&data, BLOCK_QUADS).unwrap();
+        let centre = 128.0 * ew;
+        let viewer = DVec3::new(centre, centre, bounds.get(4, 4)[1] as f64 + 50.0);
+        // The one smallest spacing (east-west, as drawn) on both axes, against per axis.
+        let one = select_levels(&bounds, ew, [stretch[0]; 2], viewer, 2.0);
+        let axis = select_levels(&bounds, ew, stretch, viewer, 2.0);
+        let coarser = one.iter().zip(&axis).filter(|(o, a)| a > o).count();
+        assert!(
+            one.iter().zip(&axis).all(|(o, a)| a >= o),
+            "a block got finer"
+        );
+        assert!(coarser > 0, "no block got coarser: {one:?}");
+        // The blocks due east and due west of the viewer (same rows) keep their levels where
+        // the east-west stretch is ~1; the north-south column changes.
+        let cols = bounds.cols as usize;
+        let column: Vec<_> = (0..bounds.rows as usize)
+            .map(|j| j * cols + cols / 2)
+            .collect();
+        assert!(
+            column.iter().any(|&k| axis[k] > one[k]),
+            "north-south unchanged"
+        );
+    }
+
     #[test]
     fn neighbouring_levels_differ_by_at_most_one() {
         let data =
@@ -426,7 +502,7 @@ mod tests {
             .unwrap();
         let bounds = BlockBounds::new(&data, BLOCK_QUADS).unwrap();
         let viewer = DVec3::new(10.0, 20.0, bounds.get(0, 0)[1] as f64);
-        let levels = select_levels(&bounds, 30.0, viewer, 0.3);
+        let levels = select_levels(&bounds, 30.0, [1.0, 1.0], viewer, 0.3);
         let (cols, rows) = (bounds.cols, bounds.rows);
         assert!(levels.contains(&0) && levels.iter().any(|&l| l >= 2));
         for j in 0..rows {

@@ -112,15 +112,14 @@ impl Levels {
     /// `[spacing, spacing]`: their selection is unchanged bit for bit (docs/udlod.md,
     /// "Per-axis metric on the earth").
     pub fn on_lattice(mut self, axis_spacing: [f64; 2], lattice: &Lattice) -> Self {
-        if crate::dataset::tiles::is_square(axis_spacing) {
-            return self;
-        }
         let lowest = self.min_max[self.tile_index(Tile {
             x: 0,
             y: 0,
             lod: self.root_lod,
         })][0];
-        self.metric = lattice.min_axis_spacing((lowest as f64).min(0.0));
+        if let Some(metric) = lattice.lod_metric(axis_spacing, lowest as f64) {
+            self.metric = metric;
+        }
         self
     }
 
