@@ -45,7 +45,7 @@ for round in $(seq "$ROUNDS"); do
     timeout 300 "$bin" eval --config config/ci.toml --earth flat --width 1920 --height 1080 \
       --frames "$FRAMES" --warmup 10 --methods brute,udlod --out "$dir" --force > "$dir.log" 2>&1 \
       || { echo "round $round $build: exit $?"; tail -3 "$dir.log"; continue; }
-    wall=$(echo "$(date +%s.%N) - $start" | bc)
+    wall=$(awk -v a="$start" -v b="$(date +%s.%N)" 'BEGIN { print b - a }') # no bc there
     echo "round $round $build"
     summary "$dir/results.json" "$wall"
   done

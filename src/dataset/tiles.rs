@@ -190,11 +190,8 @@ pub fn load(dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<Heightmap>
     load_as(dir, lod, max_samples, LoadGrid::SquareMetres)
 }
 
-/// Are `[sx, sy]` metres between samples square (to 1e-9)? Non-square grids are resampled
-/// for the flat world and kept native on the ellipsoid.
-pub fn is_square([sx, sy]: [f64; 2]) -> bool {
-    ((sx - sy) / sy).abs() <= 1e-9
-}
+/// Non-square grids are resampled for the flat world and kept native on the ellipsoid.
+pub use crate::geo::is_square;
 
 /// The LOD metric of a native grid whose stated metres between samples are `[sx, sy]`
 /// (`height` rows, georeferenced by `georef`): the smallest metric spacing anywhere on it, so

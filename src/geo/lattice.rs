@@ -156,6 +156,12 @@ impl EarthCull {
     }
 }
 
+/// Are `[sx, sy]` metres between samples square (to 1e-9)? A non-square grid (a geographic
+/// one) is drawn natively on the ellipsoid and measured per axis ([`Lattice::lod_metric`]).
+pub fn is_square([sx, sy]: [f64; 2]) -> bool {
+    ((sx - sy) / sy).abs() <= 1e-9
+}
+
 impl Lattice {
     /// The default node step for a `width` x `height` grid whose samples are `spacing_m`
     /// apart (the larger metric spacing): lattice cells of at most [`CELL_M`] (the sagitta of
@@ -396,7 +402,7 @@ impl Lattice {
     /// on a square grid, whose one spacing stays the metric. UDLOD's
     /// (`udlod::select::Levels::on_lattice`) and GeoMipMapping's distances.
     pub fn lod_metric(&self, axis_spacing: [f64; 2], lowest: f64) -> Option<[f64; 2]> {
-        if crate::dataset::tiles::is_square(axis_spacing) {
+        if is_square(axis_spacing) {
             return None;
         }
         Some(self.min_axis_spacing(lowest.min(0.0)))

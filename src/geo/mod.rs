@@ -13,5 +13,5 @@ pub mod pose;
 
 pub use ellipsoid::{Geodetic, WGS84};
 pub use frame::EnuFrame;
-pub use lattice::{EarthCull, Lattice, WorldBox};
+pub use lattice::{EarthCull, Lattice, WorldBox, is_square};
 pub use pose::{GeoPose, HeightRef, WorldPose};
