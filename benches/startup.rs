@@ -10,7 +10,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use vkterrain::dataset::stats::TileStats;
+use vkterrain::dataset::stats::{Finest, TileStats};
 use vkterrain::dataset::{Level0, PyramidReader};
 use vkterrain::lod::udlod::select::Levels;
 
@@ -40,7 +40,7 @@ fn main() {
             .map(|_| {
                 let t = Instant::now();
                 let r = PyramidReader::open(&dir).expect("data set");
-                let s = r.tile_stats(GRID).expect("stats");
+                let s = r.tile_stats(GRID, Finest::Skip).expect("stats");
                 let levels = Levels::from_stats(s, r.spacing());
                 assert_eq!(r.node_loads(), 0, "start-up read level 0");
                 std::hint::black_box(levels);

@@ -79,7 +79,8 @@ fn main() -> anyhow::Result<()> {
         };
         println!("\n== tau {tau} px (focal {focal:.1} px)");
         let field = SplitField::new(&levels, FieldKey::new(&s, focal));
-        for l in 0..=levels.root_lod as usize {
+        // Level 0's field is all ones and not stored.
+        for l in 1..=levels.root_lod as usize {
             let screen = levels.level_error[l] * focal / tau;
             let (nx, ny) = levels.tiles_per_side[l];
             let off = field.corner_offsets[l] as usize;

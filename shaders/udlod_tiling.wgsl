@@ -98,9 +98,15 @@ fn child_slot(i: u32) -> u32 {
     return i;
 }
 
+// Heights bounding the tile: its own, or for a level-0 tile (none stored when the root is
+// coarser) its parent's (mirrors `Levels::stats_tile` in src/lod/udlod/select.rs).
 fn tile_min_max(t: Tile) -> vec2<f32> {
-    let level = udlod.levels[t.lod];
-    return min_max[level.x + t.y * level.y + t.x];
+    var s = t;
+    if t.lod == 0u && udlod.sizes.y >= 1u {
+        s = Tile(t.x / 2u, t.y / 2u, 1u, 0u);
+    }
+    let level = udlod.levels[s.lod];
+    return min_max[level.x + s.y * level.y + s.x];
 }
 
 // Distance from the LOD viewer to the nearest point of the tile's rectangle at the reference

@@ -1041,8 +1041,11 @@ fn reference_statistics(data: &Heightmap, levels: &Levels) -> (Vec<f32>, Vec<f32
                         }
                     }
                 }
-                mm.extend([lo, hi]);
-                te.push(error as f32);
+                // `Levels` holds level 0's tiles only in a one-level tree.
+                if lod >= 1 || levels.root_lod == 0 {
+                    mm.extend([lo, hi]);
+                    te.push(error as f32);
+                }
                 worst = worst.max(error);
             }
         }
@@ -1074,7 +1077,7 @@ impl std::fmt::Debug for Bits {
 /// one-line error naming the file.
 #[test]
 fn stored_tile_statistics_equal_the_computed_ones() {
-    use vkterrain::dataset::stats::TileStats;
+    use vkterrain::dataset::stats::{Finest, TileStats};
     let data = heightmap();
     let reader = PyramidReader::open(dataset()).unwrap();
     let bits = |v: &[f32]| Bits(v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
@@ -1093,7 +1096,7 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     // Stored (grid 8, UDLOD's default and preprocess's): no level-0 node read.
     let stored = reader
         .store()
-        .stored_stats(8)
+        .stored_stats(8, Finest::Keep)
         .unwrap()
         .expect("grid 8 stored");
     assert_eq!(reader.node_loads(), 0);
@@ -1107,9 +1110,24 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     // In parallel over the pyramid's level file: the same bits.
     let par = TileStats::compute(&data, 8, &|_| {}).unwrap();
     assert_eq!(par, stored);
+    // UDLOD's read skips level 0's tiles: the same statistics without them, and a quarter of
+    // the tiles held.
+    let coarse = reader.tile_stats(8, Finest::Skip).unwrap();
+    assert!(stored.has_finest() && !coarse.has_finest());
+    assert_eq!(coarse, stored.clone().without_finest());
+    assert!(same(
+        &Levels::from_stats(coarse, reader.spacing()),
+        &from_disk
+    ));
     // Not stored (grid 16): computed from level 0, equal to the in-memory computation.
-    assert!(reader.store().stored_stats(16).unwrap().is_none());
-    let s16 = reader.tile_stats(16).unwrap();
+    assert!(
+        reader
+            .store()
+            .stored_stats(16, Finest::Keep)
+            .unwrap()
+            .is_none()
+    );
+    let s16 = reader.tile_stats(16, Finest::Skip).unwrap();
     assert!(same(
         &Levels::from_stats(s16, reader.spacing()),
         &Levels::new(&data, 16).unwrap()
@@ -1121,18 +1139,32 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     let file = moved.join("stats-g8.bin");
     let mut bytes = std::fs::read(&file).unwrap();
     let levels = stored.levels.len();
-    let first_tile = 40 + 16 * levels + 12 * 5; // tile 5 of level 0: (min, max, error)
+    // Tile 5 of level 1 (level 0's tiles are not part of `Levels`): (min, max, error).
+    let (nx0, ny0) = stored.levels[0].tiles;
+    let first_tile = 40 + 16 * levels + 12 * (nx0 * ny0) as usize + 12 * 5;
     let v = f32::from_le_bytes(bytes[first_tile..first_tile + 4].try_into().unwrap());
     bytes[first_tile..first_tile + 4]
         .copy_from_slice(&f32::from_bits(v.to_bits() - 1).to_le_bytes());
     std::fs::write(&file, &bytes).unwrap();
     let mutated = PyramidReader::open(&moved).unwrap();
-    let m = mutated.store().stored_stats(8).unwrap().unwrap();
+    let m = mutated
+        .store()
+        .stored_stats(8, Finest::Skip)
+        .unwrap()
+        .unwrap();
     assert!(!same(&Levels::from_stats(m, reader.spacing()), &computed));
     // A NaN: refused with a one-line error naming the file.
     bytes[first_tile..first_tile + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     std::fs::write(&file, &bytes).unwrap();
-    let e = mutated.tile_stats(8).unwrap_err().to_string();
+    let e = mutated.tile_stats(8, Finest::Skip).unwrap_err().to_string();
     assert!(e.contains("stats-g8.bin") && !e.contains('\n'), "{e}");
+    // A NaN in level 0: refused where level 0 is read; UDLOD's read never looks at it.
+    let level0_tile = 40 + 16 * levels + 12 * 5;
+    let mut bytes = std::fs::read(dataset().join("stats-g8.bin")).unwrap();
+    bytes[level0_tile..level0_tile + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(&file, &bytes).unwrap();
+    let e = mutated.tile_stats(8, Finest::Keep).unwrap_err().to_string();
+    assert!(e.contains("level 0") && !e.contains('\n'), "{e}");
+    assert!(mutated.tile_stats(8, Finest::Skip).is_ok());
     std::fs::remove_dir_all(&moved).ok();
 }

@@ -9,14 +9,15 @@
 mod common;
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::DVec3;
 use vkterrain::clipmap::{Clipmap, ClipmapSettings, DatasetSource, Geometry};
 use vkterrain::dataset::{Level0, PyramidReader, Terrain, tiles};
-use vkterrain::lod::MethodKind;
+use vkterrain::driver::Gpu;
+use vkterrain::lod::udlod::settings::UdlodSettings;
 use vkterrain::readback::FrameView;
 use vkterrain::render::Renderer;
 use vkterrain::scene::Camera;
@@ -77,8 +78,32 @@ const SIZE: u32 = 2049;
 const CENTER: u32 = 64;
 const MIB: f64 = (1 << 20) as f64;
 
+/// The UDLOD tile sizes checked: the default and grid 4 (issue 18's better selection, which
+/// needed four times the statistics while level 0's tiles were held).
+const GRIDS: [u32; 2] = [8, 4];
+
 fn dataset() -> PathBuf {
-    common::procedural_pyramid("hostmem", SIZE, 5, CENTER)
+    common::procedural_pyramid_with_stats("hostmem", SIZE, 5, CENTER, &GRIDS)
+}
+
+/// UDLOD's statistics as held: per tile of levels 1 and up, min/max and error (12 bytes) and
+/// a split-field corner (4 bytes), and while the field is built levels 1 and 2's corner
+/// distances in f64; level 0's tiles are not held.
+fn udlod_stats_bytes(grid: u32) -> usize {
+    let mut corners = Vec::new();
+    let mut tiles = 0;
+    let mut span = grid * 2;
+    loop {
+        let n = (SIZE - 1).div_ceil(span) as usize;
+        tiles += n * n;
+        corners.push((n + 1) * (n + 1));
+        if n == 1 {
+            break;
+        }
+        span *= 2;
+    }
+    let field_build = 8 * (corners[0] + corners.get(1).copied().unwrap_or(0));
+    tiles * 12 + corners.iter().sum::<usize>() * 4 + field_build
 }
 
 #[test]
@@ -86,10 +111,31 @@ fn clipmap_render_holds_no_level0_sized_array_on_the_host() {
     let dir = dataset();
     let gpu = common::gpu(false);
     let level0_bytes = SIZE as usize * SIZE as usize * 4;
+    assert_eq!(
+        UdlodSettings::default().grid_size,
+        GRIDS[0],
+        "the default grid is checked first"
+    );
+    for grid in GRIDS {
+        render_within_budget(&gpu, &dir, grid, level0_bytes);
+    }
 
+    // Control: the whole height map is one level-0-sized allocation, and the counter sees it.
     let base = start();
-    let reader = Arc::new(PyramidReader::open(&dir).unwrap());
-    let source = DatasetSource::open(&dir).unwrap();
+    let map = tiles::load(&dir, Some(0), u64::MAX).unwrap();
+    assert_eq!((map.width, map.height), (SIZE, SIZE));
+    assert!(PEAK.load(Ordering::Relaxed) - base >= level0_bytes);
+    assert!(LARGEST.load(Ordering::Relaxed) >= level0_bytes);
+    drop(map);
+    let _ = std::fs::remove_dir_all(dir.parent().unwrap());
+}
+
+/// Flies UDLOD at `grid` through the clipmap and checks the Rust heap's peak and largest
+/// allocation against the budget.
+fn render_within_budget(gpu: &Arc<Gpu>, dir: &Path, grid: u32, level0_bytes: usize) {
+    let base = start();
+    let reader = Arc::new(PyramidReader::open(dir).unwrap());
+    let source = DatasetSource::open(dir).unwrap();
     let geometry = Geometry::of(&source.dataset);
     let settings = ClipmapSettings {
         enabled: true,
@@ -117,10 +163,14 @@ fn clipmap_render_holds_no_level0_sized_array_on_the_host() {
         })
         .collect();
     let cm = Clipmap::new(geometry, settings, Arc::new(source), 1).unwrap();
+    let udlod = UdlodSettings {
+        grid_size: grid,
+        ..UdlodSettings::default()
+    };
     let mut renderer = Renderer::with_clipmap(
-        &gpu,
+        gpu,
         Terrain::Pyramid(reader.clone()),
-        MethodKind::Udlod,
+        udlod,
         common::options(160, 100, 2),
         Some(cm),
     )
@@ -143,19 +193,16 @@ fn clipmap_render_holds_no_level0_sized_array_on_the_host() {
     let cm = renderer.clipmap().unwrap();
     assert!(cm.counters.uploaded > 20, "{:?}", cm.counters);
     // The budget: CPU copy of every atlas layer's heights, the level-0 node cache's bound,
-    // loads queued or waiting for upload (heights + shading planes each), and 2 MiB for everything else on the Rust
+    // loads queued or waiting for upload (heights + shading planes each), UDLOD's statistics, and 1 MiB for everything else on the Rust
     // side (pipelines, UDLOD's O(tiles) statistics, descriptors, loader queues).
     let atlas_cpu = cm.settings.atlas_capacity as usize * side * side * 4;
     let queued = (cm.settings.max_in_flight + cm.settings.max_uploads_per_frame) as usize;
     let shading = queued * (side * side * 4 + cm.geometry.shading_texels() as usize * 8);
     let cache = reader.max_cached_bytes() as usize;
-    let udlod_stats = {
-        let tiles = (SIZE as usize / 16 + 1).pow(2) * 4 / 3;
-        tiles * (8 + 4 + 4)
-    };
-    let budget = atlas_cpu + shading + cache + udlod_stats + (2 << 20);
+    let udlod_stats = udlod_stats_bytes(grid);
+    let budget = atlas_cpu + shading + cache + udlod_stats + (1 << 20);
     eprintln!(
-        "peak Rust heap {:.2} MiB (budget {:.2}: atlas {:.2} + queued loads {:.2} + cache {:.2} + udlod {:.2} + 2 slack), largest allocation {:.2} MiB, level 0 {:.2} MiB; cache now {:.2} MiB in {} loads",
+        "grid {grid}: peak Rust heap {:.2} MiB (budget {:.2}: atlas {:.2} + queued loads {:.2} + cache {:.2} + udlod {:.2} + 1 slack), largest allocation {:.2} MiB, level 0 {:.2} MiB; cache now {:.2} MiB in {} loads",
         peak as f64 / MIB,
         budget as f64 / MIB,
         atlas_cpu as f64 / MIB,
@@ -178,14 +225,5 @@ fn clipmap_render_holds_no_level0_sized_array_on_the_host() {
     );
     assert!(reader.cached_bytes() <= reader.max_cached_bytes());
     drop(renderer);
-    common::assert_no_validation_messages(&gpu);
-
-    // Control: the whole height map is one level-0-sized allocation, and the counter sees it.
-    let base = start();
-    let map = tiles::load(&dir, Some(0), u64::MAX).unwrap();
-    assert_eq!((map.width, map.height), (SIZE, SIZE));
-    assert!(PEAK.load(Ordering::Relaxed) - base >= level0_bytes);
-    assert!(LARGEST.load(Ordering::Relaxed) >= level0_bytes);
-    drop(map);
-    let _ = std::fs::remove_dir_all(dir.parent().unwrap());
+    common::assert_no_validation_messages(gpu);
 }

@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use super::Heightmap;
 use super::interp::GridCell;
 use super::pyramid::{LayerSet, Layout, LevelRows, Node};
-use super::stats::TileStats;
+use super::stats::{Finest, TileStats};
 use super::tiles::Dataset;
 use super::tiles::LoadGrid;
 use super::xyz::XyzPyramid;
@@ -248,9 +248,10 @@ impl PyramidReader {
     }
 
     /// UDLOD's tile statistics for `grid_size`: the data set's stored ones, or (not stored)
-    /// computed from level 0 with a progress line on stderr.
-    pub fn tile_stats(&self, grid_size: u32) -> Result<TileStats> {
-        if let Some(s) = self.store.stored_stats(grid_size)? {
+    /// computed from level 0 with a progress line on stderr; with [`Finest::Skip`] without
+    /// level 0's tiles ([`TileStats::without_finest`]).
+    pub fn tile_stats(&self, grid_size: u32, finest: Finest) -> Result<TileStats> {
+        if let Some(s) = self.store.stored_stats(grid_size, finest)? {
             return Ok(s);
         }
         let t = std::time::Instant::now();
@@ -268,7 +269,10 @@ impl PyramidReader {
             "udlod: tile statistics computed in {:.1} s",
             t.elapsed().as_secs_f64()
         );
-        Ok(stats)
+        Ok(match finest {
+            Finest::Keep => stats,
+            Finest::Skip => stats.without_finest(),
+        })
     }
 
     /// Most nodes the cache holds.
@@ -617,8 +621,9 @@ pub trait NodeStore: Send + Sync {
             .flat_map(|j| n.heights[(j + b) * s + b..(j + b) * s + b + c].to_vec())
             .collect())
     }
-    /// UDLOD tile statistics for `grid_size`, if stored.
-    fn stored_stats(&self, _grid_size: u32) -> Result<Option<TileStats>> {
+    /// UDLOD tile statistics for `grid_size`, if stored (`finest`: whether level 0's tiles
+    /// are read).
+    fn stored_stats(&self, _grid_size: u32, _finest: Finest) -> Result<Option<TileStats>> {
         Ok(None)
     }
     /// Level-0 rows straight from storage (parallel statistics), where that is cheap.
@@ -713,8 +718,8 @@ impl NodeStore for DiskStore {
         }
         Ok(heights)
     }
-    fn stored_stats(&self, grid_size: u32) -> Result<Option<TileStats>> {
-        self.dataset.tile_stats(grid_size)
+    fn stored_stats(&self, grid_size: u32, finest: Finest) -> Result<Option<TileStats>> {
+        self.dataset.tile_stats(grid_size, finest)
     }
     fn georef(&self) -> Result<Option<super::crs::Georef>> {
         Ok(self.dataset.manifest.georef.clone())

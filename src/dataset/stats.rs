@@ -268,7 +268,10 @@ fn band<D: Level0 + ?Sized>(data: &D, shape: &Shape, r0: u32, r1: u32) -> Result
 }
 
 impl TileStats {
-    fn empty(shape: &Shape) -> Self {
+    /// Statistics to fold into: every tile empty; with [`Finest::Skip`] and a coarser
+    /// level, none held for level 0.
+    fn empty(shape: &Shape, finest: Finest) -> Self {
+        let skip = finest == Finest::Skip && shape.levels.len() > 1;
         TileStats {
             grid_size: shape.grid,
             width: shape.width,
@@ -276,11 +279,19 @@ impl TileStats {
             levels: shape
                 .levels
                 .iter()
-                .map(|&(nx, ny, _)| LevelTiles {
-                    tiles: (nx, ny),
-                    min_max: vec![[f32::INFINITY, f32::NEG_INFINITY]; (nx * ny) as usize],
-                    error: vec![0.0; (nx * ny) as usize],
-                    max_error: 0.0,
+                .enumerate()
+                .map(|(lod, &(nx, ny, _))| {
+                    let held = if lod == 0 && skip {
+                        0
+                    } else {
+                        (nx * ny) as usize
+                    };
+                    LevelTiles {
+                        tiles: (nx, ny),
+                        min_max: vec![[f32::INFINITY, f32::NEG_INFINITY]; held],
+                        error: vec![0.0; held],
+                        max_error: 0.0,
+                    }
                 })
                 .collect(),
         }
@@ -319,7 +330,7 @@ impl TileStats {
         progress: &(dyn Fn(u64) + Sync),
     ) -> Result<Self> {
         let shape = Shape::new(data.width(), data.height(), grid_size)?;
-        let out = Mutex::new(Self::empty(&shape));
+        let out = Mutex::new(Self::empty(&shape, Finest::Keep));
         Self::bands(&shape)
             .into_par_iter()
             .try_for_each(|(r0, r1)| -> Result<()> {
@@ -334,7 +345,7 @@ impl TileStats {
     /// [`TileStats::compute`] on the calling thread (for sources that are not `Sync`).
     pub fn compute_serial<D: Level0 + ?Sized>(data: &D, grid_size: u32) -> Result<Self> {
         let shape = Shape::new(data.width(), data.height(), grid_size)?;
-        let mut out = Self::empty(&shape);
+        let mut out = Self::empty(&shape, Finest::Keep);
         for (r0, r1) in Self::bands(&shape) {
             out.merge(band(data, &shape, r0, r1)?);
         }
@@ -398,27 +409,48 @@ impl TileStats {
         height: u32,
         grid_size: u32,
     ) -> Result<Self> {
-        let bad = |m: String| Error::invalid(what, m);
-        let shape = Shape::new(width, height, grid_size)?;
         let want = Self::stored_size(width, height, grid_size)?;
         if bytes.len() as u64 != want {
-            return Err(bad(format!(
-                "{} bytes, expected {want} for {width}x{height} samples and grid size {grid_size}: truncated or altered",
-                bytes.len()
-            )));
+            return Err(Error::invalid(
+                what,
+                format!(
+                    "{} bytes, expected {want} for {width}x{height} samples and grid size {grid_size}: truncated or altered",
+                    bytes.len()
+                ),
+            ));
         }
-        if &bytes[..8] != STATS_MAGIC {
+        let mut cursor = std::io::Cursor::new(bytes);
+        Self::parse(&mut cursor, what, width, height, grid_size, Finest::Keep)
+    }
+
+    /// Parses the stored form from `r` (its length already checked), level by level, so no
+    /// buffer is larger than one level; with [`Finest::Skip`] the finest level's tiles are
+    /// skipped unread (when a coarser level exists: [`TileStats::without_finest`]).
+    fn parse<R: std::io::Read + std::io::Seek>(
+        r: &mut R,
+        what: &str,
+        width: u32,
+        height: u32,
+        grid_size: u32,
+        finest: Finest,
+    ) -> Result<Self> {
+        let bad = |m: String| Error::invalid(what, m);
+        let shape = Shape::new(width, height, grid_size)?;
+        let mut head = vec![0u8; HEADER + shape.levels.len() * LEVEL_ENTRY];
+        r.read_exact(&mut head)
+            .map_err(|e| bad(format!("unreadable header: {e}")))?;
+        if &head[..8] != STATS_MAGIC {
             return Err(bad("not a vkterrain statistics file".into()));
         }
-        let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes"));
-        let u64_at = |o: usize| u64::from_le_bytes(bytes[o..o + 8].try_into().expect("8 bytes"));
-        let f32_at = |o: usize| f32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes"));
+        let u32_at =
+            |b: &[u8], o: usize| u32::from_le_bytes(b[o..o + 4].try_into().expect("4 bytes"));
+        let u64_at = |o: usize| u64::from_le_bytes(head[o..o + 8].try_into().expect("8 bytes"));
         let header = (
-            u32_at(8),
-            u32_at(12),
+            u32_at(&head, 8),
+            u32_at(&head, 12),
             u64_at(16),
             u64_at(24),
-            u32_at(32) as usize,
+            u32_at(&head, 32) as usize,
         );
         let expected = (
             STATS_VERSION,
@@ -432,22 +464,39 @@ impl TileStats {
                 "header (version, grid, width, height, levels) {header:?} disagrees with {expected:?}"
             )));
         }
-        let mut out = Self::empty(&shape);
-        let mut o = HEADER + shape.levels.len() * LEVEL_ENTRY;
+        let mut out = Self::empty(&shape, finest);
+        let skip_finest = finest == Finest::Skip && out.levels.len() > 1;
+        let mut buf = Vec::new();
         for (lod, level) in out.levels.iter_mut().enumerate() {
             let e = HEADER + lod * LEVEL_ENTRY;
-            let tiles = (u32_at(e), u32_at(e + 4));
+            let tiles = (u32_at(&head, e), u32_at(&head, e + 4));
             if tiles != level.tiles {
                 return Err(bad(format!(
                     "level {lod} has {tiles:?} tiles, expected {:?}",
                     level.tiles
                 )));
             }
-            level.max_error = f64::from_le_bytes(bytes[e + 8..e + 16].try_into().expect("8"));
+            let count = level.min_max.len();
+            if lod == 0 && skip_finest {
+                let stored = level.tiles.0 as usize * level.tiles.1 as usize;
+                r.seek(std::io::SeekFrom::Current((stored * TILE_ENTRY) as i64))
+                    .map_err(|e| bad(format!("level 0: {e}")))?;
+                continue;
+            }
+            level.max_error = f64::from_le_bytes(head[e + 8..e + 16].try_into().expect("8"));
+            buf.resize(count * TILE_ENTRY, 0);
+            r.read_exact(&mut buf)
+                .map_err(|e| bad(format!("level {lod}: unreadable (truncated?): {e}")))?;
             let mut largest = 0.0f32;
-            for (m, err) in level.min_max.iter_mut().zip(level.error.iter_mut()) {
-                let (lo, hi, er) = (f32_at(o), f32_at(o + 4), f32_at(o + 8));
-                o += TILE_ENTRY;
+            let values = buf.chunks_exact(TILE_ENTRY);
+            for ((m, err), v) in level
+                .min_max
+                .iter_mut()
+                .zip(level.error.iter_mut())
+                .zip(values)
+            {
+                let f = |o: usize| f32::from_le_bytes(v[o..o + 4].try_into().expect("4 bytes"));
+                let (lo, hi, er) = (f(0), f(4), f(8));
                 if !(lo.is_finite() && hi.is_finite() && lo <= hi && er.is_finite() && er >= 0.0)
                     || (lod == 0 && er != 0.0)
                 {
@@ -469,6 +518,26 @@ impl TileStats {
         Ok(out)
     }
 
+    /// These statistics without the finest level's tiles (its shape and zero error kept),
+    /// when a coarser level exists: UDLOD never splits a level-0 tile and bounds it with its
+    /// parent's heights, so three quarters of the tiles need no memory
+    /// (`Levels::from_stats`).
+    pub fn without_finest(mut self) -> Self {
+        if self.levels.len() > 1 {
+            let l = &mut self.levels[0];
+            l.min_max = Vec::new();
+            l.error = Vec::new();
+            l.max_error = 0.0;
+        }
+        self
+    }
+
+    /// Whether the finest level's tiles are held ([`TileStats::without_finest`]).
+    pub fn has_finest(&self) -> bool {
+        let l = &self.levels[0];
+        l.min_max.len() == (l.tiles.0 * l.tiles.1) as usize
+    }
+
     /// Writes the stored form to `path`, fsynced.
     pub fn write(&self, path: &std::path::Path) -> Result<u64> {
         use std::io::Write;
@@ -479,20 +548,34 @@ impl TileStats {
         Ok(bytes.len() as u64)
     }
 
-    /// Reads and checks a stored file (its size is checked before it is read).
-    pub fn read(path: &std::path::Path, width: u32, height: u32, grid_size: u32) -> Result<Self> {
+    /// Reads and checks a stored file (its size is checked before it is read), one level at
+    /// a time; with [`Finest::Skip`] the finest level's tiles are not read.
+    pub fn read(
+        path: &std::path::Path,
+        width: u32,
+        height: u32,
+        grid_size: u32,
+        finest: Finest,
+    ) -> Result<Self> {
         let what = path.display().to_string();
         let want = Self::stored_size(width, height, grid_size)?;
-        let len = std::fs::metadata(path)
-            .map_err(|e| Error::io(path, e))?
-            .len();
+        let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
         if len != want {
             return Err(Error::invalid(
                 what,
                 format!("{len} bytes, expected {want}: truncated or altered"),
             ));
         }
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        Self::from_bytes(&bytes, &what, width, height, grid_size)
+        let mut r = std::io::BufReader::new(&mut file);
+        Self::parse(&mut r, &what, width, height, grid_size, finest)
     }
+}
+
+/// Whether a read of stored statistics keeps the finest level's tiles: UDLOD reads without
+/// them ([`TileStats::without_finest`]); chunked LOD and the tests keep them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Finest {
+    Keep,
+    Skip,
 }

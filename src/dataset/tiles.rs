@@ -8,7 +8,7 @@ use super::manifest::{self, Manifest};
 use super::pyramid::{
     LEVEL_HEADER, LEVEL_MAGIC, LayerSet, Layout, Node, level_header, read_node_from,
 };
-use super::stats::TileStats;
+use super::stats::{Finest, TileStats};
 use super::{Albedo, Heightmap};
 use crate::error::{Error, Result};
 
@@ -71,8 +71,9 @@ impl Dataset {
         })
     }
 
-    /// The stored UDLOD tile statistics for `grid_size`, checked against level 0's size.
-    pub fn tile_stats(&self, grid_size: u32) -> Result<Option<TileStats>> {
+    /// The stored UDLOD tile statistics for `grid_size`, checked against level 0's size
+    /// (`finest`: whether level 0's tiles are read).
+    pub fn tile_stats(&self, grid_size: u32, finest: Finest) -> Result<Option<TileStats>> {
         let Some(info) = self
             .manifest
             .tile_stats
@@ -86,6 +87,7 @@ impl Dataset {
             self.manifest.width as u32,
             self.manifest.height as u32,
             grid_size,
+            finest,
         )
         .map(Some)
     }

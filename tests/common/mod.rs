@@ -116,6 +116,18 @@ pub fn srgb8(linear: f32) -> u8 {
 /// Preprocesses a `size`² procedural data set with `center`-texel nodes into a fresh
 /// per-process temporary directory named after `name`; returns the pyramid's directory.
 pub fn procedural_pyramid(name: &str, size: u32, seed: u64, center: u32) -> std::path::PathBuf {
+    let grids = vkterrain::dataset::preprocess::DEFAULT_STATS_GRID_SIZES;
+    procedural_pyramid_with_stats(name, size, seed, center, &grids)
+}
+
+/// [`procedural_pyramid`] storing UDLOD's tile statistics for `stats_grid_sizes`.
+pub fn procedural_pyramid_with_stats(
+    name: &str,
+    size: u32,
+    seed: u64,
+    center: u32,
+    stats_grid_sizes: &[u32],
+) -> std::path::PathBuf {
     use vkterrain::dataset::preprocess::{self, Input, NoProgress, Options};
     use vkterrain::dataset::procedural::ProceduralParams;
     let dir = std::env::temp_dir().join(format!("vkterrain-{name}-{}", std::process::id()));
@@ -130,6 +142,7 @@ pub fn procedural_pyramid(name: &str, size: u32, seed: u64, center: u32) -> std:
         }),
         out: out.clone(),
         center_size: center,
+        stats_grid_sizes: stats_grid_sizes.to_vec(),
         ..Default::default()
     };
     preprocess::run(&opts, &NoProgress).unwrap();

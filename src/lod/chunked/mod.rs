@@ -23,7 +23,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use super::MethodContext;
-use crate::dataset::stats::TileStats;
+use crate::dataset::stats::{Finest, TileStats};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
@@ -357,7 +357,10 @@ impl Chunked {
                 TileStats::compute(&**h, settings.chunk_quads, &|_| {})?,
                 h.spacing,
             ),
-            Terrain::Pyramid(p) => (p.tile_stats(settings.chunk_quads)?, p.spacing()),
+            Terrain::Pyramid(p) => (
+                p.tile_stats(settings.chunk_quads, Finest::Keep)?,
+                p.spacing(),
+            ),
         };
         let levels = Levels::from_stats(stats, spacing);
         if levels.levels() > UDLOD_MAX_LEVELS {

@@ -18,7 +18,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use super::{LodMethod, MethodContext};
-use crate::dataset::stats::TileStats;
+use crate::dataset::stats::{Finest, TileStats};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
@@ -139,10 +139,10 @@ impl Udlod {
     fn build_levels(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Levels> {
         let (stats, spacing) = match ctx.data {
             Terrain::Grid(h) => (
-                TileStats::compute(&**h, settings.grid_size, &|_| {})?,
+                TileStats::compute(&**h, settings.grid_size, &|_| {})?.without_finest(),
                 h.spacing,
             ),
-            Terrain::Pyramid(p) => (p.tile_stats(settings.grid_size)?, p.spacing()),
+            Terrain::Pyramid(p) => (p.tile_stats(settings.grid_size, Finest::Skip)?, p.spacing()),
         };
         let mut levels = Levels::from_stats(stats, spacing);
         if let (Some(lattice), LodMetric::Axis) = (ctx.lattice, settings.lod_metric) {
@@ -177,12 +177,15 @@ impl Udlod {
             MemoryLocation::CpuToGpu,
         )?;
         min_max.write(mm_bytes)?;
-        // Corner values per level: (nx + 1) x (ny + 1) floats.
+        // Corner values per level from level 1: (nx + 1) x (ny + 1) floats (level 0's are
+        // ones and not stored; a one-level tree has none, and a buffer is never empty).
         let field_bytes: u64 = levels
             .tiles_per_side
             .iter()
+            .skip(1)
             .map(|&(nx, ny)| (nx as u64 + 1) * (ny as u64 + 1) * 4)
-            .sum();
+            .sum::<u64>()
+            .max(4);
         let grid = super::brute::grid_indices(settings.grid_size);
         let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
         let mut indices = Buffer::new(

@@ -47,13 +47,15 @@ pub struct Levels {
     pub metric: [f64; 2],
     /// Tiles per side of each level (only tiles that touch the data).
     pub tiles_per_side: Vec<(u32, u32)>,
-    /// Offset of each level's entries in `min_max` and `tile_error`.
+    /// Offset of each level's entries in `min_max` and `tile_error` (level 0 has none when
+    /// there is a coarser level: [`Levels::stats_tile`]).
     pub level_offsets: Vec<u32>,
     /// (min, max) height in metres of every tile's samples (and of its morph targets, which are
-    /// samples of the same tile).
+    /// samples of the same tile), from level 1 up when `root_lod >= 1`.
     pub min_max: Vec<[f32; 2]>,
     /// Geometric error of every tile in metres: the largest height difference between the
-    /// full-resolution samples inside the tile and the tile's triangulated grid.
+    /// full-resolution samples inside the tile and the tile's triangulated grid (level 0: 0,
+    /// not stored when `root_lod >= 1`).
     pub tile_error: Vec<f32>,
     /// Geometric error of each level (the largest of its tiles'; 0 for level 0).
     pub level_error: Vec<f64>,
@@ -71,12 +73,18 @@ impl Levels {
     }
 
     /// The levels from per-tile statistics (computed, or stored by `vkterrain preprocess`).
+    /// Level 0's tiles are dropped when there is a coarser level
+    /// ([`TileStats::without_finest`]): a level-0 tile never splits and has no error, and its
+    /// parent's heights bound it for culling ([`Levels::stats_tile`]), so the statistics take
+    /// a quarter of the memory (docs/udlod.md, "Host memory of the statistics").
     pub fn from_stats(stats: TileStats, spacing: f64) -> Self {
+        let stats = stats.without_finest();
         let root_lod = stats.root_lod();
+        let held: usize = stats.levels.iter().map(|l| l.error.len()).sum();
         let mut tiles_per_side = Vec::new();
         let mut level_offsets = Vec::new();
-        let mut min_max = Vec::new();
-        let mut tile_error = Vec::new();
+        let mut min_max = Vec::with_capacity(held);
+        let mut tile_error = Vec::with_capacity(held);
         let mut level_error = Vec::new();
         for level in stats.levels {
             tiles_per_side.push(level.tiles);
@@ -141,16 +149,36 @@ impl Levels {
         (self.grid_size << lod) as f64 * self.spacing
     }
 
+    /// The tile whose statistics stand for `t`: `t` itself, or for a level-0 tile (none
+    /// stored when `root_lod >= 1`) its parent, whose heights contain its own (mirrors
+    /// `tile_min_max` in `shaders/udlod_tiling.wgsl`).
+    pub fn stats_tile(&self, t: Tile) -> Tile {
+        if t.lod == 0 && self.root_lod >= 1 {
+            return Tile {
+                x: t.x / 2,
+                y: t.y / 2,
+                lod: 1,
+            };
+        }
+        t
+    }
+
     fn tile_index(&self, t: Tile) -> usize {
+        let t = self.stats_tile(t);
         let (nx, _) = self.tiles_per_side[t.lod as usize];
         (self.level_offsets[t.lod as usize] + t.y * nx + t.x) as usize
     }
 
+    /// (min, max) height bounding the tile's samples: its own, or its parent's at level 0.
     pub fn tile_min_max(&self, t: Tile) -> [f32; 2] {
         self.min_max[self.tile_index(t)]
     }
 
+    /// The tile's geometric error (0 at level 0).
     pub fn tile_error(&self, t: Tile) -> f32 {
+        if t.lod == 0 {
+            return 0.0;
+        }
         self.tile_error[self.tile_index(t)]
     }
 
@@ -277,7 +305,7 @@ pub struct SplitField {
     /// splits; [`UDLOD_NO_SPLIT`] past the root), `UDLOD_MAX_LEVELS` entries as uploaded.
     pub split: Vec<f32>,
     /// Field values `m >= 1` at every level's tile corners, `(nx + 1) x (ny + 1)` row-major
-    /// per level (all ones at level 0).
+    /// per level from level 1 (level 0's are all ones and not stored).
     pub corners: Vec<f32>,
     /// Offset of each level's corners in `corners`.
     pub corner_offsets: Vec<u32>,
@@ -299,9 +327,9 @@ impl SplitField {
             let cw = nx as usize + 1;
             corner_offsets.push(corners.len() as u32);
             if lod == 0 {
+                // Level 0 never splits: its field is 1 everywhere and not stored, and level 1
+                // has no chain term (`tile_requirement`), so nothing reads `finer` here.
                 split[0] = 0.0;
-                corners.extend(std::iter::repeat_n(1.0f32, cw * (ny as usize + 1)));
-                finer = vec![0.0; cw * (ny as usize + 1)];
                 continue;
             }
             let mut s = vec![0.0f64; cw * (ny as usize + 1)];
@@ -335,6 +363,9 @@ impl SplitField {
     }
 
     fn corner(&self, levels: &Levels, lod: u32, i: u32, j: u32) -> f32 {
+        if lod == 0 {
+            return 1.0;
+        }
         let (nx, _) = levels.tiles_per_side[lod as usize];
         self.corners[(self.corner_offsets[lod as usize] + j * (nx + 1) + i) as usize]
     }
