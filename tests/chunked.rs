@@ -93,7 +93,7 @@ fn naive_gpu_selection_equals_cpu_reference() {
     let data = terrain(257);
     let cams = poses(&data, 40);
     let lod = settings(Traversal::Naive);
-    let levels = Levels::new(&data, lod.chunk_quads).unwrap();
+    let levels = Levels::with_finest(&data, lod.chunk_quads).unwrap();
     let gpu = gpu_chunks(&data, &cams, &lod, 1);
     let cpu: Vec<_> = cams
         .iter()
@@ -138,7 +138,7 @@ fn cbt_converges_to_the_naive_selection() {
     let data = terrain(257);
     let cams = poses(&data, 30);
     let lod = settings(Traversal::Cbt);
-    let levels = Levels::new(&data, lod.chunk_quads).unwrap();
+    let levels = Levels::with_finest(&data, lod.chunk_quads).unwrap();
     let depth = levels.root_lod as usize;
     let converged = gpu_chunks(&data, &cams, &lod, depth + 1);
     let cpu: Vec<_> = cams
@@ -218,7 +218,7 @@ fn crack_survey(data: &Heightmap, cams: &[Camera], quads: u32) -> BTreeMap<u32, 
         chunk_quads: quads,
         ..settings(Traversal::Naive)
     };
-    let levels = Levels::new(data, quads).unwrap();
+    let levels = Levels::with_finest(data, quads).unwrap();
     let brute = render(data, MethodKind::Brute, cams);
     let stitched = render(data, lod(true), cams);
     let unstitched = render(data, lod(false), cams);
@@ -414,7 +414,7 @@ fn placement_wgsl_glsl_and_cpu_agree() {
     let data = terrain(257);
     let cams = poses(&data, 30);
     let lod = settings(Traversal::Naive);
-    let levels = Levels::new(&data, lod.chunk_quads).unwrap();
+    let levels = Levels::with_finest(&data, lod.chunk_quads).unwrap();
     let q = lod.chunk_quads;
     let gpu = common::gpu(false);
     let (mut checked, mut snapped) = (0, 0);
@@ -560,7 +560,7 @@ fn naive_gpu_selection_equals_cpu_reference_on_the_earth() {
     ] {
         let cams = common::poses::earth_poses(&data, &lattice, 60);
         let lod = settings(Traversal::Naive);
-        let levels = Levels::new(&data, lod.chunk_quads).unwrap();
+        let levels = Levels::with_finest(&data, lod.chunk_quads).unwrap();
         let gpu = gpu_chunks_on_earth(&data, &lattice, &cams, &lod);
         let no_cull = ChunkedSettings {
             cull: false,

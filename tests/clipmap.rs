@@ -1077,7 +1077,9 @@ impl std::fmt::Debug for Bits {
 /// one-line error naming the file.
 #[test]
 fn stored_tile_statistics_equal_the_computed_ones() {
+    use vkterrain::dataset::preprocess;
     use vkterrain::dataset::stats::{Finest, TileStats};
+    use vkterrain::lod::udlod::settings::UdlodSettings;
     let data = heightmap();
     let reader = PyramidReader::open(dataset()).unwrap();
     let bits = |v: &[f32]| Bits(v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
@@ -1093,26 +1095,29 @@ fn stored_tile_statistics_equal_the_computed_ones() {
             && bits(&a.tile_error) == bits(&b.tile_error)
             && e64(&a.level_error) == e64(&b.level_error)
     };
-    // Stored (grid 8, UDLOD's default and preprocess's): no level-0 node read.
+    // Stored (UDLOD's default grid, which preprocess stores): no level-0 node read.
+    let g = preprocess::DEFAULT_STATS_GRID_SIZES[0];
+    assert_eq!(g, UdlodSettings::default().grid_size);
+    let file_name = format!("stats-g{g}.bin");
     let stored = reader
         .store()
-        .stored_stats(8, Finest::Keep)
+        .stored_stats(g, Finest::Keep)
         .unwrap()
-        .expect("grid 8 stored");
+        .expect("default grid stored");
     assert_eq!(reader.node_loads(), 0);
     let from_disk = Levels::from_stats(stored.clone(), reader.spacing());
-    let computed = Levels::new(&data, 8).unwrap();
+    let computed = Levels::new(&data, g).unwrap();
     assert!(same(&from_disk, &computed), "stored statistics differ");
     let (mm, te, le) = reference_statistics(&data, &computed);
     assert_eq!(bits(&mm), bits(&from_disk.min_max.concat()));
     assert_eq!(bits(&te), bits(&from_disk.tile_error));
     assert_eq!(le, from_disk.level_error);
     // In parallel over the pyramid's level file: the same bits.
-    let par = TileStats::compute(&data, 8, &|_| {}).unwrap();
+    let par = TileStats::compute(&data, g, &|_| {}).unwrap();
     assert_eq!(par, stored);
     // UDLOD's read skips level 0's tiles: the same statistics without them, and a quarter of
     // the tiles held.
-    let coarse = reader.tile_stats(8, Finest::Skip).unwrap();
+    let coarse = reader.tile_stats(g, Finest::Skip).unwrap();
     assert!(stored.has_finest() && !coarse.has_finest());
     assert_eq!(coarse, stored.clone().without_finest());
     assert!(same(
@@ -1136,7 +1141,7 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     // A stored minimum one ulp lower: a valid file whose levels differ.
     let moved = dataset().with_file_name("moved-stats");
     copy_dir(dataset(), &moved);
-    let file = moved.join("stats-g8.bin");
+    let file = moved.join(&file_name);
     let mut bytes = std::fs::read(&file).unwrap();
     let levels = stored.levels.len();
     // Tile 5 of level 1 (level 0's tiles are not part of `Levels`): (min, max, error).
@@ -1149,22 +1154,22 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     let mutated = PyramidReader::open(&moved).unwrap();
     let m = mutated
         .store()
-        .stored_stats(8, Finest::Skip)
+        .stored_stats(g, Finest::Skip)
         .unwrap()
         .unwrap();
     assert!(!same(&Levels::from_stats(m, reader.spacing()), &computed));
     // A NaN: refused with a one-line error naming the file.
     bytes[first_tile..first_tile + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     std::fs::write(&file, &bytes).unwrap();
-    let e = mutated.tile_stats(8, Finest::Skip).unwrap_err().to_string();
-    assert!(e.contains("stats-g8.bin") && !e.contains('\n'), "{e}");
+    let e = mutated.tile_stats(g, Finest::Skip).unwrap_err().to_string();
+    assert!(e.contains(&file_name) && !e.contains('\n'), "{e}");
     // A NaN in level 0: refused where level 0 is read; UDLOD's read never looks at it.
     let level0_tile = 40 + 16 * levels + 12 * 5;
-    let mut bytes = std::fs::read(dataset().join("stats-g8.bin")).unwrap();
+    let mut bytes = std::fs::read(dataset().join(&file_name)).unwrap();
     bytes[level0_tile..level0_tile + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     std::fs::write(&file, &bytes).unwrap();
-    let e = mutated.tile_stats(8, Finest::Keep).unwrap_err().to_string();
+    let e = mutated.tile_stats(g, Finest::Keep).unwrap_err().to_string();
     assert!(e.contains("level 0") && !e.contains('\n'), "{e}");
-    assert!(mutated.tile_stats(8, Finest::Skip).is_ok());
+    assert!(mutated.tile_stats(g, Finest::Skip).is_ok());
     std::fs::remove_dir_all(&moved).ok();
 }

@@ -61,7 +61,7 @@ pub struct Options {
 
 /// The tile size whose statistics are stored unless told otherwise (UDLOD's default; other
 /// sizes are computed from level 0 at start-up, or stored with `--stats-grid-sizes`).
-pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [8];
+pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [4];
 
 impl Default for Options {
     fn default() -> Self {

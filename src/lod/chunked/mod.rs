@@ -362,7 +362,9 @@ impl Chunked {
                 p.spacing(),
             ),
         };
-        let levels = Levels::from_stats(stats, spacing);
+        // Level 0's chunks are culled and bounded with their own heights (the shaders read
+        // them), unlike UDLOD's level-0 tiles.
+        let levels = Levels::from_stats_with_finest(stats, spacing);
         if levels.levels() > UDLOD_MAX_LEVELS {
             return Err(Error::invalid(
                 "chunked",

@@ -144,7 +144,9 @@ impl Udlod {
             ),
             Terrain::Pyramid(p) => (p.tile_stats(settings.grid_size, Finest::Skip)?, p.spacing()),
         };
+        // Without level 0's tiles: the tiling shader bounds them by their parents.
         let mut levels = Levels::from_stats(stats, spacing);
+        debug_assert!(!levels.finest_held || levels.root_lod == 0);
         if let (Some(lattice), LodMetric::Axis) = (ctx.lattice, settings.lod_metric) {
             levels = levels.on_lattice(ctx.data.axis_spacing(), lattice);
         }

@@ -59,6 +59,9 @@ pub struct Levels {
     pub tile_error: Vec<f32>,
     /// Geometric error of each level (the largest of its tiles'; 0 for level 0).
     pub level_error: Vec<f64>,
+    /// Whether level 0's tiles are held (chunked LOD's levels) or stand in for by their
+    /// parents (UDLOD's, when there is a coarser level: [`Levels::stats_tile`]).
+    pub finest_held: bool,
 }
 
 impl Levels {
@@ -72,13 +75,26 @@ impl Levels {
         Ok(Self::from_stats(stats, data.spacing()))
     }
 
+    /// [`Levels::new`] holding level 0's tiles too (chunked LOD culls and bounds its level-0
+    /// chunks with their own heights).
+    pub fn with_finest<D: Level0 + ?Sized>(data: &D, grid_size: u32) -> Result<Self> {
+        let stats = TileStats::compute_serial(data, grid_size)?;
+        Ok(Self::from_stats_with_finest(stats, data.spacing()))
+    }
+
     /// The levels from per-tile statistics (computed, or stored by `vkterrain preprocess`).
     /// Level 0's tiles are dropped when there is a coarser level
     /// ([`TileStats::without_finest`]): a level-0 tile never splits and has no error, and its
     /// parent's heights bound it for culling ([`Levels::stats_tile`]), so the statistics take
     /// a quarter of the memory (docs/udlod.md, "Host memory of the statistics").
     pub fn from_stats(stats: TileStats, spacing: f64) -> Self {
-        let stats = stats.without_finest();
+        Self::from_stats_with_finest(stats.without_finest(), spacing)
+    }
+
+    /// The levels from per-tile statistics as they are: with level 0's tiles when `stats`
+    /// hold them (chunked LOD), else as [`Levels::from_stats`].
+    pub fn from_stats_with_finest(stats: TileStats, spacing: f64) -> Self {
+        let finest_held = stats.has_finest();
         let root_lod = stats.root_lod();
         let held: usize = stats.levels.iter().map(|l| l.error.len()).sum();
         let mut tiles_per_side = Vec::new();
@@ -105,6 +121,7 @@ impl Levels {
             min_max,
             tile_error,
             level_error,
+            finest_held,
         }
     }
 
@@ -153,7 +170,7 @@ impl Levels {
     /// stored when `root_lod >= 1`) its parent, whose heights contain its own (mirrors
     /// `tile_min_max` in `shaders/udlod_tiling.wgsl`).
     pub fn stats_tile(&self, t: Tile) -> Tile {
-        if t.lod == 0 && self.root_lod >= 1 {
+        if t.lod == 0 && !self.finest_held {
             return Tile {
                 x: t.x / 2,
                 y: t.y / 2,
