@@ -5,7 +5,7 @@
 # .device-vk/vkterrain-before (a build before level 0's statistics were dropped: the
 # selections should match, culling of level-0 tiles aside).
 # Per binary and data set: one eval at 1920x1080, 60 frames after 10 of the default flight,
-# --sweep grid_size=4,8 --sweep tau_px=0.5,1,2; prints per variant the medians of prepass and
+# --sweep grid_size=4,8 --sweep tau_px=$TAUS; prints per variant the medians of prepass and
 # terrain GPU ms, triangles, p99.9 px, holes and UDLOD/oracle.
 # Here, before carrying: the device build prepared into .device-vk (../shared/device-vulkan),
 # and the Puget Sound heights in .device-vk/data/ps_height_1k.png (skipped when absent).
@@ -15,8 +15,19 @@ set -u
 PUGET=$(mktemp --suffix=.toml)
 printf '[dataset]\nkind = "png16"\npath = "%s"\nspacing = 160.0\nvertical_scale = 0.1\n[scenario]\npath = "%s"\n' \
   "$PWD/.device-vk/data/ps_height_1k.png" "$PWD/config/scenarios/default.toml" > "$PUGET"
-cfgs=(config/ci.toml)
-if [ -f .device-vk/data/ps_height_1k.png ]; then cfgs+=("$PUGET"); else echo "### Puget Sound heights absent: skipped"; fi
+# CASES: which data sets (ci, puget, hedberg: Hedberg's uneven map, procedural 4097² at 10 m;
+# pyrenees: Fischer S3, when out/datasets/pyrenees was carried). TAUS: the tau sweep.
+CASES=${CASES:-ci puget}
+TAUS=${TAUS:-0.5,1,2}
+cfgs=()
+for c in $CASES; do
+  case $c in
+    ci) cfgs+=(config/ci.toml) ;;
+    puget) if [ -f .device-vk/data/ps_height_1k.png ]; then cfgs+=("$PUGET"); else echo "### Puget Sound heights absent: skipped"; fi ;;
+    hedberg) cfgs+=(config/hedberg_uneven.toml) ;;
+    pyrenees) if [ -f out/datasets/pyrenees/manifest.json ]; then cfgs+=(config/pyrenees.toml); else echo "### out/datasets/pyrenees absent: skipped"; fi ;;
+  esac
+done
 summarize() { # results.json + summary.csv -> one line per variant
   python3 - "$1" <<'PY'
 import csv, json, statistics as st, sys, os
@@ -34,9 +45,9 @@ for bin in .device-vk/vkterrain .device-vk/vkterrain-before; do
   [ -x "$bin" ] || { echo "### $bin absent: skipped"; continue; }
   for cfg in "${cfgs[@]}"; do
     dir=$(mktemp -d)
-    echo "### $bin eval $(basename "$cfg") grid 4/8, tau 0.5/1/2, 1920x1080"
+    echo "### $bin eval $(basename "$cfg") grid 4/8, tau $TAUS, 1920x1080"
     timeout 280 "$bin" eval --config "$cfg" --methods udlod --sweep grid_size=4,8 \
-      --sweep tau_px=0.5,1,2 --width 1920 --height 1080 --frames 70 --warmup 10 \
+      --sweep tau_px="$TAUS" --width 1920 --height 1080 --frames 70 --warmup 10 \
       --flip-every 0 --images 0 --out "$dir" --force > "$dir.log" 2>&1 \
       || { echo "exit $?"; tail -5 "$dir.log"; continue; }
     summarize "$dir"

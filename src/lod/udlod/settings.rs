@@ -56,8 +56,9 @@ impl Default for UdlodSettings {
             grid_size: 4,
             tau_px: 1.0,
             morph_range: 0.2,
-            // 8.4 M triangles of grid-4 tiles (what 65,536 grid-8 tiles held before).
-            max_tiles: 262_144,
+            // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
+            // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
+            max_tiles: 524_288,
             morph: true,
             cull: true,
             error_field_max: 1024.0,
