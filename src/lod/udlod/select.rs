@@ -47,15 +47,15 @@ pub struct Levels {
     pub metric: [f64; 2],
     /// Tiles per side of each level (only tiles that touch the data).
     pub tiles_per_side: Vec<(u32, u32)>,
-    /// Offset of each level's entries in `min_max` and `tile_error` (level 0 has none when
-    /// there is a coarser level: [`Levels::stats_tile`]).
+    /// Offset of each level's entries in `min_max` and `tile_error` (level 0 has none unless
+    /// `finest_held`: [`Levels::stats_tile`]).
     pub level_offsets: Vec<u32>,
     /// (min, max) height in metres of every tile's samples (and of its morph targets, which are
-    /// samples of the same tile), from level 1 up when `root_lod >= 1`.
+    /// samples of the same tile); level 0's only when `finest_held`.
     pub min_max: Vec<[f32; 2]>,
     /// Geometric error of every tile in metres: the largest height difference between the
     /// full-resolution samples inside the tile and the tile's triangulated grid (level 0: 0,
-    /// not stored when `root_lod >= 1`).
+    /// stored only when `finest_held`).
     pub tile_error: Vec<f32>,
     /// Geometric error of each level (the largest of its tiles'; 0 for level 0).
     pub level_error: Vec<f64>,
@@ -166,9 +166,10 @@ impl Levels {
         (self.grid_size << lod) as f64 * self.spacing
     }
 
-    /// The tile whose statistics stand for `t`: `t` itself, or for a level-0 tile (none
-    /// stored when `root_lod >= 1`) its parent, whose heights contain its own (mirrors
-    /// `tile_min_max` in `shaders/udlod_tiling.wgsl`).
+    /// The tile whose statistics stand for `t`: `t` itself, or for a level-0 tile when
+    /// level 0's are not held its parent, whose heights contain its own (mirrors
+    /// `tile_min_max` in `shaders/udlod_tiling.wgsl`, where UDLOD's levels never hold them
+    /// below a coarser root).
     pub fn stats_tile(&self, t: Tile) -> Tile {
         if t.lod == 0 && !self.finest_held {
             return Tile {
