@@ -103,6 +103,92 @@ struct SlotBuffers {
     set: vk::DescriptorSet,
 }
 
+/// Sizes of one slot's lists and split field.
+struct SlotSizes {
+    final_capacity: u32,
+    temp_capacity: u32,
+    field_bytes: u64,
+}
+
+impl SlotBuffers {
+    /// Slot `i`'s buffers, written into its descriptor set `set` with the shared `min_max`.
+    fn new(
+        gpu: &Arc<Gpu>,
+        sets: &DescriptorSets,
+        (i, set): (usize, vk::DescriptorSet),
+        sizes: &SlotSizes,
+        min_max: &Buffer,
+    ) -> Result<Self> {
+        let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let uniforms = Buffer::new(
+            gpu,
+            &format!("udlod uniforms {i}"),
+            size_of::<UdlodUniforms>() as u64,
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        let state = Buffer::new(
+            gpu,
+            &format!("udlod state {i}"),
+            size_of::<TilingState>() as u64,
+            storage
+                | vk::BufferUsageFlags::INDIRECT_BUFFER
+                | vk::BufferUsageFlags::TRANSFER_DST
+                | vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::GpuOnly,
+        )?;
+        let temp_tiles = Buffer::new(
+            gpu,
+            &format!("udlod temp tiles {i}"),
+            sizes.temp_capacity as u64 * TILE_BYTES,
+            storage,
+            MemoryLocation::GpuOnly,
+        )?;
+        let final_tiles = Buffer::new(
+            gpu,
+            &format!("udlod final tiles {i}"),
+            sizes.final_capacity as u64 * TILE_BYTES,
+            storage | vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::GpuOnly,
+        )?;
+        let counters = Buffer::new(
+            gpu,
+            &format!("udlod counters {i}"),
+            size_of::<TilingState>() as u64,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+        )?;
+        let field = Buffer::new(
+            gpu,
+            &format!("udlod split field {i}"),
+            sizes.field_bytes,
+            storage,
+            MemoryLocation::CpuToGpu,
+        )?;
+        sets.write(
+            i,
+            &[
+                ("udlod", Resource::Buffer(uniforms.raw)),
+                ("state", Resource::Buffer(state.raw)),
+                ("temp_tiles", Resource::Buffer(temp_tiles.raw)),
+                ("final_tiles", Resource::Buffer(final_tiles.raw)),
+                ("min_max", Resource::Buffer(min_max.raw)),
+                ("split_field", Resource::Buffer(field.raw)),
+            ],
+        )?;
+        Ok(SlotBuffers {
+            uniforms,
+            state,
+            _temp_tiles: temp_tiles,
+            final_tiles,
+            counters,
+            field,
+            field_key: None,
+            set,
+        })
+    }
+}
+
 pub struct Udlod {
     gpu: Arc<Gpu>,
     settings: UdlodSettings,
@@ -206,76 +292,14 @@ impl Udlod {
         // Parents and children of one pass share the temporary list: a pass has at most
         // `4/3 * final_capacity + 1` children (every split reserved 3 final entries).
         let temp_capacity = 2 * final_capacity + 8;
-        let mut slots = Vec::with_capacity(ctx.slots);
-        for (i, &set) in sets.sets.iter().enumerate() {
-            let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-            let uniforms = Buffer::new(
-                gpu,
-                &format!("udlod uniforms {i}"),
-                size_of::<UdlodUniforms>() as u64,
-                vk::BufferUsageFlags::UNIFORM_BUFFER,
-                MemoryLocation::CpuToGpu,
-            )?;
-            let state = Buffer::new(
-                gpu,
-                &format!("udlod state {i}"),
-                size_of::<TilingState>() as u64,
-                storage
-                    | vk::BufferUsageFlags::INDIRECT_BUFFER
-                    | vk::BufferUsageFlags::TRANSFER_DST
-                    | vk::BufferUsageFlags::TRANSFER_SRC,
-                MemoryLocation::GpuOnly,
-            )?;
-            let temp_tiles = Buffer::new(
-                gpu,
-                &format!("udlod temp tiles {i}"),
-                temp_capacity as u64 * TILE_BYTES,
-                storage,
-                MemoryLocation::GpuOnly,
-            )?;
-            let final_tiles = Buffer::new(
-                gpu,
-                &format!("udlod final tiles {i}"),
-                final_capacity as u64 * TILE_BYTES,
-                storage | vk::BufferUsageFlags::TRANSFER_SRC,
-                MemoryLocation::GpuOnly,
-            )?;
-            let counters = Buffer::new(
-                gpu,
-                &format!("udlod counters {i}"),
-                size_of::<TilingState>() as u64,
-                vk::BufferUsageFlags::TRANSFER_DST,
-                MemoryLocation::GpuToCpu,
-            )?;
-            let field = Buffer::new(
-                gpu,
-                &format!("udlod split field {i}"),
-                field_bytes,
-                storage,
-                MemoryLocation::CpuToGpu,
-            )?;
-            sets.write(
-                i,
-                &[
-                    ("udlod", Resource::Buffer(uniforms.raw)),
-                    ("state", Resource::Buffer(state.raw)),
-                    ("temp_tiles", Resource::Buffer(temp_tiles.raw)),
-                    ("final_tiles", Resource::Buffer(final_tiles.raw)),
-                    ("min_max", Resource::Buffer(min_max.raw)),
-                    ("split_field", Resource::Buffer(field.raw)),
-                ],
-            )?;
-            slots.push(SlotBuffers {
-                uniforms,
-                state,
-                _temp_tiles: temp_tiles,
-                final_tiles,
-                counters,
-                field,
-                field_key: None,
-                set,
-            });
-        }
+        let sizes = SlotSizes {
+            final_capacity,
+            temp_capacity,
+            field_bytes,
+        };
+        let slots = (sets.sets.iter().enumerate())
+            .map(|(i, &set)| SlotBuffers::new(gpu, &sets, (i, set), &sizes, &min_max))
+            .collect::<Result<Vec<_>>>()?;
         let set_layouts = [ctx.terrain.descriptors.layout, sets.layout];
         let tiling = crate::driver::shaders::UDLOD_TILING_SPV;
         let prepare = compute_pipeline(gpu, tiling, c"prepare", &set_layouts)?;
