@@ -16,6 +16,10 @@ cd "$(dirname "$0")/../.."
 BIN=${BIN:-.device-vk/vkterrain}
 FRAMES=${FRAMES:-240}
 CASES=${CASES:-s3 ipgm low}
+# METHODS / SWEEPS: a subset (e.g. METHODS=brute,udlod,chunked SWEEPS="--sweep tau_px=0.5,1,2
+# --sweep error_px=1,4" for UDLOD against chunked LOD alone).
+METHODS=${METHODS:-brute,udlod,pgm,tessellation,geomipmap,chunked}
+SWEEPS=${SWEEPS:---sweep tau_px=0.5,1,2,4 --sweep grid_scale=0.5,1 --sweep warp_rows=0,1 --sweep edge_px=1,4,16 --sweep distance_factor=1,4,8 --sweep error_px=1,4,16}
 KEEP=${OUT:-out/device}/all_methods
 mkdir -p "$KEEP"
 TMP=$(mktemp -d)
@@ -39,9 +43,7 @@ for c in $CASES; do
   echo "### $c ($cfg), $FRAMES frames, 1920x1080"
   s=$(date +%s)
   "$BIN" eval --config "$cfg" --earth flat --width 1920 --height 1080 --frames "$FRAMES" --warmup 20 \
-    --methods brute,udlod,pgm,tessellation,geomipmap,chunked --sweep tau_px=0.5,1,2,4 \
-    --sweep grid_scale=0.5,1 --sweep warp_rows=0,1 --sweep edge_px=1,4,16 \
-    --sweep distance_factor=1,4,8 --sweep error_px=1,4,16 --flip-every 60 \
+    --methods "$METHODS" $SWEEPS --flip-every 60 \
     --out "$KEEP/$c" --force >"$KEEP/$c.log" 2>&1 || { echo "eval $c failed:"; tail -5 "$KEEP/$c.log"; }
   echo "wall $(( $(date +%s) - s )) s"
   [ -f "$KEEP/$c/summary.csv" ] && grep -A40 "^variant" "$KEEP/$c.log" | grep -v "^evaluated\|^wrote"
