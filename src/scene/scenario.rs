@@ -153,6 +153,10 @@ struct Key {
     /// A WGS84 keyframe, its height in the world's datum (above the ellipsoid on the lattice,
     /// `Earth::world_height`), interpolated linearly between keys.
     geo: Option<GeoPose>,
+    /// An earth key's pose as given (its height above its own reference) and, for a key
+    /// given on the grid, its height in the terrain's datum: what the heights between two
+    /// keys given alike are interpolated in ([`Scenario::own_datum_heights`]).
+    given: Option<(GeoPose, Option<f64>)>,
 }
 
 impl Key {
@@ -187,9 +191,28 @@ impl Key {
                 height_ref: HeightRef::Ellipsoid,
                 ..*pose
             }),
+            given: Some((*pose, world_height)),
         })
     }
+
+    /// Whether the heights between this key and `next` follow a datum of their own (both
+    /// above mean sea level, or both given on the grid in the terrain's datum) rather than
+    /// the ellipsoid: their heights are then interpolated in that datum.
+    fn shares_own_datum(&self, next: &Key) -> bool {
+        match (self.given, next.given) {
+            (Some((a, None)), Some((b, None))) => {
+                a.height_ref == HeightRef::Msl && b.height_ref == HeightRef::Msl
+            }
+            (Some((_, Some(_))), Some((_, Some(_)))) => true,
+            _ => false,
+        }
+    }
 }
+
+/// Samples per segment of a path's heights in the keys' own datum: the geoid's undulation
+/// between them is linear over 1/64 of a segment (EGM96 bends by millimetres over
+/// kilometres; docs/coordinates.md "Datums").
+const SEGMENT_SAMPLES: usize = 64;
 
 /// A resolved camera path.
 #[derive(Clone, Debug)]
@@ -201,6 +224,10 @@ pub struct Scenario {
     keys: Vec<Key>,
     /// The world frame WGS84 keyframes are placed in.
     frame: Option<EnuFrame>,
+    /// Per segment (key `i` to `i + 1`) whose keys share a datum of their own: the ellipsoidal
+    /// heights of `SEGMENT_SAMPLES + 1` evenly spaced points of it, interpolated in that
+    /// datum ([`Scenario::own_datum_heights`]); None: heights above the ellipsoid interpolate.
+    segment_heights: Vec<Option<Vec<f64>>>,
 }
 
 impl Scenario {
@@ -308,6 +335,7 @@ impl Scenario {
                 pitch: k.pitch,
                 roll: k.roll,
                 geo: None,
+                given: None,
             });
         }
         match file.speed {
@@ -342,6 +370,10 @@ impl Scenario {
             roll_deg: keys[0].roll,
             ..template
         };
+        let segment_heights = match earth {
+            Some(e) => Self::own_datum_heights(&keys, e, data, &template)?,
+            None => Vec::new(),
+        };
         let scenario = Scenario {
             name: file.name.clone(),
             fps: file.fps,
@@ -349,6 +381,7 @@ impl Scenario {
             template,
             keys,
             frame: earth.map(|e| *e.frame()),
+            segment_heights,
         };
         for k in &scenario.keys {
             let mut c = template;
@@ -356,6 +389,47 @@ impl Scenario {
             c.validate()?;
         }
         Ok(scenario)
+    }
+
+    /// Per segment whose keys share a datum of their own ([`Key::shares_own_datum`]): the
+    /// heights above the ellipsoid of evenly spaced points along it, each placed as a key at
+    /// the interpolated latitude, longitude and height in that datum would be
+    /// ([`Key::on_earth`]), so a flight between two keys at one height above mean sea level
+    /// (or over the terrain's datum) keeps that height instead of following the chord of the
+    /// geoid between them.
+    fn own_datum_heights<D: Level0 + ?Sized>(
+        keys: &[Key],
+        earth: &Earth,
+        data: &D,
+        template: &Camera,
+    ) -> Result<Vec<Option<Vec<f64>>>> {
+        let mut out = Vec::with_capacity(keys.len());
+        for w in keys.windows(2) {
+            let (Some((a, ha)), Some((b, hb))) = (w[0].given, w[1].given) else {
+                out.push(None);
+                continue;
+            };
+            if !w[0].shares_own_datum(&w[1]) {
+                out.push(None);
+                continue;
+            }
+            let mut heights = Vec::with_capacity(SEGMENT_SAMPLES + 1);
+            for k in 0..=SEGMENT_SAMPLES {
+                let s = k as f64 / SEGMENT_SAMPLES as f64;
+                let pose = GeoPose {
+                    lat_deg: a.lat_deg + (b.lat_deg - a.lat_deg) * s,
+                    lon_deg: a.lon_deg + short_delta(a.lon_deg, b.lon_deg) * s,
+                    height_m: a.height_m + (b.height_m - a.height_m) * s,
+                    ..a
+                };
+                let given = ha.zip(hb).map(|(x, y)| x + (y - x) * s);
+                let key = Key::on_earth(earth, &pose, given, 0.0, data, template)?;
+                heights.push(key.geo.map_or(f64::NAN, |g| g.height_m));
+            }
+            out.push(Some(heights));
+        }
+        out.push(None);
+        Ok(out)
     }
 
     /// A scenario holding one fixed camera.
@@ -368,6 +442,7 @@ impl Scenario {
             pitch: camera.pitch_deg,
             roll: camera.roll_deg,
             geo: None,
+            given: None,
         };
         Ok(Scenario {
             name: name.into(),
@@ -376,6 +451,7 @@ impl Scenario {
             template: camera,
             keys: vec![key],
             frame: None,
+            segment_heights: Vec::new(),
         })
     }
 
@@ -393,6 +469,9 @@ impl Scenario {
             i if i >= self.keys.len() => (self.keys[i - 1], self.keys[i - 1]),
             i => (self.keys[i - 1], self.keys[i]),
         };
+        let segment = i
+            .checked_sub(1)
+            .and_then(|j| self.segment_heights.get(j)?.as_ref());
         let s = if b.t > a.t {
             ((t - a.t) / (b.t - a.t)).clamp(0.0, 1.0)
         } else {
@@ -400,7 +479,7 @@ impl Scenario {
         };
         let lerp = |x: f64, y: f64| x + (y - x) * s;
         // Headings interpolate the short way round.
-        let short = |from: f64, to: f64| from + ((to - from + 540.0).rem_euclid(360.0) - 180.0) * s;
+        let short = |from: f64, to: f64| from + short_delta(from, to) * s;
         // Strictly between two WGS84 keyframes: along latitude, longitude and height (at a key
         // itself, its camera exactly as resolved).
         if let (Some(ga), Some(gb), Some(frame)) = (a.geo, b.geo, &self.frame)
@@ -410,7 +489,7 @@ impl Scenario {
             let pose = GeoPose {
                 lat_deg: lerp(ga.lat_deg, gb.lat_deg),
                 lon_deg: short(ga.lon_deg, gb.lon_deg),
-                height_m: lerp(ga.height_m, gb.height_m),
+                height_m: segment.map_or(lerp(ga.height_m, gb.height_m), |h| along(h, s)),
                 heading_deg: short(ga.heading_deg, gb.heading_deg),
                 pitch_deg: lerp(ga.pitch_deg, gb.pitch_deg),
                 roll_deg: lerp(ga.roll_deg, gb.roll_deg),
@@ -425,7 +504,7 @@ impl Scenario {
                 ..self.template
             };
         }
-        let dyaw = (b.yaw - a.yaw + 540.0).rem_euclid(360.0) - 180.0;
+        let dyaw = short_delta(a.yaw, b.yaw);
         Camera {
             position: a.position.lerp(b.position, s),
             yaw_deg: a.yaw + dyaw * s,
@@ -434,4 +513,17 @@ impl Scenario {
             ..self.template
         }
     }
+}
+
+/// The signed shortest turn from longitude (or heading) `from` to `to`, in degrees.
+fn short_delta(from: f64, to: f64) -> f64 {
+    (to - from + 540.0).rem_euclid(360.0) - 180.0
+}
+
+/// `samples` (evenly spaced over [0, 1]) interpolated linearly at `s`.
+fn along(samples: &[f64], s: f64) -> f64 {
+    let x = s.clamp(0.0, 1.0) * (samples.len() - 1) as f64;
+    let i = (x.floor() as usize).min(samples.len() - 2);
+    let f = x - i as f64;
+    samples[i] + (samples[i + 1] - samples[i]) * f
 }
