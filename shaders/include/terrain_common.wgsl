@@ -20,6 +20,9 @@ struct Frame {
     // xyz: the camera's world position split into f32 hi and lo parts.
     camera_hi: vec4<f32>,
     camera_lo: vec4<f32>,
+    // xy: the stated metres between samples along x and y that the normal maps' slopes were
+    // taken with (`Terrain::axis_spacing`); `world_normal` turns them into the lattice's metres.
+    normal_spacing: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -156,10 +159,54 @@ fn project(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec4<f32> {
     return frame.view_proj * vec4<f32>(relative_position(cell, frac, height_m), 1.0);
 }
 
-// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map,
-// faded towards the sky with view depth (aerial perspective; the fragment position's w is
-// 1 / clip w, and clip w is the view depth). Through the clipmap albedo and normal come from
-// the atlas (`clipmap_surface`).
+// The normal, in world axes, of the terrain at `grid_pos` (samples) whose normal in the grid's
+// frame is `n`: the normal maps hold (-dh/dx, -dh/dy, 1) normalized, slopes per metre along
+// the grid's x (columns) and y (rows) with the stated spacing `frame.normal_spacing.xy`.
+// Flat world: the grid's frame is the world's, `n` as it is. On the earth (a uniform branch) the
+// grid's axes at `grid_pos` are the lattice's: `tx`, `ty` the metres per sample along columns
+// and rows (the bilinear lattice's derivatives: node differences, hi and lo parts subtracted
+// separately, interpolated across the cell), made tangent to the interpolated up vector `u`.
+// The surface's tangents are `tx + hx u` and `ty + hy u` with `hx = -n.x / n.z * sx` (height
+// per sample), so its normal is their cross product times n.z:
+// `n.x sx (ty x u) + n.y sy (u x tx) + n.z (tx x ty)`: the inverse-transpose (cofactor) of the
+// grid-to-world map applied to `n`. On an orthogonal grid whose stated spacing is its metric
+// one this is the rotation into the local frame (tx, ty, u); it also corrects the slopes where
+// the stated spacing is not the local one (a geographic grid's east-west spacing holds at one
+// latitude). docs/coordinates.md ("Normals on the earth") has the error budget.
+fn world_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
+    let lstep = i32(frame.lattice.x);
+    if lstep == 0 {
+        return n;
+    }
+    let cell = vec2<i32>(floor(grid_pos));
+    let node = clamp(cell / lstep, vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
+    let f = (grid_pos - vec2<f32>(node * lstep)) / f32(lstep);
+    let i00 = 3 * (node.y * i32(frame.lattice.y) + node.x);
+    let i10 = i00 + 3;
+    let i01 = i00 + 3 * i32(frame.lattice.y);
+    let i11 = i01 + 3;
+    // Node differences along x (south and north edges) and y (west and east edges).
+    let dx0 = (geo_lattice[i10].xyz - geo_lattice[i00].xyz) + (geo_lattice[i10 + 1].xyz - geo_lattice[i00 + 1].xyz);
+    let dx1 = (geo_lattice[i11].xyz - geo_lattice[i01].xyz) + (geo_lattice[i11 + 1].xyz - geo_lattice[i01 + 1].xyz);
+    let dy0 = (geo_lattice[i01].xyz - geo_lattice[i00].xyz) + (geo_lattice[i01 + 1].xyz - geo_lattice[i00 + 1].xyz);
+    let dy1 = (geo_lattice[i11].xyz - geo_lattice[i10].xyz) + (geo_lattice[i11 + 1].xyz - geo_lattice[i10 + 1].xyz);
+    let u = normalize(mix(
+        mix(geo_lattice[i00 + 2].xyz, geo_lattice[i10 + 2].xyz, f.x),
+        mix(geo_lattice[i01 + 2].xyz, geo_lattice[i11 + 2].xyz, f.x),
+        f.y,
+    ));
+    let ax = mix(dx0, dx1, f.y) / f32(lstep);
+    let ay = mix(dy0, dy1, f.x) / f32(lstep);
+    let tx = ax - dot(ax, u) * u;
+    let ty = ay - dot(ay, u) * u;
+    let s = frame.normal_spacing.xy;
+    return normalize(n.x * s.x * cross(ty, u) + n.y * s.y * cross(u, tx) + n.z * cross(tx, ty));
+}
+
+// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map
+// (in world axes: `world_normal`), faded towards the sky with view depth (aerial perspective;
+// the fragment position's w is 1 / clip w, and clip w is the view depth). Through the clipmap
+// albedo and normal come from the atlas (`clipmap_surface`).
 fn shade(grid_pos: vec2<f32>, frag_position: vec4<f32>) -> vec4<f32> {
     let gx = dpdx(grid_pos);
     let gy = dpdy(grid_pos);
@@ -174,6 +221,7 @@ fn shade(grid_pos: vec2<f32>, frag_position: vec4<f32>) -> vec4<f32> {
         n = normalize(textureSampleGrad(normal_tex, linear_sampler, (grid_pos + 0.5) / size, gx / size, gy / size).xyz);
         albedo = textureSampleGrad(albedo_tex, linear_sampler, grid_pos / (size - 1.0), gx / (size - 1.0), gy / (size - 1.0)).rgb;
     }
+    n = world_normal(grid_pos, n);
     let light = LIGHT_AMBIENT + LIGHT_DIFFUSE * max(dot(n, frame.sun_dir.xyz), 0.0);
     let haze = 1.0 - exp(-frame.haze.w / frag_position.w);
     return vec4<f32>(mix(albedo * light, frame.haze.rgb, haze), 1.0);

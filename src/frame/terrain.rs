@@ -58,6 +58,9 @@ pub struct TerrainInfo {
     pub width: u32,
     pub height: u32,
     pub spacing: f64,
+    /// Stated metres between samples along x and y, as the normal maps' slopes take them
+    /// (`Terrain::axis_spacing`).
+    pub axis_spacing: [f64; 2],
     pub min_height: f32,
     pub max_height: f32,
     /// The geolocation lattice's `[step, nodes per row, nodes per column, curve radius]` (the
@@ -142,6 +145,7 @@ impl TerrainGpu {
             width: data.width(),
             height: data.height(),
             spacing: data.spacing(),
+            axis_spacing: data.axis_spacing(),
             min_height,
             max_height,
             lattice: lattice.map(|l| {

@@ -32,6 +32,9 @@ pub struct FrameUniforms {
     /// The camera's world position split into f32 `hi` and `lo` parts (xyz).
     pub camera_hi: [f32; 4],
     pub camera_lo: [f32; 4],
+    /// xy: the stated metres between samples along x and y that the normal maps' slopes were
+    /// taken with ([`super::TerrainInfo::axis_spacing`]; `world_normal` on the earth).
+    pub normal_spacing: [f32; 4],
 }
 
 impl FrameUniforms {
@@ -68,6 +71,12 @@ impl FrameUniforms {
             lattice,
             camera_hi: [hi[0], hi[1], hi[2], 0.0],
             camera_lo: [lo[0], lo[1], lo[2], 0.0],
+            normal_spacing: [
+                data.axis_spacing[0] as f32,
+                data.axis_spacing[1] as f32,
+                0.0,
+                0.0,
+            ],
         }
     }
 }
