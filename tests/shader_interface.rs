@@ -195,6 +195,7 @@ fn chunked_uniforms_match_the_wgsl_struct() {
         ("sizes", offset_of!(U, sizes)),
         ("lists", offset_of!(U, lists)),
         ("cbt", offset_of!(U, cbt)),
+        ("metric", offset_of!(U, metric)),
     ];
     assert_struct_layout(
         &[

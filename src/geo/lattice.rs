@@ -395,6 +395,18 @@ impl Lattice {
         min.map(|m| m / self.step as f64)
     }
 
+    /// Metres per sample along columns and rows at sample position `s` and `height` on the
+    /// drawn surface (the chords to `s + (1, 0)` and `s + (0, 1)`; outside the grid the
+    /// lattice's extrapolation, where a geographic grid's east-west spacing keeps shrinking
+    /// poleward). Chunked LOD's metric for a viewer beyond the grid's edge.
+    pub fn axis_spacing_at(&self, s: DVec2, height: f64) -> [f64; 2] {
+        let p = self.position(s, height);
+        [
+            (self.position(s + DVec2::X, height) - p).length(),
+            (self.position(s + DVec2::Y, height) - p).length(),
+        ]
+    }
+
     /// The LOD metric of a grid drawn through this lattice whose stated metres between
     /// samples are `axis_spacing` and whose lowest height is `lowest` (m): on a native
     /// non-square grid (a geographic one) each axis's smallest spacing on the drawn surface at
