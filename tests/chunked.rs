@@ -669,7 +669,7 @@ fn box_distance_in_the_per_axis_metric_is_a_lower_bound_and_draws_fewer_chunks()
                         y,
                         lod: lod_level,
                     };
-                    let span = (axis.grid_size << t.lod) as u32;
+                    let span = axis.grid_size << t.lod;
                     let c0 = [x * span, y * span];
                     let c1 = [
                         ((x + 1) * span).min(data.width - 1),

@@ -35,6 +35,10 @@ pub struct FrameUniforms {
     /// xy: the stated metres between samples along x and y that the normal maps' slopes were
     /// taken with ([`super::TerrainInfo::axis_spacing`]; `world_normal` on the earth).
     pub normal_spacing: [f32; 4],
+    /// `u`, `tx`, `ty` (xyz) of the grid's south-west, south-east, north-west and north-east
+    /// corner samples, the frame `world_normal` interpolates when `normal_spacing.z` is 1
+    /// ([`super::TerrainInfo::normal_frame`]).
+    pub normal_frame: [[f32; 4]; 12],
 }
 
 impl FrameUniforms {
@@ -74,9 +78,14 @@ impl FrameUniforms {
             normal_spacing: [
                 data.axis_spacing[0] as f32,
                 data.axis_spacing[1] as f32,
-                0.0,
+                if data.normal_frame.is_some() {
+                    1.0
+                } else {
+                    0.0
+                },
                 0.0,
             ],
+            normal_frame: data.normal_frame.unwrap_or_default(),
         }
     }
 }
