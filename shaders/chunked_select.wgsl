@@ -81,14 +81,36 @@ fn chunk_sphere(t: Chunk) -> vec4<f32> {
     return vec4<f32>(centre, length(half));
 }
 
+// Distance from the LOD viewer to the chunk's box (rectangle clamped to the data x its
+// min/max height) in the LOD metric: grid-frame offsets stretched per axis (mirrors
+// `chunk_box_distance` in select.rs, the same f32 operations).
+fn chunk_box_distance(t: Chunk) -> f32 {
+    let span = i32(chunked.sizes.x << t.lod);
+    let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+    let lo = chunk_relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
+    let hi = chunk_relative_xy(min(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span), last));
+    let mm = min_max[chunk_index(t)];
+    let v = chunked.viewer.xyz;
+    let dxy = max(lo - v.xy, min(vec2<f32>(0.0), hi - v.xy)) * chunked.metric.xy;
+    let dz = max(mm.x - frame.camera_offset.z - v.z, min(0.0, mm.y - frame.camera_offset.z - v.z));
+    return length(vec3<f32>(dxy, dz));
+}
+
 // Projected error above the threshold (mirrors `chunk_splits`); never below the finest level.
+// Square grids (metric exactly (1, 1), a uniform branch): the distance to the bounding
+// sphere; native non-square grids: to the box in the per-axis metric.
 fn chunk_splits(t: Chunk) -> bool {
     if t.lod <= chunked.sizes.w {
         return false;
     }
-    let s = chunk_sphere(t);
-    let to = s.xyz - chunked.viewer.xyz;
-    let d = max(length(to) - s.w, 0.0);
+    var d: f32;
+    if all(chunked.metric.xy == vec2<f32>(1.0)) {
+        let s = chunk_sphere(t);
+        let to = s.xyz - chunked.viewer.xyz;
+        d = max(length(to) - s.w, 0.0);
+    } else {
+        d = chunk_box_distance(t);
+    }
     return chunk_error[chunk_index(t)] * chunked.params.y > chunked.params.x * d;
 }
 

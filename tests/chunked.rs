@@ -560,7 +560,10 @@ fn naive_gpu_selection_equals_cpu_reference_on_the_earth() {
     ] {
         let cams = common::poses::earth_poses(&data, &lattice, 60);
         let lod = settings(Traversal::Naive);
-        let levels = Levels::with_finest(&data, lod.chunk_quads).unwrap();
+        // As the renderer builds them: the per-axis metric on the native 60 N grid.
+        let levels = Levels::with_finest(&data, lod.chunk_quads)
+            .unwrap()
+            .on_lattice(data.axis_spacing, &lattice);
         let gpu = gpu_chunks_on_earth(&data, &lattice, &cams, &lod);
         let no_cull = ChunkedSettings {
             cull: false,
@@ -572,7 +575,9 @@ fn naive_gpu_selection_equals_cpu_reference_on_the_earth() {
         for (i, (cam, (g, c))) in cams.iter().zip(&gpu).enumerate() {
             let viewer = common::poses::grid_viewer(&lattice, data.spacing, cam.position);
             let flat = ChunkParams::new(&levels, &lod, cam, viewer, W, H);
-            let earth = flat.clone().on_earth(lattice.clone(), cam.position);
+            let earth = flat
+                .clone()
+                .on_earth(&levels, lattice.clone(), cam.position);
             let sel = |p: &ChunkParams| -> HashSet<Tile> {
                 select::select_chunks(&levels, p).into_iter().collect()
             };
@@ -613,6 +618,128 @@ fn naive_gpu_selection_equals_cpu_reference_on_the_earth() {
         assert!(
             sphere_differs > 0,
             "{name}: the flat spheres agreed on every pose"
+        );
+    }
+}
+
+/// On a native geographic grid chunks split by the distance to their box in the per-axis LOD
+/// metric (`select::chunk_box_distance`): a lower bound of the true distance (world chords
+/// from the camera to every sample of the chunk at its height, through the lattice) for every
+/// chunk the walk visits over the earth poses, so the projected error stays under the
+/// threshold; and fewer chunks are drawn than with the grid's one smallest spacing and the
+/// bounding sphere (`lod_metric = "smallest"`, before). Square grids keep the sphere: the
+/// stretch is exactly 1 and the selection is the same. Control: a metric 2 % longer than the
+/// smallest spacing exceeds the true distance.
+#[test]
+fn box_distance_in_the_per_axis_metric_is_a_lower_bound_and_draws_fewer_chunks() {
+    let lod = settings(Traversal::Naive);
+    let (data, lattice) = common::poses::geographic_60n(257);
+    let cams = common::poses::earth_poses(&data, &lattice, 60);
+    let smallest = Levels::with_finest(&data, lod.chunk_quads).unwrap();
+    let axis = smallest.clone().on_lattice(data.axis_spacing, &lattice);
+    let stretch = axis.stretch();
+    // East-west: the grid's one spacing (the poleward row's), a hair less at the lowest height
+    // (below the datum); north-south about twice that at 60 N.
+    assert!(
+        stretch[0] > 0.999 && stretch[0] <= 1.0 && stretch[1] > 1.9,
+        "{stretch:?}"
+    );
+    let (mut worst, mut worst_long, mut worst_unclamped) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut drawn_axis, mut drawn_smallest, mut fewer, mut more) = (0, 0, 0, 0);
+    for cam in &cams {
+        let viewer = common::poses::grid_viewer(&lattice, data.spacing, cam.position);
+        let p = ChunkParams::new(&axis, &lod, cam, viewer, W, H).on_earth(
+            &axis,
+            lattice.clone(),
+            cam.position,
+        );
+        // Controls: the grid's stretch without the viewer's, and a metric 2 % too long.
+        let mut unclamped = p.clone();
+        unclamped.stretch = stretch;
+        let mut long = p.clone();
+        long.stretch = p.stretch.map(|s| s * 1.02);
+        // Every chunk of every level down to 2 levels above the finest (fine chunks are
+        // covered by their parents' boxes: a child's box lies inside its parent's).
+        for lod_level in 2..=axis.root_lod {
+            let (nx, ny) = axis.tiles_per_side[lod_level as usize];
+            for y in 0..ny {
+                for x in 0..nx {
+                    let t = Tile {
+                        x,
+                        y,
+                        lod: lod_level,
+                    };
+                    let span = axis.grid_size << t.lod;
+                    let c0 = [x * span, y * span];
+                    let c1 = [
+                        ((x + 1) * span).min(data.width - 1),
+                        ((y + 1) * span).min(data.height - 1),
+                    ];
+                    let step = (span / 16).max(1) as usize;
+                    let mut nearest = f64::INFINITY;
+                    for r in (c0[1]..=c1[1]).step_by(step).chain([c1[1]]) {
+                        for c in (c0[0]..=c1[0]).step_by(step).chain([c1[0]]) {
+                            let s = glam::DVec2::new(c as f64, r as f64);
+                            let q = lattice.position(s, data.sample(c, r) as f64);
+                            nearest = nearest.min((q - cam.position).length());
+                        }
+                    }
+                    let d = select::chunk_box_distance(&axis, &p, t) as f64;
+                    worst = worst.max(d / nearest);
+                    let ratio =
+                        |q: &ChunkParams| select::chunk_box_distance(&axis, q, t) as f64 / nearest;
+                    worst_long = worst_long.max(ratio(&long));
+                    worst_unclamped = worst_unclamped.max(ratio(&unclamped));
+                }
+            }
+        }
+        let a = select::select_chunks(&axis, &p).len();
+        let sp = ChunkParams::new(&smallest, &lod, cam, viewer, W, H).on_earth(
+            &smallest,
+            lattice.clone(),
+            cam.position,
+        );
+        let b = select::select_chunks(&smallest, &sp).len();
+        drawn_axis += a;
+        drawn_smallest += b;
+        fewer += (a < b) as usize;
+        more += (a > b) as usize;
+    }
+    println!(
+        "60 N grid, {} poses: box distance / nearest true chord at most {worst:.6} (2 % longer \
+         metric: {worst_long:.6}, the grid's stretch from a viewer beyond its edge: \
+         {worst_unclamped:.6}); chunks drawn {drawn_axis} per-axis box against \
+         {drawn_smallest} smallest-spacing sphere (fewer on {fewer} poses, more on {more})",
+        cams.len()
+    );
+    assert!(
+        worst <= 1.0,
+        "box distance exceeds the true distance: {worst}"
+    );
+    assert!(
+        worst_long > 1.0 && worst_unclamped > 1.0,
+        "controls: {worst_long} {worst_unclamped}"
+    );
+    // Fewer in all (a few poses draw more: the east-west stretch is a hair under 1 and a viewer
+    // beyond the edge lowers it further).
+    assert!(
+        drawn_axis < drawn_smallest && fewer > 4 * more,
+        "{drawn_axis} vs {drawn_smallest}, fewer on {fewer}, more on {more}"
+    );
+
+    // A square grid (the anchored CI terrain): the stretch is exactly 1, the same selection.
+    let (data, lattice) = common::poses::anchored_ci(257, 60.0);
+    let plain = Levels::with_finest(&data, lod.chunk_quads).unwrap();
+    let on = plain.clone().on_lattice(data.axis_spacing, &lattice);
+    assert_eq!(on.stretch(), [1.0, 1.0]);
+    for cam in common::poses::earth_poses(&data, &lattice, 12) {
+        let viewer = common::poses::grid_viewer(&lattice, data.spacing, cam.position);
+        let p = |l: &Levels| {
+            ChunkParams::new(l, &lod, &cam, viewer, W, H).on_earth(l, lattice.clone(), cam.position)
+        };
+        assert_eq!(
+            select::select_chunks(&on, &p(&on)),
+            select::select_chunks(&plain, &p(&plain))
         );
     }
 }

@@ -143,6 +143,8 @@ fn frame_uniforms_match_the_wgsl_struct() {
         ("lattice", offset_of!(FrameUniforms, lattice)),
         ("camera_hi", offset_of!(FrameUniforms, camera_hi)),
         ("camera_lo", offset_of!(FrameUniforms, camera_lo)),
+        ("normal_spacing", offset_of!(FrameUniforms, normal_spacing)),
+        ("normal_frame", offset_of!(FrameUniforms, normal_frame)),
     ];
     assert_struct_layout(
         &composed_shaders(),
@@ -194,6 +196,7 @@ fn chunked_uniforms_match_the_wgsl_struct() {
         ("sizes", offset_of!(U, sizes)),
         ("lists", offset_of!(U, lists)),
         ("cbt", offset_of!(U, cbt)),
+        ("metric", offset_of!(U, metric)),
     ];
     assert_struct_layout(
         &[

@@ -18,6 +18,10 @@ struct Chunked {
     // x: the CBT's binary depth, y: indices per chunk (6 * quads^2), z: the CBT's root depth
     // in binary levels (never merged above).
     cbt: vec4<u32>,
+    // xy: the LOD metric's stretch of the grid frame per axis (`Levels::stretch`): exactly
+    // (1, 1) on square grids (chunks split by their bounding spheres), else chunks split by
+    // the distance to their box in the stretched metric (`chunk_box_distance`).
+    metric: vec4<f32>,
 }
 
 struct Chunk {

@@ -20,6 +20,13 @@ struct Frame {
     // xyz: the camera's world position split into f32 hi and lo parts.
     camera_hi: vec4<f32>,
     camera_lo: vec4<f32>,
+    // xy: the stated metres between samples along x and y that the normal maps' slopes were
+    // taken with (`Terrain::axis_spacing`); `world_normal` turns them into the lattice's metres.
+    // z: 1 when `normal_frame` models the grid's frame (`world_normal`), 0: read the lattice.
+    normal_spacing: vec4<f32>,
+    // u, tx, ty (xyz) of the grid's south-west, south-east, north-west and north-east corner
+    // samples (`Lattice::corner_frame_model`).
+    normal_frame: array<vec4<f32>, 12>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -156,10 +163,94 @@ fn project(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec4<f32> {
     return frame.view_proj * vec4<f32>(relative_position(cell, frac, height_m), 1.0);
 }
 
-// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map,
-// faded towards the sky with view depth (aerial perspective; the fragment position's w is
-// 1 / clip w, and clip w is the view depth). Through the clipmap albedo and normal come from
-// the atlas (`clipmap_surface`).
+// The grid's local frame at a position: the unit up vector `u` and the metres per sample
+// along columns and rows (`ax`, `ay`, not yet made tangent to `u`).
+struct GridFrame {
+    u: vec3<f32>,
+    ax: vec3<f32>,
+    ay: vec3<f32>,
+}
+
+// The grid's frame at `grid_pos` from the lattice (`Lattice::grid_frame` is its CPU twin):
+// the bilinear up vector normalized, the bilinear lattice's derivatives along x and y (node
+// differences, hi and lo parts subtracted separately, interpolated across the cell). Twelve
+// lattice reads per fragment: used only where the corner model is not close enough.
+fn lattice_grid_frame(grid_pos: vec2<f32>) -> GridFrame {
+    let lstep = i32(frame.lattice.x);
+    let cell = vec2<i32>(floor(grid_pos));
+    let node = clamp(cell / lstep, vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
+    let f = (grid_pos - vec2<f32>(node * lstep)) / f32(lstep);
+    let i00 = 3 * (node.y * i32(frame.lattice.y) + node.x);
+    let i10 = i00 + 3;
+    let i01 = i00 + 3 * i32(frame.lattice.y);
+    let i11 = i01 + 3;
+    // Node differences along x (south and north edges) and y (west and east edges).
+    let dx0 = (geo_lattice[i10].xyz - geo_lattice[i00].xyz) + (geo_lattice[i10 + 1].xyz - geo_lattice[i00 + 1].xyz);
+    let dx1 = (geo_lattice[i11].xyz - geo_lattice[i01].xyz) + (geo_lattice[i11 + 1].xyz - geo_lattice[i01 + 1].xyz);
+    let dy0 = (geo_lattice[i01].xyz - geo_lattice[i00].xyz) + (geo_lattice[i01 + 1].xyz - geo_lattice[i00 + 1].xyz);
+    let dy1 = (geo_lattice[i11].xyz - geo_lattice[i10].xyz) + (geo_lattice[i11 + 1].xyz - geo_lattice[i10 + 1].xyz);
+    var g: GridFrame;
+    g.u = normalize(mix(
+        mix(geo_lattice[i00 + 2].xyz, geo_lattice[i10 + 2].xyz, f.x),
+        mix(geo_lattice[i01 + 2].xyz, geo_lattice[i11 + 2].xyz, f.x),
+        f.y,
+    ));
+    g.ax = mix(dx0, dx1, f.y) / f32(lstep);
+    g.ay = mix(dy0, dy1, f.x) / f32(lstep);
+    return g;
+}
+
+// The grid's frame at `grid_pos` modelled between the frames of its four corner samples
+// (`frame.normal_frame`, bilinear; `corner_model_frame` in src/geo/lattice.rs is its CPU
+// twin): no memory reads beyond the uniforms. Taken where the model is within
+// `FRAME_MODEL_TOLERANCE` of the lattice's frame at every node (`Lattice::corner_frame_model`).
+fn modelled_grid_frame(grid_pos: vec2<f32>) -> GridFrame {
+    let f = grid_pos / (vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0));
+    return GridFrame(normalize(corner_mix(0u, f)), corner_mix(1u, f), corner_mix(2u, f));
+}
+
+// Vector `k` (0: u, 1: tx, 2: ty) of the corner frames, bilinear at fraction `f` of the grid
+// (called with constant `k`: constant uniform indices once inlined).
+fn corner_mix(k: u32, f: vec2<f32>) -> vec3<f32> {
+    let south = mix(frame.normal_frame[k].xyz, frame.normal_frame[3u + k].xyz, f.x);
+    let north = mix(frame.normal_frame[6u + k].xyz, frame.normal_frame[9u + k].xyz, f.x);
+    return mix(south, north, f.y);
+}
+
+// The normal, in world axes, of the terrain at `grid_pos` (samples) whose normal in the grid's
+// frame is `n`: the normal maps hold (-dh/dx, -dh/dy, 1) normalized, slopes per metre along
+// the grid's x (columns) and y (rows) with the stated spacing `frame.normal_spacing.xy`.
+// Flat world: the grid's frame is the world's, `n` as it is. On the earth (a uniform branch)
+// the grid's frame at `grid_pos` (modelled between the grid's corners, or read from the
+// lattice): `tx`, `ty` the metres per sample along columns and rows made tangent to the up
+// vector `u`. The surface's tangents are `tx + hx u` and `ty + hy u` with
+// `hx = -n.x / n.z * sx` (height per sample), so its normal is their cross product times n.z:
+// `n.x sx (ty x u) + n.y sy (u x tx) + n.z (tx x ty)`: the inverse-transpose (cofactor) of the
+// grid-to-world map applied to `n`. On an orthogonal grid whose stated spacing is its metric
+// one this is the rotation into the local frame (tx, ty, u); it also corrects the slopes where
+// the stated spacing is not the local one (a geographic grid's east-west spacing holds at one
+// latitude). docs/coordinates.md ("Normals on the earth") has the error budget.
+fn world_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
+    if frame.lattice.x == 0u {
+        return n;
+    }
+    var g: GridFrame;
+    if frame.normal_spacing.z != 0.0 {
+        g = modelled_grid_frame(grid_pos);
+    } else {
+        g = lattice_grid_frame(grid_pos);
+    }
+    let u = g.u;
+    let tx = g.ax - dot(g.ax, u) * u;
+    let ty = g.ay - dot(g.ay, u) * u;
+    let s = frame.normal_spacing.xy;
+    return normalize(n.x * s.x * cross(ty, u) + n.y * s.y * cross(u, tx) + n.z * cross(tx, ty));
+}
+
+// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map
+// (in world axes: `world_normal`), faded towards the sky with view depth (aerial perspective;
+// the fragment position's w is 1 / clip w, and clip w is the view depth). Through the clipmap
+// albedo and normal come from the atlas (`clipmap_surface`).
 fn shade(grid_pos: vec2<f32>, frag_position: vec4<f32>) -> vec4<f32> {
     let gx = dpdx(grid_pos);
     let gy = dpdy(grid_pos);
@@ -174,6 +265,7 @@ fn shade(grid_pos: vec2<f32>, frag_position: vec4<f32>) -> vec4<f32> {
         n = normalize(textureSampleGrad(normal_tex, linear_sampler, (grid_pos + 0.5) / size, gx / size, gy / size).xyz);
         albedo = textureSampleGrad(albedo_tex, linear_sampler, grid_pos / (size - 1.0), gx / (size - 1.0), gy / (size - 1.0)).rgb;
     }
+    n = world_normal(grid_pos, n);
     let light = LIGHT_AMBIENT + LIGHT_DIFFUSE * max(dot(n, frame.sun_dir.xyz), 0.0);
     let haze = 1.0 - exp(-frame.haze.w / frag_position.w);
     return vec4<f32>(mix(albedo * light, frame.haze.rgb, haze), 1.0);

@@ -58,11 +58,47 @@ pub struct TerrainInfo {
     pub width: u32,
     pub height: u32,
     pub spacing: f64,
+    /// Stated metres between samples along x and y, as the normal maps' slopes take them
+    /// (`Terrain::axis_spacing`).
+    pub axis_spacing: [f64; 2],
+    /// On the earth, where the grid's frame modelled between its corners is within
+    /// [`crate::geo::lattice::FRAME_MODEL_TOLERANCE`] of the lattice's: the corner frames
+    /// (`u`, `tx`, `ty` per corner, xyz of 12 vec4; `frame.normal_frame`) that `world_normal`
+    /// interpolates instead of reading the lattice per fragment.
+    pub normal_frame: Option<[[f32; 4]; 12]>,
     pub min_height: f32,
     pub max_height: f32,
     /// The geolocation lattice's `[step, nodes per row, nodes per column, curve radius]` (the
     /// last the f32 bits of [`crate::geo::Lattice::curve_radius`]); None: flat world.
     pub lattice: Option<[u32; 4]>,
+}
+
+/// The corner frames of `lattice`'s grid for `world_normal` when their bilinear model is
+/// within [`crate::geo::lattice::FRAME_MODEL_TOLERANCE`] of the lattice's frame everywhere
+/// (a grid of a few degrees), else None (`world_normal` reads the lattice per fragment).
+fn normal_frame_model(
+    lattice: &crate::geo::Lattice,
+    width: u32,
+    height: u32,
+) -> Option<[[f32; 4]; 12]> {
+    let (corners, departure) = lattice.corner_frame_model(width, height);
+    let model = departure <= crate::geo::lattice::FRAME_MODEL_TOLERANCE;
+    tracing::debug!(
+        "normals on the earth: the grid's frame between its corners departs {departure:.2e} \
+         from the lattice's ({})",
+        if model {
+            "modelled"
+        } else {
+            "read from the lattice per fragment"
+        }
+    );
+    model.then(|| {
+        let mut out = [[0.0f32; 4]; 12];
+        for (k, v) in corners.iter().flatten().enumerate() {
+            out[k] = [v.x as f32, v.y as f32, v.z as f32, 0.0];
+        }
+        out
+    })
 }
 
 /// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.
@@ -142,6 +178,8 @@ impl TerrainGpu {
             width: data.width(),
             height: data.height(),
             spacing: data.spacing(),
+            axis_spacing: data.axis_spacing(),
+            normal_frame: lattice.and_then(|l| normal_frame_model(l, data.width(), data.height())),
             min_height,
             max_height,
             lattice: lattice.map(|l| {

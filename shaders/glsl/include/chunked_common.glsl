@@ -14,6 +14,8 @@ layout(set = 1, binding = 0, std140) uniform Chunked {
     // x: render list capacity, y: traversal list capacity, z/w: LOD map cells per side.
     uvec4 lists;
     uvec4 cbt;
+    // xy: the LOD metric's stretch per axis (the selection's; the GLSL stages do not select).
+    vec4 metric;
 } chunked;
 
 // The render list: x, y, lod, pad per chunk.

@@ -26,6 +26,10 @@ layout(set = 0, binding = 0, std140) uniform Frame {
     // xyz: the camera's world position split into f32 hi and lo parts.
     vec4 camera_hi;
     vec4 camera_lo;
+    // xy: the stated metres between samples of the normal maps (`world_normal` in the WGSL;
+    // the GLSL stages do not shade).
+    vec4 normal_spacing;
+    vec4 normal_frame[12];
 } frame;
 layout(set = 0, binding = 1) uniform texture2D height_tex;
 

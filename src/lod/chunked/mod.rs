@@ -51,6 +51,8 @@ pub struct ChunkedUniforms {
     pub sizes: [u32; 4],
     pub lists: [u32; 4],
     pub cbt: [u32; 4],
+    /// xy: the LOD metric's stretch per axis ([`select::ChunkParams::stretch`]).
+    pub metric: [f32; 4],
 }
 
 /// The selection state the GPU keeps per slot (`ChunkState` in `shaders/chunked_select.wgsl`).
@@ -364,7 +366,10 @@ impl Chunked {
         };
         // Level 0's chunks are culled and bounded with their own heights (the shaders read
         // them), unlike UDLOD's level-0 tiles.
-        let levels = Levels::from_stats_with_finest(stats, spacing);
+        let mut levels = Levels::from_stats_with_finest(stats, spacing);
+        if let (Some(lattice), settings::LodMetric::Axis) = (ctx.lattice, settings.lod_metric) {
+            levels = levels.on_lattice(ctx.data.axis_spacing(), lattice);
+        }
         if levels.levels() > UDLOD_MAX_LEVELS {
             return Err(Error::invalid(
                 "chunked",
@@ -508,7 +513,7 @@ impl Chunked {
             view.height,
         );
         match &self.lattice {
-            Some(l) => p.on_earth(l.clone(), view.camera.position),
+            Some(l) => p.on_earth(&self.levels, l.clone(), view.camera.position),
             None => p,
         }
     }

@@ -22,6 +22,7 @@ impl Chunked {
         let mut u = ChunkedUniforms {
             frustum: p.frustum,
             viewer: [p.viewer[0], p.viewer[1], p.viewer[2], 0.0],
+            metric: [p.stretch[0], p.stretch[1], 0.0, 0.0],
             params: [
                 p.error_px,
                 p.focal_px,

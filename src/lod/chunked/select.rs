@@ -53,6 +53,10 @@ pub struct ChunkParams {
     /// The LOD viewer relative to the camera (metres).
     pub viewer: [f32; 3],
     pub spacing: f32,
+    /// The LOD metric's stretch of the grid frame per axis ([`Levels::stretch`]): exactly
+    /// `[1, 1]` on square grids, whose chunks split by their bounding spheres; otherwise by
+    /// the distance to their box in the stretched metric ([`chunk_box_distance`]).
+    pub stretch: [f32; 2],
     pub frustum: [[f32; 4]; 6],
     pub cull: bool,
     /// On the earth: the lattice and the camera's world position; chunks are then culled
@@ -87,6 +91,7 @@ impl ChunkParams {
             camera_z: camera.position.z as f32,
             viewer: [v.x as f32, v.y as f32, v.z as f32],
             spacing: s as f32,
+            stretch: levels.stretch(),
             frustum: frustum_planes(camera, width as f64 / height as f64),
             cull: settings.cull,
             earth: None,
@@ -97,8 +102,23 @@ impl ChunkParams {
     }
 
     /// These inputs on the earth: chunks are culled with the curved boxes of `lattice`
-    /// (`camera`: the camera's world position, as the frame uniforms carry it).
-    pub fn on_earth(mut self, lattice: Arc<Lattice>, camera: DVec3) -> Self {
+    /// (`camera`: the camera's world position, as the frame uniforms carry it). On a native
+    /// non-square grid the per-axis stretch is also lowered to the lattice's spacing at the
+    /// LOD viewer where that is smaller ([`Lattice::axis_spacing_at`] at the data's lowest
+    /// height, below the datum): a viewer beyond the grid's poleward edge stands where the
+    /// extrapolated east-west spacing is below the grid's smallest (1.8 % at 66 km past the
+    /// edge of a 60 N grid), and distances measured from there with the grid's would exceed
+    /// the true ones. Each axis's spacing changes monotonically with latitude, so the smaller
+    /// of the two ends bounds it along the way. Square grids keep `[1, 1]`.
+    pub fn on_earth(mut self, levels: &Levels, lattice: Arc<Lattice>, camera: DVec3) -> Self {
+        if self.stretch != [1.0, 1.0] {
+            let v = camera + DVec3::new(self.viewer[0] as f64, self.viewer[1] as f64, 0.0);
+            let s = glam::DVec2::new(v.x, v.y) / levels.spacing;
+            let here = lattice.axis_spacing_at(s, (levels.lowest() as f64).min(0.0));
+            for (k, m) in here.into_iter().enumerate() {
+                self.stretch[k] = self.stretch[k].min((m / levels.spacing) as f32);
+            }
+        }
         self.earth = Some(EarthCull::new(lattice, camera));
         self
     }
@@ -115,13 +135,7 @@ impl ChunkParams {
 /// A chunk's bounding sphere, camera-relative: the sphere around its box (rectangle clamped
 /// to the data x its min/max height). Returns (centre, radius).
 pub fn chunk_sphere(levels: &Levels, p: &ChunkParams, t: Tile) -> (Vec3, f32) {
-    let span = (levels.grid_size << t.lod) as i32;
-    let (w, h) = (levels.width as i32 - 1, levels.height as i32 - 1);
-    let lo = p.relative([t.x as i32 * span, t.y as i32 * span]);
-    let hi = p.relative([
-        ((t.x as i32 + 1) * span).min(w),
-        ((t.y as i32 + 1) * span).min(h),
-    ]);
+    let (lo, hi) = chunk_rect(levels, p, t);
     let [zmin, zmax] = levels.tile_min_max(t);
     let centre = Vec3::new(
         (lo[0] + hi[0]) * 0.5,
@@ -136,17 +150,52 @@ pub fn chunk_sphere(levels: &Levels, p: &ChunkParams, t: Tile) -> (Vec3, f32) {
     (centre, half.length())
 }
 
+/// The chunk's rectangle (clamped to the data), camera-relative grid-frame metres: `(lo, hi)`.
+fn chunk_rect(levels: &Levels, p: &ChunkParams, t: Tile) -> ([f32; 2], [f32; 2]) {
+    let span = (levels.grid_size << t.lod) as i32;
+    let (w, h) = (levels.width as i32 - 1, levels.height as i32 - 1);
+    let lo = p.relative([t.x as i32 * span, t.y as i32 * span]);
+    let hi = p.relative([
+        ((t.x as i32 + 1) * span).min(w),
+        ((t.y as i32 + 1) * span).min(h),
+    ]);
+    (lo, hi)
+}
+
+/// Distance from the LOD viewer to the chunk's box (its rectangle clamped to the data x its
+/// min/max height) in the LOD metric: grid-frame offsets times [`ChunkParams::stretch`] per
+/// axis, heights as they are (`chunk_box_distance` in `shaders/chunked_select.wgsl`, the same
+/// f32 operations). Each axis's stretch is the smallest metres per sample on the drawn
+/// surface ([`crate::geo::Lattice::min_axis_spacing`]), so this is a lower bound of the
+/// distance to the chunk's terrain (tests/chunked.rs checks it against true chords).
+pub fn chunk_box_distance(levels: &Levels, p: &ChunkParams, t: Tile) -> f32 {
+    let (lo, hi) = chunk_rect(levels, p, t);
+    let [zmin, zmax] = levels.tile_min_max(t);
+    let v = p.viewer;
+    let dx = (lo[0] - v[0]).max(0.0f32.min(hi[0] - v[0])) * p.stretch[0];
+    let dy = (lo[1] - v[1]).max(0.0f32.min(hi[1] - v[1])) * p.stretch[1];
+    let dz = (zmin - p.camera_z - v[2]).max(0.0f32.min(zmax - p.camera_z - v[2]));
+    Vec3::new(dx, dy, dz).length()
+}
+
 /// Does the chunk split? Its geometric error (metres, the data's tile statistics) projected
-/// at the distance from the LOD viewer to its bounding sphere exceeds the pixel threshold:
-/// `error * focal > threshold * distance` (no division; inside the sphere always, unless the
-/// chunk has no error). Never below the finest level.
+/// at its distance from the LOD viewer exceeds the pixel threshold:
+/// `error * focal > threshold * distance` (no division; inside always, unless the chunk has
+/// no error). The distance: to its bounding sphere on square grids (stretch `[1, 1]`), to its
+/// box in the per-axis LOD metric on native non-square ones ([`chunk_box_distance`]; a
+/// sphere around a stretched box grows with the stretch, docs/chunked.md). Never below the
+/// finest level.
 pub fn chunk_splits(levels: &Levels, p: &ChunkParams, t: Tile) -> bool {
     if t.lod <= p.depths.finest {
         return false;
     }
-    let (c, r) = chunk_sphere(levels, p, t);
-    let to = c - Vec3::from(p.viewer);
-    let d = (to.length() - r).max(0.0);
+    let d = if p.stretch == [1.0, 1.0] {
+        let (c, r) = chunk_sphere(levels, p, t);
+        let to = c - Vec3::from(p.viewer);
+        (to.length() - r).max(0.0)
+    } else {
+        chunk_box_distance(levels, p, t)
+    };
     levels.tile_error(t) * p.focal_px > p.error_px * d
 }
 

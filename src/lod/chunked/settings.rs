@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::lod::sweep::Sweep;
+pub use crate::lod::udlod::settings::LodMetric;
 
 /// How the quadtree is walked on the GPU (Hedberg's two selection variants).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
@@ -74,6 +75,11 @@ pub struct ChunkedSettings {
     /// Edge patching against a coarser neighbour through the LOD map (off: an ablation that
     /// shows the cracks it closes; tests use it as the watertightness check's control).
     pub stitch: bool,
+    /// The LOD metric on a native non-square grid on the earth (docs/chunked.md, "On the
+    /// earth"): `axis` measures split distances to the chunk's box with each axis's own
+    /// smallest spacing; `smallest` keeps the bounding sphere in the grid's one smallest
+    /// spacing (the ablation, what chunked LOD did before). Square grids: the sphere either way.
+    pub lod_metric: LodMetric,
 }
 
 impl Default for ChunkedSettings {
@@ -88,6 +94,7 @@ impl Default for ChunkedSettings {
             max_chunks: 16384,
             cull: true,
             stitch: true,
+            lod_metric: LodMetric::Axis,
         }
     }
 }

@@ -137,15 +137,19 @@ impl Levels {
     /// `[spacing, spacing]`: their selection is unchanged bit for bit (docs/udlod.md,
     /// "Per-axis metric on the earth").
     pub fn on_lattice(mut self, axis_spacing: [f64; 2], lattice: &Lattice) -> Self {
-        let lowest = self.min_max[self.tile_index(Tile {
-            x: 0,
-            y: 0,
-            lod: self.root_lod,
-        })][0];
-        if let Some(metric) = lattice.lod_metric(axis_spacing, lowest as f64) {
+        if let Some(metric) = lattice.lod_metric(axis_spacing, self.lowest() as f64) {
             self.metric = metric;
         }
         self
+    }
+
+    /// The data's lowest height (m; the root tile's minimum).
+    pub fn lowest(&self) -> f32 {
+        self.min_max[self.tile_index(Tile {
+            x: 0,
+            y: 0,
+            lod: self.root_lod,
+        })][0]
     }
 
     /// The LOD metric as a stretch of the grid frame per axis, as the GPU gets it (f32;
