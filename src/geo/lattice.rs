@@ -381,11 +381,7 @@ impl Lattice {
     /// World position (f64) of the surface point at sample position `s` (columns, rows) and
     /// `height` metres: the shader's formula on the shader's data (the CPU mirror).
     pub fn position(&self, s: DVec2, height: f64) -> DVec3 {
-        let (i, j, f) = self.cell_of(s);
-        let (p00, u00) = self.node_position(i, j);
-        let (p10, u10) = self.node_position(i + 1, j);
-        let (p01, u01) = self.node_position(i, j + 1);
-        let (p11, u11) = self.node_position(i + 1, j + 1);
+        let ([(p00, u00), (p10, u10), (p01, u01), (p11, u11)], f) = self.cell_nodes(s);
         let lerp = |a: DVec3, b: DVec3, t: f64| a * (1.0 - t) + b * t;
         let p = lerp(lerp(p00, p10, f.x), lerp(p01, p11, f.x), f.y);
         let u = lerp(lerp(u00, u10, f.x), lerp(u01, u11, f.x), f.y);
@@ -420,6 +416,16 @@ impl Lattice {
         min.map(|m| m / self.step as f64)
     }
 
+    /// The (position, up) of the four nodes of the lattice cell holding sample position `s`
+    /// (south-west, south-east, north-west, north-east) and the fraction of the cell
+    /// ([`Lattice::cell_of`]).
+    fn cell_nodes(&self, s: DVec2) -> ([(DVec3, DVec3); 4], DVec2) {
+        let (i, j, f) = self.cell_of(s);
+        let nodes =
+            [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(di, dj)| self.node_position(i + di, j + dj));
+        (nodes, f)
+    }
+
     /// The lattice cell holding sample position `s` (its south-west node, clamped to the
     /// lattice) and the fraction of the cell (outside the lattice: the edge cell's
     /// extrapolation).
@@ -436,11 +442,7 @@ impl Lattice {
     /// bilinear lattice's derivatives along columns and rows (node differences, interpolated
     /// across the cell) over the step, made tangent to it.
     pub fn grid_frame(&self, s: DVec2) -> GridFrame {
-        let (i, j, f) = self.cell_of(s);
-        let (p00, u00) = self.node_position(i, j);
-        let (p10, u10) = self.node_position(i + 1, j);
-        let (p01, u01) = self.node_position(i, j + 1);
-        let (p11, u11) = self.node_position(i + 1, j + 1);
+        let ([(p00, u00), (p10, u10), (p01, u01), (p11, u11)], f) = self.cell_nodes(s);
         let lerp = |a: DVec3, b: DVec3, t: f64| a * (1.0 - t) + b * t;
         let u = lerp(lerp(u00, u10, f.x), lerp(u01, u11, f.x), f.y).normalize();
         let step = self.step as f64;
