@@ -103,6 +103,19 @@ fn relative_position(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec3<f3
         let rel_xy = vec2<f32>(cell - frame.camera_cell.xy) * spacing + frac * spacing - frame.camera_offset.xy;
         return vec3<f32>(rel_xy, height_m - frame.camera_offset.z);
     }
+    let s = lattice_point(cell, frac);
+    return s.p + height_m * s.up;
+}
+
+// On the earth: the camera-relative surface point at height 0 of the datum and the up vector
+// at a sample position (integer cell + fraction), both bilinear in the lattice.
+struct LatticePoint {
+    p: vec3<f32>,
+    up: vec3<f32>,
+}
+
+fn lattice_point(cell: vec2<i32>, frac: vec2<f32>) -> LatticePoint {
+    let lstep = i32(frame.lattice.x);
     let node = clamp(cell / lstep, vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
     let f = (vec2<f32>(cell - node * lstep) + frac) / f32(lstep);
     let p00 = lattice_relative(node);
@@ -115,7 +128,7 @@ fn relative_position(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec3<f3
     let u11 = lattice_up(node + vec2<i32>(1, 1));
     let p = mix(mix(p00, p10, f.x), mix(p01, p11, f.x), f.y);
     let up = mix(mix(u00, u10, f.x), mix(u01, u11, f.x), f.y);
-    return p + height_m * up;
+    return LatticePoint(p, up);
 }
 
 // An axis-aligned camera-relative box (metres).
@@ -134,11 +147,15 @@ struct Box3 {
 fn earth_box(c0: vec2<i32>, c1: vec2<i32>, heights: vec2<f32>) -> Box3 {
     var lo = vec3<f32>(3.0e38);
     var hi = vec3<f32>(-3.0e38);
-    for (var k = 0u; k < 8u; k++) {
+    // Each corner's lattice point once, at both heights (the corners' lattice reads are what
+    // the culling of a prepass pass waits on).
+    for (var k = 0u; k < 4u; k++) {
         let c = vec2<i32>(select(c0.x, c1.x, (k & 1u) != 0u), select(c0.y, c1.y, (k & 2u) != 0u));
-        let p = relative_position(c, vec2<f32>(0.0), select(heights.x, heights.y, k >= 4u));
-        lo = min(lo, p);
-        hi = max(hi, p);
+        let s = lattice_point(c, vec2<f32>(0.0));
+        let low = s.p + heights.x * s.up;
+        let high = s.p + heights.y * s.up;
+        lo = min(lo, min(low, high));
+        hi = max(hi, max(low, high));
     }
     let d = length(hi.xy - lo.xy);
     let bulge = vec3<f32>(d * d / (8.0 * bitcast<f32>(frame.lattice.w)) + 1e-3 * d);
