@@ -145,15 +145,21 @@ struct Box3 {
 // src/geo/lattice.rs is its CPU twin (f64), proven to decide as this one in tests/udlod.rs
 // and tests/chunked.rs.
 fn earth_box(c0: vec2<i32>, c1: vec2<i32>, heights: vec2<f32>) -> Box3 {
+    let sw = lattice_point(c0, vec2<f32>(0.0));
+    let se = lattice_point(vec2<i32>(c1.x, c0.y), vec2<f32>(0.0));
+    let nw = lattice_point(vec2<i32>(c0.x, c1.y), vec2<f32>(0.0));
+    let ne = lattice_point(c1, vec2<f32>(0.0));
+    return corner_box(array<LatticePoint, 4>(sw, se, nw, ne), heights);
+}
+
+// `earth_box` from the lattice points of the rectangle's four corners (callers deciding
+// neighbouring rectangles share them).
+fn corner_box(corners: array<LatticePoint, 4>, heights: vec2<f32>) -> Box3 {
     var lo = vec3<f32>(3.0e38);
     var hi = vec3<f32>(-3.0e38);
-    // Each corner's lattice point once, at both heights (the corners' lattice reads are what
-    // the culling of a prepass pass waits on).
     for (var k = 0u; k < 4u; k++) {
-        let c = vec2<i32>(select(c0.x, c1.x, (k & 1u) != 0u), select(c0.y, c1.y, (k & 2u) != 0u));
-        let s = lattice_point(c, vec2<f32>(0.0));
-        let low = s.p + heights.x * s.up;
-        let high = s.p + heights.y * s.up;
+        let low = corners[k].p + heights.x * corners[k].up;
+        let high = corners[k].p + heights.y * corners[k].up;
         lo = min(lo, min(low, high));
         hi = max(hi, max(low, high));
     }
