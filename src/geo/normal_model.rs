@@ -165,13 +165,14 @@ fn solve_ridge(
             .unwrap_or(col);
         gram.swap(col, pivot);
         rhs.swap(col, pivot);
+        let (pivot_gram, pivot_rhs) = (gram[col], rhs[col]);
         for row in col + 1..N {
-            let factor = gram[row][col] / gram[col][col];
-            for k in col..N {
-                gram[row][k] -= factor * gram[col][k];
+            let factor = gram[row][col] / pivot_gram[col];
+            for (g, p) in gram[row][col..].iter_mut().zip(&pivot_gram[col..]) {
+                *g -= factor * p;
             }
-            for k in 0..9 {
-                rhs[row][k] -= factor * rhs[col][k];
+            for (r, p) in rhs[row].iter_mut().zip(&pivot_rhs) {
+                *r -= factor * p;
             }
         }
     }
