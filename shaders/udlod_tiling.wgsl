@@ -124,18 +124,18 @@ fn tile_distance(t: Tile) -> f32 {
 fn tile_culled(t: Tile) -> bool {
     let span = i32(udlod.sizes.x << t.lod);
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
-    let margin = -1e-3 * (f32(span) * frame.camera_offset.w);
     if frame.lattice.x != 0u {
         // On the earth: the curved box (`earth_box`, the one every method culls with there).
         let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);
         let b = earth_box(c0, min(c0 + vec2<i32>(span), last), tile_min_max(t));
-        return box_outside(udlod.frustum, b, -margin);
+        return box_outside(udlod.frustum, b, cull_slack(t));
     }
     let lo = relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
     let hi = relative_xy(min(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span), last));
     let mm = tile_min_max(t) - vec2<f32>(frame.camera_offset.z);
     let box_lo = vec3<f32>(lo, mm.x);
     let box_hi = vec3<f32>(hi, mm.y);
+    let margin = -cull_slack(t);
     for (var i = 0u; i < 6u; i++) {
         let pl = udlod.frustum[i];
         let p = vec3<f32>(select(box_lo.x, box_hi.x, pl.x >= 0.0), select(box_lo.y, box_hi.y, pl.y >= 0.0), select(box_lo.z, box_hi.z, pl.z >= 0.0));
@@ -144,6 +144,11 @@ fn tile_culled(t: Tile) -> bool {
         }
     }
     return false;
+}
+
+// How far (metres) a tile's box must lie outside a plane to be culled: 1e-3 of its side.
+fn cull_slack(t: Tile) -> f32 {
+    return 1e-3 * (f32(udlod.sizes.x << t.lod) * frame.camera_offset.w);
 }
 
 // Per workgroup of `refine`: its splits' child slots, final tiles, next-pass split requests and
@@ -189,8 +194,8 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocatio
             atomicAdd(&wg_culled, 1u);
         } else if (t.pad & TILE_SPLITS) != 0u && state.splits_allowed != 0u {
             action = ACTION_SPLIT;
+            children = decided_children(t);
             for (var k = 0u; k < 4u; k++) {
-                children[k] = decided(Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u));
                 if children[k].pad == (TILE_DECIDED | TILE_SPLITS) {
                     atomicAdd(&wg_requests, 1u);
                 }
@@ -282,6 +287,48 @@ fn decided(t: Tile) -> Tile {
         flags |= TILE_SPLITS;
     }
     return Tile(t.x, t.y, t.lod, flags);
+}
+
+// The four children of splitting tile `t` (south-west, south-east, north-west, north-east),
+// each `decided`. On the earth with culling on, their curved boxes share corners: the 3 x 3
+// lattice points are read once and independently, where four `decided` calls built four boxes
+// one after the other (a pass waits on its slowest invocation, and the boxes' lattice reads
+// were most of the earth's prepass time). The same boxes and flags as `decided`.
+fn decided_children(t: Tile) -> array<Tile, 4> {
+    var out: array<Tile, 4>;
+    let lod = t.lod - 1u;
+    if frame.lattice.x == 0u || udlod.params.w <= 0.5 {
+        for (var k = 0u; k < 4u; k++) {
+            out[k] = decided(Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), lod, 0u));
+        }
+        return out;
+    }
+    let span = i32(udlod.sizes.x << lod);
+    let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+    let origin = vec2<i32>(i32(t.x) * 2 * span, i32(t.y) * 2 * span);
+    var points: array<LatticePoint, 9>;
+    for (var j = 0; j < 3; j++) {
+        for (var i = 0; i < 3; i++) {
+            points[j * 3 + i] = lattice_point(min(origin + vec2<i32>(i, j) * span, last), vec2<f32>(0.0));
+        }
+    }
+    for (var k = 0u; k < 4u; k++) {
+        let c = Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), lod, 0u);
+        var flags = TILE_DECIDED;
+        if outside_data(c) {
+            flags |= TILE_OUTSIDE;
+        } else {
+            let sw = i32(k >> 1u) * 3 + i32(k & 1u);
+            let corners = array<LatticePoint, 4>(points[sw], points[sw + 1], points[sw + 3], points[sw + 4]);
+            if box_outside(udlod.frustum, corner_box(corners, tile_min_max(c)), cull_slack(c)) {
+                flags |= TILE_CULLED;
+            } else if splits_by_distance(c) {
+                flags |= TILE_SPLITS;
+            }
+        }
+        out[k] = Tile(c.x, c.y, c.lod, flags);
+    }
+    return out;
 }
 
 @compute @workgroup_size(1)

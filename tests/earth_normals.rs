@@ -15,7 +15,7 @@ use glam::{DVec2, DVec3};
 use vkterrain::dataset::{Albedo, Heightmap};
 use vkterrain::driver::Gpu;
 use vkterrain::geo::Lattice;
-use vkterrain::geo::lattice::corner_model_frame;
+use vkterrain::geo::normal_model::NormalModel;
 use vkterrain::lod::MethodKind;
 use vkterrain::readback::CollectSink;
 use vkterrain::render::{FrameRequest, Renderer};
@@ -162,7 +162,7 @@ fn render(
 /// Probes `world_normal` on `grid` at sample positions `rows` x `cols` with six slopes and
 /// compares it with the oracle; returns the worst angle and the controls' (the unrotated
 /// normal 50+ km out: smallest; a rotation keeping the stated spacing on the 10 edge rows:
-/// largest; north flipped: smallest), and which frame the shader took (true: the corner model).
+/// largest; north flipped: smallest), and which frame the shader took (true: the quadratic normal model).
 fn probe_against_geodesy(
     gpu: &Arc<Gpu>,
     grid: &Grid,
@@ -199,18 +199,17 @@ fn probe_against_geodesy(
         .map(|(s, n)| (s.as_vec2().to_array(), n.as_vec3().to_array()))
         .collect();
     let got = renderer.probe_world_normals(0, &points).unwrap();
-    let modelled = renderer.terrain().normal_frame.is_some();
-    // The CPU twins of the shader's frames (`Lattice::grid_frame`, `corner_model_frame`) with
-    // the cofactor written out here: the GPU must equal them to f32 rounding.
-    let corners = lattice.corner_frame_model(grid.cols, grid.rows).0;
-    let last = DVec2::new((grid.cols - 1) as f64, (grid.rows - 1) as f64);
+    let modelled = renderer.terrain().normal_model.is_some();
+    // The CPU twins of the shader's normals (`NormalModel::normal`, `Lattice::grid_frame` with
+    // the cofactor written out here): the GPU must equal them to f32 rounding.
     let stated_spacing = grid.stated_spacing();
+    let (model, _) = NormalModel::fit(&lattice, grid.cols, grid.rows, stated_spacing);
+    let last = DVec2::new((grid.cols - 1) as f64, (grid.rows - 1) as f64);
     let twin = |s: DVec2, n: DVec3| {
-        let [u, tx, ty] = if modelled {
-            corner_model_frame(&corners, s / last)
-        } else {
-            lattice.grid_frame(s)
-        };
+        if modelled {
+            return model.normal(s / last, n).normalize();
+        }
+        let [u, tx, ty] = lattice.grid_frame(s);
         (n.x * stated_spacing[0] * ty.cross(u)
             + n.y * stated_spacing[1] * u.cross(tx)
             + n.z * tx.cross(ty))
@@ -269,9 +268,9 @@ fn world_normals_follow_the_local_frame_and_metric_on_a_geographic_grid() {
     let tolerance = 1e-4;
     // 0.5 x 1 degree at 60 N, 3" samples (46 x 93 m): lattice nodes every 5 samples; the far
     // rows lie 111 km north of the world origin (the up vector tilted by 1 degree), the stated
-    // east-west spacing (at 60.5 N) is 1.5 % off at the south and north edges. The corner
-    // model holds here. Then 8 x 2 degrees at 45 N of 15" samples: the parallels bend too far
-    // for the corner model (the sagitta of 8 degrees, ~1e-3 rad), so the lattice is read.
+    // east-west spacing (at 60.5 N) is 1.5 % off at the south and north edges. The normal
+    // model holds here. Then 16 x 4 degrees at 45 N of 30" samples: the parallels bend too far
+    // for one quadratic over the grid (6.7e-4 rad), so the lattice is read.
     let cases = [
         (
             Grid {
@@ -289,7 +288,7 @@ fn world_normals_follow_the_local_frame_and_metric_on_a_geographic_grid() {
             Grid {
                 lat0: 45.0,
                 lon0: -3.0,
-                d: 1.0 / 240.0,
+                d: 1.0 / 120.0,
                 cols: 1921,
                 rows: 481,
             },
@@ -301,7 +300,7 @@ fn world_normals_follow_the_local_frame_and_metric_on_a_geographic_grid() {
     for (grid, rows, cols, model) in cases {
         let ([worst, unrotated, stated, flipped], modelled) =
             probe_against_geodesy(&gpu, &grid, &rows, &cols);
-        assert_eq!(modelled, model, "corner model at {} N", grid.lat0);
+        assert_eq!(modelled, model, "normal model at {} N", grid.lat0);
         assert!(worst < tolerance, "world normal off by {worst} rad");
         assert!(unrotated > 20.0 * tolerance, "{unrotated}");
         assert!(stated > 20.0 * tolerance, "{stated}");
@@ -372,7 +371,10 @@ fn a_low_sun_lights_far_terrain_by_its_own_vertical() {
             worst = worst.max((p - want as i32).abs());
         }
     }
-    println!("expected {want} (unrotated {unrotated}), worst pixel off by {worst}");
+    println!(
+        "expected {want} (unrotated {unrotated}), worst pixel off by {worst} (normal model: {})",
+        renderer.terrain().normal_model.is_some()
+    );
     assert!(
         worst <= 1,
         "pixels off by {worst} from {want} (unrotated: {unrotated})"

@@ -144,7 +144,7 @@ fn frame_uniforms_match_the_wgsl_struct() {
         ("camera_hi", offset_of!(FrameUniforms, camera_hi)),
         ("camera_lo", offset_of!(FrameUniforms, camera_lo)),
         ("normal_spacing", offset_of!(FrameUniforms, normal_spacing)),
-        ("normal_frame", offset_of!(FrameUniforms, normal_frame)),
+        ("normal_model", offset_of!(FrameUniforms, normal_model)),
     ];
     assert_struct_layout(
         &composed_shaders(),

@@ -22,11 +22,11 @@ struct Frame {
     camera_lo: vec4<f32>,
     // xy: the stated metres between samples along x and y that the normal maps' slopes were
     // taken with (`Terrain::axis_spacing`); `world_normal` turns them into the lattice's metres.
-    // z: 1 when `normal_frame` models the grid's frame (`world_normal`), 0: read the lattice.
+    // z: 1 when `normal_model` models the grid's normals (`world_normal`), 0: read the lattice.
     normal_spacing: vec4<f32>,
-    // u, tx, ty (xyz) of the grid's south-west, south-east, north-west and north-east corner
-    // samples (`Lattice::corner_frame_model`).
-    normal_frame: array<vec4<f32>, 12>,
+    // The quadratic model of the grid's normal matrices (src/geo/normal_model.rs): three xyz
+    // columns per term, the terms 1, fx, fx^2, fy, fy^2, fx fy of the grid fraction.
+    normal_model: array<vec4<f32>, NORMAL_MODEL_VEC4S>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -103,6 +103,19 @@ fn relative_position(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec3<f3
         let rel_xy = vec2<f32>(cell - frame.camera_cell.xy) * spacing + frac * spacing - frame.camera_offset.xy;
         return vec3<f32>(rel_xy, height_m - frame.camera_offset.z);
     }
+    let s = lattice_point(cell, frac);
+    return s.p + height_m * s.up;
+}
+
+// On the earth: the camera-relative surface point at height 0 of the datum and the up vector
+// at a sample position (integer cell + fraction), both bilinear in the lattice.
+struct LatticePoint {
+    p: vec3<f32>,
+    up: vec3<f32>,
+}
+
+fn lattice_point(cell: vec2<i32>, frac: vec2<f32>) -> LatticePoint {
+    let lstep = i32(frame.lattice.x);
     let node = clamp(cell / lstep, vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
     let f = (vec2<f32>(cell - node * lstep) + frac) / f32(lstep);
     let p00 = lattice_relative(node);
@@ -115,7 +128,7 @@ fn relative_position(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec3<f3
     let u11 = lattice_up(node + vec2<i32>(1, 1));
     let p = mix(mix(p00, p10, f.x), mix(p01, p11, f.x), f.y);
     let up = mix(mix(u00, u10, f.x), mix(u01, u11, f.x), f.y);
-    return p + height_m * up;
+    return LatticePoint(p, up);
 }
 
 // An axis-aligned camera-relative box (metres).
@@ -132,13 +145,23 @@ struct Box3 {
 // src/geo/lattice.rs is its CPU twin (f64), proven to decide as this one in tests/udlod.rs
 // and tests/chunked.rs.
 fn earth_box(c0: vec2<i32>, c1: vec2<i32>, heights: vec2<f32>) -> Box3 {
+    let sw = lattice_point(c0, vec2<f32>(0.0));
+    let se = lattice_point(vec2<i32>(c1.x, c0.y), vec2<f32>(0.0));
+    let nw = lattice_point(vec2<i32>(c0.x, c1.y), vec2<f32>(0.0));
+    let ne = lattice_point(c1, vec2<f32>(0.0));
+    return corner_box(array<LatticePoint, 4>(sw, se, nw, ne), heights);
+}
+
+// `earth_box` from the lattice points of the rectangle's four corners (callers deciding
+// neighbouring rectangles share them).
+fn corner_box(corners: array<LatticePoint, 4>, heights: vec2<f32>) -> Box3 {
     var lo = vec3<f32>(3.0e38);
     var hi = vec3<f32>(-3.0e38);
-    for (var k = 0u; k < 8u; k++) {
-        let c = vec2<i32>(select(c0.x, c1.x, (k & 1u) != 0u), select(c0.y, c1.y, (k & 2u) != 0u));
-        let p = relative_position(c, vec2<f32>(0.0), select(heights.x, heights.y, k >= 4u));
-        lo = min(lo, p);
-        hi = max(hi, p);
+    for (var k = 0u; k < 4u; k++) {
+        let low = corners[k].p + heights.x * corners[k].up;
+        let high = corners[k].p + heights.y * corners[k].up;
+        lo = min(lo, min(low, high));
+        hi = max(hi, max(low, high));
     }
     let d = length(hi.xy - lo.xy);
     let bulge = vec3<f32>(d * d / (8.0 * bitcast<f32>(frame.lattice.w)) + 1e-3 * d);
@@ -174,7 +197,7 @@ struct GridFrame {
 // The grid's frame at `grid_pos` from the lattice (`Lattice::grid_frame` is its CPU twin):
 // the bilinear up vector normalized, the bilinear lattice's derivatives along x and y (node
 // differences, hi and lo parts subtracted separately, interpolated across the cell). Twelve
-// lattice reads per fragment: used only where the corner model is not close enough.
+// lattice reads per fragment: used only where the quadratic model (`modelled_normal`) is not close enough.
 fn lattice_grid_frame(grid_pos: vec2<f32>) -> GridFrame {
     let lstep = i32(frame.lattice.x);
     let cell = vec2<i32>(floor(grid_pos));
@@ -200,31 +223,35 @@ fn lattice_grid_frame(grid_pos: vec2<f32>) -> GridFrame {
     return g;
 }
 
-// The grid's frame at `grid_pos` modelled between the frames of its four corner samples
-// (`frame.normal_frame`, bilinear; `corner_model_frame` in src/geo/lattice.rs is its CPU
-// twin): no memory reads beyond the uniforms. Taken where the model is within
-// `FRAME_MODEL_TOLERANCE` of the lattice's frame at every node (`Lattice::corner_frame_model`).
-fn modelled_grid_frame(grid_pos: vec2<f32>) -> GridFrame {
+// The world normal (not normalized) of grid-frame normal `n` at `grid_pos` from the quadratic
+// model of the grid's normal matrices (`frame.normal_model`; `NormalModel::normal` in
+// src/geo/normal_model.rs is its CPU twin): no memory reads beyond the uniforms and no frame
+// to build per fragment. Taken where the model is within `NORMAL_MODEL_TOLERANCE` of the
+// lattice's matrices at every node (`NormalModel::fit`).
+fn modelled_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
     let f = grid_pos / (vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0));
-    return GridFrame(normalize(corner_mix(0u, f)), corner_mix(1u, f), corner_mix(2u, f));
+    let along_x = model_term(1u, n) + model_term(2u, n) * f.x + model_term(5u, n) * f.y;
+    let along_y = model_term(3u, n) + model_term(4u, n) * f.y;
+    return model_term(0u, n) + along_x * f.x + along_y * f.y;
 }
 
-// Vector `k` (0: u, 1: tx, 2: ty) of the corner frames, bilinear at fraction `f` of the grid
-// (called with constant `k`: constant uniform indices once inlined).
-fn corner_mix(k: u32, f: vec2<f32>) -> vec3<f32> {
-    let south = mix(frame.normal_frame[k].xyz, frame.normal_frame[3u + k].xyz, f.x);
-    let north = mix(frame.normal_frame[6u + k].xyz, frame.normal_frame[9u + k].xyz, f.x);
-    return mix(south, north, f.y);
+// Term `i` of the normal model (its matrix) times `n` (called with constant `i`: constant
+// uniform indices once inlined).
+fn model_term(i: u32, n: vec3<f32>) -> vec3<f32> {
+    let k = 3u * i;
+    let x = frame.normal_model[k].xyz;
+    return x * n.x + frame.normal_model[k + 1u].xyz * n.y + frame.normal_model[k + 2u].xyz * n.z;
 }
 
 // The normal, in world axes, of the terrain at `grid_pos` (samples) whose normal in the grid's
 // frame is `n`: the normal maps hold (-dh/dx, -dh/dy, 1) normalized, slopes per metre along
 // the grid's x (columns) and y (rows) with the stated spacing `frame.normal_spacing.xy`.
 // Flat world: the grid's frame is the world's, `n` as it is. On the earth (a uniform branch)
-// the grid's frame at `grid_pos` (modelled between the grid's corners, or read from the
-// lattice): `tx`, `ty` the metres per sample along columns and rows made tangent to the up
-// vector `u`. The surface's tangents are `tx + hx u` and `ty + hy u` with
-// `hx = -n.x / n.z * sx` (height per sample), so its normal is their cross product times n.z:
+// the normal matrix (`normal_matrix` in src/geo/normal_model.rs) times `n`, normalized: its
+// quadratic model over the grid, or built from the grid's frame read from the lattice: `tx`,
+// `ty` the metres per sample along columns and rows made tangent to the up vector `u`. The
+// surface's tangents are `tx + hx u` and `ty + hy u` with `hx = -n.x / n.z * sx` (height per
+// sample), so its normal is their cross product times n.z:
 // `n.x sx (ty x u) + n.y sy (u x tx) + n.z (tx x ty)`: the inverse-transpose (cofactor) of the
 // grid-to-world map applied to `n`. On an orthogonal grid whose stated spacing is its metric
 // one this is the rotation into the local frame (tx, ty, u); it also corrects the slopes where
@@ -234,12 +261,10 @@ fn world_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
     if frame.lattice.x == 0u {
         return n;
     }
-    var g: GridFrame;
     if frame.normal_spacing.z != 0.0 {
-        g = modelled_grid_frame(grid_pos);
-    } else {
-        g = lattice_grid_frame(grid_pos);
+        return normalize(modelled_normal(grid_pos, n));
     }
+    let g = lattice_grid_frame(grid_pos);
     let u = g.u;
     let tx = g.ax - dot(g.ax, u) * u;
     let ty = g.ay - dot(g.ay, u) * u;

@@ -13,6 +13,7 @@ use crate::driver::Gpu;
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::{Buffer, Image};
 use crate::error::{Error, Result, VkResultExt};
+use crate::geo::normal_model::{NORMAL_MODEL_TOLERANCE, NORMAL_MODEL_VEC4S, NormalModel};
 use crate::slots::ViewSlot;
 
 /// Descriptor set 0, shared by every terrain shader (`shaders/include/terrain_common.wgsl` and
@@ -61,11 +62,11 @@ pub struct TerrainInfo {
     /// Stated metres between samples along x and y, as the normal maps' slopes take them
     /// (`Terrain::axis_spacing`).
     pub axis_spacing: [f64; 2],
-    /// On the earth, where the grid's frame modelled between its corners is within
-    /// [`crate::geo::lattice::FRAME_MODEL_TOLERANCE`] of the lattice's: the corner frames
-    /// (`u`, `tx`, `ty` per corner, xyz of 12 vec4; `frame.normal_frame`) that `world_normal`
-    /// interpolates instead of reading the lattice per fragment.
-    pub normal_frame: Option<[[f32; 4]; 12]>,
+    /// On the earth, where one quadratic model of the grid's normal matrices is within
+    /// [`NORMAL_MODEL_TOLERANCE`] of the lattice's: its terms ([`NormalModel::to_gpu`];
+    /// `frame.normal_model`), which `world_normal` evaluates instead of reading the lattice per
+    /// fragment.
+    pub normal_model: Option<[[f32; 4]; NORMAL_MODEL_VEC4S]>,
     pub min_height: f32,
     pub max_height: f32,
     /// The geolocation lattice's `[step, nodes per row, nodes per column, curve radius]` (the
@@ -73,32 +74,27 @@ pub struct TerrainInfo {
     pub lattice: Option<[u32; 4]>,
 }
 
-/// The corner frames of `lattice`'s grid for `world_normal` when their bilinear model is
-/// within [`crate::geo::lattice::FRAME_MODEL_TOLERANCE`] of the lattice's frame everywhere
-/// (a grid of a few degrees), else None (`world_normal` reads the lattice per fragment).
-fn normal_frame_model(
+/// The quadratic model of `lattice`'s normal matrices for `world_normal` when it is within
+/// [`NORMAL_MODEL_TOLERANCE`] of the lattice's at every node (a grid of a few degrees), else
+/// None (`world_normal` reads the lattice per fragment).
+fn fitted_normal_model(
     lattice: &crate::geo::Lattice,
     width: u32,
     height: u32,
-) -> Option<[[f32; 4]; 12]> {
-    let (corners, departure) = lattice.corner_frame_model(width, height);
-    let model = departure <= crate::geo::lattice::FRAME_MODEL_TOLERANCE;
+    stated_spacing: [f64; 2],
+) -> Option<[[f32; 4]; NORMAL_MODEL_VEC4S]> {
+    let (model, departure) = NormalModel::fit(lattice, width, height, stated_spacing);
+    let taken = departure <= NORMAL_MODEL_TOLERANCE;
     tracing::debug!(
-        "normals on the earth: the grid's frame between its corners departs {departure:.2e} \
-         from the lattice's ({})",
-        if model {
+        "normals on the earth: the quadratic model departs {departure:.2e} rad from the \
+         lattice's normals ({})",
+        if taken {
             "modelled"
         } else {
             "read from the lattice per fragment"
         }
     );
-    model.then(|| {
-        let mut out = [[0.0f32; 4]; 12];
-        for (k, v) in corners.iter().flatten().enumerate() {
-            out[k] = [v.x as f32, v.y as f32, v.z as f32, 0.0];
-        }
-        out
-    })
+    taken.then(|| model.to_gpu())
 }
 
 /// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.
@@ -179,7 +175,9 @@ impl TerrainGpu {
             height: data.height(),
             spacing: data.spacing(),
             axis_spacing: data.axis_spacing(),
-            normal_frame: lattice.and_then(|l| normal_frame_model(l, data.width(), data.height())),
+            normal_model: lattice.and_then(|l| {
+                fitted_normal_model(l, data.width(), data.height(), data.axis_spacing())
+            }),
             min_height,
             max_height,
             lattice: lattice.map(|l| {

@@ -35,10 +35,10 @@ pub struct FrameUniforms {
     /// xy: the stated metres between samples along x and y that the normal maps' slopes were
     /// taken with ([`super::TerrainInfo::axis_spacing`]; `world_normal` on the earth).
     pub normal_spacing: [f32; 4],
-    /// `u`, `tx`, `ty` (xyz) of the grid's south-west, south-east, north-west and north-east
-    /// corner samples, the frame `world_normal` interpolates when `normal_spacing.z` is 1
-    /// ([`super::TerrainInfo::normal_frame`]).
-    pub normal_frame: [[f32; 4]; 12],
+    /// The quadratic model of the grid's normal matrices (three xyz columns per term), which
+    /// `world_normal` evaluates when `normal_spacing.z` is 1
+    /// ([`super::TerrainInfo::normal_model`]).
+    pub normal_model: [[f32; 4]; crate::geo::normal_model::NORMAL_MODEL_VEC4S],
 }
 
 impl FrameUniforms {
@@ -78,14 +78,14 @@ impl FrameUniforms {
             normal_spacing: [
                 data.axis_spacing[0] as f32,
                 data.axis_spacing[1] as f32,
-                if data.normal_frame.is_some() {
+                if data.normal_model.is_some() {
                     1.0
                 } else {
                     0.0
                 },
                 0.0,
             ],
-            normal_frame: data.normal_frame.unwrap_or_default(),
+            normal_model: data.normal_model.unwrap_or_default(),
         }
     }
 }

@@ -30,12 +30,6 @@ pub const CELL_M: f64 = 500.0;
 /// Floats per lattice node on the GPU: three vec4 (hi.xyz, lo.xyz, up.xyz; w unused).
 pub const NODE_FLOATS: usize = 12;
 
-/// The largest error (radians) of a normal that the grid's frame modelled between its corners
-/// ([`Lattice::corner_frame_model`]) may add at any lattice node for `world_normal` to take
-/// the model (no lattice reads per fragment): 20 times below the 8-bit normal maps'
-/// quantization (up to ~4e-3 rad).
-pub const FRAME_MODEL_TOLERANCE: f64 = 2e-4;
-
 /// The grid's local frame at a sample position, as `world_normal` uses it: the unit up
 /// vector `u` and the metres per sample along columns (`tx`) and rows (`ty`), each tangent to
 /// `u`: `[u, tx, ty]`.
@@ -68,24 +62,6 @@ pub fn normal_ecef(lat_deg: f64, lon_deg: f64) -> DVec3 {
     let (sl, cl) = lat_deg.to_radians().sin_cos();
     let (so, co) = lon_deg.to_radians().sin_cos();
     DVec3::new(cl * co, cl * so, sl)
-}
-
-/// The grid's frame at fraction `f` of the grid (0 to 1 per axis) from the corner frames of
-/// [`Lattice::corner_frame_model`], as `modelled_grid_frame` in
-/// `shaders/include/terrain_common.wgsl` takes it: each vector bilinear between the corners,
-/// the up vector normalized, the tangents made tangent to it.
-pub fn corner_model_frame(corners: &[GridFrame; 4], f: DVec2) -> GridFrame {
-    let lerp = |a: DVec3, b: DVec3, t: f64| a * (1.0 - t) + b * t;
-    let v = |k: usize| {
-        lerp(
-            lerp(corners[0][k], corners[1][k], f.x),
-            lerp(corners[2][k], corners[3][k], f.x),
-            f.y,
-        )
-    };
-    let u = v(0).normalize();
-    let (ax, ay) = (v(1), v(2));
-    [u, ax - u * ax.dot(u), ay - u * ay.dot(u)]
 }
 
 /// Splits an f64 into the f32 pair `(hi, lo)` with `hi + lo` within ~1e-14 relative of it.
@@ -449,44 +425,6 @@ impl Lattice {
         let ax = lerp(p10 - p00, p11 - p01, f.y) / step;
         let ay = lerp(p01 - p00, p11 - p10, f.x) / step;
         [u, ax - u * ax.dot(u), ay - u * ay.dot(u)]
-    }
-
-    /// The grid's frame over a whole `width` x `height` grid modelled from its four corner
-    /// samples' ([`Lattice::grid_frame`]; order south-west, south-east, north-west,
-    /// north-east), and the largest error the model adds to a normal at any node of the grid
-    /// ([`corner_model_frame`] against [`Lattice::grid_frame`]): the angle between their up
-    /// vectors plus the larger angle between their tangents plus half the larger relative
-    /// difference of the tangents' lengths (a slope `g` scaled by `1 + e` turns its normal by
-    /// at most `e / 2`). The frame turns smoothly and slowly (the up vector by 1 degree per
-    /// 111 km; a geographic grid's east-west metres go with cos(latitude), `d^2 / 8` off a
-    /// straight line over `d` radians of latitude), so across a grid of a degree or two the
-    /// model is within ~1e-4 rad, and `world_normal` then needs no lattice reads per fragment
-    /// ([`FRAME_MODEL_TOLERANCE`]).
-    pub fn corner_frame_model(&self, width: u32, height: u32) -> ([GridFrame; 4], f64) {
-        let last = DVec2::new(width.max(2) as f64 - 1.0, height.max(2) as f64 - 1.0);
-        let corners = [
-            DVec2::ZERO,
-            DVec2::new(last.x, 0.0),
-            DVec2::new(0.0, last.y),
-            last,
-        ]
-        .map(|s| self.grid_frame(s));
-        let angle = |a: DVec3, b: DVec3| a.cross(b).length().atan2(a.dot(b));
-        let mut worst: f64 = 0.0;
-        for j in 0..self.nodes[1] {
-            for i in 0..self.nodes[0] {
-                let s = DVec2::new((i * self.step) as f64, (j * self.step) as f64).min(last);
-                let exact = self.grid_frame(s);
-                let model = corner_model_frame(&corners, s / last);
-                let turn = angle(exact[1], model[1]).max(angle(exact[2], model[2]));
-                let stretch = [1, 2]
-                    .map(|k| (model[k].length() / exact[k].length() - 1.0).abs())
-                    .into_iter()
-                    .fold(0.0, f64::max);
-                worst = worst.max(angle(exact[0], model[0]) + turn + stretch / 2.0);
-            }
-        }
-        (corners, worst)
     }
 
     /// Metres per sample along columns and rows at sample position `s` and `height` on the

@@ -29,7 +29,7 @@ layout(set = 0, binding = 0, std140) uniform Frame {
     // xy: the stated metres between samples of the normal maps (`world_normal` in the WGSL;
     // the GLSL stages do not shade).
     vec4 normal_spacing;
-    vec4 normal_frame[12];
+    vec4 normal_model[NORMAL_MODEL_VEC4S];
 } frame;
 layout(set = 0, binding = 1) uniform texture2D height_tex;
 
