@@ -1,9 +1,10 @@
 //! `vkterrain info`: what the device is and offers.
 
+use std::fmt::Write;
 use std::path::Path;
 
 use crate::config::Config;
-use crate::driver::Gpu;
+use crate::driver::{Capabilities, DeviceInfo, Gpu};
 
 pub fn run(config: Option<&Path>, device: Option<String>) -> anyhow::Result<()> {
     let mut config = Config::load(config)?;
@@ -21,11 +22,17 @@ fn yes(b: bool) -> &'static str {
 
 /// The report `vkterrain info` prints.
 pub fn describe(gpu: &Gpu) -> String {
-    use std::fmt::Write;
-    let i = &gpu.info;
-    let c = &i.caps;
-    let e = &gpu.enabled;
     let mut s = String::new();
+    write_device(&mut s, gpu);
+    write_memory(&mut s, &gpu.info);
+    write_features(&mut s, &gpu.info.caps, &gpu.enabled);
+    write_limits(&mut s, gpu);
+    s
+}
+
+/// The device, its driver and the queues vkterrain uses.
+fn write_device(s: &mut String, gpu: &Gpu) {
+    let i = &gpu.info;
     let _ = writeln!(
         s,
         "device:        [{}] {} ({})",
@@ -45,6 +52,10 @@ pub fn describe(gpu: &Gpu) -> String {
             None => "none".into(),
         }
     );
+}
+
+/// The memory heaps and types, and where readback copies land.
+fn write_memory(s: &mut String, i: &DeviceInfo) {
     let _ = writeln!(s, "memory heaps:");
     for (h, heap) in i.memory.memory_heaps[..i.memory.memory_heap_count as usize]
         .iter()
@@ -71,14 +82,46 @@ pub fn describe(gpu: &Gpu) -> String {
     let _ = writeln!(
         s,
         "readback:      {}",
-        if c.unified_memory {
+        if i.caps.unified_memory {
             "unified memory (DEVICE_LOCAL|HOST_VISIBLE): copies land where the host reads, no staging"
         } else {
             "host-visible system memory (GPU copies over the bus)"
         }
     );
+}
+
+/// One row of the features table: name, offered, used by vkterrain, what for.
+type FeatureRow = (&'static str, bool, bool, &'static str);
+
+/// The features table: what the device offers against what vkterrain turned on.
+fn write_features(s: &mut String, c: &Capabilities, e: &Capabilities) {
     let _ = writeln!(s, "features (offered / used by vkterrain):");
-    let rows: [(&str, bool, bool, &str); 14] = [
+    for (name, offered, used, note) in frame_and_draw_features(c, e)
+        .into_iter()
+        .chain(other_features(c, e))
+    {
+        let extra = if name.starts_with("BC") {
+            format!(
+                "BC {} ETC2 {} ASTC {}",
+                yes(c.texture_compression_bc),
+                yes(c.texture_compression_etc2),
+                yes(c.texture_compression_astc)
+            )
+        } else {
+            note.to_string()
+        };
+        let _ = writeln!(
+            s,
+            "  {name:<28} {:>3} / {:<3}  {extra}",
+            yes(offered),
+            yes(used)
+        );
+    }
+}
+
+/// The table's first rows: synchronisation, rendering and indirect drawing.
+fn frame_and_draw_features(c: &Capabilities, e: &Capabilities) -> [FeatureRow; 7] {
+    [
         (
             "timeline semaphores",
             c.timeline_semaphore,
@@ -121,6 +164,13 @@ pub fn describe(gpu: &Gpu) -> String {
             e.draw_indirect_count,
             "",
         ),
+    ]
+}
+
+/// The table's last rows: queries, shader stages vkterrain leaves out, host memory import and
+/// compressed formats.
+fn other_features(c: &Capabilities, e: &Capabilities) -> [FeatureRow; 7] {
+    [
         (
             "pipeline statistics",
             c.pipeline_statistics_query,
@@ -153,26 +203,12 @@ pub fn describe(gpu: &Gpu) -> String {
             "zero-copy ring publishing (GPU writes into the ring slot)",
         ),
         ("BC / ETC2 / ASTC", c.texture_compression_bc, false, ""),
-    ];
-    for (name, offered, used, note) in rows {
-        let extra = if name.starts_with("BC") {
-            format!(
-                "BC {} ETC2 {} ASTC {}",
-                yes(c.texture_compression_bc),
-                yes(c.texture_compression_etc2),
-                yes(c.texture_compression_astc)
-            )
-        } else {
-            note.to_string()
-        };
-        let _ = writeln!(
-            s,
-            "  {name:<28} {:>3} / {:<3}  {extra}",
-            yes(offered),
-            yes(used)
-        );
-    }
-    let l = &i.limits;
+    ]
+}
+
+/// The device limits that bound the renderer, and whether validation is on.
+fn write_limits(s: &mut String, gpu: &Gpu) {
+    let l = &gpu.info.limits;
     let _ = writeln!(
         s,
         "limits:        max 2D image {}, max framebuffer {}x{}, max anisotropy {}, timestamp period {} ns, max storage buffer {} MiB",
@@ -192,5 +228,4 @@ pub fn describe(gpu: &Gpu) -> String {
             "off"
         }
     );
-    s
 }

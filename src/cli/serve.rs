@@ -5,20 +5,25 @@
 
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use clap::Args;
 use serde::{Deserialize, Serialize};
 
-use super::render::{RenderArgs, check_validation, prepare};
+use super::render::{Prepared, RenderArgs, check_validation, prepare};
+use crate::config::Config;
+use crate::dataset::Terrain;
+use crate::driver::Gpu;
 use crate::output::lock::{PathLock, lock_path_for};
 use crate::output::ring::{
     Geometry, ProducerOptions, RingLocation, RingProducer, ZeroCopyRequest, sys,
 };
 use crate::readback::{DirectTarget, FrameSink, FrameView};
 use crate::render::stats::Percentiles;
-use crate::render::{FrameRequest, RenderOptions};
+use crate::render::{FrameRequest, RenderOptions, Renderer};
+use crate::scene::{Camera, Scenario};
 use crate::service::control::{Control, ControlSocket};
 
 #[derive(Args, Debug, Clone, Default)]
@@ -267,15 +272,8 @@ fn start_zenoh(config: &crate::config::Config, ring: &str) -> anyhow::Result<Opt
     }
 }
 
-pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
-    let p = prepare(&RenderArgs {
-        config: args.config.clone(),
-        width: args.width,
-        height: args.height,
-        device: args.device.clone(),
-        ..Default::default()
-    })?;
-    let mut config = p.config;
+/// Applies the command line's ring and Zenoh overrides to the config, and checks them.
+fn apply_overrides(config: &mut Config, args: &ServeArgs) -> anyhow::Result<()> {
     if let Some(r) = &args.ring {
         crate::output::ring::validate_name(r)?;
         config.ring.name = r.clone();
@@ -293,225 +291,191 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         .connect
         .extend(args.zenoh_connect.iter().cloned());
     config.zenoh.validate()?;
-    let location = RingLocation::new(
-        config
+    Ok(())
+}
+
+/// Where the service publishes and listens, resolved (and checked) before anything is opened.
+struct Endpoints {
+    location: RingLocation,
+    control: Option<PathBuf>,
+    status: Option<PathBuf>,
+    /// The group allowed to read the ring (`ring.group`).
+    group: Option<u32>,
+}
+
+impl Endpoints {
+    fn of(config: &Config, args: &ServeArgs) -> anyhow::Result<Self> {
+        let location = RingLocation::new(
+            config
+                .ring
+                .dir
+                .as_ref()
+                .map(|d| config.resolve(d))
+                .unwrap_or_else(crate::output::ring::location::default_dir),
+            &config.ring.name,
+        )?;
+        let control = args
+            .control
+            .clone()
+            .or_else(|| config.service.control.as_ref().map(|c| config.resolve(c)));
+        let status = args.status_file.clone().or_else(|| {
+            config
+                .service
+                .status_file
+                .as_ref()
+                .map(|c| config.resolve(c))
+        });
+        let group = config
             .ring
-            .dir
-            .as_ref()
-            .map(|d| config.resolve(d))
-            .unwrap_or_else(crate::output::ring::location::default_dir),
-        &config.ring.name,
-    )?;
-    let control_path = args
-        .control
-        .clone()
-        .or_else(|| config.service.control.as_ref().map(|c| config.resolve(c)));
-    let status_path = args.status_file.clone().or_else(|| {
-        config
-            .service
-            .status_file
-            .as_ref()
-            .map(|c| config.resolve(c))
-    });
-    let group = config
-        .ring
-        .group
-        .as_deref()
-        .map(sys::group_id)
-        .transpose()?;
-    install_signal_handlers()?;
-    // Claim the paths first: a bad or taken path fails before the (slow) device start-up.
-    let _status_lock = status_path.as_deref().map(claim_status_file).transpose()?;
-    let mut control = control_path
-        .as_deref()
-        .map(ControlSocket::bind)
-        .transpose()?;
+            .group
+            .as_deref()
+            .map(sys::group_id)
+            .transpose()?;
+        Ok(Endpoints {
+            location,
+            control,
+            status,
+            group,
+        })
+    }
+}
 
-    let gpu = config.open_gpu()?;
-    let mut options = config.render_options();
-    let popts = ProducerOptions {
-        group,
-        keep_segment: config.ring.keep_segment,
-        zero_copy: config.ring.zero_copy.then(|| ZeroCopyRequest {
-            gpu: gpu.clone(),
-            frames_in_flight: options.frames_in_flight,
-        }),
-    };
-    let mut renderer = config.open_renderer(&gpu, &p.data, options.clone())?;
-    let mut ring = make_ring(&location, &options, config.ring.slots, &popts)?;
-    #[allow(unused_mut, clippy::let_unit_value)]
-    let mut zenoh = start_zenoh(&config, &config.ring.name)?;
-    tracing::info!(
-        ring = %location,
-        zero_copy = ring.zero_copy(),
-        device = gpu.info.name,
-        dataset = p.data.name(),
-        width = options.width,
-        height = options.height,
-        "serving"
-    );
+/// Where frames go: the ring and, when enabled, Zenoh; with the publish times of the last
+/// [`WINDOW`] frames. Kept apart from the renderer so both can be borrowed at once.
+struct Sinks {
+    ring: RingProducer,
+    zenoh: Option<Zenoh>,
+    publish_ms: VecDeque<f64>,
+}
 
-    let started = Instant::now();
+impl Sinks {
+    fn outputs(&mut self) -> Outputs<'_> {
+        Outputs {
+            ring: &mut self.ring,
+            #[cfg(feature = "zenoh")]
+            zenoh: self.zenoh.as_mut(),
+            publish_ms: &mut self.publish_ms,
+        }
+    }
+}
+
+#[allow(unused_variables)]
+fn zenoh_status(z: &Option<Zenoh>) -> Option<ZenohStatus> {
+    #[cfg(feature = "zenoh")]
+    {
+        z.as_ref().map(|z| ZenohStatus {
+            key: z.keys().frame.clone(),
+            published: z.counters.published.load(Ordering::Relaxed),
+            dropped: z.counters.dropped.load(Ordering::Relaxed),
+            shm_frames: z.counters.shm_frames.load(Ordering::Relaxed),
+        })
+    }
+    #[cfg(not(feature = "zenoh"))]
+    None
+}
+
+/// Control messages with WGS84 poses, when the data set lies on the earth.
+fn control_for(config: &Config, data: &Terrain) -> anyhow::Result<Control> {
     let mut ctl = Control::default();
-    // WGS84 poses in control messages, when the data set lies on the earth.
     if let Some(earth) = config.open_earth()? {
-        let data = p.data.clone();
+        let data = data.clone();
         ctl.geo = Some(Box::new(
             move |pose: &crate::geo::GeoPose, current: &crate::scene::Camera| {
                 earth.camera(pose, &data, current)
             },
         ));
     }
-    let mut intervals: VecDeque<f64> = VecDeque::with_capacity(WINDOW);
-    let mut publish_ms: VecDeque<f64> = VecDeque::with_capacity(WINDOW);
-    let mut rendered: u64 = 0;
-    let mut last_status = Instant::now() - Duration::from_secs(3600);
-    let status_every = Duration::from_secs_f64(config.service.status_interval_s);
-    let frame_budget = (config.service.max_fps > 0.0)
-        .then(|| Duration::from_secs_f64(1.0 / config.service.max_fps));
-    let scripted_frames = p.scenario.frames.max(1) as u64;
-    let mut camera = p.scenario.camera(0);
+    Ok(ctl)
+}
 
-    let status = |state: &str,
-                  ring: &RingProducer,
-                  options: &RenderOptions,
-                  ctl: &Control,
-                  intervals: &VecDeque<f64>,
-                  publish_ms: &VecDeque<f64>,
-                  rendered: u64,
-                  clipmap: Option<ClipmapStatus>,
-                  zenoh: Option<ZenohStatus>|
-     -> Status {
-        let pc = Percentiles::of(intervals.iter().copied().collect());
-        let pub_ms = Percentiles::of(publish_ms.iter().copied().collect());
-        Status {
-            state: state.into(),
-            pid: std::process::id(),
-            ring: ring.name().into(),
-            generation: ring.generation(),
-            device: gpu.info.name.clone(),
-            dataset: p.data.name().to_string(),
-            width: options.width,
-            height: options.height,
-            frames_rendered: rendered,
-            frame_ms_median: pc.median,
-            frame_ms_p99: pc.p99,
-            camera: if ctl.live.is_some() {
-                "control".into()
-            } else {
-                format!("scripted ({})", p.scenario.name)
+/// A running service: the renderer and where its frames go, the control state that steers the
+/// camera, and the counters `status.json` reports.
+struct Service<'a> {
+    config: &'a Config,
+    gpu: &'a Arc<Gpu>,
+    data: &'a Terrain,
+    scenario: &'a Scenario,
+    popts: ProducerOptions,
+    options: RenderOptions,
+    renderer: Renderer,
+    sinks: Sinks,
+    control: Option<ControlSocket>,
+    ctl: Control,
+    camera: Camera,
+    /// Frame intervals of the last [`WINDOW`] frames.
+    intervals: VecDeque<f64>,
+    rendered: u64,
+    started: Instant,
+    status_path: Option<PathBuf>,
+}
+
+impl<'a> Service<'a> {
+    /// Opens the renderer, the ring and Zenoh on `gpu`.
+    fn start(
+        p: &'a Prepared,
+        gpu: &'a Arc<Gpu>,
+        ends: Endpoints,
+        control: Option<ControlSocket>,
+    ) -> anyhow::Result<Self> {
+        let config = &p.config;
+        let options = config.render_options();
+        let popts = ProducerOptions {
+            group: ends.group,
+            keep_segment: config.ring.keep_segment,
+            zero_copy: config.ring.zero_copy.then(|| ZeroCopyRequest {
+                gpu: gpu.clone(),
+                frames_in_flight: options.frames_in_flight,
+            }),
+        };
+        let renderer = config.open_renderer(gpu, &p.data, options.clone())?;
+        let ring = make_ring(&ends.location, &options, config.ring.slots, &popts)?;
+        let zenoh = start_zenoh(config, &config.ring.name)?;
+        tracing::info!(
+            ring = %ends.location,
+            zero_copy = ring.zero_copy(),
+            device = gpu.info.name,
+            dataset = p.data.name(),
+            width = options.width,
+            height = options.height,
+            "serving"
+        );
+        let started = Instant::now();
+        Ok(Service {
+            config,
+            gpu,
+            data: &p.data,
+            scenario: &p.scenario,
+            popts,
+            options,
+            renderer,
+            sinks: Sinks {
+                ring,
+                zenoh,
+                publish_ms: VecDeque::with_capacity(WINDOW),
             },
-            control_accepted: ctl.accepted,
-            control_rejected: ctl.rejected,
-            control_last_error: ctl.last_error.clone(),
-            consumers: ctl.consumers(),
-            clipmap,
-            ring_dir: ring.location().dir.display().to_string(),
-            zero_copy: ring.zero_copy(),
-            zero_copy_note: ring.zero_copy_note().map(String::from),
-            publish_ms_median: pub_ms.median,
-            zenoh,
-            uptime_s: started.elapsed().as_secs_f64(),
-            updated_unix_ms: sys::realtime_ns() / 1_000_000,
-        }
-    };
-    #[allow(unused_variables)]
-    let zenoh_status = |z: &Option<Zenoh>| -> Option<ZenohStatus> {
-        #[cfg(feature = "zenoh")]
-        {
-            z.as_ref().map(|z| ZenohStatus {
-                key: z.keys().frame.clone(),
-                published: z.counters.published.load(Ordering::Relaxed),
-                dropped: z.counters.dropped.load(Ordering::Relaxed),
-                shm_frames: z.counters.shm_frames.load(Ordering::Relaxed),
-            })
-        }
-        #[cfg(not(feature = "zenoh"))]
-        None
-    };
-    let write_status = |s: &Status, z: &Option<Zenoh>| {
-        let text = serde_json::to_string_pretty(s).unwrap_or_default();
-        #[cfg(feature = "zenoh")]
-        if let Some(z) = z {
-            z.set_status(text.clone());
-        }
-        let _ = z;
-        if let Some(path) = &status_path
-            && let Err(e) = crate::output::write_atomic(path, text.as_bytes())
-        {
-            tracing::warn!("status file: {e}");
-        }
-    };
+            control,
+            ctl: control_for(config, &p.data)?,
+            camera: p.scenario.camera(0),
+            intervals: VecDeque::with_capacity(WINDOW),
+            rendered: 0,
+            started,
+            status_path: ends.status,
+        })
+    }
 
-    let result = (|| -> anyhow::Result<()> {
-        while !STOP.load(Ordering::SeqCst) && args.frames.is_none_or(|n| rendered < n) {
+    /// Renders until SIGTERM/SIGINT or `frames`, writing the status every
+    /// `service.status_interval_s` and keeping to `service.max_fps`.
+    fn serve(&mut self, frames: Option<u64>) -> anyhow::Result<()> {
+        let mut last_status = Instant::now() - Duration::from_secs(3600);
+        let status_every = Duration::from_secs_f64(self.config.service.status_interval_s);
+        let frame_budget = (self.config.service.max_fps > 0.0)
+            .then(|| Duration::from_secs_f64(1.0 / self.config.service.max_fps));
+        while !STOP.load(Ordering::SeqCst) && frames.is_none_or(|n| self.rendered < n) {
             let frame_start = Instant::now();
-            if let Some(sock) = &mut control {
-                sock.drain(&mut ctl, &camera);
-            }
-            #[cfg(feature = "zenoh")]
-            if let Some(z) = &mut zenoh {
-                z.drain_control(&mut ctl, &camera);
-            }
-            if let Some((w, h)) = ctl.resize.take()
-                && (w, h) != (options.width, options.height)
-            {
-                // Deliver what is in flight, then a new renderer and a new ring generation.
-                renderer.finish(&mut Outputs {
-                    ring: &mut ring,
-                    #[cfg(feature = "zenoh")]
-                    zenoh: zenoh.as_mut(),
-                    publish_ms: &mut publish_ms,
-                })?;
-                options.width = w;
-                options.height = h;
-                // A fresh clipmap too: its atlas lives in the old renderer's device memory.
-                renderer = config.open_renderer(&gpu, &p.data, options.clone())?;
-                let geometry = ring_geometry(&options, config.ring.slots, &popts);
-                ring.replace(geometry, &popts)?;
-                tracing::info!(width = w, height = h, "resolution changed");
-            }
-            camera = ctl
-                .live
-                .unwrap_or_else(|| p.scenario.camera(rendered % scripted_frames));
-            let views = FrameRequest::with_extra_views_on(
-                camera,
-                &config.render.extra_views,
-                renderer.earth_frame(),
-            );
-            renderer.render_views(
-                &views,
-                &mut Outputs {
-                    ring: &mut ring,
-                    #[cfg(feature = "zenoh")]
-                    zenoh: zenoh.as_mut(),
-                    publish_ms: &mut publish_ms,
-                },
-            )?;
-            rendered += 1;
-            for rec in renderer.stats.frames.drain(..) {
-                if rec.interval_ms > 0.0 {
-                    if intervals.len() == WINDOW {
-                        intervals.pop_front();
-                    }
-                    intervals.push_back(rec.interval_ms);
-                }
-            }
+            self.take_control()?;
+            self.render_frame()?;
             if last_status.elapsed() >= status_every {
-                write_status(
-                    &status(
-                        "running",
-                        &ring,
-                        &options,
-                        &ctl,
-                        &intervals,
-                        &publish_ms,
-                        rendered,
-                        renderer.clipmap().map(ClipmapStatus::of),
-                        zenoh_status(&zenoh),
-                    ),
-                    &zenoh,
-                );
+                self.write_status("running");
                 last_status = Instant::now();
             }
             if let Some(budget) = frame_budget {
@@ -522,38 +486,161 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             }
         }
         // The frames in flight are finished and published before the ring closes.
-        renderer.finish(&mut Outputs {
-            ring: &mut ring,
-            #[cfg(feature = "zenoh")]
-            zenoh: zenoh.as_mut(),
-            publish_ms: &mut publish_ms,
-        })?;
+        self.renderer.finish(&mut self.sinks.outputs())?;
         Ok(())
-    })();
-    // No GPU work may still write into the ring when it closes (zero-copy).
-    let _ = gpu.wait_idle();
-    ring.close();
-    write_status(
-        &status(
-            "stopped",
-            &ring,
-            &options,
-            &ctl,
-            &intervals,
-            &publish_ms,
+    }
+
+    /// Reads the control messages waiting (socket and Zenoh) and applies a resize they ask for.
+    fn take_control(&mut self) -> anyhow::Result<()> {
+        if let Some(sock) = &mut self.control {
+            sock.drain(&mut self.ctl, &self.camera);
+        }
+        #[cfg(feature = "zenoh")]
+        if let Some(z) = &mut self.sinks.zenoh {
+            z.drain_control(&mut self.ctl, &self.camera);
+        }
+        if let Some((w, h)) = self.ctl.resize.take()
+            && (w, h) != (self.options.width, self.options.height)
+        {
+            // Deliver what is in flight, then a new renderer and a new ring generation.
+            self.renderer.finish(&mut self.sinks.outputs())?;
+            self.options.width = w;
+            self.options.height = h;
+            // A fresh clipmap too: its atlas lives in the old renderer's device memory.
+            self.renderer = self
+                .config
+                .open_renderer(self.gpu, self.data, self.options.clone())?;
+            let geometry = ring_geometry(&self.options, self.config.ring.slots, &self.popts);
+            self.sinks.ring.replace(geometry, &self.popts)?;
+            tracing::info!(width = w, height = h, "resolution changed");
+        }
+        Ok(())
+    }
+
+    /// Renders the next frame from the live camera (or the looped scenario) and publishes it.
+    fn render_frame(&mut self) -> anyhow::Result<()> {
+        let scripted_frames = self.scenario.frames.max(1) as u64;
+        self.camera = self
+            .ctl
+            .live
+            .unwrap_or_else(|| self.scenario.camera(self.rendered % scripted_frames));
+        let views = FrameRequest::with_extra_views_on(
+            self.camera,
+            &self.config.render.extra_views,
+            self.renderer.earth_frame(),
+        );
+        self.renderer
+            .render_views(&views, &mut self.sinks.outputs())?;
+        self.rendered += 1;
+        for rec in self.renderer.stats.frames.drain(..) {
+            if rec.interval_ms > 0.0 {
+                if self.intervals.len() == WINDOW {
+                    self.intervals.pop_front();
+                }
+                self.intervals.push_back(rec.interval_ms);
+            }
+        }
+        Ok(())
+    }
+
+    fn status(&self, state: &str) -> Status {
+        let pc = Percentiles::of(self.intervals.iter().copied().collect());
+        let pub_ms = Percentiles::of(self.sinks.publish_ms.iter().copied().collect());
+        let ring = &self.sinks.ring;
+        let ctl = &self.ctl;
+        Status {
+            state: state.into(),
+            pid: std::process::id(),
+            ring: ring.name().into(),
+            generation: ring.generation(),
+            device: self.gpu.info.name.clone(),
+            dataset: self.data.name().to_string(),
+            width: self.options.width,
+            height: self.options.height,
+            frames_rendered: self.rendered,
+            frame_ms_median: pc.median,
+            frame_ms_p99: pc.p99,
+            camera: if ctl.live.is_some() {
+                "control".into()
+            } else {
+                format!("scripted ({})", self.scenario.name)
+            },
+            control_accepted: ctl.accepted,
+            control_rejected: ctl.rejected,
+            control_last_error: ctl.last_error.clone(),
+            consumers: ctl.consumers(),
+            clipmap: self.renderer.clipmap().map(ClipmapStatus::of),
+            ring_dir: ring.location().dir.display().to_string(),
+            zero_copy: ring.zero_copy(),
+            zero_copy_note: ring.zero_copy_note().map(String::from),
+            publish_ms_median: pub_ms.median,
+            zenoh: zenoh_status(&self.sinks.zenoh),
+            uptime_s: self.started.elapsed().as_secs_f64(),
+            updated_unix_ms: sys::realtime_ns() / 1_000_000,
+        }
+    }
+
+    /// The status to the status file and to Zenoh; a failed write is only a warning.
+    fn write_status(&self, state: &str) {
+        let text = serde_json::to_string_pretty(&self.status(state)).unwrap_or_default();
+        #[cfg(feature = "zenoh")]
+        if let Some(z) = &self.sinks.zenoh {
+            z.set_status(text.clone());
+        }
+        if let Some(path) = &self.status_path
+            && let Err(e) = crate::output::write_atomic(path, text.as_bytes())
+        {
+            tracing::warn!("status file: {e}");
+        }
+    }
+
+    /// Closes the ring, writes the final status, then reports the loop's `result` and the
+    /// validation messages.
+    fn shut_down(mut self, result: anyhow::Result<()>) -> anyhow::Result<()> {
+        // No GPU work may still write into the ring when it closes (zero-copy).
+        let _ = self.gpu.wait_idle();
+        self.sinks.ring.close();
+        self.write_status("stopped");
+        let Service {
+            gpu,
+            renderer,
+            sinks: Sinks { ring, zenoh, .. },
             rendered,
-            renderer.clipmap().map(ClipmapStatus::of),
-            zenoh_status(&zenoh),
-        ),
-        &zenoh,
-    );
-    drop(zenoh);
-    result?;
-    drop(renderer);
-    drop(ring);
-    check_validation(&gpu)?;
-    tracing::info!(frames = rendered, "stopped");
-    Ok(())
+            ..
+        } = self;
+        drop(zenoh);
+        result?;
+        drop(renderer);
+        drop(ring);
+        check_validation(gpu)?;
+        tracing::info!(frames = rendered, "stopped");
+        Ok(())
+    }
+}
+
+pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
+    let mut p = prepare(&RenderArgs {
+        config: args.config.clone(),
+        width: args.width,
+        height: args.height,
+        device: args.device.clone(),
+        ..Default::default()
+    })?;
+    apply_overrides(&mut p.config, args)?;
+    let ends = Endpoints::of(&p.config, args)?;
+    install_signal_handlers()?;
+    // Claim the paths first: a bad or taken path fails before the (slow) device start-up.
+    let _status_lock = ends.status.as_deref().map(claim_status_file).transpose()?;
+    let control = ends
+        .control
+        .as_deref()
+        .map(ControlSocket::bind)
+        .transpose()?;
+
+    let gpu = p.config.open_gpu()?;
+    let mut service = Service::start(&p, &gpu, ends, control)?;
+    let result = service.serve(args.frames);
+    service.shut_down(result)
 }
 
 #[derive(Args, Debug, Clone, Default)]

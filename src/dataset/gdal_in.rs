@@ -761,24 +761,60 @@ fn to_mem(input: &Input, notes: &mut ReadNotes) -> Result<Dataset> {
     Ok(ds)
 }
 
-/// Every input warped (GDAL, bilinear) into `target` at the finest input's resolution over
-/// the union of their extents; the first input wins where several have data.
-fn warp(
-    inputs: &[Input],
-    target: &Crs,
-    opts: &ReadOptions,
-    notes: &mut ReadNotes,
-    name: String,
-) -> Result<Raster> {
-    // Resolution and bounds in the target CRS.
-    let (mut tx, mut ty) = (f64::INFINITY, f64::INFINITY);
-    let mut b = [
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    ];
-    for i in inputs {
+/// The grid `warp` resamples into: the finest input's resolution over the union of the
+/// inputs' extents, in the target CRS.
+struct WarpGrid {
+    /// Sample spacing (x, y) in the target CRS's units.
+    step: [f64; 2],
+    /// Bounds `[min x, min y, max x, max y]` of the inputs' union.
+    bounds: [f64; 4],
+    width: u64,
+    height: u64,
+}
+
+impl WarpGrid {
+    fn covering(inputs: &[Input], target: &Crs, name: &str) -> Result<Self> {
+        let (mut tx, mut ty) = (f64::INFINITY, f64::INFINITY);
+        let mut b = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for i in inputs {
+            let ([ix, iy], ib) = Self::of_input(i, target)?;
+            tx = tx.min(ix);
+            ty = ty.min(iy);
+            b = [
+                b[0].min(ib[0]),
+                b[1].min(ib[1]),
+                b[2].max(ib[2]),
+                b[3].max(ib[3]),
+            ];
+        }
+        if !(tx.is_finite() && ty.is_finite() && tx > 0.0 && ty > 0.0) {
+            return Err(Error::invalid(name, "cannot derive a target resolution"));
+        }
+        let w = ((b[2] - b[0]) / tx).ceil() as u64;
+        let h = ((b[3] - b[1]) / ty).ceil() as u64;
+        if w < 2 || h < 2 || w > MAX_SIDE_SAMPLES || h > MAX_SIDE_SAMPLES {
+            return Err(Error::invalid(
+                name,
+                format!(
+                    "the warped mosaic would be {w}x{h} samples (outside 2..={MAX_SIDE_SAMPLES} per side)"
+                ),
+            ));
+        }
+        Ok(WarpGrid {
+            step: [tx, ty],
+            bounds: b,
+            width: w,
+            height: h,
+        })
+    }
+
+    /// One input's resolution (a pixel step at its centre) and bounds in the target CRS.
+    fn of_input(i: &Input, target: &Crs) -> Result<([f64; 2], [f64; 4])> {
         let t = i.transform.expect("checked");
         let to = Transform::new(i.crs.as_ref().expect("checked"), target)?;
         let at = |c: f64, r: f64| [t[0] + c * t[1] + r * t[2], t[3] + c * t[4] + r * t[5]];
@@ -789,8 +825,12 @@ fn warp(
         let step = |p: [f64; 2]| ((p[0] - centre[0]).abs(), (p[1] - centre[1]).abs());
         let (ex, ey) = step(east);
         let (sx, sy) = step(south);
-        tx = tx.min(ex.max(sx));
-        ty = ty.min(ey.max(sy));
+        let mut b = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
         // Densified edges.
         let n = 64;
         for k in 0..=n {
@@ -810,20 +850,81 @@ fn warp(
                 ];
             }
         }
+        Ok(([ex.max(sx), ey.max(sy)], b))
     }
-    if !(tx.is_finite() && ty.is_finite() && tx > 0.0 && ty > 0.0) {
-        return Err(Error::invalid(&name, "cannot derive a target resolution"));
+
+    /// `gdalwarp`'s arguments for this grid in `target`.
+    fn warp_args(&self, target: &Crs) -> Vec<String> {
+        let (b, [tx, ty]) = (self.bounds, self.step);
+        let (w, h) = (self.width, self.height);
+        [
+            "-of",
+            "MEM",
+            "-r",
+            "bilinear",
+            "-ot",
+            "Float32",
+            "-dstnodata",
+            "nan",
+            "-et",
+            "0",
+            "-t_srs",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .chain([target.wkt.clone(), "-te".into()])
+        .chain(
+            [b[0], b[1], b[0] + w as f64 * tx, b[1] + h as f64 * ty]
+                .iter()
+                .map(|v| format!("{v:.17e}")),
+        )
+        .chain(["-tr".into(), format!("{tx:.17e}"), format!("{ty:.17e}")])
+        .collect()
     }
-    let w = ((b[2] - b[0]) / tx).ceil() as u64;
-    let h = ((b[3] - b[1]) / ty).ceil() as u64;
-    if w < 2 || h < 2 || w > MAX_SIDE_SAMPLES || h > MAX_SIDE_SAMPLES {
-        return Err(Error::invalid(
-            &name,
-            format!(
-                "the warped mosaic would be {w}x{h} samples (outside 2..={MAX_SIDE_SAMPLES} per side)"
-            ),
+
+    /// The warped heights, row 0 the southern edge: GDAL's row 0 is the northern one, the
+    /// raster's origin is the grid's minimum corner.
+    fn read_heights(&self, out: &Dataset, name: &str) -> Result<Vec<f32>> {
+        let band = out
+            .rasterband(1)
+            .map_err(|e| Error::invalid(name, gdal_msg(e)))?;
+        let (wu, hu) = (self.width as usize, self.height as usize);
+        let mut heights = vec![0f32; wu * hu];
+        band.read_into_slice::<f32>((0, 0), (wu, hu), (wu, hu), &mut heights, None)
+            .map_err(|e| Error::invalid(name, gdal_msg(e)))?;
+        for r in 0..hu / 2 {
+            let (a, bb) = heights.split_at_mut((hu - 1 - r) * wu);
+            a[r * wu..(r + 1) * wu].swap_with_slice(&mut bb[..wu]);
+        }
+        Ok(heights)
+    }
+}
+
+/// The inputs' common vertical datum; unknown (with a warning) where they differ.
+fn common_vertical_datum(inputs: &[Input], warnings: &mut Vec<String>) -> String {
+    let datums: Vec<String> = inputs.iter().map(vertical_datum).collect();
+    if datums.iter().all(|d| *d == datums[0]) {
+        datums[0].clone()
+    } else {
+        warnings.push(format!(
+            "inputs have different vertical datums {datums:?}: heights are mixed, the data set says unknown"
         ));
+        datum::UNKNOWN.into()
     }
+}
+
+/// Every input warped (GDAL, bilinear) into `target` at the finest input's resolution over
+/// the union of their extents; the first input wins where several have data.
+fn warp(
+    inputs: &[Input],
+    target: &Crs,
+    opts: &ReadOptions,
+    notes: &mut ReadNotes,
+    name: String,
+) -> Result<Raster> {
+    let grid = WarpGrid::covering(inputs, target, &name)?;
+    let (w, h) = (grid.width, grid.height);
+    let [tx, ty] = grid.step;
     let input_samples: u64 = inputs
         .iter()
         .map(|i| i.width as u64 * i.height as u64)
@@ -833,41 +934,9 @@ fn warp(
         .iter()
         .map(|i| to_mem(i, notes))
         .collect::<Result<Vec<_>>>()?;
-    let args: Vec<String> = [
-        "-of",
-        "MEM",
-        "-r",
-        "bilinear",
-        "-ot",
-        "Float32",
-        "-dstnodata",
-        "nan",
-        "-et",
-        "0",
-        "-t_srs",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .chain([target.wkt.clone(), "-te".into()])
-    .chain(
-        [b[0], b[1], b[0] + w as f64 * tx, b[1] + h as f64 * ty]
-            .iter()
-            .map(|v| format!("{v:.17e}")),
-    )
-    .chain(["-tr".into(), format!("{tx:.17e}"), format!("{ty:.17e}")])
-    .collect();
-    let out = gdal_warp(&mems, &args, &name)?;
-    let band = out
-        .rasterband(1)
-        .map_err(|e| Error::invalid(&name, gdal_msg(e)))?;
-    let (wu, hu) = (w as usize, h as usize);
-    let mut heights = vec![0f32; wu * hu];
-    band.read_into_slice::<f32>((0, 0), (wu, hu), (wu, hu), &mut heights, None)
-        .map_err(|e| Error::invalid(&name, gdal_msg(e)))?;
-    for r in 0..hu / 2 {
-        let (a, bb) = heights.split_at_mut((hu - 1 - r) * wu);
-        a[r * wu..(r + 1) * wu].swap_with_slice(&mut bb[..wu]);
-    }
+    let out = gdal_warp(&mems, &grid.warp_args(target), &name)?;
+    let heights = grid.read_heights(&out, &name)?;
+    let b = grid.bounds;
     let georef = Georef::north_up(target.clone(), [b[0] + 0.5 * tx, b[1] + 0.5 * ty], [tx, ty]);
     let mut provenance: Vec<String> = inputs.iter().map(provenance_line).collect();
     provenance.push(format!(
@@ -885,15 +954,7 @@ fn warp(
         &mut provenance,
         &mut warnings,
     )?;
-    let datums: Vec<String> = inputs.iter().map(vertical_datum).collect();
-    let vertical_datum = if datums.iter().all(|d| *d == datums[0]) {
-        datums[0].clone()
-    } else {
-        warnings.push(format!(
-            "inputs have different vertical datums {datums:?}: heights are mixed, the data set says unknown"
-        ));
-        datum::UNKNOWN.into()
-    };
+    let vertical_datum = common_vertical_datum(inputs, &mut warnings);
     Ok(Raster {
         name,
         width: w as u32,

@@ -552,57 +552,66 @@ pub fn estimate_bytes(layout: &Layout, layers: LayerSet, grid_sizes: &[u32]) -> 
     Ok(total)
 }
 
-/// Runs the whole pipeline.
-pub fn run(opts: &Options, progress: &dyn Progress) -> Result<Summary> {
-    let t0 = Instant::now();
-    check_options(opts)?;
-    output::check_target(&opts.out, opts.force)?;
-    let src = read_source(opts, progress)?;
-    let albedo = match (&opts.albedo, &src.raster) {
+/// The albedo image, aligned to the DEM source (it has nothing to align to without one).
+fn open_albedo(opts: &Options, src: &Source) -> Result<Option<AlbedoSampler>> {
+    Ok(match (&opts.albedo, &src.raster) {
         (Some(a), Some(r)) => Some(AlbedoSampler::open(a, r)?),
         (Some(_), None) => {
             return Err(Error::invalid("--albedo", "needs a DEM source"));
         }
         _ => None,
-    };
-    let mut plan = plan(opts, &src)?;
-    if let Some(d) = &opts.vertical_datum {
-        plan.provenance.push(format!(
-            "vertical datum {d} given by --vertical-datum (the source said {})",
-            plan.vertical_datum
-        ));
-        plan.vertical_datum = d.clone();
-    }
-    if let (Some(a), Some(p)) = (&opts.albedo, &albedo) {
-        plan.provenance.push(format!(
-            "albedo {} ({}x{}) aligned by {}",
-            a.display(),
-            p.width,
-            p.height,
-            if p.map == [-0.5, p.width as f64, -0.5, p.height as f64] {
-                "extent"
-            } else {
-                "world file"
-            }
-        ));
-    }
-    let layout = Layout::new(plan.width, plan.height, opts.center_size, opts.border_size)?;
-    let layers = LayerSet {
-        mask: src.raster.is_some(),
-        albedo: albedo.is_some(),
-    };
-    let amplify = match (opts.amplify, &src.raster) {
-        (Some((k, seed)), Some(r)) => {
-            let wl = r.spacing[0].min(r.spacing[1]);
-            let amp = 0.05 * wl;
-            plan.provenance.push(format!(
-                "AMPLIFIED: bilinear upsampling x{k} plus procedural detail (seed {seed}, wavelength {wl:.2} m, amplitude {amp:.2} m) below the source resolution; not measured data"
+    })
+}
+
+impl Plan {
+    /// Records what the options add to the source: a vertical datum given on the command line
+    /// (it replaces the source's), and where the albedo came from.
+    fn note_options(&mut self, opts: &Options, albedo: Option<&AlbedoSampler>) {
+        if let Some(d) = &opts.vertical_datum {
+            self.provenance.push(format!(
+                "vertical datum {d} given by --vertical-datum (the source said {})",
+                self.vertical_datum
             ));
-            Some((k, seed, wl, amp, plan.spacing))
+            self.vertical_datum = d.clone();
         }
-        _ => None,
-    };
-    let need = estimate_bytes(&layout, layers, &opts.stats_grid_sizes)?;
+        if let (Some(a), Some(p)) = (&opts.albedo, albedo) {
+            self.provenance.push(format!(
+                "albedo {} ({}x{}) aligned by {}",
+                a.display(),
+                p.width,
+                p.height,
+                if p.map == [-0.5, p.width as f64, -0.5, p.height as f64] {
+                    "extent"
+                } else {
+                    "world file"
+                }
+            ));
+        }
+    }
+
+    /// [`RasterLeaves::amplify`] for `--amplify` over a DEM; the provenance says loudly that the
+    /// detail below the source's resolution is invented.
+    fn amplification(
+        &mut self,
+        opts: &Options,
+        src: &Source,
+    ) -> Option<(u32, u64, f64, f64, [f64; 2])> {
+        match (opts.amplify, &src.raster) {
+            (Some((k, seed)), Some(r)) => {
+                let wl = r.spacing[0].min(r.spacing[1]);
+                let amp = 0.05 * wl;
+                self.provenance.push(format!(
+                    "AMPLIFIED: bilinear upsampling x{k} plus procedural detail (seed {seed}, wavelength {wl:.2} m, amplitude {amp:.2} m) below the source resolution; not measured data"
+                ));
+                Some((k, seed, wl, amp, self.spacing))
+            }
+            _ => None,
+        }
+    }
+}
+
+/// Refuses before anything is written when the output's file system has less than `need` free.
+fn check_free_space(opts: &Options, need: u64) -> Result<()> {
     let parent = opts
         .out
         .parent()
@@ -620,23 +629,26 @@ pub fn run(opts: &Options, progress: &dyn Progress) -> Result<Summary> {
             ),
         ));
     }
-    let partial = PartialDir::claim(&opts.out)?;
-    let tmp = partial.path.clone();
+    Ok(())
+}
 
-    // Stage 2: levels, finest first; each coarser level reads only the previous level file.
-    let leaves: Box<dyn LeafSource + '_> = match (&src.raster, src.params) {
-        (Some(r), _) => Box::new(RasterLeaves {
-            layout,
-            heights: &r.heights,
-            mask: &src.mask,
-            w: r.width,
-            h: r.height,
-            albedo: albedo.as_ref(),
-            amplify,
-        }),
-        (None, Some(p)) => Box::new(ProceduralLeaves { params: p }),
-        _ => unreachable!("one source"),
-    };
+/// What stage 2 wrote: the level files and level 0's height range.
+struct WrittenLevels {
+    levels: Vec<LevelInfo>,
+    nodes: u64,
+    bytes: u64,
+    range: [f32; 2],
+}
+
+/// Stage 2: the level files in `tmp`, finest first; each coarser level reads only the previous
+/// level file.
+fn write_levels(
+    tmp: &Path,
+    layout: Layout,
+    layers: LayerSet,
+    leaves: &dyn LeafSource,
+    progress: &dyn Progress,
+) -> Result<WrittenLevels> {
     let mut levels = Vec::new();
     let (mut nodes, mut bytes) = (0u64, 0u64);
     let mut range = [f32::INFINITY, f32::NEG_INFINITY];
@@ -647,7 +659,7 @@ pub fn run(opts: &Options, progress: &dyn Progress) -> Result<Summary> {
         let path = tmp.join(&file);
         let child = tmp.join(manifest::level_file(lod.saturating_sub(1)));
         let input = if lod == 0 {
-            LevelInput::Leaves(&*leaves)
+            LevelInput::Leaves(leaves)
         } else {
             LevelInput::Child(&child)
         };
@@ -671,17 +683,32 @@ pub fn run(opts: &Options, progress: &dyn Progress) -> Result<Summary> {
         nodes += stats.nodes;
         bytes += stats.bytes;
     }
-    drop(leaves);
+    Ok(WrittenLevels {
+        levels,
+        nodes,
+        bytes,
+        range,
+    })
+}
 
-    // Stage 3: UDLOD's tile statistics from the written level 0.
+/// Stage 3: UDLOD's tile statistics from the written level 0; with the bytes written.
+fn write_tile_stats(
+    tmp: &Path,
+    layout: Layout,
+    layers: LayerSet,
+    row_spacing: f64,
+    grid_sizes: &[u32],
+    progress: &dyn Progress,
+) -> Result<(Vec<StatsInfo>, u64)> {
     let mut tile_stats = Vec::new();
+    let mut bytes = 0u64;
     let rows = LevelRows::open(
         &tmp.join(manifest::level_file(0)),
         layout,
         layers,
-        plan.spacing[1],
+        row_spacing,
     )?;
-    for &g in &opts.stats_grid_sizes {
+    for &g in grid_sizes {
         progress.level(&format!("stats g{g:>2}"), layout.height);
         let stats = TileStats::compute(&rows, g, &|n| progress.advance(n))?;
         progress.level_done();
@@ -694,7 +721,19 @@ pub fn run(opts: &Options, progress: &dyn Progress) -> Result<Summary> {
             bytes: n,
         });
     }
-    let m = Manifest {
+    Ok((tile_stats, bytes))
+}
+
+/// The manifest describing the written files.
+fn manifest_of(
+    plan: &Plan,
+    layout: &Layout,
+    layers: LayerSet,
+    written: WrittenLevels,
+    tile_stats: Vec<StatsInfo>,
+    voids_filled: u64,
+) -> Manifest {
+    Manifest {
         format: manifest::FORMAT.into(),
         version: manifest::VERSION,
         name: plan.name.clone(),
@@ -705,32 +744,95 @@ pub fn run(opts: &Options, progress: &dyn Progress) -> Result<Summary> {
             (plan.width - 1) as f64 * plan.spacing[0],
             (plan.height - 1) as f64 * plan.spacing[1],
         ],
-        georef: plan.georef,
-        vertical_datum: plan.vertical_datum,
+        georef: plan.georef.clone(),
+        vertical_datum: plan.vertical_datum.clone(),
         nodata: plan.nodata.filter(|v| v.is_finite()),
         center_size: layout.center,
         border_size: layout.border,
-        levels,
+        levels: written.levels,
         layers: manifest::Layers {
             height: "f32le".into(),
             void_mask: layers.mask,
             albedo: layers.albedo.then(|| "rgba8_srgb".into()),
         },
-        height_range: range,
-        voids_filled: src.voids_filled,
+        height_range: written.range,
+        voids_filled,
         content: plan.content.into(),
-        provenance: plan.provenance,
+        provenance: plan.provenance.clone(),
         warnings: plan.warnings.clone(),
         tile_stats,
         created_by: format!("vkterrain {}", env!("CARGO_PKG_VERSION")),
-    };
+    }
+}
+
+/// Writes the manifest into `tmp` (temp + rename), returning its size: it comes last, so a
+/// directory with a manifest has all its files.
+fn write_manifest(tmp: &Path, m: &Manifest) -> Result<u64> {
     m.check("manifest being written")?;
-    // Manifest last (temp + rename), then the directory rename publishes the data set.
-    let json = serde_json::to_string_pretty(&m).expect("manifest serialises");
+    let json = serde_json::to_string_pretty(m).expect("manifest serialises");
     let mtmp = tmp.join("manifest.json.tmp");
     write_synced(&mtmp, json.as_bytes())?;
     std::fs::rename(&mtmp, tmp.join(manifest::FILE_NAME)).map_err(|e| Error::io(&mtmp, e))?;
-    bytes += json.len() as u64;
+    Ok(json.len() as u64)
+}
+
+/// Runs the whole pipeline.
+pub fn run(opts: &Options, progress: &dyn Progress) -> Result<Summary> {
+    let t0 = Instant::now();
+    check_options(opts)?;
+    output::check_target(&opts.out, opts.force)?;
+    let src = read_source(opts, progress)?;
+    let albedo = open_albedo(opts, &src)?;
+    let mut plan = plan(opts, &src)?;
+    plan.note_options(opts, albedo.as_ref());
+    let layout = Layout::new(plan.width, plan.height, opts.center_size, opts.border_size)?;
+    let layers = LayerSet {
+        mask: src.raster.is_some(),
+        albedo: albedo.is_some(),
+    };
+    let amplify = plan.amplification(opts, &src);
+    check_free_space(
+        opts,
+        estimate_bytes(&layout, layers, &opts.stats_grid_sizes)?,
+    )?;
+    let partial = PartialDir::claim(&opts.out)?;
+    let tmp = partial.path.clone();
+
+    let leaves: Box<dyn LeafSource + '_> = match (&src.raster, src.params) {
+        (Some(r), _) => Box::new(RasterLeaves {
+            layout,
+            heights: &r.heights,
+            mask: &src.mask,
+            w: r.width,
+            h: r.height,
+            albedo: albedo.as_ref(),
+            amplify,
+        }),
+        (None, Some(p)) => Box::new(ProceduralLeaves { params: p }),
+        _ => unreachable!("one source"),
+    };
+    let written = write_levels(&tmp, layout, layers, &*leaves, progress)?;
+    drop(leaves);
+    let (nodes, range) = (written.nodes, written.range);
+    let (tile_stats, stats_bytes) = write_tile_stats(
+        &tmp,
+        layout,
+        layers,
+        plan.spacing[1],
+        &opts.stats_grid_sizes,
+        progress,
+    )?;
+    let mut bytes = written.bytes + stats_bytes;
+    let m = manifest_of(
+        &plan,
+        &layout,
+        layers,
+        written,
+        tile_stats,
+        src.voids_filled,
+    );
+    // Manifest last, then the directory rename publishes the data set.
+    bytes += write_manifest(&tmp, &m)?;
     partial.publish(opts.force)?;
     Ok(Summary {
         out: opts.out.clone(),

@@ -262,6 +262,171 @@ impl GpuFrameMetrics {
     }
 }
 
+impl FrameShape {
+    /// 8x8 blocks per row and column of the frame (one SSIM window and partial sum each).
+    fn block_groups(&self) -> (u32, u32) {
+        (
+            self.width.div_ceil(EVAL_TILE_PX),
+            self.height.div_ceil(EVAL_TILE_PX),
+        )
+    }
+
+    /// Workgroups of the per-pixel pass: the widest view's columns, rows, views.
+    fn pixel_groups(&self) -> (u32, u32, u32) {
+        let widest = (0..self.views)
+            .map(|v| crate::render::view_columns(self.width, self.views, v).1)
+            .max()
+            .unwrap_or(self.width);
+        (
+            widest.div_ceil(EVAL_TILE_PX),
+            self.height.div_ceil(EVAL_TILE_PX),
+            self.views.max(1) as u32,
+        )
+    }
+}
+
+/// A storage buffer in device memory for the analysis' passes (`usage` besides storage).
+fn device_buffer(
+    gpu: &Arc<Gpu>,
+    name: &str,
+    bytes: u64,
+    usage: vk::BufferUsageFlags,
+) -> Result<Buffer> {
+    Buffer::new(
+        gpu,
+        name,
+        bytes,
+        vk::BufferUsageFlags::STORAGE_BUFFER | usage,
+        MemoryLocation::GpuOnly,
+    )
+}
+
+/// A buffer the host reads back, filled by a copy.
+fn host_buffer(gpu: &Arc<Gpu>, name: &str, bytes: u64) -> Result<Buffer> {
+    Buffer::new(
+        gpu,
+        name,
+        bytes,
+        vk::BufferUsageFlags::TRANSFER_DST,
+        MemoryLocation::GpuToCpu,
+    )
+}
+
+/// The buffers one analysis owns, before they become [`GpuAnalysis`]'s fields.
+struct AnalysisBuffers {
+    uniform: Buffer,
+    /// The variant's own copies of its targets (the reference writes the shared ones).
+    own: Option<(Buffer, Buffer)>,
+    depth: vk::Buffer,
+    color: vk::Buffer,
+    error_image: Buffer,
+    metres_image: Buffer,
+    partials: Buffer,
+    stats: Buffer,
+    stats_host: Buffer,
+    /// Where the error images are read back, when any frame's is wanted.
+    export: Option<Buffer>,
+}
+
+impl AnalysisBuffers {
+    fn new(
+        shared: &EvalShared,
+        role: Role,
+        groups: (u32, u32),
+        export_images: bool,
+    ) -> Result<Self> {
+        let gpu = &shared.gpu;
+        let pixels = shared.shape.width as u64 * shared.shape.height as u64;
+        let own = match role {
+            Role::Reference => None,
+            Role::Variant => Some((
+                device_buffer(
+                    gpu,
+                    "eval depth",
+                    pixels * 4,
+                    vk::BufferUsageFlags::TRANSFER_DST,
+                )?,
+                device_buffer(
+                    gpu,
+                    "eval colour",
+                    pixels * 4,
+                    vk::BufferUsageFlags::TRANSFER_DST,
+                )?,
+            )),
+        };
+        let (depth, color) = match &own {
+            Some((d, c)) => (d.raw, c.raw),
+            None => (shared.ref_depth.raw, shared.ref_color.raw),
+        };
+        let copy_usage = vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::TRANSFER_SRC;
+        let none = vk::BufferUsageFlags::empty();
+        let error_image = device_buffer(gpu, "eval error image", pixels * 4, copy_usage)?;
+        let metres_image = device_buffer(gpu, "eval height error image", pixels * 4, none)?;
+        let partials = device_buffer(gpu, "eval partials", partials_bytes(groups), none)?;
+        let stats_size = stats_bytes(max_points(shared.frames));
+        let stats = device_buffer(gpu, "eval statistics", stats_size, copy_usage)?;
+        let stats_host = host_buffer(gpu, "eval statistics (host)", stats_size)?;
+        let export = if export_images {
+            Some(host_buffer(gpu, "eval error image (host)", pixels * 4)?)
+        } else {
+            None
+        };
+        let uniform = Buffer::new(
+            gpu,
+            "eval frame uniforms",
+            size_of::<EvalFrame>() as u64,
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        Ok(AnalysisBuffers {
+            uniform,
+            own,
+            depth,
+            color,
+            error_image,
+            metres_image,
+            partials,
+            stats,
+            stats_host,
+            export,
+        })
+    }
+
+    /// Fills the error image with [`EVAL_NO_ERROR_PX`], the value of a pixel without an error
+    /// (sky, or off the data), which the shader expects before the first frame.
+    fn clear_error_image(&self, gpu: &Gpu) -> Result<()> {
+        let no_error = EVAL_NO_ERROR_PX.to_bits();
+        let image = self.error_image.raw;
+        gpu.one_shot(|cmd| unsafe {
+            gpu.device
+                .cmd_fill_buffer(cmd, image, 0, vk::WHOLE_SIZE, no_error)
+        })
+    }
+
+    /// Points descriptor set `index` of `shared` at these buffers and the shared ones.
+    fn bind(&self, shared: &EvalShared, index: usize) -> Result<()> {
+        let buffer = Resource::Buffer;
+        shared.sets.write(
+            index,
+            &[
+                ("frame", buffer(self.uniform.raw)),
+                ("ref_tiles", buffer(shared.atlas)),
+                ("ref_table", buffer(shared.table)),
+                ("depth", buffer(self.depth)),
+                ("color", buffer(self.color)),
+                ("ref_depth", buffer(shared.ref_depth.raw)),
+                ("ref_color", buffer(shared.ref_color.raw)),
+                ("seeds", buffer(shared.seeds.raw)),
+                ("error_image", buffer(self.error_image.raw)),
+                ("partials", buffer(self.partials.raw)),
+                ("stats", buffer(self.stats.raw)),
+                ("metres_image", buffer(self.metres_image.raw)),
+                ("geo_lattice", buffer(shared.lattice_nodes.raw)),
+            ],
+        )
+    }
+}
+
 /// One renderer's frame analysis (see the module docs).
 pub struct GpuAnalysis {
     shared: Arc<EvalShared>,
@@ -297,7 +462,6 @@ impl GpuAnalysis {
         image_frames: Vec<u64>,
     ) -> Result<(Self, Receiver<GpuFrameMetrics>)> {
         let (results, receiver) = unbounded();
-        let gpu = &shared.gpu;
         let index = shared.next_set.fetch_add(1, Ordering::Relaxed);
         let set = *shared.sets.sets.get(index).ok_or_else(|| {
             Error::invalid(
@@ -305,123 +469,27 @@ impl GpuAnalysis {
                 "more analysed renderers than the evaluation planned",
             )
         })?;
-        let shape = shared.shape;
-        let pixels = shape.width as u64 * shape.height as u64;
-        let groups = (
-            shape.width.div_ceil(EVAL_TILE_PX),
-            shape.height.div_ceil(EVAL_TILE_PX),
-        );
-        let widest = (0..shape.views)
-            .map(|v| crate::render::view_columns(shape.width, shape.views, v).1)
-            .max()
-            .unwrap_or(shape.width);
-        let pixel_groups = (
-            widest.div_ceil(EVAL_TILE_PX),
-            shape.height.div_ceil(EVAL_TILE_PX),
-            shape.views.max(1) as u32,
-        );
-        let device = |name: &str, bytes: u64, usage: vk::BufferUsageFlags| {
-            Buffer::new(
-                gpu,
-                name,
-                bytes,
-                vk::BufferUsageFlags::STORAGE_BUFFER | usage,
-                MemoryLocation::GpuOnly,
-            )
-        };
-        let own = match role {
-            Role::Reference => None,
-            Role::Variant => Some((
-                device("eval depth", pixels * 4, vk::BufferUsageFlags::TRANSFER_DST)?,
-                device(
-                    "eval colour",
-                    pixels * 4,
-                    vk::BufferUsageFlags::TRANSFER_DST,
-                )?,
-            )),
-        };
-        let (depth, color) = match &own {
-            Some((d, c)) => (d.raw, c.raw),
-            None => (shared.ref_depth.raw, shared.ref_color.raw),
-        };
-        let copy_usage = vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::TRANSFER_SRC;
-        let error_image = device("eval error image", pixels * 4, copy_usage)?;
-        let metres_image = device(
-            "eval height error image",
-            pixels * 4,
-            vk::BufferUsageFlags::empty(),
-        )?;
-        let partials = device(
-            "eval partials",
-            partials_bytes(groups),
-            vk::BufferUsageFlags::empty(),
-        )?;
-        let stats_size = stats_bytes(max_points(shared.frames));
-        let stats = device("eval statistics", stats_size, copy_usage)?;
-        let host = |name: &str, bytes: u64| {
-            Buffer::new(
-                gpu,
-                name,
-                bytes,
-                vk::BufferUsageFlags::TRANSFER_DST,
-                MemoryLocation::GpuToCpu,
-            )
-        };
-        let stats_host = host("eval statistics (host)", stats_size)?;
-        let export = if image_frames.is_empty() {
-            None
-        } else {
-            Some(host("eval error image (host)", pixels * 4)?)
-        };
-        let uniform = Buffer::new(
-            gpu,
-            "eval frame uniforms",
-            size_of::<EvalFrame>() as u64,
-            vk::BufferUsageFlags::UNIFORM_BUFFER,
-            MemoryLocation::CpuToGpu,
-        )?;
-        let no_error = EVAL_NO_ERROR_PX.to_bits();
-        let image = error_image.raw;
-        gpu.one_shot(|cmd| unsafe {
-            gpu.device
-                .cmd_fill_buffer(cmd, image, 0, vk::WHOLE_SIZE, no_error)
-        })?;
-        let buffer = Resource::Buffer;
-        shared.sets.write(
-            index,
-            &[
-                ("frame", buffer(uniform.raw)),
-                ("ref_tiles", buffer(shared.atlas)),
-                ("ref_table", buffer(shared.table)),
-                ("depth", buffer(depth)),
-                ("color", buffer(color)),
-                ("ref_depth", buffer(shared.ref_depth.raw)),
-                ("ref_color", buffer(shared.ref_color.raw)),
-                ("seeds", buffer(shared.seeds.raw)),
-                ("error_image", buffer(error_image.raw)),
-                ("partials", buffer(partials.raw)),
-                ("stats", buffer(stats.raw)),
-                ("metres_image", buffer(metres_image.raw)),
-                ("geo_lattice", buffer(shared.lattice_nodes.raw)),
-            ],
-        )?;
+        let groups = shared.shape.block_groups();
+        let b = AnalysisBuffers::new(shared, role, groups, !image_frames.is_empty())?;
+        b.clear_error_image(&shared.gpu)?;
+        b.bind(shared, index)?;
         let analysis = GpuAnalysis {
             shared: shared.clone(),
             role,
             set,
-            uniform,
-            _own: own,
-            depth,
-            color,
-            error_image,
-            _metres_image: metres_image,
-            _partials: partials,
-            stats,
-            stats_host,
-            export,
+            uniform: b.uniform,
+            _own: b.own,
+            depth: b.depth,
+            color: b.color,
+            error_image: b.error_image,
+            _metres_image: b.metres_image,
+            _partials: b.partials,
+            stats: b.stats,
+            stats_host: b.stats_host,
+            export: b.export,
             image_frames,
             groups,
-            pixel_groups,
+            pixel_groups: shared.shape.pixel_groups(),
             recorded: 0,
             results,
         };
