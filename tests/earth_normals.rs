@@ -14,6 +14,7 @@ use std::sync::Arc;
 use glam::{DVec2, DVec3};
 use vkterrain::dataset::{Albedo, Heightmap};
 use vkterrain::driver::Gpu;
+use vkterrain::frame::NormalPath;
 use vkterrain::geo::Lattice;
 use vkterrain::geo::normal_model::NormalModel;
 use vkterrain::lod::MethodKind;
@@ -309,23 +310,14 @@ fn world_normals_follow_the_local_frame_and_metric_on_a_geographic_grid() {
     common::assert_no_validation_messages(&gpu);
 }
 
-#[test]
-fn a_low_sun_lights_far_terrain_by_its_own_vertical() {
-    let gpu = common::gpu(false);
-    // Flat terrain at sea level, 0.25 x 5 degrees north from 40 N at 30" (926 m): seen
-    // straight down 450 km north of the world origin, where the vertical is tilted 4 degrees
-    // towards the north. The sun stands 10 degrees above the world's horizon in the north.
-    let grid = Grid {
-        lat0: 40.0,
-        lon0: 5.0,
-        d: 1.0 / 120.0,
-        cols: 31,
-        rows: 601,
-    };
+/// Renders flat sea-level terrain on `grid` seen straight down from 2,000 m over sample
+/// `under` under a sun 10 degrees above the world's northern horizon; returns the expected
+/// colour (lit by the local vertical), the unrotated normal's colour, the worst of the middle
+/// 16 x 16 pixels' differences from the expected one, and the drawing shaders' normal path.
+fn low_sun_render(gpu: &Arc<Gpu>, grid: &Grid, under: DVec2) -> (u8, u8, i32, NormalPath) {
     let lattice = grid.lattice();
     let albedo = 200u8;
     let data = grid.heightmap(0.0, albedo);
-    let under = DVec2::new(15.0, 486.0);
     let camera = Camera {
         position: lattice.position(under, 2000.0),
         pitch_deg: -90.0,
@@ -335,13 +327,7 @@ fn a_low_sun_lights_far_terrain_by_its_own_vertical() {
     };
     let el = 10f64.to_radians();
     let sun = DVec3::new(0.0, el.cos(), el.sin());
-    let (renderer, rgba) = render(
-        &gpu,
-        &data,
-        Some(&lattice),
-        camera,
-        sun.as_vec3().to_array(),
-    );
+    let (renderer, rgba) = render(gpu, &data, Some(&lattice), camera, sun.as_vec3().to_array());
     // The expected colour: albedo x (ambient + diffuse * max(n . sun, 0)), sRGB-encoded.
     let lin = |c: u8| {
         let s = c as f64 / 255.0;
@@ -359,10 +345,6 @@ fn a_low_sun_lights_far_terrain_by_its_own_vertical() {
     let (lat, lon) = grid.lat_lon(under);
     let up = local_axes_in_world(grid.lat0, grid.lon0, lat, lon)[2];
     let (want, unrotated) = (lit(up), lit(DVec3::Z));
-    assert!(
-        want as i32 - unrotated as i32 >= 5,
-        "{want} vs {unrotated}: no contrast"
-    );
     // The middle 16 x 16 pixels (the ground within ~100 m of `under`).
     let mut worst = 0;
     for y in 24..40 {
@@ -371,14 +353,52 @@ fn a_low_sun_lights_far_terrain_by_its_own_vertical() {
             worst = worst.max((p - want as i32).abs());
         }
     }
-    println!(
-        "expected {want} (unrotated {unrotated}), worst pixel off by {worst} (normal model: {})",
-        renderer.terrain().normal_model.is_some()
-    );
-    assert!(
-        worst <= 1,
-        "pixels off by {worst} from {want} (unrotated: {unrotated})"
-    );
-    drop(renderer);
+    (want, unrotated, worst, renderer.terrain().normal_path())
+}
+
+#[test]
+fn a_low_sun_lights_far_terrain_by_its_own_vertical() {
+    let gpu = common::gpu(false);
+    // Seen 450 km north of the world origin, where the vertical is tilted 4 degrees towards
+    // the north: 0.25 x 5 degrees north from 40 N at 30" (926 m), drawn with the normal model;
+    // 16 x 4 degrees from 40 N at 30", too wide for the model (the lattice), seen 3.9 degrees
+    // north of its origin. Each drawing pipeline compiles only its own path (`NormalPath`).
+    let cases = [
+        (
+            Grid {
+                lat0: 40.0,
+                lon0: 5.0,
+                d: 1.0 / 120.0,
+                cols: 31,
+                rows: 601,
+            },
+            DVec2::new(15.0, 486.0),
+            NormalPath::Model,
+        ),
+        (
+            Grid {
+                lat0: 40.0,
+                lon0: 5.0,
+                d: 1.0 / 120.0,
+                cols: 1921,
+                rows: 481,
+            },
+            DVec2::new(15.0, 470.0),
+            NormalPath::Lattice,
+        ),
+    ];
+    for (grid, under, path) in cases {
+        let (want, unrotated, worst, got_path) = low_sun_render(&gpu, &grid, under);
+        println!("{path:?}: expected {want} (unrotated {unrotated}), worst pixel off by {worst}");
+        assert_eq!(got_path, path);
+        assert!(
+            want as i32 - unrotated as i32 >= 5,
+            "{want} vs {unrotated}: no contrast"
+        );
+        assert!(
+            worst <= 1,
+            "{path:?}: pixels off by {worst} from {want} (unrotated: {unrotated})"
+        );
+    }
     common::assert_no_validation_messages(&gpu);
 }

@@ -257,11 +257,15 @@ fn model_term(i: u32, n: vec3<f32>) -> vec3<f32> {
 // one this is the rotation into the local frame (tx, ty, u); it also corrects the slopes where
 // the stated spacing is not the local one (a geographic grid's east-west spacing holds at one
 // latitude). docs/coordinates.md ("Normals on the earth") has the error budget.
+//
+// `NORMAL_PATH` (a constant build.rs prepends) picks the path at compile time: 0 the flat world,
+// 1 the normal model, 2 the lattice (the drawing pipelines take the variant of their terrain:
+// `NormalPath`), 3 whichever the uniforms say (probes and analysis passes).
 fn world_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
-    if frame.lattice.x == 0u {
+    if NORMAL_PATH == 0u || (NORMAL_PATH == 3u && frame.lattice.x == 0u) {
         return n;
     }
-    if frame.normal_spacing.z != 0.0 {
+    if NORMAL_PATH == 1u || (NORMAL_PATH == 3u && frame.normal_spacing.z != 0.0) {
         return normalize(modelled_normal(grid_pos, n));
     }
     let g = lattice_grid_frame(grid_pos);

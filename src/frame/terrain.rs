@@ -74,6 +74,25 @@ pub struct TerrainInfo {
     pub lattice: Option<[u32; 4]>,
 }
 
+/// Which of `world_normal`'s paths a terrain's drawing shaders compile (build.rs builds each
+/// drawing shader once per path, `*_SPV_BY_NORMALS` in this order): the flat world's normal as
+/// it is, the normal model, or the lattice. One path per pipeline, because the unused paths'
+/// registers cost the fragment stage even where their branch is never taken (the clipmap's
+/// ~0.1 ms at 1080p on the H200; docs/coordinates.md, "Reduced").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NormalPath {
+    Flat = 0,
+    Model = 1,
+    Lattice = 2,
+}
+
+impl NormalPath {
+    /// The SPIR-V of this path among a drawing shader's variants.
+    pub fn pick(self, variants: &[&'static [u8]; 3]) -> &'static [u8] {
+        variants[self as usize]
+    }
+}
+
 /// The quadratic model of `lattice`'s normal matrices for `world_normal` when it is within
 /// [`NORMAL_MODEL_TOLERANCE`] of the lattice's at every node (a grid of a few degrees), else
 /// None (`world_normal` reads the lattice per fragment).
@@ -95,6 +114,17 @@ fn fitted_normal_model(
         }
     );
     taken.then(|| model.to_gpu())
+}
+
+impl TerrainInfo {
+    /// The `world_normal` path this terrain's drawing shaders take.
+    pub fn normal_path(&self) -> NormalPath {
+        match (self.lattice, self.normal_model) {
+            (None, _) => NormalPath::Flat,
+            (Some(_), Some(_)) => NormalPath::Model,
+            (Some(_), None) => NormalPath::Lattice,
+        }
+    }
 }
 
 /// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.

@@ -67,7 +67,11 @@ impl BruteForce {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: crate::driver::shaders::BRUTE_SPV,
+                spv: ctx
+                    .terrain
+                    .info
+                    .normal_path()
+                    .pick(&crate::driver::shaders::BRUTE_SPV_BY_NORMALS),
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout],

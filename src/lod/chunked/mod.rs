@@ -175,7 +175,11 @@ impl Pipelines {
         draw: ChunkDraw,
     ) -> Result<Pipeline> {
         let desc = TerrainPipelineDesc {
-            spv: crate::driver::shaders::CHUNKED_SPV,
+            spv: ctx
+                .terrain
+                .info
+                .normal_path()
+                .pick(&crate::driver::shaders::CHUNKED_SPV_BY_NORMALS),
             vertex_entry: c"vs_main",
             fragment_entry: c"fs_main",
             set_layouts,

@@ -240,7 +240,11 @@ impl Geomipmap {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: crate::driver::shaders::GEOMIPMAP_SPV,
+                spv: ctx
+                    .terrain
+                    .info
+                    .normal_path()
+                    .pick(&crate::driver::shaders::GEOMIPMAP_SPV_BY_NORMALS),
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout],

@@ -661,7 +661,11 @@ impl Pgm {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: crate::driver::shaders::PGM_SPV,
+                spv: ctx
+                    .terrain
+                    .info
+                    .normal_path()
+                    .pick(&crate::driver::shaders::PGM_SPV_BY_NORMALS),
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout, sets.layout],

@@ -309,7 +309,11 @@ impl Udlod {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: crate::driver::shaders::UDLOD_SPV,
+                spv: ctx
+                    .terrain
+                    .info
+                    .normal_path()
+                    .pick(&crate::driver::shaders::UDLOD_SPV_BY_NORMALS),
                 vertex_entry: if settings.vertex_pulling {
                     c"vs_pulled"
                 } else {
