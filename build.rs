@@ -154,18 +154,25 @@ fn main() {
     for path in &shader_files {
         let stem = path.file_stem().unwrap().to_string_lossy().to_string();
         // `NORMAL_PATH` 3: `world_normal` picks the flat world, the normal model or the lattice
-        // per frame from the uniforms (compute probes, the reference).
+        // per frame from the uniforms (compute probes, the reference). Drawing shaders (those
+        // with a fragment stage) are validated and reflected (`_WGSL`) this way too, but drawn
+        // only from their per-geometry variants below.
         let (bytes, source) =
             compile_wgsl(path, &format!("{prelude}const NORMAL_PATH: u32 = 3u;\n"));
-        std::fs::write(out_dir.join(format!("{stem}.spv")), bytes).unwrap();
         std::fs::write(out_dir.join(format!("{stem}.composed.wgsl")), &source).unwrap();
         let upper = stem.to_uppercase();
         writeln!(
             generated,
-            "/// SPIR-V of `shaders/{stem}.wgsl`.\npub static {upper}_SPV: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.spv\"));\n/// `shaders/{stem}.wgsl` as compiled (constants and includes expanded).\npub static {upper}_WGSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.composed.wgsl\"));"
+            "/// `shaders/{stem}.wgsl` as compiled (constants and includes expanded).\npub static {upper}_WGSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.composed.wgsl\"));"
         )
         .unwrap();
         if !source.contains("@fragment") {
+            std::fs::write(out_dir.join(format!("{stem}.spv")), bytes).unwrap();
+            writeln!(
+                generated,
+                "/// SPIR-V of `shaders/{stem}.wgsl`.\npub static {upper}_SPV: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.spv\"));"
+            )
+            .unwrap();
             continue;
         }
         // Drawing shaders once more per geometry, each with only its own `world_normal` path
