@@ -213,15 +213,15 @@ vec3 lattice_up(ivec2 node) {
     return geo_lattice.nodes[3 * (node.y * int(frame.lattice.y) + node.x) + 2].xyz;
 }
 
-// Camera-relative position (metres, world axes) of a surface point: the flat world's integer
-// cell subtraction, or the geolocation lattice interpolated bilinearly plus height * up.
-vec3 relative_position(ivec2 cell, vec2 frac_, float height_m) {
+// On the earth: the camera-relative surface point at height 0 of the datum and the up vector
+// at a sample position (integer cell + fraction), both bilinear in the lattice.
+struct LatticePoint {
+    vec3 p;
+    vec3 up;
+};
+
+LatticePoint lattice_point(ivec2 cell, vec2 frac_) {
     int step_ = int(frame.lattice.x);
-    if (step_ == 0) {
-        float spacing = frame.camera_offset.w;
-        vec2 rel_xy = vec2(cell - frame.camera_cell.xy) * spacing + frac_ * spacing - frame.camera_offset.xy;
-        return vec3(rel_xy, height_m - frame.camera_offset.z);
-    }
     ivec2 node = clamp(cell / step_, ivec2(0), ivec2(frame.lattice.yz) - ivec2(2));
     vec2 f = (vec2(cell - node * step_) + frac_) / float(step_);
     vec3 p00 = lattice_relative(node);
@@ -234,7 +234,20 @@ vec3 relative_position(ivec2 cell, vec2 frac_, float height_m) {
     vec3 u11 = lattice_up(node + ivec2(1, 1));
     vec3 p = mix(mix(p00, p10, f.x), mix(p01, p11, f.x), f.y);
     vec3 up = mix(mix(u00, u10, f.x), mix(u01, u11, f.x), f.y);
-    return p + height_m * up;
+    return LatticePoint(p, up);
+}
+
+// Camera-relative position (metres, world axes) of a surface point: the flat world's integer
+// cell subtraction, or the geolocation lattice interpolated bilinearly plus height * up.
+vec3 relative_position(ivec2 cell, vec2 frac_, float height_m) {
+    int step_ = int(frame.lattice.x);
+    if (step_ == 0) {
+        float spacing = frame.camera_offset.w;
+        vec2 rel_xy = vec2(cell - frame.camera_cell.xy) * spacing + frac_ * spacing - frame.camera_offset.xy;
+        return vec3(rel_xy, height_m - frame.camera_offset.z);
+    }
+    LatticePoint s = lattice_point(cell, frac_);
+    return s.p + height_m * s.up;
 }
 
 // Clip position (WebGPU clip space, y up, like the WGSL) of a surface point given in sample
