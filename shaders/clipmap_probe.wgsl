@@ -40,7 +40,7 @@ fn probe_surface_main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let p = probe.points[i].xy;
-    let s = clipmap_surface(p, vec2<f32>(0.0), vec2<f32>(0.0));
-    probe.points[i].z = s.normal.x;
-    probe.points[i].w = s.normal.y;
+    let n = normalize(clipmap_surface(p, vec2<f32>(0.0), vec2<f32>(0.0)).normal);
+    probe.points[i].z = n.x;
+    probe.points[i].w = n.y;
 }

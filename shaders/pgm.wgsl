@@ -42,16 +42,13 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let inside_pos = vec2<f32>(clamp(cell, vec2<i32>(0), last)) + select(frac, vec2<f32>(0.0), outside);
     let uv = (inside_pos + 0.5) / vec2<f32>(frame.data_size.xy);
     let h = textureSampleLevel(height_mips, mip_sampler, uv, level).r;
-    var out: TerrainVertex;
-    out.clip = project(cell, frac, h);
-    out.grid_pos = grid_pos;
-    return out;
+    return terrain_vertex(project(cell, frac, h), grid_pos);
 }
 
 @fragment
 fn fs_main(v: TerrainVertex) -> @location(0) vec4<f32> {
     // Shaded first: its derivatives need every fragment of the quad.
-    let colour = shade(v.grid_pos, v.clip);
+    let colour = shade(v);
     // Beyond the data's edge (grid positions 0..size-1 are the data's samples): nothing.
     let last = vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0);
     if any(v.grid_pos < vec2<f32>(0.0)) || any(v.grid_pos > last) {

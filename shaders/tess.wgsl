@@ -53,5 +53,5 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
 
 @fragment
 fn fs_main(v: TerrainVertex) -> @location(0) vec4<f32> {
-    return shade(v.grid_pos, v.clip);
+    return shade(v);
 }

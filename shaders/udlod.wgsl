@@ -31,13 +31,10 @@ fn vs_pulled(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instan
 // The morphed vertex (`morphed_vertex`, shared with the test probe) projected.
 fn tile_vertex(tile: Tile, local: vec2<u32>) -> TerrainVertex {
     let v = morphed_vertex(tile, local);
-    var out: TerrainVertex;
-    out.clip = project(v.cell, v.frac, v.height);
-    out.grid_pos = v.grid_pos;
-    return out;
+    return terrain_vertex(project(v.cell, v.frac, v.height), v.grid_pos);
 }
 
 @fragment
 fn fs_main(v: TerrainVertex) -> @location(0) vec4<f32> {
-    return shade(v.grid_pos, v.clip);
+    return shade(v);
 }

@@ -161,6 +161,7 @@ fn clipmap_height(p: vec2<f32>) -> f32 {
 }
 
 struct ClipmapSurface {
+    // Not normalized (the shading normalizes once, after turning it to world axes).
     normal: vec3<f32>,
     albedo: vec3<f32>,
 }
@@ -210,6 +211,5 @@ fn clipmap_surface(p: vec2<f32>, gx: vec2<f32>, gy: vec2<f32>) -> ClipmapSurface
             out.albedo = mix(coarse.albedo, out.albedo, weight);
         }
     }
-    out.normal = normalize(out.normal);
     return out;
 }

@@ -47,6 +47,30 @@ struct TerrainVertex {
     @builtin(position) clip: vec4<f32>,
     // Position in sample units (x = column, y = row), for texturing.
     @location(0) grid_pos: vec2<f32>,
+    // The normal model's matrix at the vertex, by columns (`modelled_matrix`), interpolated
+    // across the triangle: the fragment stage's normal is one matrix product. Written where
+    // the grid's normals are modelled (`terrain_vertex`), zero elsewhere and not read.
+    @location(1) normal_x: vec3<f32>,
+    @location(2) normal_y: vec3<f32>,
+    @location(3) normal_z: vec3<f32>,
+}
+
+// A drawn vertex at clip position `clip` and grid position `grid_pos` (samples), with the
+// normal model's matrix when the grid's normals are modelled (`normals_modelled`). The model
+// is quadratic in the grid fraction, so interpolating it linearly across a triangle that spans
+// a fraction `d` of the grid departs from it by at most `d^2 / 8` times its second derivative
+// (docs/coordinates.md, "Normals on the earth").
+fn terrain_vertex(clip: vec4<f32>, grid_pos: vec2<f32>) -> TerrainVertex {
+    var out: TerrainVertex;
+    out.clip = clip;
+    out.grid_pos = grid_pos;
+    if normals_modelled() {
+        let m = modelled_matrix(grid_pos);
+        out.normal_x = m[0];
+        out.normal_y = m[1];
+        out.normal_z = m[2];
+    }
+    return out;
 }
 
 // Height in metres at an integer sample of the single height texture, clamped to the data.
@@ -197,7 +221,7 @@ struct GridFrame {
 // The grid's frame at `grid_pos` from the lattice (`Lattice::grid_frame` is its CPU twin):
 // the bilinear up vector normalized, the bilinear lattice's derivatives along x and y (node
 // differences, hi and lo parts subtracted separately, interpolated across the cell). Twelve
-// lattice reads per fragment: used only where the quadratic model (`modelled_normal`) is not close enough.
+// lattice reads per fragment: used only where the quadratic model (`modelled_matrix`) is not close enough.
 fn lattice_grid_frame(grid_pos: vec2<f32>) -> GridFrame {
     let lstep = i32(frame.lattice.x);
     let cell = vec2<i32>(floor(grid_pos));
@@ -223,24 +247,29 @@ fn lattice_grid_frame(grid_pos: vec2<f32>) -> GridFrame {
     return g;
 }
 
-// The world normal (not normalized) of grid-frame normal `n` at `grid_pos` from the quadratic
-// model of the grid's normal matrices (`frame.normal_model`; `NormalModel::normal` in
-// src/geo/normal_model.rs is its CPU twin): no memory reads beyond the uniforms and no frame
-// to build per fragment. Taken where the model is within `NORMAL_MODEL_TOLERANCE` of the
-// lattice's matrices at every node (`NormalModel::fit`).
-fn modelled_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
-    let f = grid_pos / (vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0));
-    let along_x = model_term(1u, n) + model_term(2u, n) * f.x + model_term(5u, n) * f.y;
-    let along_y = model_term(3u, n) + model_term(4u, n) * f.y;
-    return model_term(0u, n) + along_x * f.x + along_y * f.y;
+// Whether the normals come from the quadratic model (`NORMAL_PATH` 1, or 3 with the uniforms
+// saying so).
+fn normals_modelled() -> bool {
+    return NORMAL_PATH == 1u || (NORMAL_PATH == 3u && frame.lattice.x != 0u && frame.normal_spacing.z != 0.0);
 }
 
-// Term `i` of the normal model (its matrix) times `n` (called with constant `i`: constant
-// uniform indices once inlined).
-fn model_term(i: u32, n: vec3<f32>) -> vec3<f32> {
+// The quadratic model's normal matrix at `grid_pos` (`frame.normal_model`; `NormalModel::matrix`
+// in src/geo/normal_model.rs is its CPU twin): it takes a normal in the grid's frame to world
+// axes (not normalized). No memory reads beyond the uniforms and no frame to build. Taken where
+// the model is within `NORMAL_MODEL_TOLERANCE` of the lattice's matrices at every node
+// (`NormalModel::fit`).
+fn modelled_matrix(grid_pos: vec2<f32>) -> mat3x3<f32> {
+    let f = grid_pos / (vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0));
+    let along_x = model_term(1u) + model_term(2u) * f.x + model_term(5u) * f.y;
+    let along_y = model_term(3u) + model_term(4u) * f.y;
+    return model_term(0u) + along_x * f.x + along_y * f.y;
+}
+
+// Term `i` of the normal model, its matrix (called with constant `i`: constant uniform
+// indices once inlined).
+fn model_term(i: u32) -> mat3x3<f32> {
     let k = 3u * i;
-    let x = frame.normal_model[k].xyz;
-    return x * n.x + frame.normal_model[k + 1u].xyz * n.y + frame.normal_model[k + 2u].xyz * n.z;
+    return mat3x3<f32>(frame.normal_model[k].xyz, frame.normal_model[k + 1u].xyz, frame.normal_model[k + 2u].xyz);
 }
 
 // The normal, in world axes, of the terrain at `grid_pos` (samples) whose normal in the grid's
@@ -265,8 +294,8 @@ fn world_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
     if NORMAL_PATH == 0u || (NORMAL_PATH == 3u && frame.lattice.x == 0u) {
         return n;
     }
-    if NORMAL_PATH == 1u || (NORMAL_PATH == 3u && frame.normal_spacing.z != 0.0) {
-        return normalize(modelled_normal(grid_pos, n));
+    if normals_modelled() {
+        return normalize(modelled_matrix(grid_pos) * n);
     }
     let g = lattice_grid_frame(grid_pos);
     let u = g.u;
@@ -276,11 +305,26 @@ fn world_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
     return normalize(n.x * s.x * cross(ty, u) + n.y * s.y * cross(u, tx) + n.z * cross(tx, ty));
 }
 
+// The unit world normal a drawn fragment shades with, of `n` from the normal map (in the
+// grid's frame, any length: normalized once, here): as `world_normal`, but the normal model's
+// matrix is interpolated from the vertices (`terrain_vertex`), not evaluated per fragment.
+fn fragment_normal(v: TerrainVertex, n: vec3<f32>) -> vec3<f32> {
+    if NORMAL_PATH == 0u {
+        return normalize(n);
+    }
+    if NORMAL_PATH == 1u {
+        return normalize(mat3x3<f32>(v.normal_x, v.normal_y, v.normal_z) * n);
+    }
+    // The lattice's normal is a linear map of `n`, normalized.
+    return world_normal(v.grid_pos, n);
+}
+
 // Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map
-// (in world axes: `world_normal`), faded towards the sky with view depth (aerial perspective;
-// the fragment position's w is 1 / clip w, and clip w is the view depth). Through the clipmap
-// albedo and normal come from the atlas (`clipmap_surface`).
-fn shade(grid_pos: vec2<f32>, frag_position: vec4<f32>) -> vec4<f32> {
+// (in world axes: `fragment_normal`), faded towards the sky with view depth (aerial
+// perspective; the fragment position's w is 1 / clip w, and clip w is the view depth). Through
+// the clipmap albedo and normal come from the atlas (`clipmap_surface`).
+fn shade(v: TerrainVertex) -> vec4<f32> {
+    let grid_pos = v.grid_pos;
     let gx = dpdx(grid_pos);
     let gy = dpdy(grid_pos);
     var n: vec3<f32>;
@@ -291,11 +335,11 @@ fn shade(grid_pos: vec2<f32>, frag_position: vec4<f32>) -> vec4<f32> {
         albedo = s.albedo;
     } else {
         let size = vec2<f32>(frame.data_size.xy);
-        n = normalize(textureSampleGrad(normal_tex, linear_sampler, (grid_pos + 0.5) / size, gx / size, gy / size).xyz);
+        n = textureSampleGrad(normal_tex, linear_sampler, (grid_pos + 0.5) / size, gx / size, gy / size).xyz;
         albedo = textureSampleGrad(albedo_tex, linear_sampler, grid_pos / (size - 1.0), gx / (size - 1.0), gy / (size - 1.0)).rgb;
     }
-    n = world_normal(grid_pos, n);
+    n = fragment_normal(v, n);
     let light = LIGHT_AMBIENT + LIGHT_DIFFUSE * max(dot(n, frame.sun_dir.xyz), 0.0);
-    let haze = 1.0 - exp(-frame.haze.w / frag_position.w);
+    let haze = 1.0 - exp(-frame.haze.w / v.clip.w);
     return vec4<f32>(mix(albedo * light, frame.haze.rgb, haze), 1.0);
 }

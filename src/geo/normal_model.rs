@@ -82,12 +82,16 @@ impl NormalModel {
         (model, departure)
     }
 
-    /// The world normal (not normalized) of grid-frame normal `n` at fraction `f` of the grid,
-    /// in the order `modelled_normal` in `shaders/include/terrain_common.wgsl` sums it (its CPU
-    /// twin).
-    pub fn normal(&self, f: DVec2, n: DVec3) -> DVec3 {
-        let t = self.terms.map(|m| m * n);
+    /// The model's normal matrix at fraction `f` of the grid, summed in the order
+    /// `modelled_matrix` in `shaders/include/terrain_common.wgsl` sums it (its CPU twin).
+    pub fn matrix(&self, f: DVec2) -> DMat3 {
+        let t = &self.terms;
         t[0] + (t[1] + t[2] * f.x + t[5] * f.y) * f.x + (t[3] + t[4] * f.y) * f.y
+    }
+
+    /// The world normal (not normalized) of grid-frame normal `n` at fraction `f` of the grid.
+    pub fn normal(&self, f: DVec2, n: DVec3) -> DVec3 {
+        self.matrix(f) * n
     }
 
     /// The GPU's copy: each term's three columns (xyz of one vec4 each).
@@ -115,11 +119,16 @@ fn departure(samples: &[(DVec2, DMat3)], normal: impl Fn(DVec2, DVec3) -> DVec3)
                 normal(*f, DVec3::Y),
                 normal(*f, DVec3::Z),
             );
-            let k = (m - *e) * e.inverse();
-            (k.x_axis.length_squared() + k.y_axis.length_squared() + k.z_axis.length_squared())
-                .sqrt()
+            matrix_departure(m, *e)
         })
         .fold(0.0, f64::max)
+}
+
+/// The largest angle matrix `m` turns any normal by against matrix `e`: `m n = (I + K) e n`
+/// with `K = (m - e) e^-1`, bounded by the Frobenius norm of `K`.
+fn matrix_departure(m: DMat3, e: DMat3) -> f64 {
+    let k = (m - e) * e.inverse();
+    (k.x_axis.length_squared() + k.y_axis.length_squared() + k.z_axis.length_squared()).sqrt()
 }
 
 fn weights(f: DVec2) -> [f64; NORMAL_MODEL_TERMS] {
@@ -268,5 +277,52 @@ mod tests {
         };
         assert!(wide((8.0, 2.0)) < NORMAL_MODEL_TOLERANCE);
         assert!(wide((16.0, 4.0)) > NORMAL_MODEL_TOLERANCE);
+    }
+
+    /// The drawing shaders evaluate the model at the vertices and interpolate the matrix
+    /// linearly across each triangle (`terrain_vertex` in terrain_common.wgsl). The model is
+    /// quadratic in the grid fraction, so that departs from it by about the square of the
+    /// triangle's extent: a sixteenth of the Pyrenees grid stays far inside the tolerance, the
+    /// whole grid (control) does not.
+    #[test]
+    fn interpolating_the_model_across_a_triangle_departs_by_its_extent_squared() {
+        let (l, w, h, stated) = pyrenees();
+        let (model, _) = NormalModel::fit(&l, w, h, stated);
+        // Both triangles of quads of side `d` (grid fraction) tiling the grid, probed at edge
+        // midpoints and centroids against the model there.
+        let interpolation_departure = |d: f64| {
+            let mut worst: f64 = 0.0;
+            let steps = (1.0 / d).round() as usize;
+            for j in 0..steps {
+                for i in 0..steps {
+                    let o = DVec2::new(i as f64, j as f64) * d;
+                    let quad = [DVec2::ZERO, DVec2::X, DVec2::Y, DVec2::ONE].map(|c| o + c * d);
+                    for tri in [[quad[0], quad[1], quad[2]], [quad[1], quad[3], quad[2]]] {
+                        let m = tri.map(|v| model.matrix(v));
+                        let probes = [
+                            [0.5, 0.5, 0.0],
+                            [0.0, 0.5, 0.5],
+                            [0.5, 0.0, 0.5],
+                            [1.0 / 3.0; 3],
+                        ];
+                        for w in probes {
+                            let f = tri[0] * w[0] + tri[1] * w[1] + tri[2] * w[2];
+                            let lerped = m[0] * w[0] + m[1] * w[1] + m[2] * w[2];
+                            worst = worst.max(matrix_departure(lerped, model.matrix(f)));
+                        }
+                    }
+                }
+            }
+            worst
+        };
+        let sixteenth = interpolation_departure(1.0 / 16.0);
+        let whole = interpolation_departure(1.0);
+        println!(
+            "interpolated across 1/16 of the grid {sixteenth:.2e} rad, across all of it {whole:.2e} rad"
+        );
+        assert!(sixteenth < NORMAL_MODEL_TOLERANCE / 50.0, "{sixteenth}");
+        assert!(whole > NORMAL_MODEL_TOLERANCE, "{whole}");
+        // Quadratic: 16 times finer, 256 times closer (within rounding of the sampling).
+        assert!(whole / sixteenth > 100.0, "{whole} / {sixteenth}");
     }
 }
