@@ -79,8 +79,11 @@ fn prepare() {
     state.splits_allowed = select(0u, 1u, fits);
     atomicStore(&state.split_requests, 0u);
     atomicStore(&state.child_count, 0u);
-    state.dispatch_x = (parents + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;
-    state.dispatch_y = 1u;
+    // Four invocations per parent (`refine`), in rows of at most 65,535 workgroups (the
+    // least maxComputeWorkGroupCount a device may have).
+    let groups = (4u * parents + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;
+    state.dispatch_x = min(groups, MAX_DISPATCH_ROW);
+    state.dispatch_y = (groups + MAX_DISPATCH_ROW - 1u) / MAX_DISPATCH_ROW;
     state.dispatch_z = 1u;
 }
 
@@ -163,16 +166,30 @@ var<workgroup> wg_overflow: atomic<u32>;
 var<workgroup> wg_child_base: u32;
 var<workgroup> wg_final_base: u32;
 
+// Four invocations per parent: their parent's slot in the workgroup's reservations.
+var<workgroup> wg_parent_local: array<u32, UDLOD_WORKGROUP / 4u>;
+
+// Workgroups per row of a `refine` dispatch.
+const MAX_DISPATCH_ROW: u32 = 65535u;
+const_assert UDLOD_WORKGROUP % 4u == 0u;
+
 const ACTION_NONE: u32 = 0u;
 const ACTION_FINAL: u32 = 1u;
 const ACTION_SPLIT: u32 = 2u;
 
-// Refines this pass's parents. A splitting tile writes its four children (decided here, for
-// the next pass) into the temporary list; the others go to the final list. A pass splits
+// Refines this pass's parents, four invocations per parent, one per child (a pass waits on its
+// slowest invocation: one invocation deciding all four children, each with its culling box,
+// was most of the prepass's time on the earth). A splitting tile writes its four children
+// (each decided by its own invocation, for the next pass) into the temporary list; the others
+// go to the final list. The parent's own bookkeeping is its first invocation's. A pass splits
 // only when `prepare` found room for all of its splits (`splits_allowed`), so the slots
 // reserved here always fit; writes past a list's end are skipped all the same.
 @compute @workgroup_size(UDLOD_WORKGROUP)
-fn refine(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+fn refine(
+    @builtin(workgroup_id) group: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
     if li == 0u {
         atomicStore(&wg_children, 0u);
         atomicStore(&wg_finals, 0u);
@@ -181,79 +198,88 @@ fn refine(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocatio
         atomicStore(&wg_overflow, 0u);
     }
     workgroupBarrier();
+    let invocation = (group.y * groups.x + group.x) * UDLOD_WORKGROUP + li;
+    let parent = invocation / 4u;
+    let k = invocation % 4u;
     let parents = state.parent_count;
     var action = ACTION_NONE;
     var t = Tile(0u, 0u, 0u, 0u);
-    var children: array<Tile, 4>;
-    if id.x < parents {
+    var child = Tile(0u, 0u, 0u, 0u);
+    if parent < parents {
         // Decided when it was written (`decided`): outside the data, culled, splitting.
-        t = temp_tiles[parent_slot(id.x)];
+        t = temp_tiles[parent_slot(parent)];
         if (t.pad & TILE_OUTSIDE) != 0u {
             // A child of an edge tile.
         } else if (t.pad & TILE_CULLED) != 0u {
-            atomicAdd(&wg_culled, 1u);
+            if k == 0u {
+                atomicAdd(&wg_culled, 1u);
+            }
         } else if (t.pad & TILE_SPLITS) != 0u && state.splits_allowed != 0u {
             action = ACTION_SPLIT;
-            children = decided_children(t);
-            for (var k = 0u; k < 4u; k++) {
-                if children[k].pad == (TILE_DECIDED | TILE_SPLITS) {
-                    atomicAdd(&wg_requests, 1u);
-                }
+            child = decided(Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u));
+            if child.pad == (TILE_DECIDED | TILE_SPLITS) {
+                atomicAdd(&wg_requests, 1u);
             }
         } else {
-            if (t.pad & TILE_SPLITS) != 0u {
+            if (t.pad & TILE_SPLITS) != 0u && k == 0u {
                 atomicAdd(&wg_overflow, 1u);
             }
             action = ACTION_FINAL;
         }
     }
-    var local = 0u;
-    if action == ACTION_SPLIT {
-        local = atomicAdd(&wg_children, 4u);
-    } else if action == ACTION_FINAL {
-        local = atomicAdd(&wg_finals, 1u);
+    if k == 0u {
+        if action == ACTION_SPLIT {
+            wg_parent_local[li / 4u] = atomicAdd(&wg_children, 4u);
+        } else if action == ACTION_FINAL {
+            wg_parent_local[li / 4u] = atomicAdd(&wg_finals, 1u);
+        }
     }
     workgroupBarrier();
     if li == 0u {
-        let nc = atomicLoad(&wg_children);
-        if nc > 0u {
-            wg_child_base = atomicAdd(&state.child_count, nc);
-            atomicAdd(&state.reserved_leaves, 3u * (nc / 4u));
-        }
-        let nf = atomicLoad(&wg_finals);
-        if nf > 0u {
-            wg_final_base = atomicAdd(&state.final_count, nf);
-        }
-        let requests = atomicLoad(&wg_requests);
-        if requests > 0u {
-            atomicAdd(&state.split_requests, requests);
-        }
-        let culled = atomicLoad(&wg_culled);
-        if culled > 0u {
-            atomicAdd(&state.culled, culled);
-        }
-        let overflow = atomicLoad(&wg_overflow);
-        if overflow > 0u {
-            atomicAdd(&state.overflow, overflow);
-        }
+        reserve_in_lists();
     }
     workgroupBarrier();
+    let local = wg_parent_local[li / 4u];
     if action == ACTION_SPLIT {
         let base = wg_child_base + local;
         if parents + base + 4u <= udlod.sizes.w {
-            for (var k = 0u; k < 4u; k++) {
-                temp_tiles[child_slot(base + k)] = children[k];
-            }
-        } else {
+            temp_tiles[child_slot(base + k)] = child;
+        } else if k == 0u {
             atomicAdd(&state.overflow, 1u);
         }
-    } else if action == ACTION_FINAL {
+    } else if action == ACTION_FINAL && k == 0u {
         let i = wg_final_base + local;
         if i < udlod.sizes.z {
             final_tiles[i] = Tile(t.x, t.y, t.lod, 0u);
         } else {
             atomicAdd(&state.overflow, 1u);
         }
+    }
+}
+
+// `refine`'s one invocation per workgroup: reserves the workgroup's children and final tiles
+// in the global lists (`wg_child_base`, `wg_final_base`) and adds its counts to the state's.
+fn reserve_in_lists() {
+    let nc = atomicLoad(&wg_children);
+    if nc > 0u {
+        wg_child_base = atomicAdd(&state.child_count, nc);
+        atomicAdd(&state.reserved_leaves, 3u * (nc / 4u));
+    }
+    let nf = atomicLoad(&wg_finals);
+    if nf > 0u {
+        wg_final_base = atomicAdd(&state.final_count, nf);
+    }
+    let requests = atomicLoad(&wg_requests);
+    if requests > 0u {
+        atomicAdd(&state.split_requests, requests);
+    }
+    let culled = atomicLoad(&wg_culled);
+    if culled > 0u {
+        atomicAdd(&state.culled, culled);
+    }
+    let overflow = atomicLoad(&wg_overflow);
+    if overflow > 0u {
+        atomicAdd(&state.overflow, overflow);
     }
 }
 
@@ -287,49 +313,6 @@ fn decided(t: Tile) -> Tile {
         flags |= TILE_SPLITS;
     }
     return Tile(t.x, t.y, t.lod, flags);
-}
-
-// The four children of splitting tile `t` (south-west, south-east, north-west, north-east),
-// each `decided`. On the earth with culling on, their curved boxes share corners: the 3 x 3
-// lattice points are read once and independently, where four `decided` calls built four boxes
-// one after the other (a pass waits on its slowest invocation; on Fischer S3 this took the
-// prepass from 0.274 to 0.239 ms on the H200, flat 0.151). The same boxes and flags as
-// `decided` (tests/udlod.rs compares the tile sets with the CPU's on the earth).
-fn decided_children(t: Tile) -> array<Tile, 4> {
-    var out: array<Tile, 4>;
-    let lod = t.lod - 1u;
-    if frame.lattice.x == 0u || udlod.params.w <= 0.5 {
-        for (var k = 0u; k < 4u; k++) {
-            out[k] = decided(Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), lod, 0u));
-        }
-        return out;
-    }
-    let span = i32(udlod.sizes.x << lod);
-    let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
-    let origin = vec2<i32>(i32(t.x) * 2 * span, i32(t.y) * 2 * span);
-    var points: array<LatticePoint, 9>;
-    for (var j = 0; j < 3; j++) {
-        for (var i = 0; i < 3; i++) {
-            points[j * 3 + i] = lattice_point(min(origin + vec2<i32>(i, j) * span, last), vec2<f32>(0.0));
-        }
-    }
-    for (var k = 0u; k < 4u; k++) {
-        let c = Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), lod, 0u);
-        var flags = TILE_DECIDED;
-        if outside_data(c) {
-            flags |= TILE_OUTSIDE;
-        } else {
-            let sw = i32(k >> 1u) * 3 + i32(k & 1u);
-            let corners = array<LatticePoint, 4>(points[sw], points[sw + 1], points[sw + 3], points[sw + 4]);
-            if box_outside(udlod.frustum, corner_box(corners, tile_min_max(c)), cull_slack(c)) {
-                flags |= TILE_CULLED;
-            } else if splits_by_distance(c) {
-                flags |= TILE_SPLITS;
-            }
-        }
-        out[k] = Tile(c.x, c.y, c.lod, flags);
-    }
-    return out;
 }
 
 @compute @workgroup_size(1)

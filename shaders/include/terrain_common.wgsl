@@ -176,8 +176,7 @@ fn earth_box(c0: vec2<i32>, c1: vec2<i32>, heights: vec2<f32>) -> Box3 {
     return corner_box(array<LatticePoint, 4>(sw, se, nw, ne), heights);
 }
 
-// `earth_box` from the lattice points of the rectangle's four corners (callers deciding
-// neighbouring rectangles share them).
+// `earth_box` from the lattice points of the rectangle's four corners.
 fn corner_box(corners: array<LatticePoint, 4>, heights: vec2<f32>) -> Box3 {
     var lo = vec3<f32>(3.0e38);
     var hi = vec3<f32>(-3.0e38);
