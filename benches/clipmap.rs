@@ -133,7 +133,7 @@ fn main() -> anyhow::Result<()> {
         let mut config = p.config.clone();
         config.clipmap.enabled = clipmap;
         config.render.extra_views = extra_views;
-        let cm = config.open_clipmap()?;
+        let cm = config.open_clipmap(None)?;
         // With the clipmap, level 0 is read node by node (`p.data`); one texture needs the
         // whole height map.
         let data: Terrain = if clipmap {

@@ -11,7 +11,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let chunk = vec2<u32>(instance % chunks_x, instance / chunks_x);
     let local = vec2<u32>(vertex % (BRUTE_CHUNK_QUADS + 1u), vertex / (BRUTE_CHUNK_QUADS + 1u));
     let s = vec2<i32>(min(chunk * BRUTE_CHUNK_QUADS + local, size - 1u));
-    return terrain_vertex(project(s, vec2<f32>(0.0), sample_height(s)), vec2<f32>(s));
+    return TerrainVertex(project(s, vec2<f32>(0.0), sample_height(s)), vec2<f32>(s));
 }
 
 @fragment

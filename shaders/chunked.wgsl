@@ -18,7 +18,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let local = vec2<u32>(vertex % (quads + 1u), vertex / (quads + 1u));
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
     let s = min(chunk_sample(t, local), last);
-    return terrain_vertex(project(s, vec2<f32>(0.0), sample_height(s)), vec2<f32>(s));
+    return TerrainVertex(project(s, vec2<f32>(0.0), sample_height(s)), vec2<f32>(s));
 }
 
 @fragment

@@ -13,7 +13,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) block: u
     let b = vec2<u32>(block % blocks_x, block / blocks_x);
     let local = vec2<u32>(vertex % (GEOMIPMAP_BLOCK_QUADS + 1u), vertex / (GEOMIPMAP_BLOCK_QUADS + 1u));
     let s = vec2<i32>(min(b * GEOMIPMAP_BLOCK_QUADS + local, size - 1u));
-    return terrain_vertex(project(s, vec2<f32>(0.0), sample_height(s)), vec2<f32>(s));
+    return TerrainVertex(project(s, vec2<f32>(0.0), sample_height(s)), vec2<f32>(s));
 }
 
 @fragment

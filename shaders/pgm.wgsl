@@ -42,7 +42,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let inside_pos = vec2<f32>(clamp(cell, vec2<i32>(0), last)) + select(frac, vec2<f32>(0.0), outside);
     let uv = (inside_pos + 0.5) / vec2<f32>(frame.data_size.xy);
     let h = textureSampleLevel(height_mips, mip_sampler, uv, level).r;
-    return terrain_vertex(project(cell, frac, h), grid_pos);
+    return TerrainVertex(project(cell, frac, h), grid_pos);
 }
 
 @fragment

@@ -31,7 +31,7 @@ fn vs_pulled(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instan
 // The morphed vertex (`morphed_vertex`, shared with the test probe) projected.
 fn tile_vertex(tile: Tile, local: vec2<u32>) -> TerrainVertex {
     let v = morphed_vertex(tile, local);
-    return terrain_vertex(project(v.cell, v.frac, v.height), v.grid_pos);
+    return TerrainVertex(project(v.cell, v.frac, v.height), v.grid_pos);
 }
 
 @fragment

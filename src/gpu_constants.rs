@@ -48,9 +48,6 @@ shared_constants! {
     /// of more quads is split into blocks: 81 vertices and 128 triangles per workgroup, within
     /// every VK_EXT_mesh_shader device's output limits of 256 each).
     CHUNKED_MESH_QUADS: u32 = 8;
-    /// vec4 of `frame.normal_model`: three xyz columns per term of the quadratic normal model
-    /// (`geo::normal_model`, six terms).
-    NORMAL_MODEL_VEC4S: u32 = 18;
     /// Quads per side of a GeoMipMapping block (blocks of 2^5 + 1 = 33 samples, 6 levels).
     GEOMIPMAP_BLOCK_QUADS: u32 = 32;
     /// Ambient term of the directional light, so slopes facing away from the sun stay readable.

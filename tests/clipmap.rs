@@ -604,20 +604,35 @@ fn shading_planes_carry_normals_albedo_and_their_mips() {
     let geometry = Geometry::of(&ds.dataset);
     let key = NodeKey { lod: 0, x: 3, y: 4 };
     let node = ds.load(key).unwrap();
-    let planes = geometry.shading(0, &node);
+    let planes = geometry.shading(key, &node);
     let side = geometry.side() as usize;
     assert_eq!(geometry.shading_mips(), 4);
     assert_eq!(planes.len() as u64, geometry.shading_texels() * 8);
     // Normal of a centre texel = the single-texture path's normal of the same sample.
     let data = heightmap();
-    let normals = data.normals_snorm8();
+    let normals = data.normals_snorm8(None);
     let (b, c) = (geometry.border as usize, CENTER as usize);
-    for (i, j) in [(0usize, 0usize), (5, 17), (31, 31)] {
-        let (u, v) = (3 * c + i, 4 * c + j);
-        let at = ((j + b) * side + i + b) * 4;
-        let want = (v * data.width as usize + u) * 4;
-        assert_eq!(planes[at..at + 4], normals[want..want + 4], "texel {i},{j}");
-    }
+    let texels = [(0usize, 0usize), (5, 17), (31, 31)];
+    let same_texels = |planes: &[u8], normals: &[u8]| {
+        for (i, j) in texels {
+            let (u, v) = (3 * c + i, 4 * c + j);
+            let at = ((j + b) * side + i + b) * 4;
+            let want = (v * data.width as usize + u) * 4;
+            assert_eq!(planes[at..at + 4], normals[want..want + 4], "texel {i},{j}");
+        }
+    };
+    same_texels(&planes, &normals);
+    // On the earth (a geographic grid of 3" at 60 N) both take their normals to world axes
+    // through the lattice, and agree again; the grid frame's would not (control).
+    let step = 1.0 / 1200.0;
+    let lattice =
+        vkterrain::geo::Lattice::geographic(data.width, data.height, [8.0, 60.0], [step, step])
+            .unwrap();
+    let earth = Geometry::of(&ds.dataset).with_world(Some(std::sync::Arc::new(lattice.clone())));
+    let world_planes = earth.shading(key, &node);
+    let world_normals = data.normals_snorm8(Some(&lattice));
+    same_texels(&world_planes, &world_normals);
+    assert_ne!(world_normals, normals);
     // Albedo mip 1 texel (x, y) = rounded mean of mip-0 texels (2x..2x+1, 2y..2y+1).
     let albedo = geometry.shading_texels() as usize * 4;
     let mip1 = albedo + side * side * 4;

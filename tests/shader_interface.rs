@@ -143,8 +143,6 @@ fn frame_uniforms_match_the_wgsl_struct() {
         ("lattice", offset_of!(FrameUniforms, lattice)),
         ("camera_hi", offset_of!(FrameUniforms, camera_hi)),
         ("camera_lo", offset_of!(FrameUniforms, camera_lo)),
-        ("normal_spacing", offset_of!(FrameUniforms, normal_spacing)),
-        ("normal_model", offset_of!(FrameUniforms, normal_model)),
     ];
     assert_struct_layout(
         &composed_shaders(),

@@ -20,13 +20,6 @@ struct Frame {
     // xyz: the camera's world position split into f32 hi and lo parts.
     camera_hi: vec4<f32>,
     camera_lo: vec4<f32>,
-    // xy: the stated metres between samples along x and y that the normal maps' slopes were
-    // taken with (`Terrain::axis_spacing`); `world_normal` turns them into the lattice's metres.
-    // z: 1 when `normal_model` models the grid's normals (`world_normal`), 0: read the lattice.
-    normal_spacing: vec4<f32>,
-    // The quadratic model of the grid's normal matrices (src/geo/normal_model.rs): three xyz
-    // columns per term, the terms 1, fx, fx^2, fy, fy^2, fx fy of the grid fraction.
-    normal_model: array<vec4<f32>, NORMAL_MODEL_VEC4S>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -47,30 +40,6 @@ struct TerrainVertex {
     @builtin(position) clip: vec4<f32>,
     // Position in sample units (x = column, y = row), for texturing.
     @location(0) grid_pos: vec2<f32>,
-    // The normal model's matrix at the vertex, by columns (`modelled_matrix`), interpolated
-    // across the triangle: the fragment stage's normal is one matrix product. Written where
-    // the grid's normals are modelled (`terrain_vertex`), zero elsewhere and not read.
-    @location(1) normal_x: vec3<f32>,
-    @location(2) normal_y: vec3<f32>,
-    @location(3) normal_z: vec3<f32>,
-}
-
-// A drawn vertex at clip position `clip` and grid position `grid_pos` (samples), with the
-// normal model's matrix when the grid's normals are modelled (`normals_modelled`). The model
-// is quadratic in the grid fraction, so interpolating it linearly across a triangle that spans
-// a fraction `d` of the grid departs from it by at most `d^2 / 8` times its second derivative
-// (docs/coordinates.md, "Normals on the earth").
-fn terrain_vertex(clip: vec4<f32>, grid_pos: vec2<f32>) -> TerrainVertex {
-    var out: TerrainVertex;
-    out.clip = clip;
-    out.grid_pos = grid_pos;
-    if normals_modelled() {
-        let m = modelled_matrix(grid_pos);
-        out.normal_x = m[0];
-        out.normal_y = m[1];
-        out.normal_z = m[2];
-    }
-    return out;
 }
 
 // Height in metres at an integer sample of the single height texture, clamped to the data.
@@ -209,119 +178,12 @@ fn project(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec4<f32> {
     return frame.view_proj * vec4<f32>(relative_position(cell, frac, height_m), 1.0);
 }
 
-// The grid's local frame at a position: the unit up vector `u` and the metres per sample
-// along columns and rows (`ax`, `ay`, not yet made tangent to `u`).
-struct GridFrame {
-    u: vec3<f32>,
-    ax: vec3<f32>,
-    ay: vec3<f32>,
-}
-
-// The grid's frame at `grid_pos` from the lattice (`Lattice::grid_frame` is its CPU twin):
-// the bilinear up vector normalized, the bilinear lattice's derivatives along x and y (node
-// differences, hi and lo parts subtracted separately, interpolated across the cell). Twelve
-// lattice reads per fragment: used only where the quadratic model (`modelled_matrix`) is not close enough.
-fn lattice_grid_frame(grid_pos: vec2<f32>) -> GridFrame {
-    let lstep = i32(frame.lattice.x);
-    let cell = vec2<i32>(floor(grid_pos));
-    let node = clamp(cell / lstep, vec2<i32>(0), vec2<i32>(frame.lattice.yz) - vec2<i32>(2));
-    let f = (grid_pos - vec2<f32>(node * lstep)) / f32(lstep);
-    let i00 = 3 * (node.y * i32(frame.lattice.y) + node.x);
-    let i10 = i00 + 3;
-    let i01 = i00 + 3 * i32(frame.lattice.y);
-    let i11 = i01 + 3;
-    // Node differences along x (south and north edges) and y (west and east edges).
-    let dx0 = (geo_lattice[i10].xyz - geo_lattice[i00].xyz) + (geo_lattice[i10 + 1].xyz - geo_lattice[i00 + 1].xyz);
-    let dx1 = (geo_lattice[i11].xyz - geo_lattice[i01].xyz) + (geo_lattice[i11 + 1].xyz - geo_lattice[i01 + 1].xyz);
-    let dy0 = (geo_lattice[i01].xyz - geo_lattice[i00].xyz) + (geo_lattice[i01 + 1].xyz - geo_lattice[i00 + 1].xyz);
-    let dy1 = (geo_lattice[i11].xyz - geo_lattice[i10].xyz) + (geo_lattice[i11 + 1].xyz - geo_lattice[i10 + 1].xyz);
-    var g: GridFrame;
-    g.u = normalize(mix(
-        mix(geo_lattice[i00 + 2].xyz, geo_lattice[i10 + 2].xyz, f.x),
-        mix(geo_lattice[i01 + 2].xyz, geo_lattice[i11 + 2].xyz, f.x),
-        f.y,
-    ));
-    g.ax = mix(dx0, dx1, f.y) / f32(lstep);
-    g.ay = mix(dy0, dy1, f.x) / f32(lstep);
-    return g;
-}
-
-// Whether the normals come from the quadratic model (`NORMAL_PATH` 1, or 3 with the uniforms
-// saying so).
-fn normals_modelled() -> bool {
-    return NORMAL_PATH == 1u || (NORMAL_PATH == 3u && frame.lattice.x != 0u && frame.normal_spacing.z != 0.0);
-}
-
-// The quadratic model's normal matrix at `grid_pos` (`frame.normal_model`; `NormalModel::matrix`
-// in src/geo/normal_model.rs is its CPU twin): it takes a normal in the grid's frame to world
-// axes (not normalized). No memory reads beyond the uniforms and no frame to build. Taken where
-// the model is within `NORMAL_MODEL_TOLERANCE` of the lattice's matrices at every node
-// (`NormalModel::fit`).
-fn modelled_matrix(grid_pos: vec2<f32>) -> mat3x3<f32> {
-    let f = grid_pos / (vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0));
-    let along_x = model_term(1u) + model_term(2u) * f.x + model_term(5u) * f.y;
-    let along_y = model_term(3u) + model_term(4u) * f.y;
-    return model_term(0u) + along_x * f.x + along_y * f.y;
-}
-
-// Term `i` of the normal model, its matrix (called with constant `i`: constant uniform
-// indices once inlined).
-fn model_term(i: u32) -> mat3x3<f32> {
-    let k = 3u * i;
-    return mat3x3<f32>(frame.normal_model[k].xyz, frame.normal_model[k + 1u].xyz, frame.normal_model[k + 2u].xyz);
-}
-
-// The normal, in world axes, of the terrain at `grid_pos` (samples) whose normal in the grid's
-// frame is `n`: the normal maps hold (-dh/dx, -dh/dy, 1) normalized, slopes per metre along
-// the grid's x (columns) and y (rows) with the stated spacing `frame.normal_spacing.xy`.
-// Flat world: the grid's frame is the world's, `n` as it is. On the earth (a uniform branch)
-// the normal matrix (`normal_matrix` in src/geo/normal_model.rs) times `n`, normalized: its
-// quadratic model over the grid, or built from the grid's frame read from the lattice: `tx`,
-// `ty` the metres per sample along columns and rows made tangent to the up vector `u`. The
-// surface's tangents are `tx + hx u` and `ty + hy u` with `hx = -n.x / n.z * sx` (height per
-// sample), so its normal is their cross product times n.z:
-// `n.x sx (ty x u) + n.y sy (u x tx) + n.z (tx x ty)`: the inverse-transpose (cofactor) of the
-// grid-to-world map applied to `n`. On an orthogonal grid whose stated spacing is its metric
-// one this is the rotation into the local frame (tx, ty, u); it also corrects the slopes where
-// the stated spacing is not the local one (a geographic grid's east-west spacing holds at one
-// latitude). docs/coordinates.md ("Normals on the earth") has the error budget.
-//
-// `NORMAL_PATH` (a constant build.rs prepends) picks the path at compile time: 0 the flat world,
-// 1 the normal model, 2 the lattice (the drawing pipelines take the variant of their terrain:
-// `NormalPath`), 3 whichever the uniforms say (probes and analysis passes).
-fn world_normal(grid_pos: vec2<f32>, n: vec3<f32>) -> vec3<f32> {
-    if NORMAL_PATH == 0u || (NORMAL_PATH == 3u && frame.lattice.x == 0u) {
-        return n;
-    }
-    if normals_modelled() {
-        return normalize(modelled_matrix(grid_pos) * n);
-    }
-    let g = lattice_grid_frame(grid_pos);
-    let u = g.u;
-    let tx = g.ax - dot(g.ax, u) * u;
-    let ty = g.ay - dot(g.ay, u) * u;
-    let s = frame.normal_spacing.xy;
-    return normalize(n.x * s.x * cross(ty, u) + n.y * s.y * cross(u, tx) + n.z * cross(tx, ty));
-}
-
-// The unit world normal a drawn fragment shades with, of `n` from the normal map (in the
-// grid's frame, any length: normalized once, here): as `world_normal`, but the normal model's
-// matrix is interpolated from the vertices (`terrain_vertex`), not evaluated per fragment.
-fn fragment_normal(v: TerrainVertex, n: vec3<f32>) -> vec3<f32> {
-    if NORMAL_PATH == 0u {
-        return normalize(n);
-    }
-    if NORMAL_PATH == 1u {
-        return normalize(mat3x3<f32>(v.normal_x, v.normal_y, v.normal_z) * n);
-    }
-    // The lattice's normal is a linear map of `n`, normalized.
-    return world_normal(v.grid_pos, n);
-}
-
-// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map
-// (in world axes: `fragment_normal`), faded towards the sky with view depth (aerial
-// perspective; the fragment position's w is 1 / clip w, and clip w is the view depth). Through
-// the clipmap albedo and normal come from the atlas (`clipmap_surface`).
+// Cheap shading shared by all methods: albedo times ambient + Lambert from the normal map,
+// faded towards the sky with view depth (aerial perspective; the fragment position's w is
+// 1 / clip w, and clip w is the view depth). Through the clipmap albedo and normal come from
+// the atlas (`clipmap_surface`). The normal maps hold normals in the axes the sun is given in:
+// the grid's in the flat world, the world's on the earth (baked on the host through the
+// lattice: docs/coordinates.md, "Normals on the earth").
 fn shade(v: TerrainVertex) -> vec4<f32> {
     let grid_pos = v.grid_pos;
     let gx = dpdx(grid_pos);
@@ -337,7 +199,7 @@ fn shade(v: TerrainVertex) -> vec4<f32> {
         n = textureSampleGrad(normal_tex, linear_sampler, (grid_pos + 0.5) / size, gx / size, gy / size).xyz;
         albedo = textureSampleGrad(albedo_tex, linear_sampler, grid_pos / (size - 1.0), gx / (size - 1.0), gy / (size - 1.0)).rgb;
     }
-    n = fragment_normal(v, n);
+    n = normalize(n);
     let light = LIGHT_AMBIENT + LIGHT_DIFFUSE * max(dot(n, frame.sun_dir.xyz), 0.0);
     let haze = 1.0 - exp(-frame.haze.w / v.clip.w);
     return vec4<f32>(mix(albedo * light, frame.haze.rgb, haze), 1.0);

@@ -20,9 +20,10 @@ use std::sync::Arc;
 use glam::DVec2;
 
 use crate::dataset::NodeStore;
-use crate::dataset::interp;
+use crate::dataset::interp::{self, NormalAxes};
 use crate::dataset::tiles::Dataset;
 use crate::error::{Error, Result};
+use crate::geo::Lattice;
 use crate::gpu_constants::CLIPMAP_MAX_LEVELS;
 use atlas::Atlas;
 use quadtree::ViewQuadtree;
@@ -120,6 +121,9 @@ pub struct Geometry {
     pub axis_spacing: [f64; 2],
     /// Level-0 height range (metres), for the colour ramp of untextured data.
     pub height_range: [f32; 2],
+    /// On the earth, the geolocation lattice the terrain is drawn through: the shading
+    /// planes' normals are then in world axes ([`Geometry::with_world`]); None: the grid's.
+    pub world: Option<Arc<Lattice>>,
 }
 
 impl Geometry {
@@ -135,6 +139,7 @@ impl Geometry {
             spacing: store.spacing()[1],
             axis_spacing: store.spacing(),
             height_range: store.height_range(),
+            world: None,
         }
     }
 
@@ -145,6 +150,14 @@ impl Geometry {
             self.spacing =
                 crate::dataset::tiles::native_lod_spacing(georef, self.height, self.axis_spacing);
         }
+        self
+    }
+
+    /// The geometry for a terrain drawn through `lattice` on the earth: normals in world
+    /// axes, where the drawing shaders light them (docs/coordinates.md, "Normals on the
+    /// earth").
+    pub fn with_world(mut self, lattice: Option<Arc<Lattice>>) -> Self {
+        self.world = lattice;
         self
     }
 
@@ -159,6 +172,7 @@ impl Geometry {
             spacing: ds.manifest.spacing[1],
             axis_spacing: ds.manifest.spacing,
             height_range: ds.manifest.height_range,
+            world: None,
         }
     }
 
@@ -180,24 +194,51 @@ impl Geometry {
             .sum()
     }
 
-    /// The shading planes of a node for the atlas: RGBA8 snorm normals (central differences
-    /// inside the node, borders included; one-sided at its outer texels) with their mips,
-    /// followed by RGBA8 sRGB albedo (the data set's, else the height/slope ramp) with its
-    /// mips (2x2 box averages per channel; normals are renormalised in the shader).
-    pub fn shading(&self, lod: u32, node: &NodeData) -> Vec<u8> {
+    /// The shading planes of node `key` for the atlas: RGBA8 snorm normals (central
+    /// differences inside the node, borders included; one-sided at its outer texels; in world
+    /// axes on the earth) with their mips, followed by RGBA8 sRGB albedo (the data set's, else
+    /// the height/slope ramp) with its mips (2x2 box averages per channel; normals are
+    /// renormalised in the shader).
+    pub fn shading(&self, key: NodeKey, node: &NodeData) -> Vec<u8> {
         let s = self.side() as usize;
         let texels = s * s;
-        let scale = (1u64 << lod.min(62)) as f64;
+        let scale = (1u64 << key.lod.min(62)) as f64;
         let step = self.axis_spacing.map(|a| a * scale);
-        let normals = interp::normals_snorm8(s, s, step, |i, j| node.heights[j * s + i] as f64);
+        let heights = |i: usize, j: usize| node.heights[j * s + i] as f64;
+        let grid_normals = || interp::normals_snorm8(s, s, &NormalAxes::Grid(step), heights);
+        let normals = match &self.world {
+            None => grid_normals(),
+            Some(lattice) => {
+                // Texel (i, j) of node (x, y) is level-`lod` sample `x * center + i - border`
+                // (unclamped: beyond the data the lattice extrapolates, so the chords stay
+                // non-zero), whose centre is level-0 sample `t * 2^lod + (2^lod - 1) / 2`
+                // (`clipmap_level_coord` in clipmap.wgsl).
+                let c = self.center as f64;
+                let b = self.border as f64;
+                let origin = DVec2::new(key.x as f64 * c - b, key.y as f64 * c - b) * scale
+                    + DVec2::splat((scale - 1.0) / 2.0);
+                let position = |i: usize, j: usize, height: f64| {
+                    lattice.position(origin + DVec2::new(i as f64, j as f64) * scale, height)
+                };
+                interp::normals_snorm8(s, s, &NormalAxes::World(&position), heights)
+            }
+        };
         let albedo = match &node.rgba {
             Some(rgba) => rgba.clone(),
             None => {
+                // The ramp goes by the slope: the grid frame's normals.
+                let grid;
+                let slopes: &[u8] = if self.world.is_some() {
+                    grid = grid_normals();
+                    &grid
+                } else {
+                    &normals
+                };
                 let [lo, hi] = self.height_range;
                 let span = (hi - lo).max(1.0);
                 (0..texels)
                     .flat_map(|t| {
-                        crate::dataset::ramp_rgba(node.heights[t], lo, span, normals[t * 4 + 2])
+                        crate::dataset::ramp_rgba(node.heights[t], lo, span, slopes[t * 4 + 2])
                     })
                     .collect()
             }
@@ -416,7 +457,7 @@ impl Clipmap {
             .load(root)
             .and_then(|n| geometry.check(root, &n).map(|()| n))
             .map_err(|e| Error::invalid("clipmap root node", e.to_string()))?;
-        let shading = geometry.shading(root.lod, &node);
+        let shading = geometry.shading(root, &node);
         let layer = atlas
             .allocate(root, 0, true)
             .ok_or_else(|| Error::invalid("clipmap", "atlas has no layer for the root"))?;

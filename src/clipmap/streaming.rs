@@ -58,7 +58,7 @@ impl Streamer {
                                     src.load(key)
                                         .and_then(|n| geometry.check(key, &n).map(|()| n))
                                         .map(|n| {
-                                            let shading = geometry.shading(key.lod, &n);
+                                            let shading = geometry.shading(key, &n);
                                             (n, shading)
                                         })
                                 })) {

@@ -40,13 +40,14 @@ impl Config {
     }
 
     /// The clipmap `[clipmap]` asks for, with a quadtree per camera of a frame; `None` when
-    /// disabled.
-    pub fn open_clipmap(&self) -> Result<Option<Clipmap>> {
+    /// disabled. `lattice`: the one the renderer draws through on the earth (the shading
+    /// planes' normals are then in world axes), None in the flat world.
+    pub fn open_clipmap(&self, lattice: Option<&Lattice>) -> Result<Option<Clipmap>> {
         if !self.clipmap.enabled {
             return Ok(None);
         }
         let store = self.open_store()?;
-        let mut geometry = Geometry::of_store(&*store);
+        let mut geometry = Geometry::of_store(&*store).with_world(lattice.cloned().map(Arc::new));
         if self.load_grid() == LoadGrid::Native {
             geometry = geometry.with_native_spacing(store.georef()?.as_ref());
         }
@@ -88,7 +89,7 @@ impl Config {
             data.clone(),
             self.method.clone(),
             options,
-            self.open_clipmap()?,
+            self.open_clipmap(lattice.as_ref())?,
             lattice.as_ref(),
         )?;
         // The frames' camera heights: above the ellipsoid where the lattice carries the

@@ -6,6 +6,8 @@
 //! compares the two (`clipmap::quadtree`, `lod::udlod::select`), not here: these helpers work in
 //! f64 on the host.
 
+use glam::DVec3;
+
 /// Where a position in sample units falls in a `width x height` grid, clamped to the grid: the
 /// cell's south-west sample `(c0, r0)`, its far corner `(c1, r1)` (clamped to the last sample)
 /// and the fraction `(fx, fy)` inside the cell.
@@ -80,31 +82,70 @@ pub fn triangulated([h00, h10, h01, h11]: [f64; 4], fx: f64, fy: f64) -> f64 {
     }
 }
 
-/// Unit surface normals of a `width x height` grid of heights (`height(col, row)`, metres,
-/// samples `step` metres apart) from central differences, one-sided at the grid's edges, packed
-/// as RGBA8 snorm `(x, y, z, 0)` row by row (the layout of the normal textures).
+/// The axes a normal map's normals are given in.
+pub enum NormalAxes<'a> {
+    /// The grid's own frame: slopes over the stated metres between texels along x and y.
+    Grid([f64; 2]),
+    /// World axes: the normal of the surface through the texels' world positions,
+    /// `position(col, row, height)` (on the earth the geolocation lattice's, where the drawn
+    /// vertices lie).
+    World(&'a (dyn Fn(usize, usize, f64) -> DVec3 + Sync)),
+}
+
+/// Unit surface normals of a `width x height` grid of heights (`height(col, row)`, metres) from
+/// central differences, one-sided at the grid's edges, in `axes`, packed as RGBA8 snorm
+/// `(x, y, z, 0)` row by row (the layout of the normal textures). In world axes the normal is
+/// the cross product of the two central chords between the texels' world positions, which on
+/// a flat grid of the stated spacing is the grid-frame normal exactly.
 pub fn normals_snorm8(
     width: usize,
     height: usize,
-    step: [f64; 2],
-    heights: impl Fn(usize, usize) -> f64,
+    axes: &NormalAxes,
+    heights: impl Fn(usize, usize) -> f64 + Sync,
 ) -> Vec<u8> {
-    let mut out = Vec::with_capacity(width * height * 4);
-    for r in 0..height {
-        for c in 0..width {
-            let (cl, cr) = (c.saturating_sub(1), (c + 1).min(width - 1));
-            let (rd, ru) = (r.saturating_sub(1), (r + 1).min(height - 1));
+    use rayon::prelude::*;
+    (0..height)
+        .into_par_iter()
+        .flat_map_iter(|r| {
+            let heights = &heights;
+            (0..width).flat_map(move |c| snorm8(normal_at(width, height, axes, heights, c, r)))
+        })
+        .collect()
+}
+
+/// The unit normal at sample `(c, r)` of [`normals_snorm8`], before quantization.
+pub fn normal_at(
+    width: usize,
+    height: usize,
+    axes: &NormalAxes,
+    heights: impl Fn(usize, usize) -> f64,
+    c: usize,
+    r: usize,
+) -> DVec3 {
+    let (cl, cr) = (c.saturating_sub(1), (c + 1).min(width - 1));
+    let (rd, ru) = (r.saturating_sub(1), (r + 1).min(height - 1));
+    match axes {
+        NormalAxes::Grid(step) => {
             let dx = (heights(cr, r) - heights(cl, r)) / ((cr - cl) as f64 * step[0]);
             let dy = (heights(c, ru) - heights(c, rd)) / ((ru - rd) as f64 * step[1]);
-            out.extend(normal_snorm8(dx, dy));
+            DVec3::new(-dx, -dy, 1.0).normalize()
+        }
+        NormalAxes::World(position) => {
+            let at = |c: usize, r: usize| position(c, r, heights(c, r));
+            let along_x = at(cr, r) - at(cl, r);
+            let along_y = at(c, ru) - at(c, rd);
+            along_x.cross(along_y).normalize()
         }
     }
-    out
 }
 
 /// A unit normal from the height gradient (metres per metre), as RGBA8 snorm `(x, y, z, 0)`.
 pub fn normal_snorm8(dx: f64, dy: f64) -> [u8; 4] {
-    let n = glam::DVec3::new(-dx, -dy, 1.0).normalize();
+    snorm8(DVec3::new(-dx, -dy, 1.0).normalize())
+}
+
+/// A unit vector as RGBA8 snorm `(x, y, z, 0)`.
+fn snorm8(n: DVec3) -> [u8; 4] {
     [n.x, n.y, n.z, 0.0].map(|v| ((v * 127.0).round().clamp(-127.0, 127.0) as i8) as u8)
 }
 
@@ -141,9 +182,27 @@ mod tests {
     fn normals_of_a_plane_are_its_normal_everywhere_including_edges() {
         // z = 0.5 x: normal (-0.5, 0, 1) / |..|, at every sample (one-sided differences agree
         // with central ones on a plane).
-        let n = normals_snorm8(5, 3, [2.0, 2.0], |c, _| c as f64);
+        let n = normals_snorm8(5, 3, &NormalAxes::Grid([2.0, 2.0]), |c, _| c as f64);
         let want = normal_snorm8(0.5, 0.0);
         assert!(n.chunks_exact(4).all(|t| t == want));
         assert_eq!(n.len(), 5 * 3 * 4);
+    }
+
+    /// World axes through positions that are the grid's own (the flat world: `(c sx, r sy,
+    /// h)`) give the grid frame's normals; a mirrored grid (rows running south) flips them.
+    #[test]
+    fn world_axes_through_the_grids_own_positions_are_the_grid_frame() {
+        let heights =
+            |c: usize, r: usize| ((c * 7 + r * 3) % 5) as f64 * 1.5 + (c * r) as f64 * 0.25;
+        let step = [2.0, 3.0];
+        let grid = normals_snorm8(6, 5, &NormalAxes::Grid(step), heights);
+        let flat =
+            |c: usize, r: usize, h: f64| DVec3::new(c as f64 * step[0], r as f64 * step[1], h);
+        let world = normals_snorm8(6, 5, &NormalAxes::World(&flat), heights);
+        assert_eq!(world, grid);
+        let mirrored =
+            |c: usize, r: usize, h: f64| DVec3::new(c as f64 * step[0], -(r as f64) * step[1], h);
+        let flipped = normals_snorm8(6, 5, &NormalAxes::World(&mirrored), heights);
+        assert_ne!(flipped, grid);
     }
 }

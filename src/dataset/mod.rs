@@ -27,8 +27,9 @@ pub mod world;
 pub mod xyz;
 
 use crate::error::{Error, Result};
-use interp::GridCell;
+use glam::DVec2;
 pub use interp::normal_snorm8;
+use interp::{GridCell, NormalAxes};
 pub use level0::{DiskStore, Level0, NodeStore, PyramidReader, Terrain};
 
 /// A regular height grid in metres, with optional albedo of the same extent.
@@ -168,14 +169,21 @@ impl Heightmap {
     }
 
     /// Unit surface normal at each sample from central differences (one-sided at the edges),
-    /// packed as RGBA8 snorm (x, y, z, 0) for the normal texture.
-    pub fn normals_snorm8(&self) -> Vec<u8> {
-        interp::normals_snorm8(
-            self.width as usize,
-            self.height as usize,
-            self.axis_spacing,
-            |c, r| self.sample(c as u32, r as u32) as f64,
-        )
+    /// packed as RGBA8 snorm (x, y, z, 0) for the normal texture: in the grid's frame, or with
+    /// the geolocation `lattice` in world axes (the surface through the samples where the
+    /// lattice draws them).
+    pub fn normals_snorm8(&self, lattice: Option<&crate::geo::Lattice>) -> Vec<u8> {
+        let heights = |c: usize, r: usize| self.sample(c as u32, r as u32) as f64;
+        let (w, h) = (self.width as usize, self.height as usize);
+        match lattice {
+            None => interp::normals_snorm8(w, h, &NormalAxes::Grid(self.axis_spacing), heights),
+            Some(l) => {
+                let position = |c: usize, r: usize, height: f64| {
+                    l.position(DVec2::new(c as f64, r as f64), height)
+                };
+                interp::normals_snorm8(w, h, &NormalAxes::World(&position), heights)
+            }
+        }
     }
 
     /// The albedo to draw: the data's own if it has one, else a colour ramp by height and
@@ -186,7 +194,7 @@ impl Heightmap {
         }
         let (lo, hi) = self.height_range();
         let span = (hi - lo).max(1.0);
-        let normals = self.normals_snorm8();
+        let normals = self.normals_snorm8(None);
         let mut rgba = Vec::with_capacity(self.heights.len() * 4);
         for (i, &h) in self.heights.iter().enumerate() {
             rgba.extend(ramp_rgba(h, lo, span, normals[i * 4 + 2]));

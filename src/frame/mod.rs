@@ -6,6 +6,6 @@ pub mod terrain;
 pub mod uniforms;
 pub mod view;
 
-pub use terrain::{NormalPath, TerrainGpu, TerrainInfo};
+pub use terrain::{TerrainGpu, TerrainInfo};
 pub use uniforms::{FrameUniforms, Lighting};
 pub use view::ViewState;

@@ -13,7 +13,6 @@ use crate::driver::Gpu;
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::{Buffer, Image};
 use crate::error::{Error, Result, VkResultExt};
-use crate::geo::normal_model::{NORMAL_MODEL_TOLERANCE, NORMAL_MODEL_VEC4S, NormalModel};
 use crate::slots::ViewSlot;
 
 /// Descriptor set 0, shared by every terrain shader (`shaders/include/terrain_common.wgsl` and
@@ -59,72 +58,11 @@ pub struct TerrainInfo {
     pub width: u32,
     pub height: u32,
     pub spacing: f64,
-    /// Stated metres between samples along x and y, as the normal maps' slopes take them
-    /// (`Terrain::axis_spacing`).
-    pub axis_spacing: [f64; 2],
-    /// On the earth, where one quadratic model of the grid's normal matrices is within
-    /// [`NORMAL_MODEL_TOLERANCE`] of the lattice's: its terms ([`NormalModel::to_gpu`];
-    /// `frame.normal_model`), which `world_normal` evaluates instead of reading the lattice per
-    /// fragment.
-    pub normal_model: Option<[[f32; 4]; NORMAL_MODEL_VEC4S]>,
     pub min_height: f32,
     pub max_height: f32,
     /// The geolocation lattice's `[step, nodes per row, nodes per column, curve radius]` (the
     /// last the f32 bits of [`crate::geo::Lattice::curve_radius`]); None: flat world.
     pub lattice: Option<[u32; 4]>,
-}
-
-/// Which of `world_normal`'s paths a terrain's drawing shaders compile (build.rs builds each
-/// drawing shader once per path, `*_SPV_BY_NORMALS` in this order): the flat world's normal as
-/// it is, the normal model, or the lattice. One path per pipeline, because the unused paths'
-/// registers cost the fragment stage even where their branch is never taken (the clipmap's
-/// ~0.1 ms at 1080p on the H200; docs/coordinates.md, "Reduced").
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum NormalPath {
-    Flat = 0,
-    Model = 1,
-    Lattice = 2,
-}
-
-impl NormalPath {
-    /// The SPIR-V of this path among a drawing shader's variants.
-    pub fn pick(self, variants: &[&'static [u8]; 3]) -> &'static [u8] {
-        variants[self as usize]
-    }
-}
-
-/// The quadratic model of `lattice`'s normal matrices for `world_normal` when it is within
-/// [`NORMAL_MODEL_TOLERANCE`] of the lattice's at every node (a grid of a few degrees), else
-/// None (`world_normal` reads the lattice per fragment).
-fn fitted_normal_model(
-    lattice: &crate::geo::Lattice,
-    width: u32,
-    height: u32,
-    stated_spacing: [f64; 2],
-) -> Option<[[f32; 4]; NORMAL_MODEL_VEC4S]> {
-    let (model, departure) = NormalModel::fit(lattice, width, height, stated_spacing);
-    let taken = departure <= NORMAL_MODEL_TOLERANCE;
-    tracing::debug!(
-        "normals on the earth: the quadratic model departs {departure:.2e} rad from the \
-         lattice's normals ({})",
-        if taken {
-            "modelled"
-        } else {
-            "read from the lattice per fragment"
-        }
-    );
-    taken.then(|| model.to_gpu())
-}
-
-impl TerrainInfo {
-    /// The `world_normal` path this terrain's drawing shaders take.
-    pub fn normal_path(&self) -> NormalPath {
-        match (self.lattice, self.normal_model) {
-            (None, _) => NormalPath::Flat,
-            (Some(_), Some(_)) => NormalPath::Model,
-            (Some(_), None) => NormalPath::Lattice,
-        }
-    }
 }
 
 /// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.
@@ -196,7 +134,7 @@ impl TerrainGpu {
             )
         } else {
             let data = data.require_grid("the single-texture path (clipmap off)")?;
-            Self::textures(gpu, data)?
+            Self::textures(gpu, data, lattice)?
         };
         let (min_height, max_height) = data.height_range();
         let info = TerrainInfo {
@@ -204,10 +142,6 @@ impl TerrainGpu {
             width: data.width(),
             height: data.height(),
             spacing: data.spacing(),
-            axis_spacing: data.axis_spacing(),
-            normal_model: lattice.and_then(|l| {
-                fitted_normal_model(l, data.width(), data.height(), data.axis_spacing())
-            }),
             min_height,
             max_height,
             lattice: lattice.map(|l| {
@@ -313,7 +247,11 @@ impl TerrainGpu {
     }
 
     /// The full-resolution height, normal and albedo textures of the single-texture path.
-    fn textures(gpu: &Arc<Gpu>, data: &Heightmap) -> Result<(Image, Image, Image)> {
+    fn textures(
+        gpu: &Arc<Gpu>,
+        data: &Heightmap,
+        lattice: Option<&crate::geo::Lattice>,
+    ) -> Result<(Image, Image, Image)> {
         let max_side = gpu.info.limits.max_image_dimension2_d;
         if data.width > max_side || data.height > max_side {
             return Err(Error::invalid(
@@ -331,13 +269,17 @@ impl TerrainGpu {
         let heights = bytemuck::cast_slice(&data.heights);
         let height =
             Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, extent, heights)?;
-        let normal = Image::texture_with_data(
-            gpu,
-            "normals",
-            vk::Format::R8G8B8A8_SNORM,
-            extent,
-            &data.normals_snorm8(),
-        )?;
+        let baking = std::time::Instant::now();
+        let normals = data.normals_snorm8(lattice);
+        tracing::debug!(
+            "normal map {}x{} ({} axes) in {:.0} ms",
+            data.width,
+            data.height,
+            if lattice.is_some() { "world" } else { "grid" },
+            baking.elapsed().as_secs_f64() * 1e3
+        );
+        let normal =
+            Image::texture_with_data(gpu, "normals", vk::Format::R8G8B8A8_SNORM, extent, &normals)?;
         let albedo_data = data.albedo_or_ramp();
         let albedo = Image::texture_with_data(
             gpu,

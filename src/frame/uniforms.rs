@@ -32,13 +32,6 @@ pub struct FrameUniforms {
     /// The camera's world position split into f32 `hi` and `lo` parts (xyz).
     pub camera_hi: [f32; 4],
     pub camera_lo: [f32; 4],
-    /// xy: the stated metres between samples along x and y that the normal maps' slopes were
-    /// taken with ([`super::TerrainInfo::axis_spacing`]; `world_normal` on the earth).
-    pub normal_spacing: [f32; 4],
-    /// The quadratic model of the grid's normal matrices (three xyz columns per term), which
-    /// `world_normal` evaluates when `normal_spacing.z` is 1
-    /// ([`super::TerrainInfo::normal_model`]).
-    pub normal_model: [[f32; 4]; crate::geo::normal_model::NORMAL_MODEL_VEC4S],
 }
 
 impl FrameUniforms {
@@ -75,17 +68,6 @@ impl FrameUniforms {
             lattice,
             camera_hi: [hi[0], hi[1], hi[2], 0.0],
             camera_lo: [lo[0], lo[1], lo[2], 0.0],
-            normal_spacing: [
-                data.axis_spacing[0] as f32,
-                data.axis_spacing[1] as f32,
-                if data.normal_model.is_some() {
-                    1.0
-                } else {
-                    0.0
-                },
-                0.0,
-            ],
-            normal_model: data.normal_model.unwrap_or_default(),
         }
     }
 }

@@ -30,11 +30,6 @@ pub const CELL_M: f64 = 500.0;
 /// Floats per lattice node on the GPU: three vec4 (hi.xyz, lo.xyz, up.xyz; w unused).
 pub const NODE_FLOATS: usize = 12;
 
-/// The grid's local frame at a sample position, as `world_normal` uses it: the unit up
-/// vector `u` and the metres per sample along columns (`tx`) and rows (`ty`), each tangent to
-/// `u`: `[u, tx, ty]`.
-pub type GridFrame = [DVec3; 3];
-
 /// Where the samples of a grid lie on the ellipsoid, every `step` samples.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Lattice {
@@ -411,20 +406,6 @@ impl Lattice {
         let i = ((s.x / step).floor() as i64).clamp(0, last[0]);
         let j = ((s.y / step).floor() as i64).clamp(0, last[1]);
         (i, j, (s - DVec2::new(i as f64, j as f64) * step) / step)
-    }
-
-    /// The grid's frame at sample position `s` from the lattice, as `lattice_grid_frame` in
-    /// `shaders/include/terrain_common.wgsl` takes it: the bilinear up vector normalized; the
-    /// bilinear lattice's derivatives along columns and rows (node differences, interpolated
-    /// across the cell) over the step, made tangent to it.
-    pub fn grid_frame(&self, s: DVec2) -> GridFrame {
-        let ([(p00, u00), (p10, u10), (p01, u01), (p11, u11)], f) = self.cell_nodes(s);
-        let lerp = |a: DVec3, b: DVec3, t: f64| a * (1.0 - t) + b * t;
-        let u = lerp(lerp(u00, u10, f.x), lerp(u01, u11, f.x), f.y).normalize();
-        let step = self.step as f64;
-        let ax = lerp(p10 - p00, p11 - p01, f.y) / step;
-        let ay = lerp(p01 - p00, p11 - p10, f.x) / step;
-        [u, ax - u * ax.dot(u), ay - u * ay.dot(u)]
     }
 
     /// Metres per sample along columns and rows at sample position `s` and `height` on the

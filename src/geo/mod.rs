@@ -9,7 +9,6 @@
 pub mod ellipsoid;
 pub mod frame;
 pub mod lattice;
-pub mod normal_model;
 pub mod pose;
 
 pub use ellipsoid::{Geodetic, WGS84};

@@ -67,11 +67,7 @@ impl BruteForce {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: ctx
-                    .terrain
-                    .info
-                    .normal_path()
-                    .pick(&crate::driver::shaders::BRUTE_SPV_BY_NORMALS),
+                spv: crate::driver::shaders::BRUTE_SPV,
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout],

@@ -257,6 +257,7 @@ impl Renderer {
         options.check(gpu)?;
         if let Some(c) = &clipmap {
             check_level0(c, &data)?;
+            check_normal_axes(c, lattice)?;
         }
         let layout = options.layout();
         let clipmap = ClipmapStage::new(gpu, clipmap, layout)?;
@@ -571,6 +572,21 @@ fn check_level0(clipmap: &Clipmap, data: &Terrain) -> Result<()> {
             data.height()
         ),
     ))
+}
+
+/// The clipmap's shading planes hold normals in the axes the renderer lights in: world axes
+/// through the renderer's lattice on the earth, the grid's in the flat world
+/// (`Geometry::with_world`).
+fn check_normal_axes(clipmap: &Clipmap, lattice: Option<&crate::geo::Lattice>) -> Result<()> {
+    match (clipmap.geometry.world.as_deref(), lattice) {
+        (None, None) => Ok(()),
+        (Some(a), Some(b)) if a == b => Ok(()),
+        _ => Err(Error::invalid(
+            "clipmap",
+            "its normals are not in the renderer's axes (build its geometry `with_world` the \
+             renderer's lattice)",
+        )),
+    }
 }
 
 /// Columns `(first, count)` of view `view` of `views` side by side in `width` columns.

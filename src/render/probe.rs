@@ -25,53 +25,7 @@ pub struct TerrainProbePoint {
     pub clip: [f32; 4],
 }
 
-/// One point of the world-normal probe (`NormalProbePoint` in `shaders/normal_probe.wgsl`).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct NormalProbePoint {
-    /// In: xy the position (samples).
-    pub pos: [f32; 4],
-    /// In: xyz the normal in the grid's frame; out: xyz `world_normal(pos.xy, in)`.
-    pub normal: [f32; 4],
-}
-
 impl Renderer {
-    /// Tests: `world_normal` (the normal every method shades with, in world axes) at each
-    /// `(grid position, grid-frame normal)` through the set 0 view `view` had in the last
-    /// rendered frame. Call after [`Renderer::finish`]; waits for the GPU.
-    pub fn probe_world_normals(
-        &self,
-        view: usize,
-        points: &[([f32; 2], [f32; 3])],
-    ) -> Result<Vec<[f32; 3]>> {
-        let slot = self.last_view_slot("probe_world_normals", view)?;
-        let header = [points.len() as u32, 0, 0, 0];
-        let points: Vec<NormalProbePoint> = points
-            .iter()
-            .map(|(p, n)| NormalProbePoint {
-                pos: [p[0], p[1], 0.0, 0.0],
-                normal: [n[0], n[1], n[2], 0.0],
-            })
-            .collect();
-        let io = [bytemuck::bytes_of(&header), bytemuck::cast_slice(&points)].concat();
-        let groups = (points.len() as u32)
-            .div_ceil(crate::gpu_constants::TERRAIN_PROBE_WORKGROUP)
-            .max(1);
-        let out = crate::driver::probe::run(
-            &self.gpu,
-            crate::driver::shaders::NORMAL_PROBE_SPV,
-            c"probe_main",
-            &[(self.terrain.descriptors.layout, self.terrain.set(slot))],
-            &io,
-            groups,
-        )?;
-        let out: Vec<NormalProbePoint> = bytemuck::pod_collect_to_vec(&out[size_of_val(&header)..]);
-        Ok(out
-            .iter()
-            .map(|p| [p.normal[0], p.normal[1], p.normal[2]])
-            .collect())
-    }
-
     /// Tests: runs the terrain-helper probe `entry` of `spv` (WGSL's `terrain_probe` or the
     /// GLSL port's `terrain_probe.comp`) over `points` through the set 0 view `view` had in
     /// the last rendered frame. Call after [`Renderer::finish`]; waits for the GPU.

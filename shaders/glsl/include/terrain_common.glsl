@@ -26,10 +26,6 @@ layout(set = 0, binding = 0, std140) uniform Frame {
     // xyz: the camera's world position split into f32 hi and lo parts.
     vec4 camera_hi;
     vec4 camera_lo;
-    // xy: the stated metres between samples of the normal maps (`world_normal` in the WGSL;
-    // the GLSL stages do not shade); z: 1 when `normal_model` models the grid's normals.
-    vec4 normal_spacing;
-    vec4 normal_model[NORMAL_MODEL_VEC4S];
 } frame;
 layout(set = 0, binding = 1) uniform texture2D height_tex;
 
@@ -256,28 +252,3 @@ vec4 project(ivec2 cell, vec2 frac_, float height_m) {
     return frame.view_proj * vec4(relative_position(cell, frac_, height_m), 1.0);
 }
 
-// Term `i` of the normal model, its matrix (`model_term` in the WGSL).
-mat3 model_term(uint i) {
-    uint k = 3u * i;
-    return mat3(frame.normal_model[k].xyz, frame.normal_model[k + 1u].xyz, frame.normal_model[k + 2u].xyz);
-}
-
-// The normal model's matrix at `grid_pos` (`modelled_matrix` in the WGSL), the same sums in
-// the same order.
-mat3 modelled_matrix(vec2 grid_pos) {
-    vec2 f = grid_pos / (vec2(frame.data_size.xy) - vec2(1.0));
-    mat3 along_x = model_term(1u) + model_term(2u) * f.x + model_term(5u) * f.y;
-    mat3 along_y = model_term(3u) + model_term(4u) * f.y;
-    return model_term(0u) + along_x * f.x + along_y * f.y;
-}
-
-// `TerrainVertex.normal_x/y/z` of the WGSL fragment stage for a vertex at `grid_pos`
-// (`terrain_vertex` in the WGSL): the normal model's matrix where the grid's normals are
-// modelled, zero elsewhere (the fragment stage reads it only where they are). The GLSL stages
-// are compiled once for every normal path, so the uniforms decide.
-mat3 vertex_normal_matrix(vec2 grid_pos) {
-    if (frame.lattice.x == 0u || frame.normal_spacing.z == 0.0) {
-        return mat3(0.0);
-    }
-    return modelled_matrix(grid_pos);
-}

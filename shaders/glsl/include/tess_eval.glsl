@@ -6,11 +6,8 @@
 //!include tess_common.glsl
 
 layout(location = 0) in vec2 in_grid[];
-// `TerrainVertex.grid_pos` and `normal_x/y/z` of the WGSL fragment stage.
+// `TerrainVertex.grid_pos` of the WGSL fragment stage.
 layout(location = 0) out vec2 out_grid_pos;
-layout(location = 1) out vec3 out_normal_x;
-layout(location = 2) out vec3 out_normal_y;
-layout(location = 3) out vec3 out_normal_z;
 
 // Height of the displaced surface at `g`: the bilinear field (Fischer: the height map sampled),
 // or, with `surface = "mesh"` (tess.flags.z, not through the clipmap), brute force's triangles
@@ -40,8 +37,4 @@ void main() {
     vec2 base = floor(g);
     gl_Position = vulkan_clip(project(ivec2(base), g - base, h));
     out_grid_pos = g;
-    mat3 m = vertex_normal_matrix(g);
-    out_normal_x = m[0];
-    out_normal_y = m[1];
-    out_normal_z = m[2];
 }

@@ -175,11 +175,7 @@ impl Pipelines {
         draw: ChunkDraw,
     ) -> Result<Pipeline> {
         let desc = TerrainPipelineDesc {
-            spv: ctx
-                .terrain
-                .info
-                .normal_path()
-                .pick(&crate::driver::shaders::CHUNKED_SPV_BY_NORMALS),
+            spv: crate::driver::shaders::CHUNKED_SPV,
             vertex_entry: c"vs_main",
             fragment_entry: c"fs_main",
             set_layouts,

@@ -240,11 +240,7 @@ impl Geomipmap {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: ctx
-                    .terrain
-                    .info
-                    .normal_path()
-                    .pick(&crate::driver::shaders::GEOMIPMAP_SPV_BY_NORMALS),
+                spv: crate::driver::shaders::GEOMIPMAP_SPV,
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout],

@@ -661,11 +661,7 @@ impl Pgm {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: ctx
-                    .terrain
-                    .info
-                    .normal_path()
-                    .pick(&crate::driver::shaders::PGM_SPV_BY_NORMALS),
+                spv: crate::driver::shaders::PGM_SPV,
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout, sets.layout],

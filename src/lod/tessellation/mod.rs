@@ -191,7 +191,7 @@ impl Tessellation {
             ctx.gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: ctx.terrain.info.normal_path().pick(&s::TESS_SPV_BY_NORMALS),
+                spv: s::TESS_SPV,
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout, set1],

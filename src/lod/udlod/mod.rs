@@ -309,11 +309,7 @@ impl Udlod {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: ctx
-                    .terrain
-                    .info
-                    .normal_path()
-                    .pick(&crate::driver::shaders::UDLOD_SPV_BY_NORMALS),
+                spv: crate::driver::shaders::UDLOD_SPV,
                 vertex_entry: if settings.vertex_pulling {
                     c"vs_pulled"
                 } else {
