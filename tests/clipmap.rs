@@ -568,6 +568,46 @@ fn slow_loads_are_bounded_prioritised_and_cancelled_when_unwanted() {
     assert_cells_resolve(&cm);
 }
 
+/// A renderer on the earth takes only a clipmap whose shading planes hold world-axes normals
+/// through its own lattice (`Geometry::with_world`); the grid's normals there would light the
+/// terrain by the wrong vertical. One-line error, nothing built.
+#[test]
+fn an_earth_renderer_refuses_a_clipmap_with_grid_frame_normals() {
+    let gpu = common::gpu(true);
+    let data = heightmap();
+    let step = 1.0 / 1200.0;
+    let lattice =
+        vkterrain::geo::Lattice::geographic(data.width, data.height, [8.0, 60.0], [step, step])
+            .unwrap();
+    let open = |world: Option<Arc<vkterrain::geo::Lattice>>| {
+        let ds = DatasetSource::open(dataset()).unwrap();
+        let geometry = Geometry::of(&ds.dataset).with_world(world);
+        Clipmap::new(geometry, settings(6, 80), Arc::new(ds), 1).unwrap()
+    };
+    let renderer = |cm: Clipmap| {
+        Renderer::with_world(
+            &gpu,
+            &data,
+            MethodKind::Brute,
+            common::options(64, 40, 1),
+            Some(cm),
+            Some(&lattice),
+        )
+    };
+    let refused = renderer(open(None))
+        .err()
+        .expect("grid-frame normals refused");
+    let message = refused.to_string();
+    assert!(
+        message.contains("normals are not in the renderer's axes"),
+        "{message}"
+    );
+    assert!(!message.contains('\n'), "{message}");
+    // Control: the same clipmap built through the renderer's lattice is taken.
+    assert!(renderer(open(Some(Arc::new(lattice.clone())))).is_ok());
+    common::assert_no_validation_messages(&gpu);
+}
+
 #[test]
 fn legacy_barrier_path_streams_without_validation_messages() {
     let gpu = common::gpu(true);
