@@ -673,7 +673,9 @@ fn earth_selections(
             assert_eq!(counters["overflow"], 0);
             let viewer = common::poses::grid_viewer(lattice, data.spacing, cam.position);
             let flat = SelectionParams::new(&levels, data, lod, cam, viewer, W, H);
-            let earth = flat.clone().on_earth(lattice.clone(), cam.position);
+            let earth = flat
+                .clone()
+                .on_earth(&levels, lattice.clone(), cam.position);
             let sel = |p: &SelectionParams| -> HashSet<Tile> {
                 select::select_tiles(&levels, p).into_iter().collect()
             };
@@ -846,8 +848,11 @@ fn udlod_measures_each_axis_with_its_own_spacing_on_the_earth() {
     for (i, cam) in cams.iter().enumerate() {
         let viewer = common::poses::grid_viewer(&lattice, data.spacing, cam.position);
         for (k, levels) in [&single, &axis, &forced].into_iter().enumerate() {
-            let p = SelectionParams::new(levels, &data, &lod, cam, viewer, W, H)
-                .on_earth(lattice.clone(), cam.position);
+            let p = SelectionParams::new(levels, &data, &lod, cam, viewer, W, H).on_earth(
+                levels,
+                lattice.clone(),
+                cam.position,
+            );
             let tiles = select::select_tiles(levels, &p);
             counts[k] += tiles.len();
             let mut pc = p.clone();
@@ -874,6 +879,75 @@ fn udlod_measures_each_axis_with_its_own_spacing_on_the_earth() {
             "{what}: {control} vs {one}"
         );
     }
+}
+
+/// From every earth pose over the 60 N grid (six of them 40-150 km out, some beyond its
+/// poleward edge) UDLOD's distance to a tile (`select::tile_distance`: the per-axis metric at
+/// the reference height, lowered to the spacing at the LOD viewer by `on_earth`) is never
+/// longer than the true one: the nearest chord from the camera to the tile's samples at the
+/// reference height through the lattice. Control: the grid's own stretch, not lowered at the
+/// viewer, is longer from beyond the edge.
+#[test]
+fn udlod_distances_are_lower_bounds_from_beyond_the_poleward_edge() {
+    let (data, lattice) = common::poses::geographic_60n(257);
+    let cams = common::poses::earth_poses(&data, &lattice, 60);
+    let lod = settings(8);
+    let levels = Levels::new(&data, lod.grid_size)
+        .unwrap()
+        .on_lattice(data.axis_spacing, &lattice);
+    let (mut worst, mut worst_unlowered, mut lowered_poses) = (0.0f64, 0.0f64, 0);
+    for cam in &cams {
+        let viewer = common::poses::grid_viewer(&lattice, data.spacing, cam.position);
+        let flat = SelectionParams::new(&levels, &data, &lod, cam, viewer, W, H);
+        let p = flat
+            .clone()
+            .on_earth(&levels, lattice.clone(), cam.position);
+        lowered_poses += (p.stretch != flat.stretch) as usize;
+        let mut unlowered = p.clone();
+        unlowered.stretch = flat.stretch;
+        let z_ref = viewer.z + p.viewer[2] as f64;
+        for lod_level in 1..=levels.root_lod {
+            let (nx, ny) = levels.tiles_per_side[lod_level as usize];
+            for y in 0..ny {
+                for x in 0..nx {
+                    let t = Tile {
+                        x,
+                        y,
+                        lod: lod_level,
+                    };
+                    let span = levels.grid_size << t.lod;
+                    let c0 = [x * span, y * span];
+                    let c1 = [
+                        ((x + 1) * span).min(data.width - 1),
+                        ((y + 1) * span).min(data.height - 1),
+                    ];
+                    let step = (span / 16).max(1) as usize;
+                    let mut nearest = f64::INFINITY;
+                    for r in (c0[1]..=c1[1]).step_by(step).chain([c1[1]]) {
+                        for c in (c0[0]..=c1[0]).step_by(step).chain([c1[0]]) {
+                            let q = lattice.position(glam::DVec2::new(c as f64, r as f64), z_ref);
+                            nearest = nearest.min((q - cam.position).length());
+                        }
+                    }
+                    worst = worst.max(select::tile_distance(&levels, &p, t) as f64 / nearest);
+                    worst_unlowered = worst_unlowered
+                        .max(select::tile_distance(&levels, &unlowered, t) as f64 / nearest);
+                }
+            }
+        }
+    }
+    println!(
+        "60 N grid, {} poses ({lowered_poses} with the stretch lowered at the viewer): tile \
+         distance / nearest true chord at most {worst:.6} (the grid's stretch: {worst_unlowered:.6})",
+        cams.len()
+    );
+    assert!(lowered_poses > 0);
+    // (1e-6: the f32 arithmetic of `tile_distance`.)
+    assert!(
+        worst <= 1.0 + 1e-6,
+        "tile distance exceeds the true distance: {worst}"
+    );
+    assert!(worst_unlowered > 1.0 + 1e-6, "control: {worst_unlowered}");
 }
 
 /// The largest ratio of a distance measured with `metric` (metres per sample along x and y)

@@ -420,6 +420,29 @@ impl Lattice {
         ]
     }
 
+    /// A per-axis LOD stretch (`stretch`: each axis's metric spacing over the grid frame's
+    /// `spacing`) lowered to the drawn surface's spacing at the LOD viewer's sample position
+    /// `viewer` (at `lowest`, the data's lowest height, or the datum if higher) where that is
+    /// smaller. A viewer beyond a geographic grid's poleward edge stands where the
+    /// extrapolated east-west spacing is below the grid's smallest (1.8 % at 66 km past the
+    /// edge of a 60 N grid), and distances measured from there with the grid's would exceed
+    /// the true ones. Each axis's spacing changes monotonically with latitude, so the smaller
+    /// of the two ends bounds it along the way. A square grid's `[1, 1]` is kept as it is.
+    /// UDLOD's, chunked LOD's and GeoMipMapping's per-frame metric.
+    pub fn stretch_at(
+        &self,
+        stretch: [f64; 2],
+        spacing: f64,
+        viewer: DVec2,
+        lowest: f64,
+    ) -> [f64; 2] {
+        if stretch == [1.0, 1.0] {
+            return stretch;
+        }
+        let here = self.axis_spacing_at(viewer, lowest.min(0.0));
+        [0, 1].map(|k| stretch[k].min(here[k] / spacing))
+    }
+
     /// The LOD metric of a grid drawn through this lattice whose stated metres between
     /// samples are `axis_spacing` and whose lowest height is `lowest` (m): on a native
     /// non-square grid (a geographic one) each axis's smallest spacing on the drawn surface at

@@ -104,19 +104,19 @@ impl ChunkParams {
     /// These inputs on the earth: chunks are culled with the curved boxes of `lattice`
     /// (`camera`: the camera's world position, as the frame uniforms carry it). On a native
     /// non-square grid the per-axis stretch is also lowered to the lattice's spacing at the
-    /// LOD viewer where that is smaller ([`Lattice::axis_spacing_at`] at the data's lowest
-    /// height, below the datum): a viewer beyond the grid's poleward edge stands where the
-    /// extrapolated east-west spacing is below the grid's smallest (1.8 % at 66 km past the
-    /// edge of a 60 N grid), and distances measured from there with the grid's would exceed
-    /// the true ones. Each axis's spacing changes monotonically with latitude, so the smaller
-    /// of the two ends bounds it along the way. Square grids keep `[1, 1]`.
+    /// LOD viewer where that is smaller ([`Lattice::stretch_at`]). Square grids keep `[1, 1]`.
     pub fn on_earth(mut self, levels: &Levels, lattice: Arc<Lattice>, camera: DVec3) -> Self {
         if self.stretch != [1.0, 1.0] {
             let v = camera + DVec3::new(self.viewer[0] as f64, self.viewer[1] as f64, 0.0);
             let s = glam::DVec2::new(v.x, v.y) / levels.spacing;
-            let here = lattice.axis_spacing_at(s, (levels.lowest() as f64).min(0.0));
-            for (k, m) in here.into_iter().enumerate() {
-                self.stretch[k] = self.stretch[k].min((m / levels.spacing) as f32);
+            let lowered = lattice.stretch_at(
+                self.stretch.map(|k| k as f64),
+                levels.spacing,
+                s,
+                levels.lowest() as f64,
+            );
+            for (k, m) in lowered.into_iter().enumerate() {
+                self.stretch[k] = self.stretch[k].min(m as f32);
             }
         }
         self.earth = Some(EarthCull::new(lattice, camera));

@@ -201,6 +201,8 @@ pub struct Geomipmap {
     spacing: f64,
     /// The LOD metric's stretch of the grid frame per axis (see [`select_levels`]).
     stretch: [f64; 2],
+    /// The data's lowest height (m): where the per-frame stretch takes the spacing.
+    lowest: f64,
     /// The data's last sample per axis (blocks past it are clamped to it).
     last: [i32; 2],
     /// The geolocation lattice (None: the flat world, or the grid-frame box asked for): blocks
@@ -257,6 +259,7 @@ impl Geomipmap {
             bounds,
             spacing: ctx.terrain.info.spacing,
             stretch: lod_stretch(ctx),
+            lowest: ctx.terrain.info.min_height as f64,
             last: [
                 ctx.terrain.info.width as i32 - 1,
                 ctx.terrain.info.height as i32 - 1,
@@ -310,10 +313,16 @@ impl LodMethod for Geomipmap {
     }
 
     fn update(&mut self, slot: ViewSlot, view: &ViewState) -> Result<()> {
+        // On the earth the stretch is lowered to the spacing at the LOD viewer where that is
+        // smaller (`Lattice::stretch_at`: a viewer beyond a geographic grid's poleward edge).
+        let stretch = self.lattice.as_ref().map_or(self.stretch, |l| {
+            let viewer = glam::DVec2::new(view.lod_viewer.x, view.lod_viewer.y) / self.spacing;
+            l.stretch_at(self.stretch, self.spacing, viewer, self.lowest)
+        });
         let levels = select_levels(
             &self.bounds,
             self.spacing,
-            self.stretch,
+            stretch,
             view.lod_viewer,
             self.settings.distance_factor,
         );

@@ -381,7 +381,7 @@ impl Udlod {
             view.height,
         );
         Ok(match &self.lattice {
-            Some(l) => p.on_earth(l.clone(), view.camera.position),
+            Some(l) => p.on_earth(&self.levels, l.clone(), view.camera.position),
             None => p,
         })
     }

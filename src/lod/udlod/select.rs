@@ -582,8 +582,25 @@ impl SelectionParams {
     }
 
     /// These inputs on the earth: tiles are culled with the curved boxes of `lattice`
-    /// (`camera`: the camera's world position, as the frame uniforms carry it).
-    pub fn on_earth(mut self, lattice: Arc<Lattice>, camera: DVec3) -> Self {
+    /// (`camera`: the camera's world position, as the frame uniforms carry it). On a native
+    /// non-square grid the per-axis stretch is also lowered to the lattice's spacing at the
+    /// LOD viewer where that is smaller ([`Lattice::stretch_at`]; the GPU gets the lowered
+    /// one). The split field keeps the tile diagonals of `levels`' stretch: a smaller metric
+    /// only shortens every distance the crack-free chain bounds. Square grids keep `[1, 1]`.
+    pub fn on_earth(mut self, levels: &Levels, lattice: Arc<Lattice>, camera: DVec3) -> Self {
+        if self.stretch != [1.0, 1.0] {
+            let v = camera + DVec3::new(self.viewer[0] as f64, self.viewer[1] as f64, 0.0);
+            let s = glam::DVec2::new(v.x, v.y) / levels.spacing;
+            let lowered = lattice.stretch_at(
+                self.stretch.map(|k| k as f64),
+                levels.spacing,
+                s,
+                levels.lowest() as f64,
+            );
+            for (k, m) in lowered.into_iter().enumerate() {
+                self.stretch[k] = self.stretch[k].min(m as f32);
+            }
+        }
         self.earth = Some(EarthCull::new(lattice, camera));
         self
     }
