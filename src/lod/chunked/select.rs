@@ -12,7 +12,7 @@ use glam::{DVec3, Vec3};
 
 use super::settings::ChunkedSettings;
 use crate::geo::{EarthCull, Lattice};
-use crate::lod::udlod::select::{Levels, Tile, frustum_planes};
+use crate::lod::udlod::select::{Levels, Tile, frustum_planes, stretch_at_viewer};
 use crate::scene::Camera;
 
 /// The levels a walk visits: it starts at `start` (the root depth below the root) and never
@@ -106,19 +106,7 @@ impl ChunkParams {
     /// non-square grid the per-axis stretch is also lowered to the lattice's spacing at the
     /// LOD viewer where that is smaller ([`Lattice::stretch_at`]). Square grids keep `[1, 1]`.
     pub fn on_earth(mut self, levels: &Levels, lattice: Arc<Lattice>, camera: DVec3) -> Self {
-        if self.stretch != [1.0, 1.0] {
-            let v = camera + DVec3::new(self.viewer[0] as f64, self.viewer[1] as f64, 0.0);
-            let s = glam::DVec2::new(v.x, v.y) / levels.spacing;
-            let lowered = lattice.stretch_at(
-                self.stretch.map(|k| k as f64),
-                levels.spacing,
-                s,
-                levels.lowest() as f64,
-            );
-            for (k, m) in lowered.into_iter().enumerate() {
-                self.stretch[k] = self.stretch[k].min(m as f32);
-            }
-        }
+        self.stretch = stretch_at_viewer(levels, &lattice, self.stretch, camera, self.viewer);
         self.earth = Some(EarthCull::new(lattice, camera));
         self
     }

@@ -588,19 +588,7 @@ impl SelectionParams {
     /// one). The split field keeps the tile diagonals of `levels`' stretch: a smaller metric
     /// only shortens every distance the crack-free chain bounds. Square grids keep `[1, 1]`.
     pub fn on_earth(mut self, levels: &Levels, lattice: Arc<Lattice>, camera: DVec3) -> Self {
-        if self.stretch != [1.0, 1.0] {
-            let v = camera + DVec3::new(self.viewer[0] as f64, self.viewer[1] as f64, 0.0);
-            let s = glam::DVec2::new(v.x, v.y) / levels.spacing;
-            let lowered = lattice.stretch_at(
-                self.stretch.map(|k| k as f64),
-                levels.spacing,
-                s,
-                levels.lowest() as f64,
-            );
-            for (k, m) in lowered.into_iter().enumerate() {
-                self.stretch[k] = self.stretch[k].min(m as f32);
-            }
-        }
+        self.stretch = stretch_at_viewer(levels, &lattice, self.stretch, camera, self.viewer);
         self.earth = Some(EarthCull::new(lattice, camera));
         self
     }
@@ -618,6 +606,27 @@ impl SelectionParams {
         let r = self.relative(sample);
         [r[0] - self.viewer[0], r[1] - self.viewer[1]]
     }
+}
+
+/// `stretch` (f32, as the GPU gets it) lowered to `lattice`'s spacing at the LOD viewer
+/// ([`Lattice::stretch_at`]): the viewer at `viewer` (x, y) from the camera's world position
+/// `camera`, as [`SelectionParams::viewer`] holds it. UDLOD's and chunked LOD's per-frame metric.
+pub fn stretch_at_viewer(
+    levels: &Levels,
+    lattice: &Lattice,
+    stretch: [f32; 2],
+    camera: DVec3,
+    viewer: [f32; 3],
+) -> [f32; 2] {
+    let v = camera + DVec3::new(viewer[0] as f64, viewer[1] as f64, 0.0);
+    let s = glam::DVec2::new(v.x, v.y) / levels.spacing;
+    let lowered = lattice.stretch_at(
+        stretch.map(|k| k as f64),
+        levels.spacing,
+        s,
+        levels.lowest() as f64,
+    );
+    [0, 1].map(|k| stretch[k].min(lowered[k] as f32))
 }
 
 /// Distance from the LOD viewer to the nearest point of the tile's rectangle at the reference
