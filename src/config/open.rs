@@ -42,12 +42,12 @@ impl Config {
     /// The clipmap `[clipmap]` asks for, with a quadtree per camera of a frame; `None` when
     /// disabled. `lattice`: the one the renderer draws through on the earth (the shading
     /// planes' normals are then in world axes), None in the flat world.
-    pub fn open_clipmap(&self, lattice: Option<&Lattice>) -> Result<Option<Clipmap>> {
+    pub fn open_clipmap(&self, lattice: Option<Arc<Lattice>>) -> Result<Option<Clipmap>> {
         if !self.clipmap.enabled {
             return Ok(None);
         }
         let store = self.open_store()?;
-        let mut geometry = Geometry::of_store(&*store).with_world(lattice.cloned().map(Arc::new));
+        let mut geometry = Geometry::of_store(&*store).with_world(lattice);
         if self.load_grid() == LoadGrid::Native {
             geometry = geometry.with_native_spacing(store.georef()?.as_ref());
         }
@@ -83,14 +83,14 @@ impl Config {
         options: RenderOptions,
     ) -> Result<Renderer> {
         let placement = self.dataset.placement(|p| self.resolve(p))?;
-        let lattice = Self::lattice_of(placement.as_ref(), data, options.earth)?;
+        let lattice = Self::lattice_of(placement.as_ref(), data, options.earth)?.map(Arc::new);
         let mut renderer = Renderer::with_world(
             gpu,
             data.clone(),
             self.method.clone(),
             options,
-            self.open_clipmap(lattice.as_ref())?,
-            lattice.as_ref(),
+            self.open_clipmap(lattice.clone())?,
+            lattice.as_deref(),
         )?;
         // The frames' camera heights: above the ellipsoid where the lattice carries the
         // terrain's datum (world heights are ellipsoidal there), else in the terrain's datum.
