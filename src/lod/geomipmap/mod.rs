@@ -105,15 +105,10 @@ pub fn select_levels(
 ) -> Vec<u32> {
     let width = BLOCK_QUADS as f64 * spacing;
     let (cols, rows) = (bounds.cols, bounds.rows);
-    let s = DVec3::new(stretch[0], stretch[1], 1.0);
-    let viewer = viewer * s;
     let mut levels = Vec::with_capacity((cols * rows) as usize);
     for j in 0..rows {
         for i in 0..cols {
-            let [lo, hi] = bounds.get(i, j);
-            let lo_xy = DVec3::new(i as f64 * width, j as f64 * width, lo as f64) * s;
-            let hi_xy = DVec3::new((i + 1) as f64 * width, (j + 1) as f64 * width, hi as f64) * s;
-            let d = viewer.clamp(lo_xy, hi_xy).distance(viewer);
+            let d = block_distance(bounds, spacing, stretch, viewer, i, j);
             let ratio = d / (factor * width);
             let level = if ratio < 1.0 {
                 0
@@ -172,6 +167,44 @@ pub fn border_mask(levels: &[u32], cols: u32, rows: u32, i: u32, j: u32) -> u32 
 struct List {
     first: u32,
     count: u32,
+}
+
+/// Distance from `viewer` (grid-frame metres and height) to block `(i, j)`'s box (its
+/// rectangle x its min/max height), each horizontal axis stretched by `stretch`: the distance
+/// [`select_levels`] chooses levels by.
+pub fn block_distance(
+    bounds: &BlockBounds,
+    spacing: f64,
+    stretch: [f64; 2],
+    viewer: DVec3,
+    i: u32,
+    j: u32,
+) -> f64 {
+    let width = BLOCK_QUADS as f64 * spacing;
+    let s = DVec3::new(stretch[0], stretch[1], 1.0);
+    let [lo, hi] = bounds.get(i, j);
+    let lo_xy = DVec3::new(i as f64 * width, j as f64 * width, lo as f64) * s;
+    let hi_xy = DVec3::new((i + 1) as f64 * width, (j + 1) as f64 * width, hi as f64) * s;
+    let viewer = viewer * s;
+    viewer.clamp(lo_xy, hi_xy).distance(viewer)
+}
+
+/// A frame's LOD stretch: `stretch` (the grid's, [`lod_stretch`]) lowered on the earth to the
+/// spacing at the LOD viewer where that is smaller ([`Lattice::stretch_at`]: a viewer beyond a
+/// geographic grid's poleward edge). `lowest`: the data's lowest height.
+///
+/// [`Lattice::stretch_at`]: crate::geo::Lattice::stretch_at
+pub fn frame_stretch(
+    lattice: Option<&crate::geo::Lattice>,
+    stretch: [f64; 2],
+    spacing: f64,
+    lowest: f64,
+    lod_viewer: DVec3,
+) -> [f64; 2] {
+    lattice.map_or(stretch, |l| {
+        let viewer = glam::DVec2::new(lod_viewer.x, lod_viewer.y) / spacing;
+        l.stretch_at(stretch, spacing, viewer, lowest)
+    })
 }
 
 /// A block's draw: its list and its index (the instance index the vertex stage reads).
@@ -313,12 +346,13 @@ impl LodMethod for Geomipmap {
     }
 
     fn update(&mut self, slot: ViewSlot, view: &ViewState) -> Result<()> {
-        // On the earth the stretch is lowered to the spacing at the LOD viewer where that is
-        // smaller (`Lattice::stretch_at`: a viewer beyond a geographic grid's poleward edge).
-        let stretch = self.lattice.as_ref().map_or(self.stretch, |l| {
-            let viewer = glam::DVec2::new(view.lod_viewer.x, view.lod_viewer.y) / self.spacing;
-            l.stretch_at(self.stretch, self.spacing, viewer, self.lowest)
-        });
+        let stretch = frame_stretch(
+            self.lattice.as_deref(),
+            self.stretch,
+            self.spacing,
+            self.lowest,
+            view.lod_viewer,
+        );
         let levels = select_levels(
             &self.bounds,
             self.spacing,
@@ -448,6 +482,63 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// From a viewer beyond the 60 N grid's poleward edge (66 km north of it and 40 km east,
+    /// 3 km up: its distances run partly east-west, where the spacing shrinks poleward) every
+    /// block's distance in the frame's stretch ([`frame_stretch`]) is at most the true one:
+    /// the nearest chord from the viewer to the block's samples through the lattice. Control:
+    /// the grid's stretch, not lowered at the viewer, is longer for some block.
+    #[test]
+    fn block_distances_are_lower_bounds_from_beyond_the_poleward_edge() {
+        use crate::geo::Lattice;
+        let step = 1.0 / 1200.0;
+        let lattice = Lattice::geographic(257, 257, [8.0, 60.0], [step, step]).unwrap();
+        let top = 60.0 + 256.0 * step;
+        let ns = crate::geo::WGS84.meridian_radius(60.0) * f64::to_radians(step);
+        let ew = crate::geo::WGS84.prime_vertical_radius(top)
+            * top.to_radians().cos()
+            * step.to_radians();
+        let metric = lattice.lod_metric([ew, ns], 0.0).expect("non-square");
+        let stretch = metric.map(|m| m / ew);
+        let data =
+            crate::dataset::procedural::generate(&crate::dataset::procedural::ProceduralParams {
+                size: 257,
+                spacing: ew,
+                ..Default::default()
+            })
+            .unwrap();
+        let bounds = BlockBounds::new(&data, BLOCK_QUADS).unwrap();
+        let lowest = data.height_range().0 as f64;
+        let (col, row) = (256.0 + 40e3 / ew, 256.0 + 66e3 / ns);
+        let viewer = DVec3::new(col * ew, row * ew, 3000.0);
+        let at_viewer = lattice.position(glam::DVec2::new(col, row), viewer.z);
+        let lowered = frame_stretch(Some(&lattice), stretch, ew, lowest, viewer);
+        assert!(lowered[0] < stretch[0], "{lowered:?} vs {stretch:?}");
+        let (mut worst, mut worst_grid) = (0.0f64, 0.0f64);
+        for j in 0..bounds.rows {
+            for i in 0..bounds.cols {
+                let mut nearest = f64::INFINITY;
+                let q = BLOCK_QUADS;
+                for r in (j * q..=(j + 1) * q).step_by(4) {
+                    for c in (i * q..=(i + 1) * q).step_by(4) {
+                        let s = glam::DVec2::new(c as f64, r as f64);
+                        let p = lattice.position(s, data.sample(c, r) as f64);
+                        nearest = nearest.min((p - at_viewer).length());
+                    }
+                }
+                let d = |stretch| block_distance(&bounds, ew, stretch, viewer, i, j) / nearest;
+                worst = worst.max(d(lowered));
+                worst_grid = worst_grid.max(d(stretch));
+            }
+        }
+        println!(
+            "block distance / true: {worst} (grid stretch {worst_grid}), stretch {lowered:?} vs {stretch:?}"
+        );
+        assert!(worst <= 1.0, "block distance exceeds the true one: {worst}");
+        assert!(worst_grid > 1.0, "control: {worst_grid}");
+        // The flat world (no lattice) keeps the grid's stretch.
+        assert_eq!(frame_stretch(None, stretch, ew, lowest, viewer), stretch);
     }
 
     /// On a native geographic grid at 60 N (north-south samples twice as far apart as
