@@ -104,20 +104,28 @@ pub fn normals_snorm8(
     heights: impl Fn(usize, usize) -> f64 + Sync,
 ) -> Vec<u8> {
     use rayon::prelude::*;
+    // Written in place, rows (or bands of rows) in parallel: no copy of the whole map.
+    let mut out = vec![0u8; width * height * 4];
+    let row_bytes = width * 4;
     match axes {
-        NormalAxes::Grid(_) => (0..height)
-            .into_par_iter()
-            .flat_map_iter(|r| {
-                let heights = &heights;
-                (0..width).flat_map(move |c| snorm8(normal_at(width, height, axes, heights, c, r)))
-            })
-            .collect(),
+        NormalAxes::Grid(_) => {
+            out.par_chunks_mut(row_bytes.max(1))
+                .enumerate()
+                .for_each(|(r, row)| {
+                    for (c, texel) in row.chunks_exact_mut(4).enumerate() {
+                        texel.copy_from_slice(&snorm8(normal_at(
+                            width, height, axes, &heights, c, r,
+                        )));
+                    }
+                })
+        }
         // In bands of rows, each texel's world position computed once (not once per chord
         // that uses it): the same positions and arithmetic as `normal_at`, a quarter of the
         // lattice evaluations.
-        NormalAxes::World(position) => (0..height.div_ceil(WORLD_BAND_ROWS))
-            .into_par_iter()
-            .flat_map_iter(|band| {
+        NormalAxes::World(position) => out
+            .par_chunks_mut((WORLD_BAND_ROWS * row_bytes).max(1))
+            .enumerate()
+            .for_each(|(band, texels)| {
                 let r0 = band * WORLD_BAND_ROWS;
                 let r1 = (r0 + WORLD_BAND_ROWS).min(height);
                 let (lo, hi) = (r0.saturating_sub(1), (r1 + 1).min(height));
@@ -126,13 +134,13 @@ pub fn normals_snorm8(
                     .map(|(c, r)| position(c, r, heights(c, r)))
                     .collect();
                 let at = |c: usize, r: usize| positions[(r - lo) * width + c];
-                (r0..r1)
-                    .flat_map(|r| (0..width).map(move |c| (c, r)))
-                    .flat_map(|(c, r)| snorm8(chord_normal(width, height, at, c, r)))
-                    .collect::<Vec<u8>>()
-            })
-            .collect(),
+                for (k, texel) in texels.chunks_exact_mut(4).enumerate() {
+                    let (c, r) = (k % width, r0 + k / width);
+                    texel.copy_from_slice(&snorm8(chord_normal(width, height, at, c, r)));
+                }
+            }),
     }
+    out
 }
 
 /// Rows per band of [`normals_snorm8`] in world axes.
