@@ -675,15 +675,14 @@ fn box_distance_in_the_per_axis_metric_is_a_lower_bound_and_draws_fewer_chunks()
                         ((x + 1) * span).min(data.width - 1),
                         ((y + 1) * span).min(data.height - 1),
                     ];
-                    let step = (span / 16).max(1) as usize;
-                    let mut nearest = f64::INFINITY;
-                    for r in (c0[1]..=c1[1]).step_by(step).chain([c1[1]]) {
-                        for c in (c0[0]..=c1[0]).step_by(step).chain([c1[0]]) {
-                            let s = glam::DVec2::new(c as f64, r as f64);
-                            let q = lattice.position(s, data.sample(c, r) as f64);
-                            nearest = nearest.min((q - cam.position).length());
-                        }
-                    }
+                    let nearest = common::poses::nearest_chord(
+                        &lattice,
+                        c0,
+                        c1,
+                        span,
+                        |c, r| data.sample(c, r) as f64,
+                        cam.position,
+                    );
                     let d = select::chunk_box_distance(&axis, &p, t) as f64;
                     worst = worst.max(d / nearest);
                     let ratio =

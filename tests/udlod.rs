@@ -921,14 +921,14 @@ fn udlod_distances_are_lower_bounds_from_beyond_the_poleward_edge() {
                         ((x + 1) * span).min(data.width - 1),
                         ((y + 1) * span).min(data.height - 1),
                     ];
-                    let step = (span / 16).max(1) as usize;
-                    let mut nearest = f64::INFINITY;
-                    for r in (c0[1]..=c1[1]).step_by(step).chain([c1[1]]) {
-                        for c in (c0[0]..=c1[0]).step_by(step).chain([c1[0]]) {
-                            let q = lattice.position(glam::DVec2::new(c as f64, r as f64), z_ref);
-                            nearest = nearest.min((q - cam.position).length());
-                        }
-                    }
+                    let nearest = common::poses::nearest_chord(
+                        &lattice,
+                        c0,
+                        c1,
+                        span,
+                        |_, _| z_ref,
+                        cam.position,
+                    );
                     worst = worst.max(select::tile_distance(&levels, &p, t) as f64 / nearest);
                     worst_unlowered = worst_unlowered
                         .max(select::tile_distance(&levels, &unlowered, t) as f64 / nearest);

@@ -167,3 +167,26 @@ pub fn earth_poses(data: &Heightmap, lattice: &Lattice, n: usize) -> Vec<Camera>
     }
     out
 }
+
+/// The nearest true chord (metres) from world point `from` to a tile's samples through
+/// `lattice`: every `(span / 16)`-th sample of its rectangle `c0..=c1` (and its far edges) at
+/// height `height(col, row)`. The oracle the LOD methods' distance lower-bound tests compare
+/// with.
+pub fn nearest_chord(
+    lattice: &Lattice,
+    c0: [u32; 2],
+    c1: [u32; 2],
+    span: u32,
+    height: impl Fn(u32, u32) -> f64,
+    from: DVec3,
+) -> f64 {
+    let step = (span / 16).max(1) as usize;
+    let mut nearest = f64::INFINITY;
+    for r in (c0[1]..=c1[1]).step_by(step).chain([c1[1]]) {
+        for c in (c0[0]..=c1[0]).step_by(step).chain([c1[0]]) {
+            let q = lattice.position(glam::DVec2::new(c as f64, r as f64), height(c, r));
+            nearest = nearest.min((q - from).length());
+        }
+    }
+    nearest
+}

@@ -484,16 +484,21 @@ mod tests {
         }
     }
 
-    /// From a viewer beyond the 60 N grid's poleward edge (66 km north of it and 40 km east,
-    /// 3 km up: its distances run partly east-west, where the spacing shrinks poleward) every
-    /// block's distance in the frame's stretch ([`frame_stretch`]) is at most the true one:
-    /// the nearest chord from the viewer to the block's samples through the lattice. Control:
-    /// the grid's stretch, not lowered at the viewer, is longer for some block.
-    #[test]
-    fn block_distances_are_lower_bounds_from_beyond_the_poleward_edge() {
-        use crate::geo::Lattice;
+    /// A native geographic grid at 60 N, 257 x 257 samples of 3": its lattice, the metres per
+    /// sample north-south (at 60 N) and east-west (at the poleward row, the grid frame's
+    /// spacing), the per-axis stretch, procedural heights at that spacing and their blocks.
+    struct Geographic60N {
+        lattice: crate::geo::Lattice,
+        ns: f64,
+        ew: f64,
+        stretch: [f64; 2],
+        data: crate::dataset::Heightmap,
+        bounds: BlockBounds,
+    }
+
+    fn geographic_60n() -> Geographic60N {
         let step = 1.0 / 1200.0;
-        let lattice = Lattice::geographic(257, 257, [8.0, 60.0], [step, step]).unwrap();
+        let lattice = crate::geo::Lattice::geographic(257, 257, [8.0, 60.0], [step, step]).unwrap();
         let top = 60.0 + 256.0 * step;
         let ns = crate::geo::WGS84.meridian_radius(60.0) * f64::to_radians(step);
         let ew = crate::geo::WGS84.prime_vertical_radius(top)
@@ -509,6 +514,31 @@ mod tests {
             })
             .unwrap();
         let bounds = BlockBounds::new(&data, BLOCK_QUADS).unwrap();
+        Geographic60N {
+            lattice,
+            ns,
+            ew,
+            stretch,
+            data,
+            bounds,
+        }
+    }
+
+    /// From a viewer beyond the 60 N grid's poleward edge (66 km north of it and 40 km east,
+    /// 3 km up: its distances run partly east-west, where the spacing shrinks poleward) every
+    /// block's distance in the frame's stretch ([`frame_stretch`]) is at most the true one:
+    /// the nearest chord from the viewer to the block's samples through the lattice. Control:
+    /// the grid's stretch, not lowered at the viewer, is longer for some block.
+    #[test]
+    fn block_distances_are_lower_bounds_from_beyond_the_poleward_edge() {
+        let Geographic60N {
+            lattice,
+            ns,
+            ew,
+            stretch,
+            data,
+            bounds,
+        } = geographic_60n();
         let lowest = data.height_range().0 as f64;
         let (col, row) = (256.0 + 40e3 / ew, 256.0 + 66e3 / ns);
         let viewer = DVec3::new(col * ew, row * ew, 3000.0);
@@ -547,27 +577,17 @@ mod tests {
     /// south of the viewer are coarser. Control: a square grid has no per-axis metric.
     #[test]
     fn geographic_grids_measure_each_axis_with_its_own_spacing() {
-        use crate::geo::Lattice;
-        let step = 1.0 / 1200.0;
-        let lattice = Lattice::geographic(257, 257, [8.0, 60.0], [step, step]).unwrap();
-        let ns = crate::geo::WGS84.meridian_radius(60.0) * f64::to_radians(step);
-        let top = 60.0 + 256.0 * step;
-        let ew = crate::geo::WGS84.prime_vertical_radius(top)
-            * top.to_radians().cos()
-            * step.to_radians();
-        let metric = lattice.lod_metric([ew, ns], 0.0).expect("non-square");
-        let stretch = metric.map(|m| m / ew);
+        let Geographic60N {
+            lattice,
+            ns,
+            ew,
+            stretch,
+            bounds,
+            ..
+        } = geographic_60n();
         assert!((stretch[0] - 1.0).abs() < 1e-3, "{stretch:?}");
         assert!((stretch[1] - ns / ew).abs() < 1e-3 * ns / ew, "{stretch:?}");
         assert!(lattice.lod_metric([ew, ew], 0.0).is_none());
-        let data =
-            crate::dataset::procedural::generate(&crate::dataset::procedural::ProceduralParams {
-                size: 257,
-                spacing: ew,
-                ..Default::default()
-            })
-            .unwrap();
-        let bounds = BlockBounds::new(&data, BLOCK_QUADS).unwrap();
         let centre = 128.0 * ew;
         let viewer = DVec3::new(centre, centre, bounds.get(4, 4)[1] as f64 + 50.0);
         // The one smallest spacing (east-west, as drawn) on both axes, against per axis.
