@@ -79,11 +79,13 @@ fn prepare() {
     state.splits_allowed = select(0u, 1u, fits);
     atomicStore(&state.split_requests, 0u);
     atomicStore(&state.child_count, 0u);
-    // Four invocations per parent (`refine`), in rows of at most 65,535 workgroups (the
-    // least maxComputeWorkGroupCount a device may have).
+    // Four invocations per parent (`refine`), in rows of at most `udlod.counts.y` workgroups
+    // (the setting `dispatch_row`: 65,535, the least maxComputeWorkGroupCount a device may
+    // have).
     let groups = (4u * parents + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;
-    state.dispatch_x = min(groups, MAX_DISPATCH_ROW);
-    state.dispatch_y = (groups + MAX_DISPATCH_ROW - 1u) / MAX_DISPATCH_ROW;
+    let row = max(udlod.counts.y, 1u);
+    state.dispatch_x = min(groups, row);
+    state.dispatch_y = (groups + row - 1u) / row;
     state.dispatch_z = 1u;
 }
 
@@ -169,8 +171,6 @@ var<workgroup> wg_final_base: u32;
 // Four invocations per parent: their parent's slot in the workgroup's reservations.
 var<workgroup> wg_parent_local: array<u32, UDLOD_WORKGROUP / 4u>;
 
-// Workgroups per row of a `refine` dispatch.
-const MAX_DISPATCH_ROW: u32 = 65535u;
 const_assert UDLOD_WORKGROUP % 4u == 0u;
 
 const ACTION_NONE: u32 = 0u;

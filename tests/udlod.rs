@@ -75,15 +75,23 @@ fn gpu_and_cpu_tiles(
     out
 }
 
+/// The GPU's tiles are the CPU reference's, at every grid size, and with one workgroup per row
+/// of the prepass's dispatches (`dispatch_row = 1`: every pass of more than 16 parents then
+/// spreads its workgroups over rows, the path a pass of more than 65,535 workgroups takes).
 #[test]
 fn gpu_selection_equals_cpu_reference() {
     let data = terrain(257, 30.0);
     let cams = poses(&data, 40);
-    for grid in grids() {
-        for (i, (gpu, cpu)) in gpu_and_cpu_tiles(&data, &cams, settings(grid))
-            .into_iter()
-            .enumerate()
-        {
+    let rows = UdlodSettings {
+        dispatch_row: 1,
+        ..settings(4)
+    };
+    let cases = grids()
+        .into_iter()
+        .map(|g| (g, settings(g)))
+        .chain([(4, rows)]);
+    for (grid, lod) in cases {
+        for (i, (gpu, cpu)) in gpu_and_cpu_tiles(&data, &cams, lod).into_iter().enumerate() {
             let g: HashSet<_> = gpu.iter().copied().collect();
             let c: HashSet<_> = cpu.iter().copied().collect();
             assert_eq!(

@@ -16,7 +16,7 @@ struct Udlod {
     // The LOD viewer (distances for levels and morphs are measured from it): x/y relative to
     // the camera (m), z: reference height (terrain under the LOD viewer) minus its height.
     viewer: vec4<f32>,
-    // x: indices per tile (6 * quads^2).
+    // x: indices per tile (6 * quads^2), y: workgroups per row of a `refine` dispatch.
     counts: vec4<u32>,
     // xy: the LOD metric's stretch of the grid frame per axis (metres per sample along x and
     // y, each a lower bound on the drawn surface, over the grid frame's spacing): exactly

@@ -432,7 +432,7 @@ impl LodMethod for Udlod {
             if p.morph { 1.0 } else { 0.0 },
             if p.cull { 1.0 } else { 0.0 },
         ];
-        u.counts = [self.index_count, 0, 0, 0];
+        u.counts = [self.index_count, self.settings.dispatch_row, 0, 0];
         u.metric = [p.stretch[0], p.stretch[1], 0.0, 0.0];
         let s = &mut self.slots[slot.index()];
         if s.field_key != Some(p.field.key) {

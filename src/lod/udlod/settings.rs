@@ -30,6 +30,10 @@ pub struct UdlodSettings {
     /// How LOD distances are measured on a native non-square grid on the earth (square grids
     /// have one spacing either way).
     pub lod_metric: LodMetric,
+    /// Workgroups per row of the prepass's `refine` dispatches (1..=65535; default 65,535,
+    /// the least `maxComputeWorkGroupCount` a Vulkan device may have): past it a dispatch takes
+    /// more rows. Lowered only to exercise the rows in tests.
+    pub dispatch_row: u32,
 }
 
 /// The LOD metric on a native non-square grid on the earth (config `lod_metric`;
@@ -64,6 +68,7 @@ impl Default for UdlodSettings {
             error_field_max: 1024.0,
             vertex_pulling: false,
             lod_metric: LodMetric::Axis,
+            dispatch_row: 65_535,
         }
     }
 }
@@ -122,6 +127,12 @@ impl UdlodSettings {
             return bad(format!(
                 "max_tiles {} must be within 16..=4194304",
                 self.max_tiles
+            ));
+        }
+        if !(1..=65_535).contains(&self.dispatch_row) {
+            return bad(format!(
+                "dispatch_row {} must be within 1..=65535",
+                self.dispatch_row
             ));
         }
         if !(self.error_field_max.is_finite() && (1.0..=1024.0).contains(&self.error_field_max)) {
