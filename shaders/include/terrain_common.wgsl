@@ -138,20 +138,14 @@ struct Box3 {
 // src/geo/lattice.rs is its CPU twin (f64), proven to decide as this one in tests/udlod.rs
 // and tests/chunked.rs.
 fn earth_box(c0: vec2<i32>, c1: vec2<i32>, heights: vec2<f32>) -> Box3 {
-    let sw = lattice_point(c0, vec2<f32>(0.0));
-    let se = lattice_point(vec2<i32>(c1.x, c0.y), vec2<f32>(0.0));
-    let nw = lattice_point(vec2<i32>(c0.x, c1.y), vec2<f32>(0.0));
-    let ne = lattice_point(c1, vec2<f32>(0.0));
-    return corner_box(array<LatticePoint, 4>(sw, se, nw, ne), heights);
-}
-
-// `earth_box` from the lattice points of the rectangle's four corners.
-fn corner_box(corners: array<LatticePoint, 4>, heights: vec2<f32>) -> Box3 {
+    let corners = array<vec2<i32>, 4>(c0, vec2<i32>(c1.x, c0.y), vec2<i32>(c0.x, c1.y), c1);
     var lo = vec3<f32>(3.0e38);
     var hi = vec3<f32>(-3.0e38);
     for (var k = 0u; k < 4u; k++) {
-        let low = corners[k].p + heights.x * corners[k].up;
-        let high = corners[k].p + heights.y * corners[k].up;
+        // Each corner's lattice point once, for both heights.
+        let c = lattice_point(corners[k], vec2<f32>(0.0));
+        let low = c.p + heights.x * c.up;
+        let high = c.p + heights.y * c.up;
         lo = min(lo, min(low, high));
         hi = max(hi, max(low, high));
     }
