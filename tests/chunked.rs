@@ -660,37 +660,20 @@ fn box_distance_in_the_per_axis_metric_is_a_lower_bound_and_draws_fewer_chunks()
         long.stretch = p.stretch.map(|s| s * 1.02);
         // Every chunk of every level down to 2 levels above the finest (fine chunks are
         // covered by their parents' boxes: a child's box lies inside its parent's).
-        for lod_level in 2..=axis.root_lod {
-            let (nx, ny) = axis.tiles_per_side[lod_level as usize];
-            for y in 0..ny {
-                for x in 0..nx {
-                    let t = Tile {
-                        x,
-                        y,
-                        lod: lod_level,
-                    };
-                    let span = axis.grid_size << t.lod;
-                    let c0 = [x * span, y * span];
-                    let c1 = [
-                        ((x + 1) * span).min(data.width - 1),
-                        ((y + 1) * span).min(data.height - 1),
-                    ];
-                    let nearest = common::poses::nearest_chord(
-                        &lattice,
-                        c0,
-                        c1,
-                        span,
-                        |c, r| data.sample(c, r) as f64,
-                        cam.position,
-                    );
-                    let d = select::chunk_box_distance(&axis, &p, t) as f64;
-                    worst = worst.max(d / nearest);
-                    let ratio =
-                        |q: &ChunkParams| select::chunk_box_distance(&axis, q, t) as f64 / nearest;
-                    worst_long = worst_long.max(ratio(&long));
-                    worst_unclamped = worst_unclamped.max(ratio(&unclamped));
-                }
-            }
+        for t in common::poses::tiles_from(&axis, 2) {
+            let nearest = common::poses::nearest_chord(
+                &lattice,
+                &axis,
+                [data.width, data.height],
+                t,
+                |c, r| data.sample(c, r) as f64,
+                cam.position,
+            );
+            let d = select::chunk_box_distance(&axis, &p, t) as f64;
+            worst = worst.max(d / nearest);
+            let ratio = |q: &ChunkParams| select::chunk_box_distance(&axis, q, t) as f64 / nearest;
+            worst_long = worst_long.max(ratio(&long));
+            worst_unclamped = worst_unclamped.max(ratio(&unclamped));
         }
         let a = select::select_chunks(&axis, &p).len();
         let sp = ChunkParams::new(&smallest, &lod, cam, viewer, W, H).on_earth(

@@ -914,34 +914,18 @@ fn udlod_distances_are_lower_bounds_from_beyond_the_poleward_edge() {
         let mut unlowered = p.clone();
         unlowered.stretch = flat.stretch;
         let z_ref = viewer.z + p.viewer[2] as f64;
-        for lod_level in 1..=levels.root_lod {
-            let (nx, ny) = levels.tiles_per_side[lod_level as usize];
-            for y in 0..ny {
-                for x in 0..nx {
-                    let t = Tile {
-                        x,
-                        y,
-                        lod: lod_level,
-                    };
-                    let span = levels.grid_size << t.lod;
-                    let c0 = [x * span, y * span];
-                    let c1 = [
-                        ((x + 1) * span).min(data.width - 1),
-                        ((y + 1) * span).min(data.height - 1),
-                    ];
-                    let nearest = common::poses::nearest_chord(
-                        &lattice,
-                        c0,
-                        c1,
-                        span,
-                        |_, _| z_ref,
-                        cam.position,
-                    );
-                    worst = worst.max(select::tile_distance(&levels, &p, t) as f64 / nearest);
-                    worst_unlowered = worst_unlowered
-                        .max(select::tile_distance(&levels, &unlowered, t) as f64 / nearest);
-                }
-            }
+        for t in common::poses::tiles_from(&levels, 1) {
+            let nearest = common::poses::nearest_chord(
+                &lattice,
+                &levels,
+                [data.width, data.height],
+                t,
+                |_, _| z_ref,
+                cam.position,
+            );
+            worst = worst.max(select::tile_distance(&levels, &p, t) as f64 / nearest);
+            worst_unlowered =
+                worst_unlowered.max(select::tile_distance(&levels, &unlowered, t) as f64 / nearest);
         }
     }
     println!(

@@ -5,6 +5,7 @@ use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::procedural::Style;
 use vkterrain::geo::{EnuFrame, Geodetic, Lattice, WGS84};
+use vkterrain::lod::udlod::select::{Levels, Tile};
 use vkterrain::scene::Camera;
 
 /// `n` poses over `data`; UDLOD's and GeoMipMapping's tests stand the low cameras on the
@@ -168,18 +169,34 @@ pub fn earth_poses(data: &Heightmap, lattice: &Lattice, n: usize) -> Vec<Camera>
     out
 }
 
-/// The nearest true chord (metres) from world point `from` to a tile's samples through
-/// `lattice`: every `(span / 16)`-th sample of its rectangle `c0..=c1` (and its far edges) at
-/// height `height(col, row)`. The oracle the LOD methods' distance lower-bound tests compare
-/// with.
+/// Every tile of `levels` from level `first` up to the root.
+pub fn tiles_from(levels: &Levels, first: u32) -> Vec<Tile> {
+    (first..=levels.root_lod)
+        .flat_map(|lod| {
+            let (nx, ny) = levels.tiles_per_side[lod as usize];
+            (0..ny).flat_map(move |y| (0..nx).map(move |x| Tile { x, y, lod }))
+        })
+        .collect()
+}
+
+/// The nearest true chord (metres) from world point `from` to tile `t`'s samples (of a
+/// `size`-sample grid, `levels`' tiling) through `lattice`: every `(span / 16)`-th sample of
+/// its rectangle (and its far edges) at height `height(col, row)`. The oracle the LOD
+/// methods' distance lower-bound tests compare with.
 pub fn nearest_chord(
     lattice: &Lattice,
-    c0: [u32; 2],
-    c1: [u32; 2],
-    span: u32,
+    levels: &Levels,
+    size: [u32; 2],
+    t: Tile,
     height: impl Fn(u32, u32) -> f64,
     from: DVec3,
 ) -> f64 {
+    let span = levels.grid_size << t.lod;
+    let c0 = [t.x * span, t.y * span];
+    let c1 = [
+        ((t.x + 1) * span).min(size[0] - 1),
+        ((t.y + 1) * span).min(size[1] - 1),
+    ];
     let step = (span / 16).max(1) as usize;
     let mut nearest = f64::INFINITY;
     for r in (c0[1]..=c1[1]).step_by(step).chain([c1[1]]) {
