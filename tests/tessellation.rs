@@ -1,6 +1,7 @@
 //! Hardware tessellation (Fischer 2024): every spacing renders validation clean and covers what
 //! brute force covers; the level rule's bounds (1 and 64) give the triangle counts the
-//! tessellator must make; watertight over 200 poses (with a crack-prone ablation as the
+//! tessellator must make; the control stage's levels are the CPU mirror's, patch by patch
+//! through the triangles they make (flat and on the earth); watertight over 200 poses (with a crack-prone ablation as the
 //! control); on a device without `tessellationShader` (masked) a one-line error, no crash.
 
 mod common;
@@ -9,6 +10,8 @@ use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::driver::{Gpu, GpuOptions};
+use vkterrain::geo::Lattice;
+use vkterrain::lod::tessellation::levels::LevelRule;
 use vkterrain::lod::tessellation::settings::{EdgeLevels, Spacing};
 use vkterrain::lod::{MethodConfig, MethodKind, TessellationSettings};
 use vkterrain::readback::{CollectSink, OwnedFrame};
@@ -192,6 +195,118 @@ fn levels_clamp_to_1_and_64_and_count_what_the_tessellator_makes() {
             frames.last().unwrap().triangles,
             expected,
             "{spacing:?}, edge {edge_px} px: all levels {level}"
+        );
+    }
+}
+
+/// Triangles the GPU counted for each of `cams` (one frame in flight, so each frame's count is
+/// its own), and the device's highest tessellation level.
+fn gpu_triangles(
+    data: &Heightmap,
+    lattice: Option<&Lattice>,
+    settings: &TessellationSettings,
+    cams: &[Camera],
+) -> (Vec<u64>, u32) {
+    let gpu = common::gpu(false);
+    let max_level = gpu.info.limits.max_tessellation_generation_level;
+    let mut sink = CollectSink::default();
+    {
+        let options = common::options(W, H, 1);
+        let mut r =
+            Renderer::with_world(&gpu, data, settings.clone(), options, None, lattice).unwrap();
+        for c in cams {
+            r.render(*c, &mut sink).unwrap();
+        }
+        r.finish(&mut sink).unwrap();
+    }
+    common::assert_no_validation_messages(&gpu);
+    (sink.frames.iter().map(|f| f.triangles).collect(), max_level)
+}
+
+/// The poses of the mirror test where `edge_levels` on the GPU counts triangles outside the
+/// range the CPU mirror of the edge rule gives (`lod::tessellation::levels`), and the
+/// triangles the mirror's ranges leave open (high minus low) against those it fixes (low),
+/// summed over the poses.
+fn poses_off_the_mirror(
+    data: &Heightmap,
+    lattice: Option<&Lattice>,
+    spacing: Spacing,
+    edge_levels: EdgeLevels,
+    cams: &[Camera],
+) -> (Vec<String>, [u64; 2]) {
+    let settings = TessellationSettings {
+        spacing,
+        edge_px: 6.0,
+        patch_samples: 8,
+        edge_levels,
+        ..Default::default()
+    };
+    let (counted, max_level) = gpu_triangles(data, lattice, &settings, cams);
+    let mirror_settings = TessellationSettings {
+        edge_levels: EdgeLevels::Edge,
+        ..settings
+    };
+    let (mut off, mut open) = (Vec::new(), [0, 0]);
+    for (i, (cam, &gpu)) in cams.iter().zip(&counted).enumerate() {
+        let rule = LevelRule::new(&mirror_settings, data, lattice, cam, (W, H), max_level).unwrap();
+        let [lo, hi] = rule.frame_triangles().unwrap();
+        open[0] += hi - lo;
+        open[1] += lo;
+        if !(lo..=hi).contains(&gpu) {
+            off.push(format!("pose {i}: GPU {gpu}, mirror {lo}..={hi}"));
+        }
+    }
+    (off, open)
+}
+
+/// The control stage's level rule (`shaders/glsl/tess.tesc`) is the CPU mirror's
+/// (`lod::tessellation::levels::LevelRule`): over 40 poses per spacing, on the flat world and
+/// on a native geographic grid at 60 N, the triangles the GPU's pipeline-statistics query
+/// counts equal the tessellator's count for the mirror's culling and levels of every patch (a
+/// range where f32 may round a level, or decide the frustum test, the other way). Control:
+/// the centroid ablation (`edge_levels = "patch"`) on the GPU falls outside the edge rule's
+/// counts on most poses.
+#[test]
+fn control_stage_levels_equal_the_cpu_mirror() {
+    let flat = terrain();
+    let flat_cams = poses(&flat, 40);
+    let (earth, lattice) = common::poses::geographic_60n(129);
+    let earth_cams: Vec<Camera> = common::poses::earth_poses(&earth, &lattice, 22);
+    let cases = [
+        ("flat", &flat, None, &flat_cams),
+        ("60 N", &earth, Some(&*lattice), &earth_cams),
+    ];
+    for (name, data, lattice, cams) in cases {
+        for spacing in [
+            Spacing::Equal,
+            Spacing::FractionalOdd,
+            Spacing::FractionalEven,
+        ] {
+            let (off, [open, fixed]) =
+                poses_off_the_mirror(data, lattice, spacing, EdgeLevels::Edge, cams);
+            println!(
+                "{name} {spacing:?}: {} poses, {} off the mirror; {fixed} triangles, {open} more \
+                 where f32 may round the other way",
+                cams.len(),
+                off.len()
+            );
+            assert!(off.is_empty(), "{name} {spacing:?}: {off:#?}");
+            // The ranges are narrow: the comparison pins the levels.
+            assert!(
+                open * 200 <= fixed,
+                "{name} {spacing:?}: {open} of {fixed} open"
+            );
+        }
+        let (off, _) = poses_off_the_mirror(data, lattice, Spacing::Equal, EdgeLevels::Patch, cams);
+        println!(
+            "{name} control (centroid levels): {} poses off the mirror",
+            off.len()
+        );
+        assert!(
+            off.len() * 2 > cams.len(),
+            "{name}: the centroid rule matched the edge rule's counts on {} of {} poses",
+            cams.len() - off.len(),
+            cams.len()
         );
     }
 }

@@ -5,7 +5,8 @@
 // A level depends only on the edge's two endpoints (in either order, bit for bit), so the two
 // patches sharing an edge give it the same level and the same vertices. Patches outside the
 // view frustum (their prism between the quad's lowest and highest height) or of zero area get
-// level 0: the tessellator discards them.
+// level 0: the tessellator discards them. The CPU mirror (src/lod/tessellation/levels.rs) is
+// this rule in f64; tests/tessellation.rs requires the triangles it predicts. Change both.
 
 //!include terrain_common.glsl
 //!include tess_common.glsl

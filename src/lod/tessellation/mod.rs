@@ -16,6 +16,7 @@
 //! The method needs the device feature `tessellationShader` (the TI TDA4VH that Fischer first
 //! targeted has none): without it `new` fails with one line naming the feature.
 
+pub mod levels;
 pub mod settings;
 
 use std::sync::Arc;
@@ -54,6 +55,37 @@ pub struct TessUniforms {
     /// ablation) or each edge's endpoints (0); z: surface from brute force's triangles (1) or
     /// the bilinear field (0).
     pub flags: [u32; 4],
+}
+
+impl TessUniforms {
+    /// The uniforms for `quads` patch quads per data side, a view `height` pixels high with a
+    /// vertical field of view of `vfov_deg`, on a device whose
+    /// `maxTessellationGenerationLevel` is `max_generation_level` (the renderer's and the
+    /// CPU mirror's, `levels::LevelRule`).
+    pub fn new(
+        settings: &TessellationSettings,
+        quads: [u32; 2],
+        height: u32,
+        vfov_deg: f64,
+        max_generation_level: u32,
+    ) -> Self {
+        let focal = height as f64 / (2.0 * (vfov_deg.to_radians() / 2.0).tan());
+        TessUniforms {
+            params: [
+                settings.edge_px as f32,
+                settings.factor as f32,
+                focal as f32,
+                (max_generation_level as f32).min(MAX_LEVEL),
+            ],
+            grid: [settings.patch_samples, CHUNK_QUADS, quads[0], quads[1]],
+            flags: [
+                settings.cull as u32,
+                (settings.edge_levels == EdgeLevels::Patch) as u32,
+                (settings.surface == Surface::Mesh) as u32,
+                0,
+            ],
+        }
+    }
 }
 
 /// Descriptor set 1: the uniforms (vertex stage: the patch grid; control stage: the levels)
@@ -226,31 +258,15 @@ impl Tessellation {
         }))
     }
 
-    /// The uniforms for a view of `height` pixels with camera `vfov_deg`.
+    /// The uniforms for `view`.
     pub fn uniforms_for(&self, view: &ViewState) -> TessUniforms {
-        let focal = view.height as f64 / (2.0 * (view.camera.vfov_deg.to_radians() / 2.0).tan());
-        let max_level =
-            (self.gpu.info.limits.max_tessellation_generation_level as f32).min(MAX_LEVEL);
-        TessUniforms {
-            params: [
-                self.settings.edge_px as f32,
-                self.settings.factor as f32,
-                focal as f32,
-                max_level,
-            ],
-            grid: [
-                self.settings.patch_samples,
-                CHUNK_QUADS,
-                self.quads[0],
-                self.quads[1],
-            ],
-            flags: [
-                self.settings.cull as u32,
-                (self.settings.edge_levels == EdgeLevels::Patch) as u32,
-                (self.settings.surface == Surface::Mesh) as u32,
-                0,
-            ],
-        }
+        TessUniforms::new(
+            &self.settings,
+            self.quads,
+            view.height,
+            view.camera.vfov_deg,
+            self.gpu.info.limits.max_tessellation_generation_level,
+        )
     }
 
     /// `[triangles, patches]` of the last completed frame of `slot`, when queried.
