@@ -4,6 +4,7 @@
 
 pub mod cli;
 pub mod poses;
+pub mod surface;
 
 use std::sync::Arc;
 
