@@ -623,6 +623,83 @@ fn overflowing_budget_at(data: &Heightmap, cams: &[Camera], max_tiles: u32) {
     );
 }
 
+/// Per frame of `cam` rendered `frames` times (two frames in flight, so two slots learn from
+/// each other): the tiles the budget dropped, and whether the GPU's tiles were the CPU
+/// reference's.
+fn repeated_frames(
+    data: &Heightmap,
+    cam: &Camera,
+    lod: &UdlodSettings,
+    frames: usize,
+) -> Vec<(u64, bool)> {
+    let levels = Levels::new(data, lod.grid_size).unwrap();
+    let p = SelectionParams::new(&levels, data, lod, cam, cam.position, W, H);
+    let cpu: HashSet<Tile> = select::select_tiles(&levels, &p).into_iter().collect();
+    let gpu = common::gpu(false);
+    let mut out = Vec::new();
+    {
+        let mut r = Renderer::new(&gpu, data, lod.clone(), common::options(W, H, 2)).unwrap();
+        let mut sink = CollectSink::default();
+        for frame in 0..frames {
+            r.render(*cam, &mut sink).unwrap();
+            // Every second frame waits for both slots, so each slot's counters are read.
+            if frame % 2 == 1 {
+                r.finish(&mut sink).unwrap();
+                for slot in [ViewSlot(0), ViewSlot(1)] {
+                    let tiles: HashSet<Tile> = r
+                        .method()
+                        .debug_tiles(slot)
+                        .unwrap()
+                        .unwrap()
+                        .into_iter()
+                        .map(|[x, y, lod]| Tile { x, y, lod })
+                        .collect();
+                    out.push((r.method().budget_overflow(slot), tiles == cpu));
+                }
+            }
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    out
+}
+
+/// A slot's tile lists start sized from the image (or `initial_tiles`) and grow, up to
+/// `max_tiles`, when a frame overflows them; what one slot learns the other takes at its next
+/// frame. With 16 tiles to start, the first frames overflow and the last ones draw exactly the
+/// CPU reference with nothing dropped. Control: `max_tiles = 16` caps the growth: every frame
+/// overflows.
+#[test]
+fn tile_lists_grow_past_an_overflow() {
+    let data = terrain(257, 30.0);
+    let cam = poses(&data, 10)[3];
+    let start_small = UdlodSettings {
+        initial_tiles: 16,
+        ..settings(4)
+    };
+    let grown = repeated_frames(&data, &cam, &start_small, 12);
+    println!("initial_tiles 16: (overflow, equal to the CPU reference) per frame: {grown:?}");
+    assert!(
+        grown[0].0 > 0,
+        "16 tiles should not hold the pose: {grown:?}"
+    );
+    assert!(
+        grown[grown.len() - 4..]
+            .iter()
+            .all(|&(o, equal)| o == 0 && equal),
+        "the lists did not grow: {grown:?}"
+    );
+    let capped = repeated_frames(
+        &data,
+        &cam,
+        &UdlodSettings {
+            max_tiles: 16,
+            ..start_small
+        },
+        12,
+    );
+    assert!(capped.iter().all(|&(o, _)| o > 0), "{capped:?}");
+}
+
 /// Whether the tiles' level-0 cells cover the data set's level-0 tiles exactly once.
 fn covers_exactly_once(levels: &Levels, tiles: &[Tile]) -> Result<(), String> {
     let cells = leaf_levels(tiles);

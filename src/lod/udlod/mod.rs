@@ -87,13 +87,24 @@ pub const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
 pub const DRAW_STRIDE: u32 = size_of::<[u32; 5]>() as u32;
 pub const TILE_BYTES: u64 = 16;
 
+/// The fewest tiles a slot's lists start with when sized from the image.
+const INITIAL_TILES_FLOOR: u32 = 1024;
+
+/// Tiles a slot's lists start with for a `width` x `height` image and tiles of `grid_size`²
+/// quads (`initial_tiles = 0`): two triangles per pixel, at least [`INITIAL_TILES_FLOOR`].
+/// Measured selections drew 0.14 (CI terrain, tau 1) to 0.22 (Puget Sound, tau 0.5, 1080p)
+/// triangles per pixel, Hedberg's uneven map 4.2 (tau 0.5, 1080p): that one grows the lists
+/// twice (docs/udlod.md, "Tile lists sized from the view").
+pub fn initial_tiles(width: u32, height: u32, grid_size: u32) -> u32 {
+    let triangles = 2 * width as u64 * height as u64;
+    let per_tile = 2 * grid_size as u64 * grid_size as u64;
+    (triangles / per_tile).clamp(INITIAL_TILES_FLOOR as u64, u32::MAX as u64) as u32
+}
+
 struct SlotBuffers {
     uniforms: Buffer,
     state: Buffer,
-    /// Referenced by the descriptor set only.
-    _temp_tiles: Buffer,
-    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
-    final_tiles: Buffer,
+    lists: TileLists,
     /// Host-readable copy of `state` (counters for statistics).
     counters: Buffer,
     /// The split field's corner values this slot draws with, and what they were built for
@@ -101,22 +112,61 @@ struct SlotBuffers {
     field: Buffer,
     field_key: Option<FieldKey>,
     set: vk::DescriptorSet,
+    /// Whether a frame was recorded on this slot (its counters hold a frame's).
+    drawn: bool,
 }
 
-/// Sizes of one slot's lists and split field.
-struct SlotSizes {
-    final_capacity: u32,
-    temp_capacity: u32,
-    field_bytes: u64,
+/// A slot's tile lists: the final list the draw reads and the temporary one the passes of
+/// the prepass share.
+struct TileLists {
+    /// Referenced by the descriptor set only.
+    _temp: Buffer,
+    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
+    final_tiles: Buffer,
+    /// Entries of the final list.
+    capacity: u32,
+}
+
+impl TileLists {
+    /// Lists for `capacity` final tiles. Parents and children of one pass share the
+    /// temporary list: a pass has at most `4/3 * capacity + 1` children (every split
+    /// reserved 3 final entries).
+    fn new(gpu: &Arc<Gpu>, i: usize, capacity: u32) -> Result<Self> {
+        let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let temp = Buffer::new(
+            gpu,
+            &format!("udlod temp tiles {i}"),
+            Self::temp_capacity(capacity) as u64 * TILE_BYTES,
+            storage,
+            MemoryLocation::GpuOnly,
+        )?;
+        let final_tiles = Buffer::new(
+            gpu,
+            &format!("udlod final tiles {i}"),
+            capacity as u64 * TILE_BYTES,
+            storage | vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::GpuOnly,
+        )?;
+        Ok(TileLists {
+            _temp: temp,
+            final_tiles,
+            capacity,
+        })
+    }
+
+    fn temp_capacity(capacity: u32) -> u32 {
+        2 * capacity + 8
+    }
 }
 
 impl SlotBuffers {
-    /// Slot `i`'s buffers, written into its descriptor set `set` with the shared `min_max`.
+    /// Slot `i`'s buffers with lists for `capacity` tiles and a split field of `field_bytes`,
+    /// written into its descriptor set `set` with the shared `min_max`.
     fn new(
         gpu: &Arc<Gpu>,
         sets: &DescriptorSets,
         (i, set): (usize, vk::DescriptorSet),
-        sizes: &SlotSizes,
+        (capacity, field_bytes): (u32, u64),
         min_max: &Buffer,
     ) -> Result<Self> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
@@ -137,20 +187,6 @@ impl SlotBuffers {
                 | vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::GpuOnly,
         )?;
-        let temp_tiles = Buffer::new(
-            gpu,
-            &format!("udlod temp tiles {i}"),
-            sizes.temp_capacity as u64 * TILE_BYTES,
-            storage,
-            MemoryLocation::GpuOnly,
-        )?;
-        let final_tiles = Buffer::new(
-            gpu,
-            &format!("udlod final tiles {i}"),
-            sizes.final_capacity as u64 * TILE_BYTES,
-            storage | vk::BufferUsageFlags::TRANSFER_SRC,
-            MemoryLocation::GpuOnly,
-        )?;
         let counters = Buffer::new(
             gpu,
             &format!("udlod counters {i}"),
@@ -161,31 +197,36 @@ impl SlotBuffers {
         let field = Buffer::new(
             gpu,
             &format!("udlod split field {i}"),
-            sizes.field_bytes,
+            field_bytes,
             storage,
             MemoryLocation::CpuToGpu,
         )?;
-        sets.write(
-            i,
-            &[
-                ("udlod", Resource::Buffer(uniforms.raw)),
-                ("state", Resource::Buffer(state.raw)),
-                ("temp_tiles", Resource::Buffer(temp_tiles.raw)),
-                ("final_tiles", Resource::Buffer(final_tiles.raw)),
-                ("min_max", Resource::Buffer(min_max.raw)),
-                ("split_field", Resource::Buffer(field.raw)),
-            ],
-        )?;
-        Ok(SlotBuffers {
+        let slot = SlotBuffers {
             uniforms,
             state,
-            _temp_tiles: temp_tiles,
-            final_tiles,
+            lists: TileLists::new(gpu, i, capacity)?,
             counters,
             field,
             field_key: None,
             set,
-        })
+            drawn: false,
+        };
+        slot.write_set(sets, i, min_max)?;
+        Ok(slot)
+    }
+
+    fn write_set(&self, sets: &DescriptorSets, i: usize, min_max: &Buffer) -> Result<()> {
+        sets.write(
+            i,
+            &[
+                ("udlod", Resource::Buffer(self.uniforms.raw)),
+                ("state", Resource::Buffer(self.state.raw)),
+                ("temp_tiles", Resource::Buffer(self.lists._temp.raw)),
+                ("final_tiles", Resource::Buffer(self.lists.final_tiles.raw)),
+                ("min_max", Resource::Buffer(min_max.raw)),
+                ("split_field", Resource::Buffer(self.field.raw)),
+            ],
+        )
     }
 }
 
@@ -212,9 +253,11 @@ pub struct Udlod {
     refine: Pipeline,
     finish: Pipeline,
     draw: Pipeline,
-    /// Entries of the final tile list: `max_tiles`, at most the full tree's leaves.
-    final_capacity: u32,
-    temp_capacity: u32,
+    /// The most tiles a slot's lists grow to: `max_tiles`, at most the full tree's leaves.
+    tile_cap: u32,
+    /// The final-list capacity every slot grows to at its next frame: sized from the image
+    /// (or `initial_tiles`), doubled past a slot's capacity when a frame overflows it.
+    wanted_tiles: u32,
 }
 
 impl Udlod {
@@ -288,17 +331,16 @@ impl Udlod {
         // No selection reserves more leaves than the full tree over the root's square has
         // (4^root_lod), so small data sets do not allocate the whole budget.
         let full_tree = 1u64 << (2 * levels.root_lod).min(62);
-        let final_capacity = (settings.max_tiles as u64).min(full_tree) as u32;
-        // Parents and children of one pass share the temporary list: a pass has at most
-        // `4/3 * final_capacity + 1` children (every split reserved 3 final entries).
-        let temp_capacity = 2 * final_capacity + 8;
-        let sizes = SlotSizes {
-            final_capacity,
-            temp_capacity,
-            field_bytes,
-        };
+        let tile_cap = (settings.max_tiles as u64).min(full_tree) as u32;
+        // The lists are sized at the first frame, from its image (`update`).
+        let first = if settings.initial_tiles > 0 {
+            settings.initial_tiles
+        } else {
+            INITIAL_TILES_FLOOR
+        }
+        .min(tile_cap);
         let slots = (sets.sets.iter().enumerate())
-            .map(|(i, &set)| SlotBuffers::new(gpu, &sets, (i, set), &sizes, &min_max))
+            .map(|(i, &set)| SlotBuffers::new(gpu, &sets, (i, set), (first, field_bytes), &min_max))
             .collect::<Result<Vec<_>>>()?;
         let set_layouts = [ctx.terrain.descriptors.layout, sets.layout];
         let tiling = crate::driver::shaders::UDLOD_TILING_SPV;
@@ -337,8 +379,8 @@ impl Udlod {
             refine,
             finish,
             draw,
-            final_capacity,
-            temp_capacity,
+            tile_cap,
+            wanted_tiles: first,
         })
     }
 
@@ -386,13 +428,50 @@ impl Udlod {
         })
     }
 
+    /// The counters of `slot`'s last completed frame (zero before its first).
     fn read_counters(&self, slot: ViewSlot) -> TilingState {
-        self.slots[slot.index()]
-            .counters
+        let s = &self.slots[slot.index()];
+        s.counters
             .mapped()
+            .filter(|_| s.drawn)
             .and_then(|bytes| bytes.get(..size_of::<TilingState>()))
             .map(bytemuck::pod_read_unaligned)
             .unwrap_or_default()
+    }
+
+    /// Grows `slot`'s tile lists, before its next frame, to what the view needs: at least
+    /// [`initial_tiles`] for its image, and past the capacity its last frame overflowed
+    /// (doubled, or by twice the overflow), up to `max_tiles`. What one slot learns, every
+    /// slot takes at its next frame. Returns the slot's capacity. The slot's previous frame
+    /// has completed, so its old lists can go.
+    fn grow_lists(&mut self, slot: ViewSlot, view: &ViewState) -> Result<u32> {
+        let i = slot.index();
+        let have = self.slots[i].lists.capacity;
+        let overflow = self.read_counters(slot).overflow;
+        let mut wanted = self.wanted_tiles;
+        if self.settings.initial_tiles == 0 {
+            wanted = wanted.max(initial_tiles(
+                view.width,
+                view.height,
+                self.settings.grid_size,
+            ));
+        }
+        if overflow > 0 {
+            wanted = wanted.max(
+                have.saturating_mul(2)
+                    .max(have.saturating_add(2 * overflow)),
+            );
+        }
+        self.wanted_tiles = wanted.min(self.tile_cap);
+        if have < self.wanted_tiles {
+            tracing::debug!(
+                "udlod: slot {i}'s tile lists grow from {have} to {} tiles (overflow {overflow})",
+                self.wanted_tiles
+            );
+            self.slots[i].lists = TileLists::new(&self.gpu, i, self.wanted_tiles)?;
+            self.slots[i].write_set(&self.sets, i, &self._min_max)?;
+        }
+        Ok(self.slots[i].lists.capacity)
     }
 }
 
@@ -419,11 +498,12 @@ impl LodMethod for Udlod {
                 p.field.corner_offsets[lod],
             ];
         }
+        let capacity = self.grow_lists(slot, view)?;
         u.sizes = [
             self.settings.grid_size,
             self.levels.root_lod,
-            self.final_capacity,
-            self.temp_capacity,
+            capacity,
+            TileLists::temp_capacity(capacity),
         ];
         u.viewer = [p.viewer[0], p.viewer[1], p.viewer[2], 0.0];
         u.params = [
@@ -453,6 +533,7 @@ impl LodMethod for Udlod {
         let gpu = &self.gpu;
         let d = &gpu.device;
         let b = Barriers::new(gpu);
+        self.slots[slot.index()].drawn = true;
         let s = &self.slots[slot.index()];
         let sets = [frame_set, s.set];
         unsafe {
@@ -580,7 +661,7 @@ impl LodMethod for Udlod {
             vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuToCpu,
         )?;
-        let src = self.slots[slot.index()].final_tiles.raw;
+        let src = self.slots[slot.index()].lists.final_tiles.raw;
         let b = Barriers::new(&self.gpu);
         self.gpu.one_shot(|cmd| unsafe {
             b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);

@@ -14,8 +14,12 @@ pub struct UdlodSettings {
     pub tau_px: f64,
     /// Fraction of each level's range over which vertices morph (0.05..=0.45).
     pub morph_range: f64,
-    /// Capacity of the final tile list (tiles per frame).
+    /// The most tiles a frame and view may draw: a slot's lists start sized from the image
+    /// (or `initial_tiles`) and grow to this when a frame overflows them.
     pub max_tiles: u32,
+    /// Tiles a slot's lists start with (0: from the image size, two triangles per pixel);
+    /// set only to exercise the growth in tests.
+    pub initial_tiles: u32,
     /// Vertex morphing (off only to demonstrate popping and cracks in tests).
     pub morph: bool,
     /// Frustum culling of tiles.
@@ -63,6 +67,7 @@ impl Default for UdlodSettings {
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
             max_tiles: 524_288,
+            initial_tiles: 0,
             morph: true,
             cull: true,
             error_field_max: 1024.0,
@@ -127,6 +132,12 @@ impl UdlodSettings {
             return bad(format!(
                 "max_tiles {} must be within 16..=4194304",
                 self.max_tiles
+            ));
+        }
+        if self.initial_tiles != 0 && !(16..=self.max_tiles).contains(&self.initial_tiles) {
+            return bad(format!(
+                "initial_tiles {} must be 0 (from the image) or within 16..=max_tiles ({})",
+                self.initial_tiles, self.max_tiles
             ));
         }
         if !(1..=65_535).contains(&self.dispatch_row) {
