@@ -9,23 +9,48 @@
 
 @group(1) @binding(3) var<storage, read> final_tiles: array<Tile>;
 
+// Two draws read the final list: the tiles that cannot morph from its front (with back-face
+// culling), the others from its back (`*_morphing`, without: `tile_may_morph` in
+// udlod_tiling.wgsl).
+fn morphing_tile(instance: u32) -> Tile {
+    return final_tiles[udlod.sizes.z - 1u - instance];
+}
+
 // Indexed drawing: the shared index grid names grid vertices `row * (quads + 1) + column`.
+fn indexed_local(vertex: u32) -> vec2<u32> {
+    let quads = udlod.sizes.x;
+    return vec2<u32>(vertex % (quads + 1u), vertex / (quads + 1u));
+}
+
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
-    let quads = udlod.sizes.x;
-    return tile_vertex(final_tiles[instance], vec2<u32>(vertex % (quads + 1u), vertex / (quads + 1u)));
+    return tile_vertex(final_tiles[instance], indexed_local(vertex));
+}
+
+@vertex
+fn vs_main_morphing(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    return tile_vertex(morphing_tile(instance), indexed_local(vertex));
 }
 
 // Vertex pulling without an index buffer: six vertices per quad, in the index grid's order
 // (triangles (0,0) (1,0) (0,1) and (1,0) (1,1) (0,1); `lod::brute::grid_indices`).
-@vertex
-fn vs_pulled(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+fn pulled_local(vertex: u32) -> vec2<u32> {
     let quads = udlod.sizes.x;
     let quad = vertex / 6u;
     let corner = vertex % 6u;
     let dx = select(0u, 1u, corner == 1u || corner == 3u || corner == 4u);
     let dy = select(0u, 1u, corner == 2u || corner == 4u || corner == 5u);
-    return tile_vertex(final_tiles[instance], vec2<u32>(quad % quads + dx, quad / quads + dy));
+    return vec2<u32>(quad % quads + dx, quad / quads + dy);
+}
+
+@vertex
+fn vs_pulled(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    return tile_vertex(final_tiles[instance], pulled_local(vertex));
+}
+
+@vertex
+fn vs_pulled_morphing(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    return tile_vertex(morphing_tile(instance), pulled_local(vertex));
 }
 
 // The morphed vertex (`morphed_vertex`, shared with the test probe) projected.

@@ -18,6 +18,7 @@
 
 //!include terrain_common.wgsl
 //!include udlod_common.wgsl
+//!include udlod_morph.wgsl
 
 struct TilingState {
     // vkCmdDispatchIndirect arguments of the next refine pass.
@@ -43,6 +44,16 @@ struct TilingState {
     splits_allowed: u32,
     // Tiles written for the next pass that will want to split there.
     split_requests: atomic<u32>,
+    // Final tiles some vertex of which may morph, written from the back of the final list
+    // (`tile_may_morph`); the others from the front.
+    morph_count: atomic<u32>,
+    // vkCmdDrawIndexedIndirect arguments of the morphing tiles (drawn without back-face
+    // culling: docs/udlod.md, "Pinholes far away").
+    morph_index_count: u32,
+    morph_instance_count: u32,
+    morph_first_index: u32,
+    morph_vertex_offset: i32,
+    morph_first_instance: u32,
 }
 
 @group(1) @binding(1) var<storage, read_write> state: TilingState;
@@ -64,6 +75,7 @@ fn prepare() {
         parents = 1u;
         requests = select(0u, 1u, root.pad == (TILE_DECIDED | TILE_SPLITS));
         atomicStore(&state.final_count, 0u);
+        atomicStore(&state.morph_count, 0u);
         atomicStore(&state.reserved_leaves, 1u);
         atomicStore(&state.overflow, 0u);
         atomicStore(&state.culled, 0u);
@@ -162,11 +174,13 @@ fn cull_slack(t: Tile) -> f32 {
 // thousands of invocations on one address: 4 ms of prepass on the H200 at 17,600 tiles.)
 var<workgroup> wg_children: atomic<u32>;
 var<workgroup> wg_finals: atomic<u32>;
+var<workgroup> wg_morphing: atomic<u32>;
 var<workgroup> wg_requests: atomic<u32>;
 var<workgroup> wg_culled: atomic<u32>;
 var<workgroup> wg_overflow: atomic<u32>;
 var<workgroup> wg_child_base: u32;
 var<workgroup> wg_final_base: u32;
+var<workgroup> wg_morph_base: u32;
 
 // Four invocations per parent: their parent's slot in the workgroup's reservations.
 var<workgroup> wg_parent_local: array<u32, UDLOD_WORKGROUP / 4u>;
@@ -193,6 +207,7 @@ fn refine(
     if li == 0u {
         atomicStore(&wg_children, 0u);
         atomicStore(&wg_finals, 0u);
+        atomicStore(&wg_morphing, 0u);
         atomicStore(&wg_requests, 0u);
         atomicStore(&wg_culled, 0u);
         atomicStore(&wg_overflow, 0u);
@@ -203,6 +218,7 @@ fn refine(
     let k = invocation % 4u;
     let parents = state.parent_count;
     var action = ACTION_NONE;
+    var morphs = false;
     var t = Tile(0u, 0u, 0u, 0u);
     var child = Tile(0u, 0u, 0u, 0u);
     if parent < parents {
@@ -231,7 +247,12 @@ fn refine(
         if action == ACTION_SPLIT {
             wg_parent_local[li / 4u] = atomicAdd(&wg_children, 4u);
         } else if action == ACTION_FINAL {
-            wg_parent_local[li / 4u] = atomicAdd(&wg_finals, 1u);
+            morphs = tile_may_morph(t);
+            if morphs {
+                wg_parent_local[li / 4u] = atomicAdd(&wg_morphing, 1u);
+            } else {
+                wg_parent_local[li / 4u] = atomicAdd(&wg_finals, 1u);
+            }
         }
     }
     workgroupBarrier();
@@ -248,9 +269,11 @@ fn refine(
             atomicAdd(&state.overflow, 1u);
         }
     } else if action == ACTION_FINAL && k == 0u {
-        let i = wg_final_base + local;
+        // Static tiles from the front, morphing ones from the back: the leaves reserved
+        // before (`reserved_leaves`) fit both.
+        let i = select(wg_final_base, wg_morph_base, morphs) + local;
         if i < udlod.sizes.z {
-            final_tiles[i] = Tile(t.x, t.y, t.lod, 0u);
+            final_tiles[select(i, udlod.sizes.z - 1u - i, morphs)] = Tile(t.x, t.y, t.lod, 0u);
         } else {
             atomicAdd(&state.overflow, 1u);
         }
@@ -268,6 +291,10 @@ fn reserve_in_lists() {
     let nf = atomicLoad(&wg_finals);
     if nf > 0u {
         wg_final_base = atomicAdd(&state.final_count, nf);
+    }
+    let nm = atomicLoad(&wg_morphing);
+    if nm > 0u {
+        wg_morph_base = atomicAdd(&state.morph_count, nm);
     }
     let requests = atomicLoad(&wg_requests);
     if requests > 0u {
@@ -315,12 +342,39 @@ fn decided(t: Tile) -> Tile {
     return Tile(t.x, t.y, t.lod, flags);
 }
 
+// Whether some vertex of final tile `t` sits part-way through its morph (`morph_factor`
+// strictly between 0 and 1, the vertex stage's own arithmetic): only then are there sliver
+// triangles. A tile whose moving (odd) vertices are all unmorphed or fully morphed is drawn
+// with back-face culling (docs/udlod.md, "Pinholes far away").
+fn tile_may_morph(t: Tile) -> bool {
+    let quads = udlod.sizes.x;
+    let step = 1u << t.lod;
+    let origin = vec2<u32>(t.x, t.y) * quads * step;
+    for (var j = 0u; j <= quads; j++) {
+        for (var i = 0u; i <= quads; i++) {
+            if ((i | j) & 1u) == 0u {
+                continue;
+            }
+            let m = morph_factor(vec2<i32>(origin + vec2<u32>(i, j) * step), t.lod);
+            if m > 0.0 && m < 1.0 {
+                return true;
+            }
+        }
+    }
+    return false;
+}
+
 @compute @workgroup_size(1)
 fn finish() {
-    let n = min(atomicLoad(&state.final_count), udlod.sizes.z);
+    let morphing = min(atomicLoad(&state.morph_count), udlod.sizes.z);
     state.index_count = udlod.counts.x;
-    state.instance_count = n;
+    state.instance_count = min(atomicLoad(&state.final_count), udlod.sizes.z - morphing);
     state.first_index = 0u;
     state.vertex_offset = 0;
     state.first_instance = 0u;
+    state.morph_index_count = udlod.counts.x;
+    state.morph_instance_count = morphing;
+    state.morph_first_index = 0u;
+    state.morph_vertex_offset = 0;
+    state.morph_first_instance = 0u;
 }

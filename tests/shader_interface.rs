@@ -17,7 +17,9 @@ use vkterrain::frame::FrameUniforms;
 use vkterrain::frame::terrain::TERRAIN_SET;
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
 use vkterrain::lod::pgm::PGM_SET;
-use vkterrain::lod::udlod::{DRAW_OFFSET, DRAW_STRIDE, TilingState, UDLOD_SET, UdlodUniforms};
+use vkterrain::lod::udlod::{
+    DRAW_OFFSET, DRAW_STRIDE, MORPH_DRAW_OFFSET, TilingState, UDLOD_SET, UdlodUniforms,
+};
 
 /// The drawing shaders (the probes come on top where a test covers them too).
 fn composed_shaders() -> [(&'static str, &'static str); 4] {
@@ -269,6 +271,7 @@ fn chunk_state_matches_the_wgsl_struct() {
 fn tiling_state_matches_the_wgsl_struct() {
     // The WGSL side spells the indirect-argument arrays out member by member.
     let draw = offset_of!(TilingState, draw);
+    let morph_draw = offset_of!(TilingState, morph_draw);
     let rust = [
         ("dispatch_x", offset_of!(TilingState, dispatch)),
         ("dispatch_y", offset_of!(TilingState, dispatch) + 4),
@@ -288,6 +291,12 @@ fn tiling_state_matches_the_wgsl_struct() {
         ("passes_started", offset_of!(TilingState, passes_started)),
         ("splits_allowed", offset_of!(TilingState, splits_allowed)),
         ("split_requests", offset_of!(TilingState, split_requests)),
+        ("morph_count", offset_of!(TilingState, morph_count)),
+        ("morph_index_count", morph_draw),
+        ("morph_instance_count", morph_draw + 4),
+        ("morph_first_index", morph_draw + 8),
+        ("morph_vertex_offset", morph_draw + 12),
+        ("morph_first_instance", morph_draw + 16),
     ];
     assert_struct_layout(
         &[("udlod_tiling", UDLOD_TILING_WGSL)],
@@ -300,8 +309,8 @@ fn tiling_state_matches_the_wgsl_struct() {
 /// The indirect arguments inside `TilingState` are laid out as Vulkan reads them: the WGSL
 /// members sit at the offsets of `VkDispatchIndirectCommand` (at 0, where the prepass
 /// dispatches from) and `VkDrawIndexedIndirectCommand` (at `DRAW_OFFSET`, drawn with
-/// `DRAW_STRIDE`), and the first four draw words read as a `VkDrawIndirectCommand` for vertex
-/// pulling.
+/// `DRAW_STRIDE`, and the morphing tiles' at `MORPH_DRAW_OFFSET`), and the first four draw
+/// words read as a `VkDrawIndirectCommand` for vertex pulling.
 #[test]
 fn indirect_arguments_are_vulkan_commands() {
     let module = naga::front::wgsl::parse_str(UDLOD_TILING_WGSL).unwrap();
@@ -331,6 +340,24 @@ fn indirect_arguments_are_vulkan_commands() {
     assert_eq!(at("instance_count"), draw + offset_of!(P, instance_count));
     assert_eq!(at("first_index"), draw + offset_of!(P, first_vertex));
     assert_eq!(at("vertex_offset"), draw + offset_of!(P, first_instance));
+    // The morphing tiles' draw, the same way.
+    let morph = MORPH_DRAW_OFFSET as usize;
+    assert_eq!(morph % 4, 0);
+    assert_eq!(at("morph_index_count"), morph + offset_of!(I, index_count));
+    assert_eq!(
+        at("morph_instance_count"),
+        morph + offset_of!(I, instance_count)
+    );
+    assert_eq!(at("morph_first_index"), morph + offset_of!(I, first_index));
+    assert_eq!(
+        at("morph_vertex_offset"),
+        morph + offset_of!(I, vertex_offset)
+    );
+    assert_eq!(
+        at("morph_first_instance"),
+        morph + offset_of!(I, first_instance)
+    );
+    assert!(morph + size_of::<I>() <= size_of::<TilingState>());
 }
 
 /// Member names and byte offsets of WGSL struct `name`.

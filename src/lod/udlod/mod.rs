@@ -30,7 +30,7 @@ use crate::frame::ViewState;
 use crate::gpu_constants::UDLOD_MAX_LEVELS;
 use crate::slots::ViewSlot;
 use select::{FieldKey, Levels, SelectionParams, SplitField};
-use settings::{LodMetric, UdlodSettings};
+use settings::{BackFaces, LodMetric, UdlodSettings};
 
 /// Per-frame uniforms of set 1 (`Udlod` in `shaders/include/udlod_common.wgsl`).
 #[repr(C)]
@@ -63,6 +63,11 @@ pub struct TilingState {
     pub passes_started: u32,
     pub splits_allowed: u32,
     pub split_requests: u32,
+    /// Final tiles with a vertex part-way through its morph, written from the back of the
+    /// final list.
+    pub morph_count: u32,
+    /// The indexed indirect draw of those tiles.
+    pub morph_draw: [u32; 5],
 }
 
 /// Descriptor set 1 (`shaders/include/udlod_common.wgsl`, `shaders/udlod_tiling.wgsl`,
@@ -83,6 +88,8 @@ pub const UDLOD_SET: &[Binding] = {
 
 /// Where `TilingState::draw` starts: the `vkCmdDrawIndexedIndirect` arguments.
 pub const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
+/// Byte offset of the morphing tiles' draw arguments in [`TilingState`].
+pub const MORPH_DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, morph_draw) as u64;
 /// Bytes between consecutive indexed indirect draws (one is drawn; Vulkan wants the stride).
 pub const DRAW_STRIDE: u32 = size_of::<[u32; 5]>() as u32;
 pub const TILE_BYTES: u64 = 16;
@@ -252,7 +259,10 @@ pub struct Udlod {
     prepare: Pipeline,
     refine: Pipeline,
     finish: Pipeline,
+    /// Draws the tiles that cannot morph (front of the final list) with back-face culling.
     draw: Pipeline,
+    /// Draws the tiles that may morph (back of the final list) without it.
+    draw_morphing: Pipeline,
     /// The most tiles a slot's lists grow to: `max_tiles`, at most the full tree's leaves.
     tile_cap: u32,
     /// The final-list capacity every slot grows to at its next frame: sized from the image
@@ -347,22 +357,35 @@ impl Udlod {
         let prepare = compute_pipeline(gpu, tiling, c"prepare", &set_layouts)?;
         let refine = compute_pipeline(gpu, tiling, c"refine", &set_layouts)?;
         let finish = compute_pipeline(gpu, tiling, c"finish", &set_layouts)?;
-        let draw = terrain_pipeline(
-            gpu,
-            &ctx.formats,
-            &TerrainPipelineDesc {
-                spv: crate::driver::shaders::UDLOD_SPV,
-                vertex_entry: if settings.vertex_pulling {
-                    c"vs_pulled"
-                } else {
-                    c"vs_main"
+        let draw_pipeline = |entry: &std::ffi::CStr, cull_back_faces| {
+            terrain_pipeline(
+                gpu,
+                &ctx.formats,
+                &TerrainPipelineDesc {
+                    spv: crate::driver::shaders::UDLOD_SPV,
+                    vertex_entry: entry,
+                    fragment_entry: c"fs_main",
+                    set_layouts: &set_layouts,
+                    topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+                    cull_back_faces,
                 },
-                fragment_entry: c"fs_main",
-                set_layouts: &set_layouts,
-                topology: vk::PrimitiveTopology::TRIANGLE_LIST,
-                cull_back_faces: false,
-            },
-        )?;
+            )
+        };
+        // By default tiles that cannot morph with back-face culling, the others without
+        // (docs/udlod.md, "Pinholes far away").
+        let cull_static = settings.back_faces != BackFaces::None;
+        let cull_morphing = settings.back_faces == BackFaces::All;
+        let (draw, draw_morphing) = if settings.vertex_pulling {
+            (
+                draw_pipeline(c"vs_pulled", cull_static)?,
+                draw_pipeline(c"vs_pulled_morphing", cull_morphing)?,
+            )
+        } else {
+            (
+                draw_pipeline(c"vs_main", cull_static)?,
+                draw_pipeline(c"vs_main_morphing", cull_morphing)?,
+            )
+        };
         Ok(Udlod {
             gpu: gpu.clone(),
             settings,
@@ -379,6 +402,7 @@ impl Udlod {
             refine,
             finish,
             draw,
+            draw_morphing,
             tile_cap,
             wanted_tiles: first,
         })
@@ -606,32 +630,37 @@ impl LodMethod for Udlod {
     ) {
         let d = &self.gpu.device;
         let s = &self.slots[slot.index()];
-        unsafe {
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.draw.raw);
-            d.cmd_bind_descriptor_sets(
-                cmd,
-                vk::PipelineBindPoint::GRAPHICS,
-                self.draw.layout,
-                0,
-                &[frame_set, s.set],
-                &[],
-            );
-            if self.settings.vertex_pulling {
-                // The indexed arguments (index_count, instance_count, first_index,
-                // vertex_offset, ...) read as non-indexed ones: 6 * quads^2 vertices per
-                // instance, first vertex 0, first instance 0.
-                let stride = size_of::<vk::DrawIndirectCommand>() as u32;
-                d.cmd_draw_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, stride);
-            } else {
-                d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
-                d.cmd_draw_indexed_indirect(cmd, s.state.raw, DRAW_OFFSET, 1, DRAW_STRIDE);
+        for (pipeline, offset) in [
+            (&self.draw, DRAW_OFFSET),
+            (&self.draw_morphing, MORPH_DRAW_OFFSET),
+        ] {
+            unsafe {
+                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
+                d.cmd_bind_descriptor_sets(
+                    cmd,
+                    vk::PipelineBindPoint::GRAPHICS,
+                    pipeline.layout,
+                    0,
+                    &[frame_set, s.set],
+                    &[],
+                );
+                if self.settings.vertex_pulling {
+                    // The indexed arguments (index_count, instance_count, first_index,
+                    // vertex_offset, ...) read as non-indexed ones: 6 * quads^2 vertices per
+                    // instance, first vertex 0, first instance 0.
+                    let stride = size_of::<vk::DrawIndirectCommand>() as u32;
+                    d.cmd_draw_indirect(cmd, s.state.raw, offset, 1, stride);
+                } else {
+                    d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
+                    d.cmd_draw_indexed_indirect(cmd, s.state.raw, offset, 1, DRAW_STRIDE);
+                }
             }
         }
     }
 
     fn triangles(&self, slot: ViewSlot) -> u64 {
         let c = self.read_counters(slot);
-        c.draw[1] as u64 * 2 * (self.settings.grid_size as u64).pow(2)
+        (c.draw[1] + c.morph_draw[1]) as u64 * 2 * (self.settings.grid_size as u64).pow(2)
     }
 
     fn budget_overflow(&self, slot: ViewSlot) -> u64 {
@@ -641,7 +670,8 @@ impl LodMethod for Udlod {
     fn counters(&self, slot: ViewSlot) -> Vec<(&'static str, u64)> {
         let c = self.read_counters(slot);
         vec![
-            ("tiles", c.draw[1] as u64),
+            ("tiles", (c.draw[1] + c.morph_draw[1]) as u64),
+            ("morphing", c.morph_draw[1] as u64),
             ("overflow", c.overflow as u64),
             ("culled", c.culled as u64),
             ("passes", c.passes_started as u64),
@@ -650,7 +680,10 @@ impl LodMethod for Udlod {
 
     #[cfg(feature = "test-support")]
     fn debug_tiles(&self, slot: ViewSlot) -> Result<Option<Vec<[u32; 3]>>> {
-        let n = self.read_counters(slot).draw[1] as u64;
+        let c = self.read_counters(slot);
+        // The static tiles from the list's front, the morphing ones from its back.
+        let (front, back) = (c.draw[1] as u64, c.morph_draw[1] as u64);
+        let n = front + back;
         if n == 0 {
             return Ok(Some(Vec::new()));
         }
@@ -661,20 +694,29 @@ impl LodMethod for Udlod {
             vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuToCpu,
         )?;
-        let src = self.slots[slot.index()].lists.final_tiles.raw;
+        let lists = &self.slots[slot.index()].lists;
+        let regions: Vec<vk::BufferCopy> = [
+            (0, 0, front),
+            (
+                (lists.capacity as u64 - back) * TILE_BYTES,
+                front * TILE_BYTES,
+                back,
+            ),
+        ]
+        .into_iter()
+        .filter(|&(_, _, tiles)| tiles > 0)
+        .map(|(src_offset, dst_offset, tiles)| vk::BufferCopy {
+            src_offset,
+            dst_offset,
+            size: tiles * TILE_BYTES,
+        })
+        .collect();
         let b = Barriers::new(&self.gpu);
         self.gpu.one_shot(|cmd| unsafe {
             b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
-            self.gpu.device.cmd_copy_buffer(
-                cmd,
-                src,
-                host.raw,
-                &[vk::BufferCopy {
-                    src_offset: 0,
-                    dst_offset: 0,
-                    size: n * TILE_BYTES,
-                }],
-            );
+            self.gpu
+                .device
+                .cmd_copy_buffer(cmd, lists.final_tiles.raw, host.raw, &regions);
             b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
         })?;
         let bytes = host

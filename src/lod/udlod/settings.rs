@@ -24,6 +24,8 @@ pub struct UdlodSettings {
     pub morph: bool,
     /// Frustum culling of tiles.
     pub cull: bool,
+    /// Which tiles are drawn with back-face culling.
+    pub back_faces: BackFaces,
     /// Largest ratio between a level's largest split distance and a tile's own (the split
     /// field's cap; 1 = distance-only selection: every tile refined for the level's worst
     /// error and the chain). Larger lets smooth tiles keep coarser levels.
@@ -38,6 +40,23 @@ pub struct UdlodSettings {
     /// the least `maxComputeWorkGroupCount` a Vulkan device may have): past it a dispatch takes
     /// more rows. Lowered only to exercise the rows in tests.
     pub dispatch_row: u32,
+}
+
+/// Which of UDLOD's tiles are drawn with back-face culling (config `back_faces`;
+/// docs/udlod.md, "Pinholes far away").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BackFaces {
+    /// Tiles none of whose vertices is part-way through its morph (each unmorphed or fully on
+    /// the parent's grid, as the prepass finds with the vertex stage's arithmetic): they have
+    /// no sliver triangles, and culling them saves the rasterizer their hidden back faces.
+    /// The other tiles' slivers, which can face away while on the surface, are drawn.
+    #[default]
+    Static,
+    /// Every tile (an ablation: morphing slivers seen from far away leave pinholes).
+    All,
+    /// No tile (what UDLOD did before: every back face rasterized).
+    None,
 }
 
 /// The LOD metric on a native non-square grid on the earth (config `lod_metric`;
@@ -70,6 +89,7 @@ impl Default for UdlodSettings {
             initial_tiles: 0,
             morph: true,
             cull: true,
+            back_faces: BackFaces::Static,
             error_field_max: 1024.0,
             vertex_pulling: false,
             lod_metric: LodMetric::Axis,
