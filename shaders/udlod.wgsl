@@ -9,9 +9,9 @@
 
 @group(1) @binding(3) var<storage, read> final_tiles: array<Tile>;
 
-// Two draws read the final list: the tiles that cannot morph from its front (with back-face
-// culling), the others from its back (`*_morphing`, without: `tile_may_morph` in
-// udlod_tiling.wgsl).
+// Two draws read the final list: the tiles with no vertex part-way through its morph from its
+// front (by default with back-face culling), the others from its back (`*_morphing`, without:
+// `tile_mid_morph` in udlod_tiling.wgsl).
 fn morphing_tile(instance: u32) -> Tile {
     return final_tiles[udlod.sizes.z - 1u - instance];
 }

@@ -44,11 +44,11 @@ struct TilingState {
     splits_allowed: u32,
     // Tiles written for the next pass that will want to split there.
     split_requests: atomic<u32>,
-    // Final tiles some vertex of which may morph, written from the back of the final list
-    // (`tile_may_morph`); the others from the front.
+    // Final tiles with a vertex part-way through its morph, written from the back of the
+    // final list (`tile_mid_morph`); the others from the front.
     morph_count: atomic<u32>,
-    // vkCmdDrawIndexedIndirect arguments of the morphing tiles (drawn without back-face
-    // culling: docs/udlod.md, "Pinholes far away").
+    // vkCmdDrawIndexedIndirect arguments of those tiles (by default drawn without back-face
+    // culling: docs/udlod.md, "Pinholes far away and back faces").
     morph_index_count: u32,
     morph_instance_count: u32,
     morph_first_index: u32,
@@ -247,7 +247,7 @@ fn refine(
         if action == ACTION_SPLIT {
             wg_parent_local[li / 4u] = atomicAdd(&wg_children, 4u);
         } else if action == ACTION_FINAL {
-            morphs = tile_may_morph(t);
+            morphs = tile_mid_morph(t);
             if morphs {
                 wg_parent_local[li / 4u] = atomicAdd(&wg_morphing, 1u);
             } else {
@@ -345,8 +345,8 @@ fn decided(t: Tile) -> Tile {
 // Whether some vertex of final tile `t` sits part-way through its morph (`morph_factor`
 // strictly between 0 and 1, the vertex stage's own arithmetic): only then are there sliver
 // triangles. A tile whose moving (odd) vertices are all unmorphed or fully morphed is drawn
-// with back-face culling (docs/udlod.md, "Pinholes far away").
-fn tile_may_morph(t: Tile) -> bool {
+// with back-face culling (docs/udlod.md, "Pinholes far away and back faces").
+fn tile_mid_morph(t: Tile) -> bool {
     let quads = udlod.sizes.x;
     let step = 1u << t.lod;
     let origin = vec2<u32>(t.x, t.y) * quads * step;

@@ -259,9 +259,10 @@ pub struct Udlod {
     prepare: Pipeline,
     refine: Pipeline,
     finish: Pipeline,
-    /// Draws the tiles that cannot morph (front of the final list) with back-face culling.
+    /// Draws the tiles with no vertex part-way through its morph (the final list's front),
+    /// with back-face culling unless `back_faces = "none"`.
     draw: Pipeline,
-    /// Draws the tiles that may morph (back of the final list) without it.
+    /// Draws the others (its back), without it unless `back_faces = "all"`.
     draw_morphing: Pipeline,
     /// The most tiles a slot's lists grow to: `max_tiles`, at most the full tree's leaves.
     tile_cap: u32,
@@ -371,8 +372,8 @@ impl Udlod {
                 },
             )
         };
-        // By default tiles that cannot morph with back-face culling, the others without
-        // (docs/udlod.md, "Pinholes far away").
+        // By default the tiles with no vertex part-way through its morph with back-face
+        // culling, the others without (docs/udlod.md, "Pinholes far away and back faces").
         let cull_static = settings.back_faces != BackFaces::None;
         let cull_morphing = settings.back_faces == BackFaces::All;
         let (draw, draw_morphing) = if settings.vertex_pulling {
