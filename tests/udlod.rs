@@ -663,8 +663,8 @@ fn repeated_frames(
     out
 }
 
-/// A slot's tile lists start sized from the image (or `initial_tiles`) and grow, up to
-/// `max_tiles`, when a frame overflows them; what one slot learns the other takes at its next
+/// With `initial_tiles` a slot's tile lists start that small and grow, up to `max_tiles`, when
+/// a frame overflows them; what one slot learns the other takes at its next
 /// frame. With 16 tiles to start, the first frames overflow and the last ones draw exactly the
 /// CPU reference with nothing dropped. Control: `max_tiles = 16` caps the growth: every frame
 /// overflows.

@@ -94,20 +94,6 @@ pub const MORPH_DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, morph_draw)
 pub const DRAW_STRIDE: u32 = size_of::<[u32; 5]>() as u32;
 pub const TILE_BYTES: u64 = 16;
 
-/// The fewest tiles a slot's lists start with when sized from the image.
-const INITIAL_TILES_FLOOR: u32 = 1024;
-
-/// Tiles a slot's lists start with for a `width` x `height` image and tiles of `grid_size`²
-/// quads (`initial_tiles = 0`): two triangles per pixel, at least [`INITIAL_TILES_FLOOR`].
-/// Measured selections drew 0.14 (CI terrain, tau 1) to 0.22 (Puget Sound, tau 0.5, 1080p)
-/// triangles per pixel, Hedberg's uneven map 4.2 (tau 0.5, 1080p): that one grows the lists
-/// twice (docs/udlod.md, "Tile lists sized from the view").
-pub fn initial_tiles(width: u32, height: u32, grid_size: u32) -> u32 {
-    let triangles = 2 * width as u64 * height as u64;
-    let per_tile = 2 * grid_size as u64 * grid_size as u64;
-    (triangles / per_tile).clamp(INITIAL_TILES_FLOOR as u64, u32::MAX as u64) as u32
-}
-
 struct SlotBuffers {
     uniforms: Buffer,
     state: Buffer,
@@ -266,8 +252,8 @@ pub struct Udlod {
     draw_morphing: Pipeline,
     /// The most tiles a slot's lists grow to: `max_tiles`, at most the full tree's leaves.
     tile_cap: u32,
-    /// The final-list capacity every slot grows to at its next frame: sized from the image
-    /// (or `initial_tiles`), doubled past a slot's capacity when a frame overflows it.
+    /// The final-list capacity every slot grows to at its next frame: `initial_tiles` at
+    /// first, doubled past a slot's capacity when a frame overflows it.
     wanted_tiles: u32,
 }
 
@@ -343,11 +329,12 @@ impl Udlod {
         // (4^root_lod), so small data sets do not allocate the whole budget.
         let full_tree = 1u64 << (2 * levels.root_lod).min(62);
         let tile_cap = (settings.max_tiles as u64).min(full_tree) as u32;
-        // The lists are sized at the first frame, from its image (`update`).
+        // Lists of `initial_tiles` grow when a frame overflows them (`grow_lists`); by default
+        // they start at the cap, so no frame is drawn coarser while they grow.
         let first = if settings.initial_tiles > 0 {
             settings.initial_tiles
         } else {
-            INITIAL_TILES_FLOOR
+            tile_cap
         }
         .min(tile_cap);
         let slots = (sets.sets.iter().enumerate())
@@ -464,27 +451,19 @@ impl Udlod {
             .unwrap_or_default()
     }
 
-    /// Grows `slot`'s tile lists, before its next frame, to what the view needs: at least
-    /// [`initial_tiles`] for its image, and past the capacity its last frame overflowed
-    /// (doubled, or by twice the overflow), up to `max_tiles`. What one slot learns, every
-    /// slot takes at its next frame. Returns the slot's capacity. The slot's previous frame
-    /// has completed, so its old lists can go.
-    fn grow_lists(&mut self, slot: ViewSlot, view: &ViewState) -> Result<u32> {
+    /// Grows `slot`'s tile lists, before its next frame, past the capacity its last frame
+    /// overflowed (doubled, or by twice the overflow), up to `max_tiles`. What one slot
+    /// learns, every slot takes at its next frame. Returns the slot's capacity. The slot's
+    /// previous frame has completed, so its old lists can go.
+    fn grow_lists(&mut self, slot: ViewSlot) -> Result<u32> {
         let i = slot.index();
         let have = self.slots[i].lists.capacity;
         let overflow = self.read_counters(slot).overflow;
         let mut wanted = self.wanted_tiles;
-        if self.settings.initial_tiles == 0 {
-            wanted = wanted.max(initial_tiles(
-                view.width,
-                view.height,
-                self.settings.grid_size,
-            ));
-        }
         if overflow > 0 {
             wanted = wanted.max(
                 have.saturating_mul(2)
-                    .max(have.saturating_add(2 * overflow)),
+                    .max(have.saturating_add(overflow.saturating_mul(2))),
             );
         }
         self.wanted_tiles = wanted.min(self.tile_cap);
@@ -523,7 +502,7 @@ impl LodMethod for Udlod {
                 p.field.corner_offsets[lod],
             ];
         }
-        let capacity = self.grow_lists(slot, view)?;
+        let capacity = self.grow_lists(slot)?;
         u.sizes = [
             self.settings.grid_size,
             self.levels.root_lod,

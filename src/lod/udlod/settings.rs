@@ -14,11 +14,11 @@ pub struct UdlodSettings {
     pub tau_px: f64,
     /// Fraction of each level's range over which vertices morph (0.05..=0.45).
     pub morph_range: f64,
-    /// The most tiles a frame and view may draw: a slot's lists start sized from the image
-    /// (or `initial_tiles`) and grow to this when a frame overflows them.
+    /// The most tiles a frame and view may draw (the lists' capacity, at most the full
+    /// tree's leaves).
     pub max_tiles: u32,
-    /// Tiles a slot's lists start with (0: from the image size, two triangles per pixel);
-    /// set only to exercise the growth in tests.
+    /// Tiles a slot's lists start with, growing to `max_tiles` when a frame overflows them
+    /// (that frame is drawn coarser); 0: start at `max_tiles`. For boards short of memory.
     pub initial_tiles: u32,
     /// Vertex morphing (off only to demonstrate popping and cracks in tests).
     pub morph: bool,
@@ -156,7 +156,7 @@ impl UdlodSettings {
         }
         if self.initial_tiles != 0 && !(16..=self.max_tiles).contains(&self.initial_tiles) {
             return bad(format!(
-                "initial_tiles {} must be 0 (from the image) or within 16..=max_tiles ({})",
+                "initial_tiles {} must be 0 (max_tiles) or within 16..=max_tiles ({})",
                 self.initial_tiles, self.max_tiles
             ));
         }
