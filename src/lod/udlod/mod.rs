@@ -112,8 +112,8 @@ struct SlotBuffers {
 /// A slot's tile lists: the final list the draw reads and the temporary one the passes of
 /// the prepass share.
 struct TileLists {
-    /// Referenced by the descriptor set only.
-    _temp: Buffer,
+    /// Read and written by the prepass only (through the descriptor set).
+    temp: Buffer,
     #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
     final_tiles: Buffer,
     /// Entries of the final list.
@@ -141,7 +141,7 @@ impl TileLists {
             MemoryLocation::GpuOnly,
         )?;
         Ok(TileLists {
-            _temp: temp,
+            temp,
             final_tiles,
             capacity,
         })
@@ -214,7 +214,7 @@ impl SlotBuffers {
             &[
                 ("udlod", Resource::Buffer(self.uniforms.raw)),
                 ("state", Resource::Buffer(self.state.raw)),
-                ("temp_tiles", Resource::Buffer(self.lists._temp.raw)),
+                ("temp_tiles", Resource::Buffer(self.lists.temp.raw)),
                 ("final_tiles", Resource::Buffer(self.lists.final_tiles.raw)),
                 ("min_max", Resource::Buffer(min_max.raw)),
                 ("split_field", Resource::Buffer(self.field.raw)),
@@ -234,8 +234,9 @@ pub struct Udlod {
     lattice: Option<Arc<crate::geo::Lattice>>,
     /// The split field of the last key asked for (per-tile split distances).
     field: Option<Arc<SplitField>>,
-    /// GPU mirror of `levels.min_max` (kept alive for the descriptor sets).
-    _min_max: Buffer,
+    /// GPU mirror of `levels.min_max` (bound in every slot's set, written again when a slot's
+    /// lists grow).
+    min_max: Buffer,
     indices: Buffer,
     index_count: u32,
     slots: Vec<SlotBuffers>,
@@ -381,7 +382,7 @@ impl Udlod {
             lattice: ctx.lattice.cloned(),
             levels,
             field: None,
-            _min_max: min_max,
+            min_max,
             indices,
             index_count: grid.len() as u32,
             slots,
@@ -473,7 +474,7 @@ impl Udlod {
                 self.wanted_tiles
             );
             self.slots[i].lists = TileLists::new(&self.gpu, i, self.wanted_tiles)?;
-            self.slots[i].write_set(&self.sets, i, &self._min_max)?;
+            self.slots[i].write_set(&self.sets, i, &self.min_max)?;
         }
         Ok(self.slots[i].lists.capacity)
     }
