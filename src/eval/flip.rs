@@ -26,13 +26,21 @@ pub fn error_map(reference: &[u8], test: &[u8], width: u32, height: u32) -> Vec<
     flip_rows(reference, test, width as usize, 0, height as usize)
 }
 
-/// [`error_map`] in horizontal strips on the rayon pool (one per thread, each at least 8 halos
-/// tall), each with [`halo_rows`] rows of context above and below: the same values bit for
-/// bit ([`error_map_in_strips`]) in a fraction of the wall time where threads are idle.
+/// [`error_map`] of the rows where the images differ, in horizontal strips on the rayon pool
+/// (at most one per thread, each at least 8 halos tall), each with [`halo_rows`] rows of
+/// context above and below ([`error_map_of_changed_rows`]): the same values bit for bit in a
+/// fraction of the time where threads are idle or the images share whole bands of rows (the sky
+/// above a horizon; terrain that a method draws exactly like the reference).
 pub fn error_map_parallel(reference: &[u8], test: &[u8], width: u32, height: u32) -> Vec<f32> {
     let halo = halo_rows(PIXELS_PER_DEGREE);
-    let strips = rayon::current_num_threads().min(height as usize / (8 * halo));
-    error_map_in_strips(reference, test, width, height, strips.max(1), halo)
+    error_map_of_changed_rows(
+        reference,
+        test,
+        width,
+        height,
+        rayon::current_num_threads(),
+        halo,
+    )
 }
 
 /// Rows of context a strip needs on each side for FLIP at `ppd`: the larger of FLIP's two
@@ -59,19 +67,84 @@ pub fn error_map_in_strips(
     strips: usize,
     halo: usize,
 ) -> Vec<f32> {
-    use rayon::prelude::*;
-    let (w, h) = (width as usize, height as usize);
+    let h = height as usize;
     let rows = h.div_ceil(strips.max(1)).max(1);
-    let parts: Vec<Vec<f32>> = (0..h.div_ceil(rows))
-        .into_par_iter()
-        .map(|s| {
-            let (y0, y1) = (s * rows, ((s + 1) * rows).min(h));
+    let pieces: Vec<_> = (0..h)
+        .step_by(rows)
+        .map(|y| (y, (y + rows).min(h)))
+        .collect();
+    flip_pieces(reference, test, width as usize, h, &pieces, halo)
+}
+
+/// [`error_map`] computed only on the rows within `halo` of a row where the two images differ,
+/// over at most `threads` strips (each at least 8 halos tall, with `halo` rows of context); every
+/// other row is 0, which FLIP gives wherever both images are equal within its filters' reach
+/// (equal filtered colours and features: a colour difference of 0 raised to any power).
+pub fn error_map_of_changed_rows(
+    reference: &[u8],
+    test: &[u8],
+    width: u32,
+    height: u32,
+    threads: usize,
+    halo: usize,
+) -> Vec<f32> {
+    let (w, h) = (width as usize, height as usize);
+    let ranges = changed_row_ranges(reference, test, w, h, halo);
+    let total: usize = ranges.iter().map(|(a, b)| b - a).sum();
+    let rows = total.div_ceil(threads.max(1)).max(8 * halo).max(1);
+    let pieces: Vec<_> = ranges
+        .iter()
+        .flat_map(|&(a, b)| (a..b).step_by(rows).map(move |y| (y, (y + rows).min(b))))
+        .collect();
+    flip_pieces(reference, test, w, h, &pieces, halo)
+}
+
+/// The ranges of rows whose FLIP value may differ from 0: rows within `halo` of a row where the
+/// images differ (RGBA compared; alpha-only differences are computed too, which costs time, not
+/// exactness), merged where they touch.
+fn changed_row_ranges(
+    reference: &[u8],
+    test: &[u8],
+    w: usize,
+    h: usize,
+    halo: usize,
+) -> Vec<(usize, usize)> {
+    let row = |y: usize| y * w * 4..(y + 1) * w * 4;
+    let mut ranges: Vec<(usize, usize)> = Vec::new();
+    for y in (0..h).filter(|&y| reference[row(y)] != test[row(y)]) {
+        let (a, b) = (y.saturating_sub(halo), (y + halo + 1).min(h));
+        match ranges.last_mut() {
+            Some(last) if last.1 >= a => last.1 = b,
+            _ => ranges.push((a, b)),
+        }
+    }
+    ranges
+}
+
+/// FLIP of each piece `(y0, y1)` of rows in parallel, each from rows `y0 - halo .. y1 + halo`
+/// (clipped to the image) as an image of its own, kept rows only; rows of no piece are 0.
+fn flip_pieces(
+    reference: &[u8],
+    test: &[u8],
+    w: usize,
+    h: usize,
+    pieces: &[(usize, usize)],
+    halo: usize,
+) -> Vec<f32> {
+    use rayon::prelude::*;
+    let parts: Vec<Vec<f32>> = pieces
+        .par_iter()
+        .map(|&(y0, y1)| {
             let (a, b) = (y0.saturating_sub(halo), (y1 + halo).min(h));
             let map = flip_rows(reference, test, w, a, b);
             map[(y0 - a) * w..(y1 - a) * w].to_vec()
         })
         .collect();
-    parts.concat()
+    let mut out = vec![0.0f32; w * h];
+    for (&(y0, y1), part) in pieces.iter().zip(parts) {
+        out[y0 * w..y1 * w].copy_from_slice(&part);
+    }
+    out
 }
 
 /// FLIP of rows `a..b` of both images as an image of their own.
@@ -203,5 +276,44 @@ mod tests {
         let short = error_map_in_strips(&a, &b, w, h, 3, 4);
         let differ = short.iter().zip(&whole).filter(|(s, o)| s != o).count();
         assert!(differ > 0, "a 4-row halo must change pixels near the seams");
+    }
+
+    #[test]
+    fn flip_of_the_changed_rows_only_equals_flip_of_the_whole_image_bit_for_bit() {
+        let (w, h) = (96, 260);
+        let a = scene(w, h, 1);
+        // Equal but for two bands of rows (a sky and a near field drawn alike around them).
+        let other = scene(w, h, 2);
+        let mut b = a.clone();
+        let band = |y0: usize, y1: usize| y0 * w as usize * 4..y1 * w as usize * 4;
+        for (y0, y1) in [(70, 95), (200, 204)] {
+            b[band(y0, y1)].copy_from_slice(&other[band(y0, y1)]);
+        }
+        let whole = flip_rows(&a, &b, w as usize, 0, h as usize);
+        let halo = halo_rows(PIXELS_PER_DEGREE);
+        let ranges = changed_row_ranges(&a, &b, w as usize, h as usize, halo);
+        assert_eq!(
+            ranges,
+            vec![(59, 106), (189, 215)],
+            "rows FLIP is computed on"
+        );
+        let zero = whole.iter().filter(|&&e| e == 0.0).count();
+        assert!(
+            zero > (w * h / 2) as usize,
+            "FLIP is 0 where the images agree: {zero}"
+        );
+        for threads in [1, 3, 16] {
+            let changed = error_map_of_changed_rows(&a, &b, w, h, threads, halo);
+            let differ = changed
+                .iter()
+                .zip(&whole)
+                .filter(|(s, o)| s.to_bits() != o.to_bits())
+                .count();
+            assert_eq!(differ, 0, "{threads} threads: {differ} pixels differ");
+        }
+        // Negative control: a 4-row margin leaves out rows FLIP's filters reach.
+        let short = error_map_of_changed_rows(&a, &b, w, h, 3, 4);
+        let differ = short.iter().zip(&whole).filter(|(s, o)| s != o).count();
+        assert!(differ > 0, "a 4-row margin must miss non-zero rows");
     }
 }

@@ -597,9 +597,11 @@ impl Run {
 }
 
 /// FLIP of frame `k` of run `index` (reference and method RGBA) on the rayon pool; the result
-/// arrives on `flip_tx`. The last frame's FLIP is the run's tail (nothing overlaps it): in
-/// strips over the pool. Earlier ones run whole, one per worker, beside the rendering (on
-/// lavapipe the same cores render).
+/// arrives on `flip_tx`. Every FLIP runs in strips over the pool: on a many-core host (the GPU
+/// machine, where one FLIP of a 1080p frame takes longer than the whole frame loop of a short
+/// run) whole-image FLIPs, one per worker, outlasted the frame loop and became the run's tail;
+/// on lavapipe's two cores strips share the cores with the rendering as whole images did
+/// (docs/eval.md, "What an evaluation adds").
 fn spawn_flip(
     setup: &EvalSetup<'_>,
     (r, m): (Arc<Vec<u8>>, Arc<Vec<u8>>),
@@ -609,14 +611,9 @@ fn spawn_flip(
 ) {
     let (w, h) = (setup.options.width, setup.options.height);
     let with_map = setup.image_frames.contains(&k);
-    let last = k + 1 == setup.frames as u64;
     let tx = flip_tx.clone();
     rayon::spawn(move || {
-        let map = if last {
-            flip::error_map_parallel(&r, &m, w, h)
-        } else {
-            flip::error_map(&r, &m, w, h)
-        };
+        let map = flip::error_map_parallel(&r, &m, w, h);
         let stats = FlipStats::of(&map);
         let colours = with_map.then(|| flip::magma_rgba(&map, w, h));
         let _ = tx.send((index, k, stats, colours));
