@@ -138,7 +138,39 @@ struct MorphComparison {
     /// Vertices where the CPU and GPU differ in any bit, and the first few of them.
     mismatched: usize,
     mismatches: Vec<String>,
+    /// Vertices whose morph factor or position differ by more than [`MORPH_TOLERANCE`].
+    beyond_tolerance: usize,
+    /// The largest difference of the morph factor, and of the position in samples over the
+    /// vertex's step (`2^lod` samples).
+    worst_morph: f32,
+    worst_position_steps: f64,
     worst_height_ulps: f32,
+    /// Bit-exact agreement is required (llvmpipe: IEEE division and square root, no fused
+    /// multiply-adds the CPU does not do).
+    exact: bool,
+}
+
+/// How far the GPU's morph factor (and the vertex position, in steps of its level) may lie
+/// from the CPU mirror's on devices other than llvmpipe. Vulkan allows division and square
+/// root 2.5 ulp off and fused multiply-adds; the morph divides the distance by the split
+/// distance and by the morph range (1/r = 5 times the error). The H200 (NVIDIA) measured
+/// 1.37e-6 at grid 4 and 1.55e-6 at grid 8 (docs/udlod.md); 1e-5 is 1/100,000 of a step.
+const MORPH_TOLERANCE: f64 = 1e-5;
+
+impl MorphComparison {
+    /// Bit for bit on llvmpipe, within [`MORPH_TOLERANCE`] elsewhere.
+    fn assert_agrees(&self, grid: u32) {
+        let (differ, how) = if self.exact {
+            (self.mismatched, "in any bit")
+        } else {
+            (self.beyond_tolerance, "beyond the tolerance")
+        };
+        assert!(
+            differ == 0,
+            "grid {grid}: {differ} vertices differ {how}, e.g. {:#?}",
+            self.mismatches
+        );
+    }
 }
 
 /// Renders `cameras` with UDLOD (`lod`) and, after each frame, evaluates the GPU's vertex morph
@@ -148,7 +180,11 @@ fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> M
     let gpu = common::gpu(false);
     let levels = Levels::new(data, lod.grid_size).unwrap();
     let g = lod.grid_size;
-    let mut out = MorphComparison::default();
+    let mut out = MorphComparison {
+        exact: gpu.info.device_type == ash::vk::PhysicalDeviceType::CPU
+            && gpu.info.name.contains("llvmpipe"),
+        ..Default::default()
+    };
     {
         let mut r = Renderer::new(&gpu, data, lod.clone(), common::options(W, H, 1)).unwrap();
         let mut sink = CollectSink::default();
@@ -178,7 +214,19 @@ fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> M
                     && bits(cv.grid_pos()) == bits(gv.grid_pos)
                     && cv.morph.to_bits() == gv.morph.to_bits();
                 out.mismatched += !same as usize;
-                if !same && out.mismatches.len() < 8 {
+                // Positions as cell + fraction in f64: a fraction rounding to 1 on one side
+                // and folding into the next cell on the other is the same point.
+                let at = |c: [i32; 2], f: [f32; 2], i: usize| c[i] as f64 + f[i] as f64;
+                let steps = (0..2)
+                    .map(|i| (at(cv.cell, cv.frac, i) - at(gv.cell, gv.frac, i)).abs())
+                    .fold(0.0, f64::max)
+                    / (1u64 << t.lod) as f64;
+                let morph = (cv.morph - gv.morph).abs();
+                out.worst_morph = out.worst_morph.max(morph);
+                out.worst_position_steps = out.worst_position_steps.max(steps);
+                let beyond = morph as f64 > MORPH_TOLERANCE || steps > MORPH_TOLERANCE;
+                out.beyond_tolerance += beyond as usize;
+                if (beyond || (out.exact && !same)) && out.mismatches.len() < 8 {
                     out.mismatches.push(format!(
                         "{cam:?} tile {t:?} vertex {local:?}: cpu {cv:?}, gpu {gv:?}"
                     ));
@@ -207,7 +255,9 @@ fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> M
 }
 
 /// One formula on both sides: the CPU mirror of the vertex morph equals what the vertex
-/// shaders compute, bit for bit (integer cell, fraction, grid position, morph factor), at every
+/// shaders compute, bit for bit on llvmpipe (integer cell, fraction, grid position, morph
+/// factor) and within [`MORPH_TOLERANCE`] on other devices, whose division, square root and
+/// fused multiply-adds Vulkan lets differ in the last bits, at every
 /// vertex of every tile drawn over a low flight plus the varied poses, with morphing on and off
 /// (the on/off switch is part of the formula). Many vertices are mid-morph, so the comparison
 /// covers the sliding arithmetic, not only the end points. Negative control: dropping the
@@ -225,15 +275,17 @@ fn gpu_vertex_morph_equals_the_cpu_mirror() {
 fn morph_equals_the_cpu_mirror(data: &Heightmap, cameras: &[Camera], grid: u32) {
     let on = compare_morph(data, cameras, &settings(grid));
     println!(
-        "grid {grid}, morph on: {} vertices, {} mid-morph ({} sliding odd vertices), {} mismatches, heights within {:.2} ulp",
-        on.vertices, on.mid_morph, on.sliding, on.mismatched, on.worst_height_ulps
-    );
-    assert!(
-        on.mismatched == 0,
-        "grid {grid}: {} vertices differ, e.g. {:#?}",
+        "grid {grid}, morph on: {} vertices, {} mid-morph ({} sliding odd vertices), {} mismatches (bit-exact required: {}), morph within {:.2e}, positions within {:.2e} steps, heights within {:.2} ulp",
+        on.vertices,
+        on.mid_morph,
+        on.sliding,
         on.mismatched,
-        on.mismatches
+        on.exact,
+        on.worst_morph,
+        on.worst_position_steps,
+        on.worst_height_ulps
     );
+    on.assert_agrees(grid);
     assert!(
         on.mid_morph >= 2000 && on.sliding >= 1000 && on.mid_morph * 50 >= on.vertices,
         "grid {grid}: too few vertices mid-morph to mean anything: {on:?}"
@@ -248,12 +300,7 @@ fn morph_equals_the_cpu_mirror(data: &Heightmap, cameras: &[Camera], grid: u32) 
         "grid {grid}, morph off: {} vertices, {} mismatches",
         off.vertices, off.mismatched
     );
-    assert!(
-        off.mismatched == 0,
-        "grid {grid}: {} vertices differ, e.g. {:#?}",
-        off.mismatched,
-        off.mismatches
-    );
+    off.assert_agrees(grid);
     assert_eq!(off.mid_morph, 0);
     assert!(off.vertices > 1000);
 }
