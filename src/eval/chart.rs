@@ -216,6 +216,7 @@ impl Chart {
         let inside = |(px, py): (f64, f64)| {
             px.is_finite() && py.is_finite() && x.range.contains(&px) && y.range.contains(&py)
         };
+        let mut placed = LabelSlots::default();
         for (i, s) in self.series.iter().enumerate() {
             let colour = PALETTE[i % PALETTE.len()];
             let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|&p| inside(p)).collect();
@@ -244,9 +245,13 @@ impl Chart {
                     )
                     .map_err(err)?;
             }
-            let labelled = s.points.iter().zip(&s.labels).filter(|(p, _)| inside(**p));
+            let labelled: Vec<_> = merged_labels(s, x, y)
+                .into_iter()
+                .filter(|(p, _)| inside(*p))
+                .map(|(p, text)| (p, text, placed.line_for(x.fraction(p.0), y.fraction(p.1))))
+                .collect();
             chart
-                .draw_series(labelled.map(|(&p, text)| {
+                .draw_series(labelled.into_iter().map(|(p, text, line)| {
                     // Labels of points near the right edge end at the point (else clipped).
                     let (dx, h) = if x.fraction(p.0) > 0.8 {
                         (-7, HPos::Right)
@@ -257,7 +262,7 @@ impl Chart {
                         .into_font()
                         .color(&colour)
                         .pos(Pos::new(h, VPos::Top));
-                    EmptyElement::at(p) + Text::new(text.clone(), (dx, -16), style)
+                    EmptyElement::at(p) + Text::new(text, (dx, -16 + LABEL_LINE_PX * line), style)
                 }))
                 .map_err(err)?;
         }
@@ -328,6 +333,84 @@ impl Chart {
 }
 
 /// Marker `shape` (circle, triangle, square, diamond, in turn) centred at `at` (pixels).
+/// Points closer than this share of both axes are one place for their labels.
+const SAME_PLACE: f64 = 0.01;
+/// A label line's height (13 px text).
+const LABEL_LINE_PX: i32 = 15;
+
+/// Whether two points, as fractions of the axes, are one place for labels.
+fn same_place(a: (f64, f64), b: (f64, f64)) -> bool {
+    (a.0 - b.0).abs() < SAME_PLACE && (a.1 - b.1).abs() < SAME_PLACE
+}
+
+/// A series' labels, one per place: the labels of points that coincide on the chart (a sweep
+/// whose settings draw the same frames) are merged, their common prefix up to the last `=`
+/// or space written once (`tau_px=0.5`, `tau_px=1` -> `tau_px=0.5, 1`); otherwise they were
+/// drawn over each other, unreadable.
+fn merged_labels(s: &Series, x: &Axis, y: &Axis) -> Vec<((f64, f64), String)> {
+    let at = |p: (f64, f64)| (x.fraction(p.0), y.fraction(p.1));
+    let mut groups: Vec<((f64, f64), Vec<&str>)> = Vec::new();
+    for (&p, label) in s.points.iter().zip(&s.labels) {
+        if !(p.0.is_finite() && p.1.is_finite()) {
+            continue;
+        }
+        match groups.iter_mut().find(|(q, _)| same_place(at(*q), at(p))) {
+            Some((_, labels)) => labels.push(label),
+            None => groups.push((p, vec![label])),
+        }
+    }
+    groups
+        .into_iter()
+        .map(|(p, labels)| (p, merge_label_texts(&labels)))
+        .collect()
+}
+
+/// `["tau_px=0.5", "tau_px=1"]` -> `"tau_px=0.5, 1"`; labels without a common `key=` or word
+/// prefix are joined with ", ".
+fn merge_label_texts(labels: &[&str]) -> String {
+    let (first, rest) = match labels {
+        [] => return String::new(),
+        [one] => return one.to_string(),
+        [first, rest @ ..] => (first, rest),
+    };
+    let mut common = rest.iter().fold(first.len(), |n, l| {
+        first
+            .bytes()
+            .zip(l.bytes())
+            .take(n)
+            .take_while(|(a, b)| a == b)
+            .count()
+    });
+    while !first.is_char_boundary(common) {
+        common -= 1;
+    }
+    let prefix = first[..common]
+        .rfind(['=', ' '])
+        .map_or(0, |i| i + 1)
+        .min(common);
+    let mut tails: Vec<&str> = Vec::new();
+    for l in labels {
+        if !tails.contains(&&l[prefix..]) {
+            tails.push(&l[prefix..]);
+        }
+    }
+    format!("{}{}", &first[..prefix], tails.join(", "))
+}
+
+/// Where labels went (as fractions of the axes): a label at a place another series' label
+/// already took goes one line lower.
+#[derive(Default)]
+struct LabelSlots(Vec<(f64, f64)>);
+
+impl LabelSlots {
+    /// The line (0, 1, ...) below the first label at this place.
+    fn line_for(&mut self, fx: f64, fy: f64) -> i32 {
+        let line = self.0.iter().filter(|&&q| same_place(q, (fx, fy))).count();
+        self.0.push((fx, fy));
+        line as i32
+    }
+}
+
 fn marker(at: (i32, i32), shape: usize, colour: RGBColor) -> Polygon<(i32, i32)> {
     let (corners, turn) = match shape % 4 {
         0 => (16, 0.0),
@@ -419,6 +502,50 @@ mod tests {
             highlight: vec![(0.4, 3.0), (1.1, 2.0), (3.9, 1.5), (8.0, 1.0)],
             y_from_zero: true,
         }
+    }
+
+    #[test]
+    fn labels_of_coinciding_points_are_merged() {
+        assert_eq!(
+            merge_label_texts(&["tau_px=0.5", "tau_px=1", "tau_px=4"]),
+            "tau_px=0.5, 1, 4"
+        );
+        assert_eq!(
+            merge_label_texts(&["120x525 warp_rows=0", "120x525 warp_rows=1"]),
+            "120x525 warp_rows=0, 1"
+        );
+        assert_eq!(merge_label_texts(&["a=1", "b=2"]), "a=1, b=2");
+        assert_eq!(merge_label_texts(&["x=1", "x=1"]), "x=1");
+        assert_eq!(merge_label_texts(&["é=1", "é=2"]), "é=1, 2");
+        // Three taus drawing the same frames, a fourth apart; a second series on the same spot.
+        let mut c = chart("error (px)");
+        c.series[0].points = vec![(0.5, 10.0), (0.5, 10.0), (0.5, 10.0), (2.0, 4.0)];
+        c.series[0].labels = ["tau_px=0.5", "tau_px=1", "tau_px=2", "tau_px=4"]
+            .map(String::from)
+            .to_vec();
+        c.series[1].points = vec![(0.5, 10.0)];
+        let svg = c.to_svg().unwrap();
+        // plotters writes each text element's content on a line of its own.
+        let text = |label: &str| format!("\n{label}\n</text>");
+        assert!(svg.contains(&text("tau_px=0.5, 1, 2")), "merged label");
+        assert!(svg.contains(&text("tau_px=4")));
+        assert!(
+            !svg.contains(&text("tau_px=1")),
+            "no label drawn over another"
+        );
+        // The second series' label at the same place goes one line lower.
+        let y_of = |label: &str| {
+            let end = svg.find(&text(label)).unwrap();
+            let start = svg[..end].rfind("<text").unwrap();
+            let y = &svg[start..end];
+            let y = &y[y.find("y=\"").unwrap() + 3..];
+            y[..y.find('"').unwrap()].parse::<f64>().unwrap()
+        };
+        let (first, second) = (y_of("tau_px=0.5, 1, 2"), y_of("120x525"));
+        assert!(
+            (second - first - LABEL_LINE_PX as f64).abs() < 1.0,
+            "stacked: {first} then {second}"
+        );
     }
 
     /// Dark pixels (text, lines) in a region of an RGBA image.
