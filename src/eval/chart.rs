@@ -397,15 +397,21 @@ fn merge_label_texts(labels: &[&str]) -> String {
     format!("{}{}", &first[..prefix], tails.join(", "))
 }
 
-/// Where labels went (as fractions of the axes): a label at a place another series' label
-/// already took goes one line lower.
+/// How near (as fractions of the axes) another series' label must start to share a label's
+/// lines: about a label's width to the side and a line's height (15 px of a ~500 px plot).
+const LABEL_BOX: (f64, f64) = (0.15, 0.035);
+
+/// Where labels went (as fractions of the axes): a label starting within [`LABEL_BOX`] of
+/// labels already drawn goes below them, one line each.
 #[derive(Default)]
 struct LabelSlots(Vec<(f64, f64)>);
 
 impl LabelSlots {
-    /// The line (0, 1, ...) below the first label at this place.
+    /// The line (0, 1, ...) this label takes below those near it.
     fn line_for(&mut self, fx: f64, fy: f64) -> i32 {
-        let line = self.0.iter().filter(|&&q| same_place(q, (fx, fy))).count();
+        let near =
+            |q: &&(f64, f64)| (q.0 - fx).abs() < LABEL_BOX.0 && (q.1 - fy).abs() < LABEL_BOX.1;
+        let line = self.0.iter().filter(near).count();
         self.0.push((fx, fy));
         line as i32
     }
