@@ -252,17 +252,7 @@ impl Chart {
                 .collect();
             chart
                 .draw_series(labelled.into_iter().map(|(p, text, line)| {
-                    // Labels of points near the right edge end at the point (else clipped).
-                    let (dx, h) = if x.fraction(p.0) > 0.8 {
-                        (-7, HPos::Right)
-                    } else {
-                        (7, HPos::Left)
-                    };
-                    let style = (FONT, 13)
-                        .into_font()
-                        .color(&colour)
-                        .pos(Pos::new(h, VPos::Top));
-                    EmptyElement::at(p) + Text::new(text, (dx, -16 + LABEL_LINE_PX * line), style)
+                    EmptyElement::at(p) + point_label(text, line, x.fraction(p.0) > 0.8, colour)
                 }))
                 .map_err(err)?;
         }
@@ -333,6 +323,26 @@ impl Chart {
 }
 
 /// Marker `shape` (circle, triangle, square, diamond, in turn) centred at `at` (pixels).
+/// A point's label, `line` lines below the first at its place, beside the point: to its right,
+/// or ending at it near the right edge (`at_right_edge`; else it would be clipped).
+fn point_label(
+    text: String,
+    line: i32,
+    at_right_edge: bool,
+    colour: RGBColor,
+) -> Text<'static, (i32, i32), String> {
+    let (dx, h) = if at_right_edge {
+        (-7, HPos::Right)
+    } else {
+        (7, HPos::Left)
+    };
+    let style = (FONT, 13)
+        .into_font()
+        .color(&colour)
+        .pos(Pos::new(h, VPos::Top));
+    Text::new(text, (dx, -16 + LABEL_LINE_PX * line), style)
+}
+
 /// Points closer than this share of both axes are one place for their labels.
 const SAME_PLACE: f64 = 0.01;
 /// A label line's height (13 px text).
