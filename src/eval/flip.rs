@@ -27,8 +27,9 @@ pub fn error_map(reference: &[u8], test: &[u8], width: u32, height: u32) -> Vec<
 }
 
 /// [`error_map`] of the rows where the images differ, in horizontal strips on the rayon pool
-/// (at most one per thread, each at least 8 halos tall), each with [`halo_rows`] rows of
-/// context above and below ([`error_map_of_changed_rows`]): the same values bit for bit in a
+/// (about one per thread, none longer than needed for that or 8 halos), each with
+/// [`halo_rows`] rows of context above and below ([`error_map_of_changed_rows`]): the same
+/// values bit for bit in a
 /// fraction of the time where threads are idle or the images share whole bands of rows (the sky
 /// above a horizon; terrain that a method draws exactly like the reference).
 pub fn error_map_parallel(reference: &[u8], test: &[u8], width: u32, height: u32) -> Vec<f32> {
@@ -77,7 +78,8 @@ pub fn error_map_in_strips(
 }
 
 /// [`error_map`] computed only on the rows within `halo` of a row where the two images differ,
-/// over at most `threads` strips (each at least 8 halos tall, with `halo` rows of context); every
+/// in strips of at most `max(changed rows / threads, 8 halo)` rows (so about `threads` of them
+/// where much changed), each with `halo` rows of context; every
 /// other row is 0, which FLIP gives wherever both images are equal within its filters' reach
 /// (equal filtered colours and features: a colour difference of 0 raised to any power).
 pub fn error_map_of_changed_rows(
