@@ -260,7 +260,8 @@ fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> M
 /// fused multiply-adds Vulkan lets differ in the last bits, at every
 /// vertex of every tile drawn over a low flight plus the varied poses, with morphing on and off
 /// (the on/off switch is part of the formula). Many vertices are mid-morph, so the comparison
-/// covers the sliding arithmetic, not only the end points. Negative control: dropping the
+/// covers the sliding arithmetic, not only the end points. Negative control (on llvmpipe,
+/// where the comparison is bit for bit; elsewhere positions compare as cell + fraction): dropping the
 /// integer fold (`c += whole; f -= whole`) from `select::morphed_vertex` fails it.
 #[test]
 fn gpu_vertex_morph_equals_the_cpu_mirror() {
