@@ -748,6 +748,109 @@ fn tile_lists_grow_past_an_overflow() {
     assert!(capped.iter().all(|&(o, _)| o > 0), "{capped:?}");
 }
 
+/// Final-list entries the refinement reserves for `p`: one root leaf, 3 more per split of a
+/// tile the frustum keeps (`refine` in `udlod_tiling.wgsl`; the walk of `select::select_tiles`).
+fn reserved_leaves(levels: &Levels, p: &SelectionParams) -> u64 {
+    let mut splits = 0;
+    let mut layer = vec![Tile {
+        x: 0,
+        y: 0,
+        lod: levels.root_lod,
+    }];
+    while !layer.is_empty() {
+        let mut next = Vec::new();
+        for t in layer {
+            let kept = levels.inside(t) && !(p.cull && select::tile_culled(levels, p, t));
+            if kept && select::tile_splits(levels, p, t) {
+                splits += 1;
+                next.extend([(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| Tile {
+                    x: t.x * 2 + dx,
+                    y: t.y * 2 + dy,
+                    lod: t.lod - 1,
+                }));
+            }
+        }
+        layer = next;
+    }
+    1 + 3 * splits
+}
+
+/// The bound the tile lists are sized with before each frame's prepass
+/// (`select::reserved_leaves_bound`) is never below what the refinement reserves: over 200
+/// poses and a low flight, with culling on and off, at every default grid size and at tau 0.5
+/// and 4. Negative control: the bound with the split distances halved falls below on some
+/// pose.
+#[test]
+fn tile_list_bound_holds_for_every_pose() {
+    let data = terrain(257, 30.0);
+    let mut cameras = poses(&data, 200);
+    cameras.extend(low_flight(&data, 20));
+    for grid in grids() {
+        let levels = Levels::new(&data, grid).unwrap();
+        for tau_px in [0.5, 4.0] {
+            let (mut tightest, mut under_half) = (f64::INFINITY, 0);
+            let mut largest = 0;
+            for cam in &cameras {
+                for cull in [true, false] {
+                    let lod = UdlodSettings {
+                        cull,
+                        tau_px,
+                        ..settings(grid)
+                    };
+                    let p = SelectionParams::new(&levels, &data, &lod, cam, cam.position, W, H);
+                    let reserved = reserved_leaves(&levels, &p);
+                    let bound = select::reserved_leaves_bound(&levels, &p.field, p.stretch);
+                    assert!(
+                        reserved <= bound,
+                        "grid {grid} tau {tau_px} cull {cull} {cam:?}: {reserved} > {bound}"
+                    );
+                    tightest = tightest.min(bound as f64 / reserved as f64);
+                    largest = largest.max(bound);
+                    let mut half = (*p.field).clone();
+                    (half.split_ranks.iter_mut().flatten()).for_each(|(_, t)| *t *= 0.5);
+                    let half_bound = select::reserved_leaves_bound(&levels, &half, p.stretch);
+                    under_half += (reserved > half_bound) as usize;
+                }
+            }
+            let (nx, ny) = levels.tiles_per_side[0];
+            println!(
+                "grid {grid} tau {tau_px}: bound at least {tightest:.2}x the reserved leaves, at most {largest} (level 0 has {} tiles); halved distances fall short on {under_half} of {}",
+                nx * ny,
+                2 * cameras.len()
+            );
+            assert!(under_half > 0, "the control must fall short somewhere");
+        }
+    }
+}
+
+/// What the bound saves where it matters: a 4097² terrain at 1920x1080 and tau 0.5, the
+/// default grid. The lists are sized at most at the bound, against the `max_tiles` (524,288:
+/// 24 MiB of lists per frame slot and view) they were allocated with before: measured 149,014
+/// (3.5x less), about 10x what the 40 poses reserve at most, so the bound holds but is loose.
+#[test]
+fn tile_list_bound_is_far_below_max_tiles_on_a_large_terrain() {
+    let data = terrain(4097, 30.0);
+    let lod = UdlodSettings {
+        tau_px: 0.5,
+        ..UdlodSettings::default()
+    };
+    let levels = Levels::new(&data, lod.grid_size).unwrap();
+    let (mut largest, mut reserved_max) = (0, 0);
+    for cam in poses(&data, 40) {
+        let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, 1920, 1080);
+        let reserved = reserved_leaves(&levels, &p);
+        let bound = select::reserved_leaves_bound(&levels, &p.field, p.stretch);
+        assert!(reserved <= bound, "{cam:?}: {reserved} > {bound}");
+        largest = largest.max(bound);
+        reserved_max = reserved_max.max(reserved);
+    }
+    println!(
+        "4097², 1920x1080, tau 0.5, grid {}: bound at most {largest}, reserved at most {reserved_max}, max_tiles {}",
+        lod.grid_size, lod.max_tiles
+    );
+    assert!(largest * 3 < lod.max_tiles as u64, "{largest}");
+}
+
 /// Whether the tiles' level-0 cells cover the data set's level-0 tiles exactly once.
 fn covers_exactly_once(levels: &Levels, tiles: &[Tile]) -> Result<(), String> {
     let cells = leaf_levels(tiles);
@@ -881,8 +984,9 @@ fn gpu_selection_equals_cpu_reference_on_the_earth() {
 }
 
 /// The tile lists hold at most the full tree's leaves (4^root_lod tiles), whatever `max_tiles`
-/// says: on a 129² data set (16 x 16 tiles of 8 quads, root level 4: 256 leaves) a budget of
-/// 65,536 tiles allocates what a budget of 256 does, and a budget of 64 less.
+/// says: on a 129² data set (16 x 16 tiles of 8 quads, root level 4: 256 leaves) lists asked
+/// to start at a budget of 65,536 tiles (`initial_tiles`) allocate what a budget of 256 does,
+/// and a budget of 64 less.
 #[test]
 fn tile_lists_are_no_larger_than_the_full_tree() {
     let data = terrain(129, 30.0);
@@ -890,6 +994,7 @@ fn tile_lists_are_no_larger_than_the_full_tree() {
     let bytes = |max_tiles: u32| {
         let lod = UdlodSettings {
             max_tiles,
+            initial_tiles: max_tiles,
             ..settings(8)
         };
         let before = gpu.allocated_bytes();

@@ -330,12 +330,13 @@ impl Udlod {
         // (4^root_lod), so small data sets do not allocate the whole budget.
         let full_tree = 1u64 << (2 * levels.root_lod).min(62);
         let tile_cap = (settings.max_tiles as u64).min(full_tree) as u32;
-        // Lists of `initial_tiles` grow when a frame overflows them (`grow_lists`); by default
-        // they start at the cap, so no frame is drawn coarser while they grow.
+        // By default each frame's lists are sized before its prepass from a bound on what the
+        // view can reserve (`update`), so they start with one tile; lists of `initial_tiles`
+        // (the opt-in ablation) grow only when a frame overflows them (`grow_lists`).
         let first = if settings.initial_tiles > 0 {
             settings.initial_tiles
         } else {
-            tile_cap
+            1
         }
         .min(tile_cap);
         let slots = (sets.sets.iter().enumerate())
@@ -452,15 +453,15 @@ impl Udlod {
             .unwrap_or_default()
     }
 
-    /// Grows `slot`'s tile lists, before its next frame, past the capacity its last frame
-    /// overflowed (doubled, or by twice the overflow), up to `max_tiles`. What one slot
-    /// learns, every slot takes at its next frame. Returns the slot's capacity. The slot's
-    /// previous frame has completed, so its old lists can go.
-    fn grow_lists(&mut self, slot: ViewSlot) -> Result<u32> {
+    /// Grows `slot`'s tile lists, before its next frame, to `needed` tiles and past the
+    /// capacity its last frame overflowed (doubled, or by twice the overflow), up to
+    /// `max_tiles`. What one slot learns, every slot takes at its next frame. Returns the
+    /// slot's capacity. The slot's previous frame has completed, so its old lists can go.
+    fn grow_lists(&mut self, slot: ViewSlot, needed: u32) -> Result<u32> {
         let i = slot.index();
         let have = self.slots[i].lists.capacity;
         let overflow = self.read_counters(slot).overflow;
-        let mut wanted = self.wanted_tiles;
+        let mut wanted = self.wanted_tiles.max(needed);
         if overflow > 0 {
             wanted = wanted.max(
                 have.saturating_mul(2)
@@ -503,7 +504,15 @@ impl LodMethod for Udlod {
                 p.field.corner_offsets[lod],
             ];
         }
-        let capacity = self.grow_lists(slot)?;
+        // What this view can reserve at most (flat world: with any viewer; on the earth the
+        // frame's lowered stretch enters), so no frame overflows; 0 with `initial_tiles` set.
+        let needed = if self.settings.initial_tiles == 0 {
+            select::reserved_leaves_bound(&self.levels, &p.field, p.stretch)
+                .min(self.tile_cap as u64) as u32
+        } else {
+            0
+        };
+        let capacity = self.grow_lists(slot, needed)?;
         u.sizes = [
             self.settings.grid_size,
             self.levels.root_lod,

@@ -331,6 +331,10 @@ pub struct SplitField {
     pub corners: Vec<f32>,
     /// Offset of each level's corners in `corners`.
     pub corner_offsets: Vec<u32>,
+    /// Per level, `(k, s)` pairs: `k` tiles of the level have a split distance ([`Self::tile_split`])
+    /// above `s` metres, at `k` = 0, 1, 2, 4, 8, ... and the level's tile count (`s` = 0): what
+    /// [`reserved_leaves_bound`] needs of the field, without a pass over the tiles per frame.
+    pub split_ranks: Vec<Vec<(u32, f32)>>,
 }
 
 const QUAD: [(u32, u32); 4] = [(0, 0), (1, 0), (0, 1), (1, 1)];
@@ -376,12 +380,35 @@ impl SplitField {
                 finer.push(largest as f64 / m as f64);
             }
         }
-        SplitField {
+        let mut field = SplitField {
             key,
             split,
             corners,
             corner_offsets,
-        }
+            split_ranks: Vec::new(),
+        };
+        field.split_ranks = (0..=levels.root_lod)
+            .map(|lod| field.ranks_of_level(levels, lod))
+            .collect();
+        field
+    }
+
+    /// The `(k, s)` pairs of [`Self::split_ranks`] for one level.
+    fn ranks_of_level(&self, levels: &Levels, lod: u32) -> Vec<(u32, f32)> {
+        let (nx, ny) = levels.tiles_per_side[lod as usize];
+        let mut splits: Vec<f32> = (0..ny)
+            .flat_map(|y| (0..nx).map(move |x| Tile { x, y, lod }))
+            .map(|t| self.tile_split(levels, t) as f32)
+            .collect();
+        splits.sort_by(|a, b| b.total_cmp(a));
+        let n = splits.len();
+        let mut ranks: Vec<(u32, f32)> =
+            std::iter::successors(Some(0usize), |k| Some((2 * k).max(1)))
+                .take_while(|&k| k < n)
+                .map(|k| (k as u32, splits[k]))
+                .collect();
+        ranks.push((n as u32, 0.0));
+        ranks
     }
 
     fn corner(&self, levels: &Levels, lod: u32, i: u32, j: u32) -> f32 {
@@ -706,6 +733,40 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
         layer = next;
     }
     out
+}
+
+/// An upper bound, known before the prepass, on the final-list entries a selection with this
+/// split field and LOD metric `stretch` reserves, wherever the viewer is and whatever the
+/// frustum culls: the refinement starts from one root leaf and every split reserves 3 more
+/// (`refine` in `udlod_tiling.wgsl`; `select_tiles` here). A tile splits only when its
+/// nearest point is nearer than its split distance `s` (`m_min * d < D`, `m_min >= 1`, and
+/// `d` at least the horizontal part of the distance, [`tile_distance`]). So for any `t`, the
+/// tiles of a level that split are at most the `k(t)` whose `s` exceeds `t` plus those within
+/// `t` of the viewer, whose rectangles meet the ellipse of radius `t` in the stretched metric:
+/// at most `floor(2 t / (stretch S)) + 2` tiles of side `S` metres along each axis (`t` taken
+/// 1e-4 larger for the GPU's f32 rounding). The bound takes the best `t` among the field's
+/// [`SplitField::split_ranks`]. Used to size the tile lists before each frame (`Udlod::update`).
+pub fn reserved_leaves_bound(levels: &Levels, field: &SplitField, stretch: [f32; 2]) -> u64 {
+    let splits: u64 = (1..=levels.root_lod)
+        .map(|lod| {
+            let side = (levels.grid_size << lod) as f64 * levels.spacing;
+            let (nx, ny) = levels.tiles_per_side[lod as usize];
+            let near = |t: f32| {
+                // 1e-4 wider: the GPU's f32 test may split a tile a rounding beyond `t`.
+                let reach = 2.0 * t as f64 * (1.0 + 1e-4);
+                let along = |s: f32, n: u32| {
+                    let s = (s as f64).max(f64::MIN_POSITIVE);
+                    ((reach / (s * side)).floor().min(n as f64) as u64 + 2).min(n as u64)
+                };
+                along(stretch[0], nx) * along(stretch[1], ny)
+            };
+            (field.split_ranks[lod as usize].iter())
+                .map(|&(k, t)| k as u64 + near(t))
+                .min()
+                .unwrap_or(0)
+        })
+        .sum();
+    1 + 3 * splits
 }
 
 /// Morph factor of a vertex of a level-`lod` tile at integer sample `sample` (0 = own level,

@@ -17,8 +17,10 @@ pub struct UdlodSettings {
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
     pub max_tiles: u32,
-    /// Tiles a slot's lists start with, growing to `max_tiles` when a frame overflows them
-    /// (that frame is drawn coarser); 0: start at `max_tiles`. For boards short of memory.
+    /// 0 (the default): before each frame's prepass a slot's lists grow to a bound on what the
+    /// view can reserve (`select::reserved_leaves_bound`), up to `max_tiles`, so no frame
+    /// overflows. N > 0 (an ablation): they start at N tiles and grow only after a frame
+    /// overflowed them (that frame is drawn coarser).
     pub initial_tiles: u32,
     /// Vertex morphing (off only to demonstrate popping and cracks in tests).
     pub morph: bool,
