@@ -322,7 +322,6 @@ impl Chart {
     }
 }
 
-/// Marker `shape` (circle, triangle, square, diamond, in turn) centred at `at` (pixels).
 /// A point's label, `line` lines below the first at its place, beside the point: to its right,
 /// or ending at it near the right edge (`at_right_edge`; else it would be clipped).
 fn point_label(
@@ -427,6 +426,7 @@ impl LabelSlots {
     }
 }
 
+/// Marker `shape` (circle, triangle, square, diamond, in turn) centred at `at` (pixels).
 fn marker(at: (i32, i32), shape: usize, colour: RGBColor) -> Polygon<(i32, i32)> {
     let (corners, turn) = match shape % 4 {
         0 => (16, 0.0),
