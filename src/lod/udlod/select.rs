@@ -331,9 +331,11 @@ pub struct SplitField {
     pub corners: Vec<f32>,
     /// Offset of each level's corners in `corners`.
     pub corner_offsets: Vec<u32>,
-    /// Per level, `(k, s)` pairs: `k` tiles of the level have a split distance ([`Self::tile_split`])
-    /// above `s` metres, at `k` = 0, 1, 2, 4, 8, ... and the level's tile count (`s` = 0): what
-    /// [`reserved_leaves_bound`] needs of the field, without a pass over the tiles per frame.
+    /// Per level, `(k, s)` pairs: with the level's split distances ([`Self::tile_split`])
+    /// sorted in decreasing order, `s` (metres) is the one at rank `k`, so `k` tiles have one of
+    /// at least `s` and every other tile one of at most `s`; at `k` = 0, 1, 2, 4, 8, ... and
+    /// the level's tile count (`s` = 0). What [`reserved_leaves_bound`] needs of the field,
+    /// without a pass over the tiles per frame. Empty for level 0, which never splits.
     pub split_ranks: Vec<Vec<(u32, f32)>>,
 }
 
@@ -388,7 +390,10 @@ impl SplitField {
             split_ranks: Vec::new(),
         };
         field.split_ranks = (0..=levels.root_lod)
-            .map(|lod| field.ranks_of_level(levels, lod))
+            .map(|lod| match lod {
+                0 => Vec::new(),
+                _ => field.ranks_of_level(levels, lod),
+            })
             .collect();
         field
     }
@@ -741,7 +746,7 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
 /// (`refine` in `udlod_tiling.wgsl`; `select_tiles` here). A tile splits only when its
 /// nearest point is nearer than its split distance `s` (`m_min * d < D`, `m_min >= 1`, and
 /// `d` at least the horizontal part of the distance, [`tile_distance`]). So for any `t`, the
-/// tiles of a level that split are at most the `k(t)` whose `s` exceeds `t` plus those within
+/// tiles of a level that split are at most the `k(t)` ranked above `t` plus those within
 /// `t` of the viewer, whose rectangles meet the ellipse of radius `t` in the stretched metric:
 /// at most `floor(2 t / (stretch S)) + 2` tiles of side `S` metres along each axis (`t` taken
 /// 1e-4 larger for the GPU's f32 rounding). The bound takes the best `t` among the field's
