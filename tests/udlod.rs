@@ -748,33 +748,6 @@ fn tile_lists_grow_past_an_overflow() {
     assert!(capped.iter().all(|&(o, _)| o > 0), "{capped:?}");
 }
 
-/// Final-list entries the refinement reserves for `p`: one root leaf, 3 more per split of a
-/// tile the frustum keeps (`refine` in `udlod_tiling.wgsl`; the walk of `select::select_tiles`).
-fn reserved_leaves(levels: &Levels, p: &SelectionParams) -> u64 {
-    let mut splits = 0;
-    let mut layer = vec![Tile {
-        x: 0,
-        y: 0,
-        lod: levels.root_lod,
-    }];
-    while !layer.is_empty() {
-        let mut next = Vec::new();
-        for t in layer {
-            let kept = levels.inside(t) && !(p.cull && select::tile_culled(levels, p, t));
-            if kept && select::tile_splits(levels, p, t) {
-                splits += 1;
-                next.extend([(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| Tile {
-                    x: t.x * 2 + dx,
-                    y: t.y * 2 + dy,
-                    lod: t.lod - 1,
-                }));
-            }
-        }
-        layer = next;
-    }
-    1 + 3 * splits
-}
-
 /// The bound the tile lists are sized with before each frame's prepass
 /// (`select::reserved_leaves_bound`) is never below what the refinement reserves: over 200
 /// poses and a low flight, with culling on and off, at every default grid size and at tau 0.5
@@ -798,7 +771,7 @@ fn tile_list_bound_holds_for_every_pose() {
                         ..settings(grid)
                     };
                     let p = SelectionParams::new(&levels, &data, &lod, cam, cam.position, W, H);
-                    let reserved = reserved_leaves(&levels, &p);
+                    let reserved = select::reserved_leaves(&levels, &p);
                     let bound = select::reserved_leaves_bound(&levels, &p.field, p.stretch);
                     assert!(
                         reserved <= bound,
@@ -838,7 +811,7 @@ fn tile_list_bound_is_far_below_max_tiles_on_a_large_terrain() {
     let (mut largest, mut reserved_max) = (0, 0);
     for cam in poses(&data, 40) {
         let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, 1920, 1080);
-        let reserved = reserved_leaves(&levels, &p);
+        let reserved = select::reserved_leaves(&levels, &p);
         let bound = select::reserved_leaves_bound(&levels, &p.field, p.stretch);
         assert!(reserved <= bound, "{cam:?}: {reserved} > {bound}");
         largest = largest.max(bound);

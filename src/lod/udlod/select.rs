@@ -712,6 +712,26 @@ pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
 /// limits. Returns the final (drawn) tiles.
 pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
     let mut out = Vec::new();
+    walk(levels, p, |t, splits| {
+        if !splits {
+            out.push(t);
+        }
+    });
+    out
+}
+
+/// Final-list entries the refinement reserves for `p`: one root leaf, 3 more per split of a
+/// tile the frustum keeps (`refine` in `udlod_tiling.wgsl`); what [`reserved_leaves_bound`]
+/// bounds.
+pub fn reserved_leaves(levels: &Levels, p: &SelectionParams) -> u64 {
+    let mut splits = 0;
+    walk(levels, p, |_, s| splits += s as u64);
+    1 + 3 * splits
+}
+
+/// The refinement's walk from the root, level by level: `kept(tile, splits)` for every tile
+/// on the data that the frustum keeps; the children of those that split are walked next.
+fn walk(levels: &Levels, p: &SelectionParams, mut kept: impl FnMut(Tile, bool)) {
     let mut layer = vec![Tile {
         x: 0,
         y: 0,
@@ -723,21 +743,18 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
             if !levels.inside(t) || (p.cull && tile_culled(levels, p, t)) {
                 continue;
             }
-            if tile_splits(levels, p, t) {
-                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                    next.push(Tile {
-                        x: t.x * 2 + dx,
-                        y: t.y * 2 + dy,
-                        lod: t.lod - 1,
-                    });
-                }
-            } else {
-                out.push(t);
+            let splits = tile_splits(levels, p, t);
+            kept(t, splits);
+            if splits {
+                next.extend(QUAD.map(|(dx, dy)| Tile {
+                    x: t.x * 2 + dx,
+                    y: t.y * 2 + dy,
+                    lod: t.lod - 1,
+                }));
             }
         }
         layer = next;
     }
-    out
 }
 
 /// An upper bound, known before the prepass, on the final-list entries a selection with this
