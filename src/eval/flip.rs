@@ -57,26 +57,6 @@ pub fn halo_rows(ppd: f32) -> usize {
     spatial.max(feature) as usize + 1
 }
 
-/// [`error_map`] over `strips` horizontal strips in parallel, each extended by `halo` rows of
-/// context (clipped at the image's top and bottom, where FLIP's own edge clamping then applies
-/// as over the whole image); only the strip's own rows are kept.
-pub fn error_map_in_strips(
-    reference: &[u8],
-    test: &[u8],
-    width: u32,
-    height: u32,
-    strips: usize,
-    halo: usize,
-) -> Vec<f32> {
-    let h = height as usize;
-    let rows = h.div_ceil(strips.max(1)).max(1);
-    let pieces: Vec<_> = (0..h)
-        .step_by(rows)
-        .map(|y| (y, (y + rows).min(h)))
-        .collect();
-    flip_pieces(reference, test, width as usize, h, &pieces, halo)
-}
-
 /// [`error_map`] computed only on the rows within `halo` of a row where the two images differ,
 /// in strips of at most `max(changed rows / threads, 8 halo)` rows (so about `threads` of them
 /// where much changed), each with `halo` rows of context; every
@@ -251,6 +231,27 @@ mod tests {
             }
         }
         img
+    }
+
+    /// [`error_map`] over exactly `strips` horizontal strips in parallel (the mechanism of
+    /// [`error_map_of_changed_rows`] at any number of seams), each extended by `halo` rows of
+    /// context (clipped at the image's top and bottom, where FLIP's own edge clamping then applies
+    /// as over the whole image); only the strip's own rows are kept.
+    fn error_map_in_strips(
+        reference: &[u8],
+        test: &[u8],
+        width: u32,
+        height: u32,
+        strips: usize,
+        halo: usize,
+    ) -> Vec<f32> {
+        let h = height as usize;
+        let rows = h.div_ceil(strips.max(1)).max(1);
+        let pieces: Vec<_> = (0..h)
+            .step_by(rows)
+            .map(|y| (y, (y + rows).min(h)))
+            .collect();
+        flip_pieces(reference, test, width as usize, h, &pieces, halo)
     }
 
     #[test]
