@@ -809,14 +809,27 @@ fn tile_list_bound_is_far_below_max_tiles_on_a_large_terrain() {
     };
     let levels = Levels::new(&data, lod.grid_size).unwrap();
     let (mut largest, mut reserved_max) = (0, 0);
+    let mut worst_levels = String::new();
     for cam in poses(&data, 40) {
         let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, 1920, 1080);
         let reserved = select::reserved_leaves(&levels, &p);
         let bound = select::reserved_leaves_bound(&levels, &p.field, p.stretch);
         assert!(reserved <= bound, "{cam:?}: {reserved} > {bound}");
         largest = largest.max(bound);
-        reserved_max = reserved_max.max(reserved);
+        if reserved > reserved_max {
+            reserved_max = reserved;
+            // Where the bound is loose: per level, splits against the level's bound.
+            let splits = select::splits_per_level(&levels, &p);
+            worst_levels = (1..=levels.root_lod)
+                .map(|l| {
+                    let b = select::level_splits_bound(&levels, &p.field, p.stretch, l);
+                    format!("{l}: {} / {b}", splits[l as usize])
+                })
+                .collect::<Vec<_>>()
+                .join(", ");
+        }
     }
+    println!("worst pose, splits / bound per level: {worst_levels}");
     println!(
         "4097², 1920x1080, tau 0.5, grid {}: bound at most {largest}, reserved at most {reserved_max}, max_tiles {}",
         lod.grid_size, lod.max_tiles

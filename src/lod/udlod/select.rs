@@ -724,9 +724,14 @@ pub fn select_tiles(levels: &Levels, p: &SelectionParams) -> Vec<Tile> {
 /// tile the frustum keeps (`refine` in `udlod_tiling.wgsl`); what [`reserved_leaves_bound`]
 /// bounds.
 pub fn reserved_leaves(levels: &Levels, p: &SelectionParams) -> u64 {
-    let mut splits = 0;
-    walk(levels, p, |_, s| splits += s as u64);
-    1 + 3 * splits
+    1 + 3 * splits_per_level(levels, p).iter().sum::<u64>()
+}
+
+/// The tiles of each level (index = level) that split for `p`.
+pub fn splits_per_level(levels: &Levels, p: &SelectionParams) -> Vec<u64> {
+    let mut splits = vec![0; levels.levels() as usize];
+    walk(levels, p, |t, s| splits[t.lod as usize] += s as u64);
+    splits
 }
 
 /// The refinement's walk from the root, level by level: `kept(tile, splits)` for every tile
@@ -770,25 +775,28 @@ fn walk(levels: &Levels, p: &SelectionParams, mut kept: impl FnMut(Tile, bool)) 
 /// [`SplitField::split_ranks`]. Used to size the tile lists before each frame (`Udlod::update`).
 pub fn reserved_leaves_bound(levels: &Levels, field: &SplitField, stretch: [f32; 2]) -> u64 {
     let splits: u64 = (1..=levels.root_lod)
-        .map(|lod| {
-            let side = (levels.grid_size << lod) as f64 * levels.spacing;
-            let (nx, ny) = levels.tiles_per_side[lod as usize];
-            let near = |t: f32| {
-                // 1e-4 wider: the GPU's f32 test may split a tile a rounding beyond `t`.
-                let reach = 2.0 * t as f64 * (1.0 + 1e-4);
-                let along = |s: f32, n: u32| {
-                    let s = (s as f64).max(f64::MIN_POSITIVE);
-                    ((reach / (s * side)).floor().min(n as f64) as u64 + 2).min(n as u64)
-                };
-                along(stretch[0], nx) * along(stretch[1], ny)
-            };
-            (field.split_ranks[lod as usize].iter())
-                .map(|&(k, t)| k as u64 + near(t))
-                .min()
-                .unwrap_or(0)
-        })
+        .map(|lod| level_splits_bound(levels, field, stretch, lod))
         .sum();
     1 + 3 * splits
+}
+
+/// [`reserved_leaves_bound`]'s bound on the tiles of level `lod` (>= 1) that split.
+pub fn level_splits_bound(levels: &Levels, field: &SplitField, stretch: [f32; 2], lod: u32) -> u64 {
+    let side = (levels.grid_size << lod) as f64 * levels.spacing;
+    let (nx, ny) = levels.tiles_per_side[lod as usize];
+    let near = |t: f32| {
+        // 1e-4 wider: the GPU's f32 test may split a tile a rounding beyond `t`.
+        let reach = 2.0 * t as f64 * (1.0 + 1e-4);
+        let along = |s: f32, n: u32| {
+            let s = (s as f64).max(f64::MIN_POSITIVE);
+            ((reach / (s * side)).floor().min(n as f64) as u64 + 2).min(n as u64)
+        };
+        along(stretch[0], nx) * along(stretch[1], ny)
+    };
+    (field.split_ranks[lod as usize].iter())
+        .map(|&(k, t)| k as u64 + near(t))
+        .min()
+        .unwrap_or(0)
 }
 
 /// Morph factor of a vertex of a level-`lod` tile at integer sample `sample` (0 = own level,
