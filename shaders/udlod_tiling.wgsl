@@ -12,8 +12,8 @@
 // want to split. Otherwise no tile of that pass
 // splits, so the whole view stops one level early: coarser, but a selection whose finest
 // level is that pass's, crack-free like any other. Refusing single tiles instead left
-// neighbours two levels apart without a morph between them: cracks (docs/udlod.md
-// "Capacity"). `overflow` counts the tiles that wanted to split and could not. Each
+// tiles unsplit nearer than their split distance, whose finer neighbours are not morphed onto
+// them: cracks (docs/udlod.md "Capacity"). `overflow` counts the tiles that wanted to split and could not. Each
 // workgroup reserves its splits' and leaves' entries with one atomic per list (`refine`).
 
 //!include terrain_common.wgsl
@@ -342,21 +342,19 @@ fn decided(t: Tile) -> Tile {
     return Tile(t.x, t.y, t.lod, flags);
 }
 
-// Whether some vertex of final tile `t` sits part-way through its morph (`morph_factor`
-// strictly between 0 and 1, the vertex stage's own arithmetic): only then are there sliver
-// triangles. A tile whose moving (odd) vertices are all unmorphed or fully morphed is drawn
-// with back-face culling (docs/udlod.md, "Pinholes far away and back faces").
+// Whether some vertex of final tile `t` may make sliver triangles (`morph_cascade`, the vertex
+// stage's own arithmetic): one part-way through its morph, or one carried on past the tile's
+// own level. A tile whose vertices all stay put or slide fully onto the parent grid at the
+// tile's level keeps the parent grid's triangles (or degenerate ones) and is drawn with
+// back-face culling (docs/udlod.md, "Pinholes far away and back faces").
 fn tile_mid_morph(t: Tile) -> bool {
     let quads = udlod.sizes.x;
     let step = 1u << t.lod;
     let origin = vec2<u32>(t.x, t.y) * quads * step;
     for (var j = 0u; j <= quads; j++) {
         for (var i = 0u; i <= quads; i++) {
-            if ((i | j) & 1u) == 0u {
-                continue;
-            }
-            let m = morph_factor(vec2<i32>(origin + vec2<u32>(i, j) * step), t.lod);
-            if m > 0.0 && m < 1.0 {
+            let c = morph_cascade(vec2<i32>(origin + vec2<u32>(i, j) * step), t.lod);
+            if c.moved == MORPH_SLIVERS {
                 return true;
             }
         }

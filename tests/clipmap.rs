@@ -999,6 +999,7 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
             focal_px: 623.5,
             tau_px: 1.0,
             morph_range: 0.2,
+            morph_levels: 2,
             field_max,
         };
         let (fa, fb) = (SplitField::new(&a, key), SplitField::new(&b, key));

@@ -508,7 +508,8 @@ fn vertex_pulling_draws_the_same_surface_as_the_indexed_grid_at(grid: u32) {
 /// of them face away from the camera while still being part of the surface, and with back-face
 /// culling they left single-pixel holes surrounded by terrain (first seen in the Improved-PGM
 /// flight at 640x360, frames 85 and 127 at tau 4; with today's selection frames 102 and 150 at
-/// tau 1, one pixel each, in a scan of every third frame). UDLOD therefore culls back faces
+/// tau 1, one pixel each, in a scan of every third frame; with the morph cascade,
+/// `morph_levels = 0`, frames 58, 139 and 179). UDLOD therefore culls back faces
 /// only on tiles none of whose vertices can morph (`back_faces = "static"`, the default): no
 /// sky pixel there has terrain on all 8 sides. Control: culling every tile (`"all"`) leaves
 /// such pixels. Skipped

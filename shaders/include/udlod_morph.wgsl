@@ -1,13 +1,14 @@
-// UDLOD's vertex morph, one function for every caller: the vertex shaders of udlod.wgsl and the
-// test probe udlod_probe.wgsl. Mirrored operation for operation by `morph_factor` and
-// `morphed_vertex` in src/lod/udlod/select.rs; tests/udlod.rs evaluates this code through the
-// probe and proves the two equal. Needs terrain_common.wgsl and udlod_common.wgsl.
+// UDLOD's vertex morph, one function for every caller: the vertex shaders of udlod.wgsl, the
+// prepass's back-face split (udlod_tiling.wgsl) and the test probe udlod_probe.wgsl. Mirrored
+// operation for operation by `morph_factor`, `morph_cascade` and `morphed_vertex` in
+// src/lod/udlod/select.rs; tests/udlod.rs evaluates this code through the probe and proves the
+// two equal. Needs terrain_common.wgsl and udlod_common.wgsl.
 
-// 0 = the tile's own grid, 1 = fully on the parent's grid (times the on/off switch
-// `udlod.params.z`). `d` is the distance from the LOD viewer to the un-morphed vertex at the
-// reference height in the LOD metric (`udlod.metric`), scaled by the parent level's split
-// field; `parent_split` the parent level's split distance; the morph runs over the last
-// `morph_range` of it.
+// 0 = the level's own grid, 1 = fully on the next level's grid (times the on/off switch
+// `udlod.params.z`), for a grid point of level `lod`. `d` is the distance from the LOD viewer
+// to the point at the reference height in the LOD metric (`udlod.metric`), scaled by the next
+// level's split field; `parent_split` that level's split distance; the morph runs over the
+// last `morph_range` of it.
 fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
     let d = length(vec3<f32>(viewer_xy(sample) * udlod.metric.xy, udlod.viewer.z));
     let scaled = d * field_at(sample, lod + 1u);
@@ -16,9 +17,70 @@ fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
     return clamp(1.0 - (1.0 - scaled / parent_split) / morph_range, 0.0, 1.0) * udlod.params.z;
 }
 
+// How a grid point moved: not at all; fully onto the next level's grid at the tile's own level
+// and no further (the tile's triangles stay the parent grid's, or degenerate); anything else
+// (part-way, or on through further levels: sliver triangles possible).
+const MORPH_STILL: u32 = 0u;
+const MORPH_ONE_LEVEL: u32 = 1u;
+const MORPH_SLIVERS: u32 = 2u;
+
+// Where grid point `sample` of a level-`lod` tile ends up after the morph cascade (docs/udlod.md,
+// "The morph cascade"). Up: at every level `j` from `lod` on at which the point reached is
+// odd, it has the factor `f_j` (`morph_factor` there) and slides towards its lower even
+// neighbour, the next point; the first factor of 0 ends the walk. Down: the last point reached
+// stays put, and each earlier point lies `1 - f` of the way from where the point it slides to
+// ended up back towards itself. A point on the walk ends up exactly where its own vertex does
+// (the same walk from there, the same operations), so a vertex fully morphed through the
+// levels between two neighbours is bit-identical to the coarser one's, and a vertex nearly
+// morphed onto its neighbour lies a small multiple of their offset away from it, never off
+// to one side by rounding. Result: an integer cell plus a fraction (not yet folded or
+// clamped), the factor at the first odd level, and how the point moved.
+struct Cascade {
+    cell: vec2<i32>,
+    frac: vec2<f32>,
+    morph: f32,
+    moved: u32,
+}
+
+fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
+    var c = Cascade(sample, vec2<f32>(0.0), 0.0, MORPH_STILL);
+    var points: array<vec2<i32>, UDLOD_MAX_LEVELS>;
+    var factors: array<f32, UDLOD_MAX_LEVELS>;
+    var n = 0u;
+    var point = sample;
+    var first = true;
+    for (var j = lod; j < udlod.sizes.y; j++) {
+        let odd = vec2<i32>((vec2<u32>(point) >> vec2<u32>(j)) & vec2<u32>(1u));
+        if all(odd == vec2<i32>(0)) {
+            continue;
+        }
+        let f = morph_factor(point, j);
+        if first {
+            c.morph = f;
+            first = false;
+        }
+        if f == 0.0 {
+            break;
+        }
+        c.moved = select(MORPH_SLIVERS, MORPH_ONE_LEVEL, c.moved == MORPH_STILL && j == lod && f == 1.0);
+        points[n] = point;
+        factors[n] = f;
+        n++;
+        point = point - odd * i32(1u << j);
+    }
+    c.cell = point;
+    for (var k = n; k > 0u; k--) {
+        let f = factors[k - 1u];
+        if f < 1.0 {
+            c.frac = c.frac + (1.0 - f) * (vec2<f32>(points[k - 1u] - c.cell) - c.frac);
+        }
+    }
+    return c;
+}
+
 // A tile's grid vertex after morphing: the position in samples as an integer cell and a
 // fraction in [0, 1) (what `project` takes), the same position as one vector (texturing and
-// height lookup), its height and the morph factor.
+// height lookup), its height and the morph factor at its first odd level.
 struct MorphedVertex {
     cell: vec2<i32>,
     frac: vec2<f32>,
@@ -33,28 +95,22 @@ fn morphed_vertex(tile: Tile, local: vec2<u32>) -> MorphedVertex {
     let quads = udlod.sizes.x;
     let step = 1u << tile.lod;
     let sample = vec2<i32>(vec2<u32>(tile.x, tile.y) * quads * step + local * step);
-    let morph = morph_factor(sample, tile.lod);
-    // Odd vertices slide onto their lower even neighbour: integer part and fraction kept apart
-    // so that a fully morphed vertex is exactly the neighbour's sample.
-    let odd = vec2<i32>(local & vec2<u32>(1u));
-    var cell = sample - odd * i32(step);
-    var frac = (1.0 - morph) * vec2<f32>(odd) * f32(step);
+    let c = morph_cascade(sample, tile.lod);
+    // One representation per position: whole samples folded from the fraction into the cell,
+    // or far from the camera an unmorphed odd vertex and the same sample as an even vertex of
+    // the neighbouring tile would differ by an ulp and the shared edge show pinholes.
+    let whole = floor(c.frac);
+    var cell = c.cell + vec2<i32>(whole);
+    var frac = c.frac - whole;
     // Tiles at the data's far edges reach past the last sample: clamp onto it.
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
     frac = min(frac, vec2<f32>(max(last - cell, vec2<i32>(0))));
     cell = min(cell, last);
-    // One representation per position: an unmorphed odd vertex (frac = step) and the same
-    // sample as an even vertex of the neighbouring tile (frac = 0) must project through the
-    // same arithmetic, or far from the camera their f32 positions differ by an ulp and the
-    // shared edge shows pinholes.
-    let whole = floor(frac);
-    cell = cell + vec2<i32>(whole);
-    frac = frac - whole;
     var v: MorphedVertex;
     v.cell = cell;
     v.frac = frac;
     v.grid_pos = vec2<f32>(cell) + frac;
     v.height = height_at(v.grid_pos);
-    v.morph = morph;
+    v.morph = c.morph;
     return v;
 }

@@ -1,7 +1,8 @@
 //! UDLOD on the CPU: the level structure, per-tile min/max heights and geometric errors, the
 //! per-tile split distances derived from the screen-space error target and the crack-free
-//! chain (the split field), the frustum, the vertex morph, and a reference implementation of the GPU's tile
-//! selection (tests compare the GPU's final tile list against it).
+//! ties between levels (the split field), the frustum, the vertex morph cascade, and a
+//! reference implementation of the GPU's tile selection (tests compare the GPU's final tile
+//! list against it).
 //!
 //! Arithmetic that must agree with the shaders (`select_tiles`, `morph_factor`,
 //! `morphed_vertex`, `field_at`) is written in f32 in the same order as
@@ -247,6 +248,8 @@ pub struct FieldKey {
     pub focal_px: f64,
     pub tau_px: f64,
     pub morph_range: f64,
+    /// Levels over which a tile's vertices morph (`UdlodSettings::morph_levels`, resolved).
+    pub morph_levels: u32,
     /// Largest ratio between a level's largest and a tile's split distance (1: one distance
     /// per level, the distance-only selection).
     pub field_max: f64,
@@ -258,6 +261,7 @@ impl FieldKey {
             focal_px,
             tau_px: settings.tau_px,
             morph_range: settings.morph_range,
+            morph_levels: settings.morph_levels(),
             field_max: settings.error_field_max,
         }
     }
@@ -293,33 +297,34 @@ pub fn worst_case_share(grid_size: u32) -> f64 {
     k0 + (k1 - k0) * t
 }
 
-/// Relative margin on the crack-free chain: covers the f32 rounding of `m`, `D` and the
-/// `m * d < D` test on the GPU (~1e-7 each).
+/// Relative margin on the split field's nesting and reach terms: covers the f32 rounding of
+/// `m`, `D` and the `m * d < D` test on the GPU (~1e-7 each).
 const CHAIN_MARGIN: f64 = 1e-5;
 
 /// Per-tile split distances: how near the LOD viewer may come to each tile before it splits,
 /// derived per tile from its own geometric error and the pixel target, and tied between
-/// levels by the crack-free chain tile by tile (`docs/udlod.md`, "Split field").
+/// levels tile by tile so the morph cascade closes every edge (`docs/udlod.md`, "Split field"
+/// and "The morph cascade").
 ///
 /// Stored as the GPU reads it: per level a split distance `D[l]` (the level's largest) and a
 /// field `m_l >= 1` at the corners of the level's tiles, interpolated bilinearly; a point's
 /// split distance is `s_l(p) = D[l] / m_l(p)`. A tile splits when its nearest point (at the
 /// reference height) is nearer than the largest `s` of its corners (`m_min * d < D`);
-/// vertices of level `l - 1` morph over the last `morph_range` of `s_l(p)`. With `s_Q` the
-/// smallest and `S_Q` the largest corner value of tile `Q`, for every tile `Q` of level `l`:
+/// grid points of level `l - 1` morph over the last `morph_range` of `s_l(p)`. With `s_Q` the
+/// smallest and `S_Q` the largest corner value of tile `Q`, for every tile `Q` of level `l`
+/// (`tile_requirement`):
 /// 1. pixel target: `s_Q >= k e_Q f / tau` (`e_Q`: the tile's own error, `k`:
-///    [`worst_case_share`] of the grid size), so wherever `Q`'s geometry is drawn, unmorphed or blended into
-///    its children's morph zone, it is at least that far away;
-/// 2. crack-free chain, for each child `P` (level `l - 1 >= 1`, which may split):
-///    `(1 - r) s_Q >= S_P + diagonal(l - 1)` (the tile's diagonal in the LOD metric,
-///    [`Levels::tile_diagonal`]; `sqrt(2) extent` on square grids): where `P` split, every
-///    point of `P` is nearer than `S_P + diagonal`, so a neighbour of `P`'s children at level
-///    `l - 1` is unmorphed there, and (with the split rule) neighbours differ by at most one
-///    level.
+///    [`worst_case_share`] of the grid size), so wherever `Q`'s geometry is drawn, unmorphed
+///    or blended into its children's morph zone, it is at least that far away;
+/// 2. nesting: `s_Q >= S_P` for each child `P`: where an unsplit tile meets finer ones, their
+///    edge vertices are fully morphed through every level between;
+/// 3. reach: `(1 - r) s_Q >= S_G + diagonal(l - q)` for each descendant `G` of level `l - q`
+///    (`q`: `FieldKey::morph_levels`; the diagonal in the LOD metric,
+///    [`Levels::tile_diagonal`], `sqrt(2) extent` on square grids): a tile's vertices morph
+///    over at most `q` levels and stay inside it.
 ///
-/// Level 0 never splits, so level 1 has no chain term. Each corner takes the largest
-/// requirement of the tiles around it; `field_max` then raises small values to the level's
-/// largest / `field_max`.
+/// Level 0 never splits. Each corner takes the largest requirement of the tiles around it;
+/// `field_max` then raises small values to the level's largest / `field_max`.
 #[derive(Clone, Debug)]
 pub struct SplitField {
     pub key: FieldKey,
@@ -343,44 +348,58 @@ const QUAD: [(u32, u32); 4] = [(0, 0), (1, 0), (0, 1), (1, 1)];
 
 impl SplitField {
     pub fn new(levels: &Levels, key: FieldKey) -> Self {
-        let keep = 1.0 - key.morph_range;
         let cap = key.field_max.max(1.0);
         let mut split = vec![UDLOD_NO_SPLIT; UDLOD_MAX_LEVELS as usize];
         let mut corners = Vec::new();
         let mut corner_offsets = Vec::new();
-        // Split distances of the previous level's corners as the GPU evaluates them (D / m).
-        let mut finer: Vec<f64> = Vec::new();
+        // Per level below, each tile's split distance as the GPU evaluates it (the largest
+        // of its corners' D / m).
+        let mut tile_splits: Vec<Vec<f64>> = Vec::new();
         for lod in 0..=levels.root_lod {
             let (nx, ny) = levels.tiles_per_side[lod as usize];
             let cw = nx as usize + 1;
             corner_offsets.push(corners.len() as u32);
             if lod == 0 {
-                // Level 0 never splits: its field is 1 everywhere and not stored, and level 1
-                // has no chain term (`tile_requirement`), so nothing reads `finer` here.
+                // Level 0 never splits: its field is 1 everywhere and not stored.
                 split[0] = 0.0;
+                tile_splits.push(vec![0.0; (nx * ny) as usize]);
                 continue;
             }
             let mut s = vec![0.0f64; cw * (ny as usize + 1)];
             for ty in 0..ny {
                 for tx in 0..nx {
                     let t = Tile { x: tx, y: ty, lod };
-                    let need = tile_requirement(levels, &key, keep, t, &finer);
+                    let need = tile_requirement(levels, &key, t, &tile_splits);
                     for (i, j) in QUAD {
                         let k = (ty + j) as usize * cw + (tx + i) as usize;
                         s[k] = s[k].max(need);
                     }
                 }
             }
+            if key.morph_levels > 1 {
+                gentle_morph(levels, &key, lod, &mut s);
+            }
             // A level whose tiles need nothing (flat data) keeps a tiny positive distance.
             let largest = s.iter().copied().fold(1e-3 * levels.spacing, f64::max) as f32;
             split[lod as usize] = largest;
             let floor = largest as f64 / cap;
-            finer = Vec::with_capacity(s.len());
+            let mut at_corners = Vec::with_capacity(s.len());
             for v in s {
                 let m = ((largest as f64 / v.max(floor)) as f32).clamp(1.0, cap as f32);
                 corners.push(m);
-                finer.push(largest as f64 / m as f64);
+                at_corners.push(largest as f64 / m as f64);
             }
+            let tile_split = |tx: u32, ty: u32| {
+                QUAD.iter()
+                    .map(|&(i, j)| at_corners[(ty + j) as usize * cw + (tx + i) as usize])
+                    .fold(0.0, f64::max)
+            };
+            tile_splits.push(
+                (0..ny)
+                    .flat_map(|ty| (0..nx).map(move |tx| (tx, ty)))
+                    .map(|(tx, ty)| tile_split(tx, ty))
+                    .collect(),
+            );
         }
         let mut field = SplitField {
             key,
@@ -465,35 +484,87 @@ impl SplitField {
     }
 }
 
-/// The smallest split distance tile `t` (level >= 1) allows at its corners: its own error at
-/// the pixel target, and the crack-free chain over its children (`finer`: the previous
-/// level's corner split distances as evaluated on the GPU).
-fn tile_requirement(levels: &Levels, key: &FieldKey, keep: f64, t: Tile, finer: &[f64]) -> f64 {
+/// The smallest split distance tile `t` (level >= 1) allows at its corners (`tile_splits`:
+/// per level below, each tile's split distance as the GPU evaluates it):
+/// - its own error at the pixel target;
+/// - nesting: no less than any child's, so a point's split distance never falls from one level
+///   to the next and an unsplit tile's neighbours are fully morphed onto it through every level
+///   between (`docs/udlod.md`, "The morph cascade");
+/// - reach: with `q` = `key.morph_levels` (at most [`cascade_levels`]), every point of a
+///   descendant `G` of level `l - q` that splits is nearer than `S_G + diagonal(l - q)`, and
+///   `(1 - r)` of this tile's split distance lies beyond that, so the vertices of `G`'s
+///   children never morph at level `l - 1`: a level-`a` tile's vertices move at levels `a` to
+///   `a + q - 1` only, which keeps them inside the tile (its culling box stays true), and
+///   neighbours differ by at most `q` levels. With `q = 1` this is the CDLOD-style chain
+///   UDLOD had before the cascade (`(1 - r) s_Q >= S_P + diagonal(l - 1)` over the children).
+fn tile_requirement(levels: &Levels, key: &FieldKey, t: Tile, tile_splits: &[Vec<f64>]) -> f64 {
     let screen = worst_case_share(levels.grid_size) * levels.tile_error(t) as f64 * key.focal_px
         / key.tau_px;
-    if t.lod < 2 {
-        return screen;
-    }
-    let child_lod = t.lod - 1;
-    let (cnx, _) = levels.tiles_per_side[child_lod as usize];
-    let diagonal = levels.tile_diagonal(child_lod);
-    let mut need = screen;
-    for (dx, dy) in QUAD {
-        let c = Tile {
-            x: t.x * 2 + dx,
-            y: t.y * 2 + dy,
-            lod: child_lod,
-        };
-        if !levels.inside(c) {
-            continue;
+    let nesting = largest_below(levels, t, t.lod - 1, tile_splits);
+    let reach = match t.lod.checked_sub(key.morph_levels) {
+        Some(lod) if lod >= 1 => {
+            let below = largest_below(levels, t, lod, tile_splits);
+            (below + levels.tile_diagonal(lod)) / (1.0 - key.morph_range)
         }
-        let largest = QUAD
-            .iter()
-            .map(|&(i, j)| finer[((c.y + j) * (cnx + 1) + c.x + i) as usize])
-            .fold(0.0, f64::max);
-        need = need.max((largest + diagonal) / keep * (1.0 + CHAIN_MARGIN));
-    }
-    need
+        _ => 0.0,
+    };
+    screen.max(nesting.max(reach) * (1.0 + CHAIN_MARGIN))
+}
+
+/// Growth of the split distance allowed from one field corner to the next (8-neighbourhood):
+/// see [`gentle_morph`].
+const FIELD_STEP_RATIO: f64 = 2.0;
+
+/// Keeps the morph of level `lod - 1`'s grid points gentle across the grid (`docs/udlod.md`,
+/// "The morph cascade"): the morph factor runs from 0 to 1 over the last `r` of the split
+/// distance, and where it jumps from 0 to 1 between neighbouring vertices, their triangles
+/// fold over (single pixels far off the surface, measured on SRTM1). Two floors on the
+/// corner split distances `s` of level `lod`: the morph zone spans at least one grid step of
+/// level `lod - 1` (`r s >= step`), and a corner's distance is at least its neighbour's over
+/// [`FIELD_STEP_RATIO`] (a chamfer pass each way: the largest `s(c') / ratio^steps(c, c')`).
+/// The CDLOD-style chain of `morph_levels = 1` implies both by a wide margin.
+fn gentle_morph(levels: &Levels, key: &FieldKey, lod: u32, s: &mut [f64]) {
+    let step = levels.tile_diagonal(lod - 1) / levels.grid_size as f64;
+    let floor = step / key.morph_range;
+    s.iter_mut().for_each(|v| *v = v.max(floor));
+    let (nx, ny) = levels.tiles_per_side[lod as usize];
+    let (w, h) = (nx as usize + 1, ny as usize + 1);
+    let pass = |s: &mut [f64], order: &mut dyn Iterator<Item = usize>, back: bool| {
+        for k in order {
+            let (x, y) = ((k % w) as i64, (k / w) as i64);
+            let dy = if back { 1 } else { -1 };
+            for (ox, oy) in [(-1, 0), (1, 0), (-1, dy), (0, dy), (1, dy)] {
+                let (sx, sy) = (x + ox, y + oy);
+                let visited_row = oy != 0 || (if back { ox > 0 } else { ox < 0 });
+                if visited_row && sx >= 0 && sy >= 0 && (sx as usize) < w && (sy as usize) < h {
+                    let n = s[sy as usize * w + sx as usize] / FIELD_STEP_RATIO;
+                    if n > s[k] {
+                        s[k] = n;
+                    }
+                }
+            }
+        }
+    };
+    pass(s, &mut (0..w * h), false);
+    pass(s, &mut (0..w * h).rev(), true);
+}
+
+/// Levels over which a tile's vertices may morph and stay inside the tile: the power of two in
+/// `grid_size` (a tile of level `a` starts at a multiple of `grid_size 2^a` samples; a vertex
+/// odd at level `j` slides `2^j` towards the tile's origin, onto a multiple of `2^(j + 1)`).
+pub fn cascade_levels(grid_size: u32) -> u32 {
+    grid_size.trailing_zeros().max(1)
+}
+
+/// The largest split distance of the tiles of level `lod` (<= `t.lod`) under tile `t`.
+fn largest_below(levels: &Levels, t: Tile, lod: u32, tile_splits: &[Vec<f64>]) -> f64 {
+    let k = t.lod - lod;
+    let (nx, ny) = levels.tiles_per_side[lod as usize];
+    let xs = (t.x << k)..((t.x + 1) << k).min(nx);
+    let ys = (t.y << k)..((t.y + 1) << k).min(ny);
+    let row = |y: u32| &tile_splits[lod as usize][(y * nx) as usize..][..nx as usize];
+    ys.flat_map(|y| xs.clone().map(move |x| row(y)[x as usize]))
+        .fold(0.0, f64::max)
 }
 
 /// Frustum planes in camera-relative world space (metres), `(normal, offset)` with
@@ -618,7 +689,7 @@ impl SelectionParams {
     /// non-square grid the per-axis stretch is also lowered to the lattice's spacing at the
     /// LOD viewer where that is smaller ([`Lattice::stretch_at`]; the GPU gets the lowered
     /// one). The split field keeps the tile diagonals of `levels`' stretch: a smaller metric
-    /// only shortens every distance the crack-free chain bounds. Square grids keep `[1, 1]`.
+    /// only shortens every distance the split field's reach term bounds. Square grids keep `[1, 1]`.
     pub fn on_earth(mut self, levels: &Levels, lattice: Arc<Lattice>, camera: DVec3) -> Self {
         self.stretch = stretch_at_viewer(levels, &lattice, self.stretch, camera, self.viewer);
         self.earth = Some(EarthCull::new(lattice, camera));
@@ -799,11 +870,11 @@ pub fn level_splits_bound(levels: &Levels, field: &SplitField, stretch: [f32; 2]
         .unwrap_or(0)
 }
 
-/// Morph factor of a vertex of a level-`lod` tile at integer sample `sample` (0 = own level,
-/// 1 = fully on the parent level's grid; 0 everywhere with morphing off): the parent level's
-/// scaled distance against the last `morph_range` of its split distance. A pure function of
-/// the vertex's world position and the tile's level, so vertices shared by tiles agree.
-/// `morph_factor` in `shaders/include/udlod_morph.wgsl`, operation for operation.
+/// Morph factor of grid point `sample` of level `lod` (0 = its own level's grid, 1 = fully on
+/// the next level's grid; 0 everywhere with morphing off): the next level's scaled distance
+/// against the last `morph_range` of its split distance. A pure function of the point and the
+/// level, so vertices shared by tiles agree. `morph_factor` in
+/// `shaders/include/udlod_morph.wgsl`, operation for operation.
 pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
     let rel = p.from_viewer(sample);
     let d = Vec3::new(rel[0] * p.stretch[0], rel[1] * p.stretch[1], p.viewer[2]).length();
@@ -813,13 +884,116 @@ pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod:
     (1.0 - (1.0 - scaled / parent_split) / p.morph_range).clamp(0.0, 1.0) * on
 }
 
+/// How a grid point moved in [`morph_cascade`] (`MORPH_*` in `shaders/include/udlod_morph.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Moved {
+    /// Not at all.
+    Still,
+    /// Fully onto the parent grid at the tile's own level, and no further: the tile's
+    /// triangles stay the parent grid's (or degenerate).
+    OneLevel,
+    /// Part-way, or on through further levels: sliver triangles possible (the tile is drawn
+    /// without back-face culling).
+    Slivers,
+}
+
+/// A grid point after the morph cascade (`Cascade` in `shaders/include/udlod_morph.wgsl`):
+/// an integer cell plus a fraction, not yet folded or clamped.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cascade {
+    pub cell: [i32; 2],
+    pub frac: [f32; 2],
+    /// The factor at the point's first odd level (0 if it reached none).
+    pub morph: f32,
+    pub moved: Moved,
+    /// Levels at which it moved (CPU only: tests count vertices morphing over several).
+    pub levels: u32,
+}
+
+/// Where grid point `sample` of a level-`lod` tile ends up (`docs/udlod.md`, "The morph
+/// cascade"): up, at every level `j` from `lod` on at which the point reached is odd, it has
+/// the factor [`morph_factor`] there and slides towards its lower even neighbour, the next
+/// point, until a factor of 0; down, the last point stays and each earlier one lies `1 - f` of
+/// the way from where the next one ended up back towards itself. The CPU mirror of
+/// `morph_cascade` in `shaders/include/udlod_morph.wgsl`, the same f32 and integer operations
+/// in the same order.
+pub fn morph_cascade(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> Cascade {
+    let mut c = Cascade {
+        cell: sample,
+        frac: [0.0; 2],
+        morph: 0.0,
+        moved: Moved::Still,
+        levels: 0,
+    };
+    let mut walk: Vec<([i32; 2], f32)> = Vec::new();
+    let mut point = sample;
+    let mut first = true;
+    for j in lod..levels.root_lod {
+        let odd = point.map(|v| ((v as u32 >> j) & 1) as i32);
+        if odd == [0, 0] {
+            continue;
+        }
+        let f = morph_factor(levels, p, point, j);
+        if first {
+            c.morph = f;
+            first = false;
+        }
+        if f == 0.0 {
+            break;
+        }
+        c.moved = if c.moved == Moved::Still && j == lod && f == 1.0 {
+            Moved::OneLevel
+        } else {
+            Moved::Slivers
+        };
+        walk.push((point, f));
+        point = [point[0] - odd[0] * (1 << j), point[1] - odd[1] * (1 << j)];
+    }
+    c.levels = walk.len() as u32;
+    c.cell = point;
+    for &(from, f) in walk.iter().rev() {
+        if f < 1.0 {
+            c.frac =
+                [0, 1].map(|i| c.frac[i] + (1.0 - f) * ((from[i] - c.cell[i]) as f32 - c.frac[i]));
+        }
+    }
+    c
+}
+
+/// Whether tile `t` may make sliver triangles: some vertex with [`Moved::Slivers`] (the CPU
+/// mirror of `tile_mid_morph` in `shaders/udlod_tiling.wgsl`; such tiles are drawn without
+/// back-face culling).
+pub fn tile_mid_morph(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
+    let g = levels.grid_size;
+    (0..=g).any(|j| {
+        (0..=g).any(|i| {
+            let sample = tile_sample(levels, t, [i, j]);
+            morph_cascade(levels, p, sample, t.lod).moved == Moved::Slivers
+        })
+    })
+}
+
+/// Integer sample of vertex `local` of tile `t`: u32 arithmetic (wrapping), then the cast, as
+/// the shaders do.
+fn tile_sample(levels: &Levels, t: Tile, local: [u32; 2]) -> [i32; 2] {
+    let step = 1u32 << t.lod;
+    let tile = [t.x, t.y];
+    std::array::from_fn(|i| {
+        let origin = tile[i].wrapping_mul(levels.grid_size).wrapping_mul(step);
+        origin.wrapping_add(local[i].wrapping_mul(step)) as i32
+    })
+}
+
 /// A tile's grid vertex after morphing (`MorphedVertex` in `shaders/include/udlod_morph.wgsl`
 /// without the height): an integer sample `cell` plus a fraction in `[0, 1)` per axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MorphedVertex {
     pub cell: [i32; 2],
     pub frac: [f32; 2],
+    /// The morph factor at the vertex's first odd level.
     pub morph: f32,
+    /// Levels at which it moved (CPU only, [`Cascade::levels`]).
+    pub levels: u32,
 }
 
 impl MorphedVertex {
@@ -834,39 +1008,34 @@ impl MorphedVertex {
 
 /// Where vertex `local` (column, row in the tile's grid) of tile `t` ends up after morphing:
 /// the CPU mirror of `morphed_vertex` in `shaders/include/udlod_morph.wgsl`, the same f32 and
-/// integer operations in the same order (odd vertices slide towards their even neighbour,
-/// clamped at the data's last sample, whole samples folded from the fraction into the cell).
-/// `tests/udlod.rs` proves it equal to the GPU's through the morph probe.
+/// integer operations in the same order ([`morph_cascade`], whole samples folded from the
+/// fraction into the cell, clamped at the data's last sample). `tests/udlod.rs` proves it
+/// equal to the GPU's through the morph probe.
 pub fn morphed_vertex(
     levels: &Levels,
     p: &SelectionParams,
     t: Tile,
     local: [u32; 2],
 ) -> MorphedVertex {
-    let step = 1u32 << t.lod;
-    // u32 arithmetic (wrapping), then the cast, as the shader does.
-    let tile = [t.x, t.y];
-    let sample: [i32; 2] = std::array::from_fn(|i| {
-        let origin = tile[i].wrapping_mul(levels.grid_size).wrapping_mul(step);
-        origin.wrapping_add(local[i].wrapping_mul(step)) as i32
-    });
-    let morph = morph_factor(levels, p, sample, t.lod);
+    let c = morph_cascade(levels, p, tile_sample(levels, t, local), t.lod);
     let last = [levels.width as i32 - 1, levels.height as i32 - 1];
     let mut cell = [0i32; 2];
     let mut frac = [0f32; 2];
     for i in 0..2 {
-        let odd = (local[i] & 1) as i32;
-        let mut c = sample[i] - odd * step as i32;
-        let mut f = (1.0 - morph) * odd as f32 * step as f32;
-        f = f.min((last[i] - c).max(0) as f32);
-        c = c.min(last[i]);
-        let whole = f.floor();
-        c += whole as i32;
-        f -= whole;
-        cell[i] = c;
+        let whole = c.frac[i].floor();
+        let mut ce = c.cell[i] + whole as i32;
+        let mut f = c.frac[i] - whole;
+        f = f.min((last[i] - ce).max(0) as f32);
+        ce = ce.min(last[i]);
+        cell[i] = ce;
         frac[i] = f;
     }
-    MorphedVertex { cell, frac, morph }
+    MorphedVertex {
+        cell,
+        frac,
+        morph: c.morph,
+        levels: c.levels,
+    }
 }
 
 #[cfg(test)]

@@ -14,6 +14,13 @@ pub struct UdlodSettings {
     pub tau_px: f64,
     /// Fraction of each level's range over which vertices morph (0.05..=0.45).
     pub morph_range: f64,
+    /// Levels over which a tile's vertices may morph (`docs/udlod.md`, "The morph cascade"):
+    /// 1 (the default) one level step, the CDLOD-style chain, where neighbours differ by at
+    /// most one level; 0 as many as keep them inside the tile, the power of two in `grid_size`
+    /// (grid 4: 2, grid 8: 3): up to 3x fewer triangles where the chain set the distances,
+    /// but single pixels far off the surface in some frames (folded morph triangles), so not
+    /// the default yet.
+    pub morph_levels: u32,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
     pub max_tiles: u32,
@@ -85,6 +92,7 @@ impl Default for UdlodSettings {
             grid_size: 4,
             tau_px: 1.0,
             morph_range: 0.2,
+            morph_levels: 1,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
             max_tiles: 524_288,
@@ -128,7 +136,21 @@ impl UdlodSettings {
             help: "share of each level's range that morphs",
             apply: |s, v| s.morph_range = v,
         },
+        Sweep {
+            key: "morph_levels",
+            help: "levels a vertex may morph over (1 = one step, the default; 0 = all the tile allows)",
+            apply: |s, v| s.morph_levels = v as u32,
+        },
     ];
+
+    /// Levels over which a tile's vertices morph: `morph_levels`, or with 0 all that keep them
+    /// inside the tile (`select::cascade_levels`).
+    pub fn morph_levels(&self) -> u32 {
+        match self.morph_levels {
+            0 => super::select::cascade_levels(self.grid_size),
+            n => n,
+        }
+    }
 
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::invalid("udlod settings", m));
@@ -148,6 +170,13 @@ impl UdlodSettings {
             return bad(format!(
                 "morph_range {} must be within 0.05..=0.45",
                 self.morph_range
+            ));
+        }
+        let most = super::select::cascade_levels(self.grid_size);
+        if self.morph_levels > most {
+            return bad(format!(
+                "morph_levels {} must be 0 (all) or within 1..={most} at grid_size {} (more would move vertices out of their tile)",
+                self.morph_levels, self.grid_size
             ));
         }
         if !(16..=1 << 22).contains(&self.max_tiles) {

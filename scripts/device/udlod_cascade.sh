@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Issue 18, the morph cascade on the GPU machine: UDLOD with `morph_levels = 1` (one level
+# step: the CDLOD-style chain before the cascade, the same selection) against the default
+# (`morph_levels = 0`: as many levels as keep a tile's vertices inside it), tau 0.5-4, 60
+# frames of each flight at 1920x1080, both in one `eval` run (frames interleaved, so the GPU
+# times compare within the run). Data: the CI terrain (procedural, in memory), Puget Sound when
+# its heights are carried, Fischer S3 when out/datasets/pyrenees is.
+#
+# Here, before carrying: a release build copied to .device-vk/vkterrain
+# (`../shared/device-vulkan/prepare.sh target/release/vkterrain`, stripped), and
+#   mkdir -p .device-vk/data && cp ../shared/data/puget_sound/ps_height_1k.png .device-vk/data/
+# Run there from the repository root: `bash scripts/device/udlod_cascade.sh > $OUT/cascade.txt 2>&1`.
+set -u
+. .device-vk/env.sh
+log() { echo "### $*"; }
+PUGET=$(mktemp --suffix=.toml)
+printf '[dataset]\nkind = "png16"\npath = "%s"\nspacing = 160.0\nvertical_scale = 0.1\n[scenario]\npath = "%s"\n' \
+  "$PWD/.device-vk/data/ps_height_1k.png" "$PWD/config/scenarios/default.toml" > "$PUGET"
+cfgs=(config/ci.toml)
+if [ -f .device-vk/data/ps_height_1k.png ]; then cfgs+=("$PUGET"); else log "Puget Sound heights absent: skipped"; fi
+if [ -f out/datasets/pyrenees/manifest.json ]; then cfgs+=(config/pyrenees.toml); else log "out/datasets/pyrenees absent: Fischer S3 skipped"; fi
+for cfg in "${cfgs[@]}"; do
+  log "eval $cfg morph_levels 1 vs 0, tau 0.5-4, 1920x1080"
+  .device-vk/vkterrain eval --config "$cfg" --methods udlod --sweep morph_levels=1,0 \
+    --sweep tau_px=0.5,1,2,4 --width 1920 --height 1080 --out "$(mktemp -d)" --force 2>&1 | tail -11
+done
+rm -f "$PUGET"
