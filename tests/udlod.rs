@@ -153,6 +153,13 @@ struct MorphComparison {
     sliding: usize,
     /// Vertices that moved at two or more levels (the morph cascade past its first step).
     cascaded: usize,
+    /// Tiles the prepass drew without back-face culling, and tiles where it disagrees with
+    /// the CPU (a tile with a vertex that `select::Moved::Slivers`).
+    morphing_tiles: usize,
+    misclassified_tiles: usize,
+    /// Tiles where the rule before the cascade (an odd vertex part-way) would disagree with
+    /// the prepass: the control that the check can fail.
+    misclassified_by_odd_rule: usize,
     /// Vertices where the CPU and GPU differ in any bit, and the first few of them.
     mismatched: usize,
     mismatches: Vec<String>,
@@ -188,6 +195,12 @@ impl MorphComparison {
             "grid {grid}: {differ} vertices differ {how}, e.g. {:#?}",
             self.mismatches
         );
+        if self.exact {
+            assert_eq!(
+                self.misclassified_tiles, 0,
+                "grid {grid}: the prepass's back-face split disagrees with the CPU"
+            );
+        }
     }
 }
 
@@ -219,6 +232,24 @@ fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> M
             let gpu_vertices = r.probe_morph_in_view(0, &inputs).unwrap();
             assert_eq!(gpu_vertices.len(), inputs.len());
             let p = SelectionParams::new(&levels, data, lod, cam, cam.position, W, H);
+            // The list holds the culled-back-face tiles first, then the prepass's morphing ones.
+            let counters = r.method().counters(ViewSlot(0));
+            let morphing = counters.iter().find(|c| c.0 == "morphing").unwrap().1 as usize;
+            out.morphing_tiles += morphing;
+            for (k, &[x, y, lod]) in tiles.iter().enumerate() {
+                let t = Tile { x, y, lod };
+                let vertex = |i, j| select::morphed_vertex(&levels, &p, t, [i, j]);
+                let grid_vertices = || (0..=g).flat_map(|j| (0..=g).map(move |i| (i, j)));
+                let cpu_slivers =
+                    grid_vertices().any(|(i, j)| vertex(i, j).moved == select::Moved::Slivers);
+                let odd_rule = grid_vertices().any(|(i, j)| {
+                    let m = vertex(i, j).morph;
+                    (i | j) & 1 == 1 && m > 0.0 && m < 1.0
+                });
+                let gpu_slivers = k >= tiles.len() - morphing;
+                out.misclassified_tiles += (cpu_slivers != gpu_slivers) as usize;
+                out.misclassified_by_odd_rule += (odd_rule != gpu_slivers) as usize;
+            }
             for ((t, local), gv) in inputs.iter().zip(&gpu_vertices) {
                 let cv = select::morphed_vertex(&levels, &p, *t, *local);
                 out.vertices += 1;
@@ -295,11 +326,14 @@ fn gpu_vertex_morph_equals_the_cpu_mirror() {
 fn morph_equals_the_cpu_mirror(data: &Heightmap, cameras: &[Camera], grid: u32) {
     let on = compare_morph(data, cameras, &cascade(grid));
     println!(
-        "grid {grid}, morph on: {} vertices, {} mid-morph ({} sliding odd vertices, {} moved at two or more levels), {} mismatches (bit-exact required: {}), morph within {:.2e}, positions within {:.2e} steps, heights within {:.2} ulp",
+        "grid {grid}, morph on: {} vertices, {} mid-morph ({} sliding odd vertices, {} moved at two or more levels), {} tiles drawn without back-face culling ({} misclassified; {} by the odd-vertex rule), {} mismatches (bit-exact required: {}), morph within {:.2e}, positions within {:.2e} steps, heights within {:.2} ulp",
         on.vertices,
         on.mid_morph,
         on.sliding,
         on.cascaded,
+        on.morphing_tiles,
+        on.misclassified_tiles,
+        on.misclassified_by_odd_rule,
         on.mismatched,
         on.exact,
         on.worst_morph,
@@ -311,6 +345,9 @@ fn morph_equals_the_cpu_mirror(data: &Heightmap, cameras: &[Camera], grid: u32) 
         on.mid_morph >= 2000 && on.sliding >= 1000 && on.mid_morph * 50 >= on.vertices,
         "grid {grid}: too few vertices mid-morph to mean anything: {on:?}"
     );
+    // The back-face split looks at every vertex's whole cascade: the odd vertices' first
+    // factor alone (the rule before the cascade) misses some tiles.
+    assert!(on.misclassified_by_odd_rule > 0, "{on:?}");
     // The cascade past its first level (several factors, a weighted fraction) is compared too.
     assert!(
         on.cascaded >= 100,
@@ -333,7 +370,10 @@ fn morph_equals_the_cpu_mirror(data: &Heightmap, cameras: &[Camera], grid: u32) 
     let one_step = compare_morph(data, &cameras[..4], &settings(grid));
     one_step.assert_agrees(grid);
     assert_eq!(one_step.cascaded, 0, "{one_step:?}");
-    assert!(one_step.mid_morph > 0);
+    assert!(
+        one_step.mid_morph > 0 && one_step.morphing_tiles > 0,
+        "{one_step:?}"
+    );
 }
 
 /// Level of the final tile covering each leaf cell (tiles at level 0).

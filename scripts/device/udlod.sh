@@ -22,10 +22,7 @@
 set -u
 . .device-vk/env.sh
 log() { echo "### $*"; }
-# Puget Sound through a config pointing at the carried copy (no albedo: geometry only).
-PUGET=$(mktemp --suffix=.toml)
-printf '[dataset]\nkind = "png16"\npath = "%s"\nspacing = 160.0\nvertical_scale = 0.1\n[scenario]\npath = "%s"\n' \
-  "$PWD/.device-vk/data/ps_height_1k.png" "$PWD/config/scenarios/default.toml" > "$PUGET"
+. scripts/device/puget_config.sh
 cfgs=(config/ci.toml)
 if [ -f .device-vk/data/ps_height_1k.png ]; then cfgs+=("$PUGET"); else log "Puget Sound heights absent: skipped"; fi
 for ds in franconia pyrenees; do

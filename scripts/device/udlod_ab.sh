@@ -5,9 +5,7 @@
 # alternated, two rounds. Run there: `bash scripts/device/udlod_ab.sh > $OUT/udlod_ab.txt 2>&1`.
 set -u
 . .device-vk/env.sh
-PUGET=$(mktemp --suffix=.toml)
-printf '[dataset]\nkind = "png16"\npath = "%s"\nspacing = 160.0\nvertical_scale = 0.1\n[scenario]\npath = "%s"\n' \
-  "$PWD/.device-vk/data/ps_height_1k.png" "$PWD/config/scenarios/default.toml" > "$PUGET"
+. scripts/device/puget_config.sh
 S3=$(mktemp --suffix=.toml)
 sed -e 's#"\.\./out/datasets/pyrenees"#"'"$PWD"'/out/datasets/pyrenees"#' -e 's#"scenarios/#"'"$PWD"'/config/scenarios/#' config/pyrenees.toml > "$S3"
 for round in 1 2; do

@@ -12,9 +12,7 @@
 # Run there: `bash scripts/device/udlod_grid4.sh > $OUT/udlod_grid4.txt 2>&1`.
 set -u
 . .device-vk/env.sh
-PUGET=$(mktemp --suffix=.toml)
-printf '[dataset]\nkind = "png16"\npath = "%s"\nspacing = 160.0\nvertical_scale = 0.1\n[scenario]\npath = "%s"\n' \
-  "$PWD/.device-vk/data/ps_height_1k.png" "$PWD/config/scenarios/default.toml" > "$PUGET"
+. scripts/device/puget_config.sh
 # CASES: which data sets (ci, puget, hedberg: Hedberg's uneven map, procedural 4097² at 10 m;
 # pyrenees: Fischer S3, when out/datasets/pyrenees was carried). TAUS: the tau sweep.
 CASES=${CASES:-ci puget}

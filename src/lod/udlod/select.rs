@@ -522,7 +522,7 @@ const FIELD_STEP_RATIO: f64 = 2.0;
 /// corner split distances `s` of level `lod`: the morph zone spans at least one grid step of
 /// level `lod - 1` (`r s >= step`), and a corner's distance is at least its neighbour's over
 /// [`FIELD_STEP_RATIO`] (a chamfer pass each way: the largest `s(c') / ratio^steps(c, c')`).
-/// The CDLOD-style chain of `morph_levels = 1` implies both by a wide margin.
+/// Applied only with `morph_levels > 1`, so one level step keeps the selection it had.
 fn gentle_morph(levels: &Levels, key: &FieldKey, lod: u32, s: &mut [f64]) {
     let step = levels.tile_diagonal(lod - 1) / levels.grid_size as f64;
     let floor = step / key.morph_range;
@@ -892,8 +892,8 @@ pub enum Moved {
     /// Fully onto the parent grid at the tile's own level, and no further: the tile's
     /// triangles stay the parent grid's (or degenerate).
     OneLevel,
-    /// Part-way, or on through further levels: sliver triangles possible (the tile is drawn
-    /// without back-face culling).
+    /// Part-way, or on through further levels: sliver triangles possible (the prepass's
+    /// `tile_mid_morph` draws the tile without back-face culling).
     Slivers,
 }
 
@@ -960,19 +960,6 @@ pub fn morph_cascade(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod
     c
 }
 
-/// Whether tile `t` may make sliver triangles: some vertex with [`Moved::Slivers`] (the CPU
-/// mirror of `tile_mid_morph` in `shaders/udlod_tiling.wgsl`; such tiles are drawn without
-/// back-face culling).
-pub fn tile_mid_morph(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
-    let g = levels.grid_size;
-    (0..=g).any(|j| {
-        (0..=g).any(|i| {
-            let sample = tile_sample(levels, t, [i, j]);
-            morph_cascade(levels, p, sample, t.lod).moved == Moved::Slivers
-        })
-    })
-}
-
 /// Integer sample of vertex `local` of tile `t`: u32 arithmetic (wrapping), then the cast, as
 /// the shaders do.
 fn tile_sample(levels: &Levels, t: Tile, local: [u32; 2]) -> [i32; 2] {
@@ -994,6 +981,8 @@ pub struct MorphedVertex {
     pub morph: f32,
     /// Levels at which it moved (CPU only, [`Cascade::levels`]).
     pub levels: u32,
+    /// How it moved (CPU only: tests check the prepass's back-face split against it).
+    pub moved: Moved,
 }
 
 impl MorphedVertex {
@@ -1035,6 +1024,7 @@ pub fn morphed_vertex(
         frac,
         morph: c.morph,
         levels: c.levels,
+        moved: c.moved,
     }
 }
 
