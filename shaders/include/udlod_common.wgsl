@@ -4,7 +4,9 @@
 struct Udlod {
     // Camera-relative frustum planes (normal.xyz, offset): dot(n, p) + offset >= 0 inside.
     frustum: array<vec4<f32>, 6>,
-    // x: split distance D of each level in metres (UDLOD_NO_SPLIT past the root).
+    // x: split distance D of each level in metres (UDLOD_NO_SPLIT past the root); y: the
+    // least width of the zone over which the level below morphs onto it (0: `morph_range` of
+    // the split distance; the morph cascade sets it: `SplitField::zone`).
     split: array<vec4<f32>, UDLOD_MAX_LEVELS>,
     // x: offset of the level's min/max entries, y/z: tiles per side of the level, w: offset
     // of the level's split-field corners ((y + 1) x (z + 1) values).

@@ -8,12 +8,21 @@
 // `udlod.params.z`), for a grid point of level `lod`. `d` is the distance from the LOD viewer
 // to the point at the reference height in the LOD metric (`udlod.metric`), scaled by the next
 // level's split field; `parent_split` that level's split distance; the morph runs over the
-// last `morph_range` of it.
+// last `morph_range` of it; with the morph cascade (`split[l].y`, the zone's least width, > 0)
+// over the last `max(zone, morph_range s)` metres of the point's split distance `s`.
 fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
     let d = length(vec3<f32>(viewer_xy(sample) * udlod.metric.xy, udlod.viewer.z));
-    let scaled = d * field_at(sample, lod + 1u);
+    let field = field_at(sample, lod + 1u);
     let parent_split = udlod.split[lod + 1u].x;
+    let zone = udlod.split[lod + 1u].y;
     let morph_range = udlod.params.y;
+    if zone > 0.0 {
+        // The morph cascade: the zone is at least `zone` wide (a few grid steps).
+        let s = parent_split / field;
+        let width = max(zone, morph_range * s);
+        return clamp(1.0 - (s - d) / width, 0.0, 1.0) * udlod.params.z;
+    }
+    let scaled = d * field;
     return clamp(1.0 - (1.0 - scaled / parent_split) / morph_range, 0.0, 1.0) * udlod.params.z;
 }
 

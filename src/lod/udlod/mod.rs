@@ -492,8 +492,8 @@ impl LodMethod for Udlod {
             frustum: p.frustum,
             ..Default::default()
         };
-        for (i, d) in p.field.split.iter().enumerate() {
-            u.split[i] = [*d, 0.0, 0.0, 0.0];
+        for (i, (d, w)) in p.field.split.iter().zip(&p.field.zone).enumerate() {
+            u.split[i] = [*d, *w, 0.0, 0.0];
         }
         for lod in 0..self.levels.levels() as usize {
             let (nx, ny) = self.levels.tiles_per_side[lod];

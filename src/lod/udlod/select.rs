@@ -318,10 +318,13 @@ const CHAIN_MARGIN: f64 = 1e-5;
 ///    or blended into its children's morph zone, it is at least that far away;
 /// 2. nesting: `s_Q >= S_P` for each child `P`: where an unsplit tile meets finer ones, their
 ///    edge vertices are fully morphed through every level between;
-/// 3. reach: `(1 - r) s_Q >= S_G + diagonal(l - q)` for each descendant `G` of level `l - q`
-///    (`q`: `FieldKey::morph_levels`; the diagonal in the LOD metric,
+/// 3. reach: the morph zone of `s_Q` (`r s_Q`, with the morph cascade at least
+///    [`Self::zone`]) ends beyond `S_G + diagonal(l - q)` for each descendant `G` of level
+///    `l - q` (`q`: `FieldKey::morph_levels`; the diagonal in the LOD metric,
 ///    [`Levels::tile_diagonal`], `sqrt(2) extent` on square grids): a tile's vertices morph
-///    over at most `q` levels and stay inside it.
+///    over at most `q` levels and stay inside it;
+/// 4. with the morph cascade, a gentle morph: a corner's distance is at least its neighbour's
+///    over `FIELD_STEP_RATIO` (`gentle_morph`).
 ///
 /// Level 0 never splits. Each corner takes the largest requirement of the tiles around it;
 /// `field_max` then raises small values to the level's largest / `field_max`.
@@ -331,6 +334,11 @@ pub struct SplitField {
     /// `D[l]` in metres: the largest split distance of each level (0 for level 0, which never
     /// splits; [`UDLOD_NO_SPLIT`] past the root), `UDLOD_MAX_LEVELS` entries as uploaded.
     pub split: Vec<f32>,
+    /// Per level, the least width in metres of the zone over which the level below morphs
+    /// onto it (`W[l]`; 0 with one level step, where the zone is `morph_range` of the split
+    /// distance): with the morph cascade the zone is the larger of `W[l]` and `r s`
+    /// ([`zone_widths`]). `UDLOD_MAX_LEVELS` entries as uploaded.
+    pub zone: Vec<f32>,
     /// Field values `m >= 1` at every level's tile corners, `(nx + 1) x (ny + 1)` row-major
     /// per level from level 1 (level 0's are all ones and not stored).
     pub corners: Vec<f32>,
@@ -352,6 +360,7 @@ impl SplitField {
         let mut split = vec![UDLOD_NO_SPLIT; UDLOD_MAX_LEVELS as usize];
         let mut corners = Vec::new();
         let mut corner_offsets = Vec::new();
+        let zone = zone_widths(levels, &key);
         // Per level below, each tile's split distance as the GPU evaluates it (the largest
         // of its corners' D / m).
         let mut tile_splits: Vec<Vec<f64>> = Vec::new();
@@ -369,7 +378,7 @@ impl SplitField {
             for ty in 0..ny {
                 for tx in 0..nx {
                     let t = Tile { x: tx, y: ty, lod };
-                    let need = tile_requirement(levels, &key, t, &tile_splits);
+                    let need = tile_requirement(levels, &key, &zone, t, &tile_splits);
                     for (i, j) in QUAD {
                         let k = (ty + j) as usize * cw + (tx + i) as usize;
                         s[k] = s[k].max(need);
@@ -377,7 +386,7 @@ impl SplitField {
                 }
             }
             if key.morph_levels > 1 {
-                gentle_morph(levels, &key, lod, &mut s);
+                gentle_morph(levels, lod, &mut s);
             }
             // A level whose tiles need nothing (flat data) keeps a tiny positive distance.
             let largest = s.iter().copied().fold(1e-3 * levels.spacing, f64::max) as f32;
@@ -404,6 +413,7 @@ impl SplitField {
         let mut field = SplitField {
             key,
             split,
+            zone,
             corners,
             corner_offsets,
             split_ranks: Vec::new(),
@@ -492,19 +502,26 @@ impl SplitField {
 ///   between (`docs/udlod.md`, "The morph cascade");
 /// - reach: with `q` = `key.morph_levels` (at most [`cascade_levels`]), every point of a
 ///   descendant `G` of level `l - q` that splits is nearer than `S_G + diagonal(l - q)`, and
-///   `(1 - r)` of this tile's split distance lies beyond that, so the vertices of `G`'s
+///   this tile's morph zone (`zone`) starts beyond that, so the vertices of `G`'s
 ///   children never morph at level `l - 1`: a level-`a` tile's vertices move at levels `a` to
 ///   `a + q - 1` only, which keeps them inside the tile (its culling box stays true), and
 ///   neighbours differ by at most `q` levels. With `q = 1` this is the CDLOD-style chain
 ///   UDLOD had before the cascade (`(1 - r) s_Q >= S_P + diagonal(l - 1)` over the children).
-fn tile_requirement(levels: &Levels, key: &FieldKey, t: Tile, tile_splits: &[Vec<f64>]) -> f64 {
+fn tile_requirement(
+    levels: &Levels,
+    key: &FieldKey,
+    zone: &[f32],
+    t: Tile,
+    tile_splits: &[Vec<f64>],
+) -> f64 {
     let screen = worst_case_share(levels.grid_size) * levels.tile_error(t) as f64 * key.focal_px
         / key.tau_px;
     let nesting = largest_below(levels, t, t.lod - 1, tile_splits);
     let reach = match t.lod.checked_sub(key.morph_levels) {
         Some(lod) if lod >= 1 => {
-            let below = largest_below(levels, t, lod, tile_splits);
-            (below + levels.tile_diagonal(lod)) / (1.0 - key.morph_range)
+            // Where the zone is `max(W, r s)`: `s - max(W, r s) >= beyond`.
+            let beyond = largest_below(levels, t, lod, tile_splits) + levels.tile_diagonal(lod);
+            (beyond / (1.0 - key.morph_range)).max(beyond + zone[t.lod as usize] as f64)
         }
         _ => 0.0,
     };
@@ -513,20 +530,36 @@ fn tile_requirement(levels: &Levels, key: &FieldKey, t: Tile, tile_splits: &[Vec
 
 /// Growth of the split distance allowed from one field corner to the next (8-neighbourhood):
 /// see [`gentle_morph`].
-const FIELD_STEP_RATIO: f64 = 2.0;
+const FIELD_STEP_RATIO: f64 = 1.5;
+
+/// Grid steps of the level below that the morph zone spans at least, with the morph cascade.
+const ZONE_STEPS: f64 = 4.0;
+
+/// `W[l]` per level ([`SplitField::zone`]): with the morph cascade [`ZONE_STEPS`] grid steps
+/// (quad diagonals) of level `l - 1`, so the morph factor changes by at most `1 / ZONE_STEPS`
+/// per step from the distance; 0 with one level step.
+fn zone_widths(levels: &Levels, key: &FieldKey) -> Vec<f32> {
+    let mut zone = vec![0.0f32; UDLOD_MAX_LEVELS as usize];
+    if key.morph_levels > 1 {
+        for lod in 1..=levels.root_lod {
+            let step = levels.tile_diagonal(lod - 1) / levels.grid_size as f64;
+            zone[lod as usize] = (ZONE_STEPS * step) as f32;
+        }
+    }
+    zone
+}
 
 /// Keeps the morph of level `lod - 1`'s grid points gentle across the grid (`docs/udlod.md`,
-/// "The morph cascade"): the morph factor runs from 0 to 1 over the last `r` of the split
-/// distance, and where it jumps from 0 to 1 between neighbouring vertices, their triangles
-/// fold over (single pixels far off the surface, measured on SRTM1). Two floors on the
-/// corner split distances `s` of level `lod`: the morph zone spans at least one grid step of
-/// level `lod - 1` (`r s >= step`), and a corner's distance is at least its neighbour's over
-/// [`FIELD_STEP_RATIO`] (a chamfer pass each way: the largest `s(c') / ratio^steps(c, c')`).
-/// Applied only with `morph_levels > 1`, so one level step keeps the selection it had.
-fn gentle_morph(levels: &Levels, key: &FieldKey, lod: u32, s: &mut [f64]) {
-    let step = levels.tile_diagonal(lod - 1) / levels.grid_size as f64;
-    let floor = step / key.morph_range;
-    s.iter_mut().for_each(|v| *v = v.max(floor));
+/// "The morph cascade"): where the morph factor jumps from 0 to 1 between neighbouring
+/// vertices, their triangles fold over (single pixels far off the surface, measured on
+/// SRTM1). The distance's share of that is bounded by the zone's least width
+/// ([`zone_widths`]); the field's by this floor on the corner split distances `s` of level
+/// `lod`: a corner's distance is at least its neighbour's over [`FIELD_STEP_RATIO`] (a
+/// chamfer pass each way: the largest `s(c') / ratio^steps(c, c')`), so over a tile's
+/// `2 grid_size` steps of the level below the zone's end moves by at most
+/// `(ratio - 1) s` against a zone of at least `r s`. Applied only with `morph_levels > 1`,
+/// so one level step keeps the selection it had.
+fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f64]) {
     let (nx, ny) = levels.tiles_per_side[lod as usize];
     let (w, h) = (nx as usize + 1, ny as usize + 1);
     let pass = |s: &mut [f64], order: &mut dyn Iterator<Item = usize>, back: bool| {
@@ -872,15 +905,24 @@ pub fn level_splits_bound(levels: &Levels, field: &SplitField, stretch: [f32; 2]
 
 /// Morph factor of grid point `sample` of level `lod` (0 = its own level's grid, 1 = fully on
 /// the next level's grid; 0 everywhere with morphing off): the next level's scaled distance
-/// against the last `morph_range` of its split distance. A pure function of the point and the
+/// against the last `morph_range` of its split distance, or with the morph cascade the last
+/// `max(zone, morph_range s)` metres of the point's split distance `s`
+/// ([`SplitField::zone`]). A pure function of the point and the
 /// level, so vertices shared by tiles agree. `morph_factor` in
 /// `shaders/include/udlod_morph.wgsl`, operation for operation.
 pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
     let rel = p.from_viewer(sample);
     let d = Vec3::new(rel[0] * p.stretch[0], rel[1] * p.stretch[1], p.viewer[2]).length();
-    let scaled = d * p.field.at(levels, sample, lod + 1);
+    let field = p.field.at(levels, sample, lod + 1);
     let parent_split = p.field.split[lod as usize + 1];
+    let zone = p.field.zone[lod as usize + 1];
     let on = if p.morph { 1.0 } else { 0.0 };
+    if zone > 0.0 {
+        let s = parent_split / field;
+        let width = zone.max(p.morph_range * s);
+        return (1.0 - (s - d) / width).clamp(0.0, 1.0) * on;
+    }
+    let scaled = d * field;
     (1.0 - (1.0 - scaled / parent_split) / p.morph_range).clamp(0.0, 1.0) * on
 }
 

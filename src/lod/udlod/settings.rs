@@ -17,9 +17,9 @@ pub struct UdlodSettings {
     /// Levels over which a tile's vertices may morph (`docs/udlod.md`, "The morph cascade"):
     /// 1 (the default) one level step, the CDLOD-style chain, where neighbours differ by at
     /// most one level; 0 as many as keep them inside the tile, the power of two in `grid_size`
-    /// (grid 4: 2, grid 8: 3): up to 3x fewer triangles where the chain set the distances,
-    /// but single pixels far off the surface in some frames (folded morph triangles), so not
-    /// the default yet.
+    /// (grid 4: 2, grid 8: 3), the morph cascade: up to 2x fewer triangles where the chain
+    /// set the distances, but a faster morph under a moving viewer and p99.9 over tau on the
+    /// CI data at tau 4, so not the default yet.
     pub morph_levels: u32,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
