@@ -390,7 +390,8 @@ fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
     m
 }
 
-/// Shared edges are closed (docs/udlod.md, "The morph cascade"): over 200 poses, every vertex
+/// Shared edges are closed (docs/udlod.md, "The morph cascade"): over 200 poses at tau 1, 4
+/// and 8, every vertex
 /// on a tile's edge lands, after morphing, exactly on a vertex of a coarser neighbour's edge,
 /// on all four sides. With one level step (the default) neighbours differ by at most one
 /// level. With the cascade they may differ by up to `select::cascade_levels` levels, and the
@@ -408,14 +409,21 @@ fn edges_coincide_after_morphing_between_tiles_of_any_levels() {
 
 fn edges_coincide_after_morphing_at(grid: u32, name: &str, lod: UdlodSettings) {
     let data = terrain(257, 30.0);
-    let lod = UdlodSettings { cull: false, ..lod };
     let levels = Levels::new(&data, lod.grid_size).unwrap();
     let mut checked = EdgeCount::default();
-    for cam in poses(&data, 200) {
-        let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
-        let tiles = select::select_tiles(&levels, &p);
-        checked += check_edges(&levels, &p, &tiles, grid)
-            .unwrap_or_else(|e| panic!("grid {grid} {name} {cam:?}: {e}"));
+    // At tau 4 and 8 the ties between levels, not the pixel target, set more of the distances.
+    for tau_px in [1.0, 4.0, 8.0] {
+        let lod = UdlodSettings {
+            cull: false,
+            tau_px,
+            ..lod.clone()
+        };
+        for cam in poses(&data, 200) {
+            let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
+            let tiles = select::select_tiles(&levels, &p);
+            checked += check_edges(&levels, &p, &tiles, grid)
+                .unwrap_or_else(|e| panic!("grid {grid} {name} tau {tau_px} {cam:?}: {e}"));
+        }
     }
     println!("grid {grid} {name}: {checked:?}");
     assert!(

@@ -516,6 +516,9 @@ fn tile_requirement(
 ) -> f64 {
     let screen = worst_case_share(levels.grid_size) * levels.tile_error(t) as f64 * key.focal_px
         / key.tau_px;
+    // This tile's geometry shows, blended, from the start of its morph zone on: no nearer than
+    // one level step lets it (`(1 - r)` of the pixel term), also where the zone is `W` wide.
+    let screen = screen.max((1.0 - key.morph_range) * screen + zone[t.lod as usize] as f64);
     let nesting = largest_below(levels, t, t.lod - 1, tile_splits);
     let reach = match t.lod.checked_sub(key.morph_levels) {
         Some(lod) if lod >= 1 => {
