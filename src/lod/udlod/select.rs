@@ -315,11 +315,12 @@ const CHAIN_MARGIN: f64 = 1e-5;
 /// (`tile_requirement`):
 /// 1. pixel target: `s_Q >= k e_Q f / tau` (`e_Q`: the tile's own error, `k`:
 ///    [`worst_case_share`] of the grid size), so wherever `Q`'s geometry is drawn, unmorphed
-///    or blended into its children's morph zone, it is at least that far away;
+///    or blended into its children's morph zone, it is at least that far away (with the morph
+///    cascade `s_Q >= (1 - r) k e_Q f / tau + W[l]` too: its zone is at least `W[l]` wide);
 /// 2. nesting: `s_Q >= S_P` for each child `P`: where an unsplit tile meets finer ones, their
 ///    edge vertices are fully morphed through every level between;
 /// 3. reach: the morph zone of `s_Q` (`r s_Q`, with the morph cascade at least
-///    [`Self::zone`]) ends beyond `S_G + diagonal(l - q)` for each descendant `G` of level
+///    [`Self::zone`]) starts beyond `S_G + diagonal(l - q)` for each descendant `G` of level
 ///    `l - q` (`q`: `FieldKey::morph_levels`; the diagonal in the LOD metric,
 ///    [`Levels::tile_diagonal`], `sqrt(2) extent` on square grids): a tile's vertices morph
 ///    over at most `q` levels and stay inside it;
