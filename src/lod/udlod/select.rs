@@ -338,7 +338,7 @@ pub struct SplitField {
     /// Per level, the least width in metres of the zone over which the level below morphs
     /// onto it (`W[l]`; 0 with one level step, where the zone is `morph_range` of the split
     /// distance): with the morph cascade the zone is the larger of `W[l]` and `r s`
-    /// ([`zone_widths`]). `UDLOD_MAX_LEVELS` entries as uploaded.
+    /// (`zone_widths`). `UDLOD_MAX_LEVELS` entries as uploaded.
     pub zone: Vec<f32>,
     /// Field values `m >= 1` at every level's tile corners, `(nx + 1) x (ny + 1)` row-major
     /// per level from level 1 (level 0's are all ones and not stored).
