@@ -41,7 +41,16 @@ fn settings(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// [`settings`] with the morph cascade over every level the tile allows (`morph_levels = 0`).
+/// [`settings`] with one level step (`morph_levels = 1`): the CDLOD-style chain.
+fn one_step(grid_size: u32) -> UdlodSettings {
+    UdlodSettings {
+        morph_levels: 1,
+        ..settings(grid_size)
+    }
+}
+
+/// [`settings`] with the morph cascade over every level the tile allows (`morph_levels = 0`,
+/// the default).
 fn cascade(grid_size: u32) -> UdlodSettings {
     UdlodSettings {
         morph_levels: 0,
@@ -49,10 +58,10 @@ fn cascade(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// The default (one level step) and the morph cascade, both checked by the structural tests.
+/// One level step and the morph cascade (the default), both checked by the structural tests.
 fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 2] {
     [
-        ("one level step", settings(grid_size)),
+        ("one level step", one_step(grid_size)),
         ("cascade", cascade(grid_size)),
     ]
 }
@@ -366,8 +375,8 @@ fn morph_equals_the_cpu_mirror(data: &Heightmap, cameras: &[Camera], grid: u32) 
     off.assert_agrees(grid);
     assert_eq!(off.mid_morph, 0);
     assert!(off.vertices > 1000);
-    // With one level step (the default) no vertex moves past its first level.
-    let one_step = compare_morph(data, &cameras[..4], &settings(grid));
+    // With one level step no vertex moves past its first level.
+    let one_step = compare_morph(data, &cameras[..4], &one_step(grid));
     one_step.assert_agrees(grid);
     assert_eq!(one_step.cascaded, 0, "{one_step:?}");
     assert!(
@@ -393,7 +402,7 @@ fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
 /// Shared edges are closed (docs/udlod.md, "The morph cascade"): over 200 poses at tau 1, 4
 /// and 8, every vertex
 /// on a tile's edge lands, after morphing, exactly on a vertex of a coarser neighbour's edge,
-/// on all four sides. With one level step (the default) neighbours differ by at most one
+/// on all four sides. With one level step (`morph_levels = 1`) neighbours differ by at most one
 /// level. With the cascade they may differ by up to `select::cascade_levels` levels, and the
 /// test requires edges between tiles two or more levels apart, where a morph of one level
 /// step (the cascade cut after its first level) leaves the fine vertices on the grid in

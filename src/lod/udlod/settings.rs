@@ -15,11 +15,10 @@ pub struct UdlodSettings {
     /// Fraction of each level's range over which vertices morph (0.05..=0.45).
     pub morph_range: f64,
     /// Levels over which a tile's vertices may morph (`docs/udlod.md`, "The morph cascade"):
-    /// 1 (the default) one level step, the CDLOD-style chain, where neighbours differ by at
-    /// most one level; 0 as many as keep them inside the tile, the power of two in `grid_size`
-    /// (grid 4: 2, grid 8: 3), the morph cascade: up to 2x fewer triangles where the chain
-    /// set the distances, but a faster morph under a moving viewer and p99.9 over tau on the
-    /// CI data at tau 4, so not the default yet.
+    /// 0 (the default) as many as keep them inside the tile, the power of two in `grid_size`
+    /// (grid 4: 2, grid 8: 3), the morph cascade: up to 2x fewer triangles where the
+    /// crack-free chain set the distances; 1 one level step, the CDLOD-style chain, where
+    /// neighbours differ by at most one level (a few % fewer triangles on rough terrain).
     pub morph_levels: u32,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
@@ -92,7 +91,9 @@ impl Default for UdlodSettings {
             grid_size: 4,
             tau_px: 1.0,
             morph_range: 0.2,
-            morph_levels: 1,
+            // The morph cascade (issue 18): 7-52 % fewer triangles at 640x360, +2 to -13 %
+            // at 1080p, +3 % on Hedberg's rough map (docs/udlod.md, "The morph cascade").
+            morph_levels: 0,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
             max_tiles: 524_288,
