@@ -533,8 +533,9 @@ fn tile_requirement(
 }
 
 /// Growth of the split distance allowed from one field corner to the next (8-neighbourhood):
-/// see [`gentle_morph`].
-const FIELD_STEP_RATIO: f64 = 1.5;
+/// see [`gentle_morph`]. 2 (1.5 until issue 18's fifth round: 6-16 % more triangles on rough
+/// terrain, no fold fewer in the fold runs, docs/udlod.md "The morph cascade").
+const FIELD_STEP_RATIO: f64 = 2.0;
 
 /// Grid steps of the level below that the morph zone spans at least, with the morph cascade.
 const ZONE_STEPS: f64 = 4.0;
@@ -561,8 +562,9 @@ fn zone_widths(levels: &Levels, key: &FieldKey) -> Vec<f32> {
 /// `lod`: a corner's distance is at least its neighbour's over [`FIELD_STEP_RATIO`] (a
 /// chamfer pass each way: the largest `s(c') / ratio^steps(c, c')`), so over a tile's
 /// `2 grid_size` steps of the level below the zone's end moves by at most
-/// `(ratio - 1) s` against a zone of at least `r s`. Applied only with `morph_levels > 1`,
-/// so one level step keeps the selection it had.
+/// `(ratio - 1) s` against a zone of at least `r s`: with the distance's `1 / ZONE_STEPS`,
+/// at most `0.25 + 1 / (2 grid_size r)` (0.875 at grid 4) per step, under the full slide.
+/// Applied only with `morph_levels > 1`, so one level step keeps the selection it had.
 fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f64]) {
     let (nx, ny) = levels.tiles_per_side[lod as usize];
     let (w, h) = (nx as usize + 1, ny as usize + 1);

@@ -18,7 +18,7 @@ pub struct UdlodSettings {
     /// 0 (the default) as many as keep them inside the tile, the power of two in `grid_size`
     /// (grid 4: 2, grid 8: 3), the morph cascade: up to 2x fewer triangles where the
     /// crack-free chain set the distances; 1 one level step, the CDLOD-style chain, where
-    /// neighbours differ by at most one level (a few % fewer triangles on rough terrain).
+    /// neighbours differ by at most one level.
     pub morph_levels: u32,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
@@ -91,8 +91,8 @@ impl Default for UdlodSettings {
             grid_size: 4,
             tau_px: 1.0,
             morph_range: 0.2,
-            // The morph cascade (issue 18): 7-52 % fewer triangles at 640x360, +2 to -13 %
-            // at 1080p, +3 % on Hedberg's rough map (docs/udlod.md, "The morph cascade").
+            // The morph cascade (issue 18): up to 2x fewer triangles than one level step at
+            // 640x360, +2 to -13 % at 1080p (docs/udlod.md, "The morph cascade").
             morph_levels: 0,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
