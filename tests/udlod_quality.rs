@@ -211,6 +211,11 @@ fn world_points(frame: &OwnedFrame) -> Vec<Option<DVec3>> {
         .collect()
 }
 
+/// The least sine of the angle between a measured pixel's ray and its surface
+/// ([`largest_pop`]): the grazing hit described there met its facet at 0.15; the controls'
+/// pops (no morphing) are seen at about 0.5.
+const GRAZING: f64 = 0.2;
+
 /// Popping: the LOD viewer flies slowly (`step` metres per frame); every frame is rendered
 /// twice from the same camera, with the LOD viewer at its previous and at its new position, so
 /// the two depth buffers differ only by the surface's change. Per pixel, the vertical
@@ -223,11 +228,6 @@ fn world_points(frame: &OwnedFrame) -> Vec<Option<DVec3>> {
 /// with a CPU ray cast through both morphed meshes: a vertex rising 0.09 m moved a grazing
 /// hit 44 m nearer, read as 7.8 m, 0.51 px; the morphing maxima of 0.46-0.67 px this test
 /// reported before were all at grazing pixels). Returns the largest change over the flight.
-/// The least sine of the angle between a measured pixel's ray and its surface
-/// ([`largest_pop`]): the grazing hit above met its facet at 0.15; the controls' pops (no
-/// morphing) are seen at about 0.5.
-const GRAZING: f64 = 0.2;
-
 fn largest_pop(
     data: &Heightmap,
     settings: UdlodSettings,
@@ -335,8 +335,9 @@ fn effective_step(data: &Heightmap, start: DVec3, step: DVec3, frames: usize) ->
 /// one weighted by their factors (`lever_k = 2^{j_k} + f_{k+1} 2^{j_{k+1}} + f_{k+1} f_{k+2}
 /// 2^{j_{k+2}} + ...`). Over a field of ones the zones of successive levels can overlap
 /// where the reach, not the pixel term, sets the distances (here at grid 4 level 4's factor
-/// reaches 0.41 while level 3's moves), so several factors move at once. Taking `m` as the lowest level whose factor moves, its point
-/// is nearer than `D[m + 1]` and every later point at most the slides in between further, so
+/// reaches 0.41 while level 3's moves), so several factors move at once. Taking `m` as the
+/// lowest level whose factor moves, its point is nearer than `D[m + 1]` and every later point
+/// at most the slides in between further, so
 /// a later level `j` has a factor of at most `phi_j = clamp(1 - (D[j + 1] - D[m + 1] -
 /// slides) / w[j + 1])`; the slide per frame is `sum_j s / w[j + 1] * lever_j` over the levels
 /// with `phi_j > 0`, each lever weighted by the `phi`s. With one level step (or zones apart)
@@ -621,7 +622,10 @@ fn no_pinholes_from_back_facing_slivers_far_away() {
         println!(
             "morph_levels {morph_levels}: pinholes per frame: {default:?}; culling every tile: {control:?}"
         );
-        assert!(default.iter().all(|&n| n == 0), "{default:?} pinholes");
+        assert!(
+            default.iter().all(|&n| n == 0),
+            "morph_levels {morph_levels}: {default:?} pinholes"
+        );
         assert!(
             control.iter().sum::<usize>() > 0,
             "morph_levels {morph_levels}: the control found no pinholes: {control:?}"
