@@ -2,7 +2,7 @@
 //! definitions (`src/eval/metrics.rs`) on small frames: per frame, the height-error,
 //! screen-space-error and popping histograms within one bin, means and maxima to f32
 //! precision, holes and PSNR exactly, SSIM to 1e-4 — for the reference itself and for a method
-//! with real errors (PGM). Negative control: the same frames measured on the CPU against a
+//! with real errors (PGM) and one with cracks (UDLOD without morphing). Negative control: the same frames measured on the CPU against a
 //! surface 0.3 m higher must differ. On the earth (the terrain drawn through an anchored
 //! geolocation lattice, the GPU inverting it per pixel, the CPU by `Lattice::sample_at`) the
 //! same, with a second negative control: the CPU mapping the points to the grid as on the
@@ -64,7 +64,7 @@ fn gpu_metrics_equal_the_cpu_path(spacing: f64, lattice: Option<&Lattice>) {
         height: h,
         views: 1,
     };
-    let shared = EvalShared::new(&gpu, &terrain, lattice, shape, frames, 2, 64 << 20).unwrap();
+    let shared = EvalShared::new(&gpu, &terrain, lattice, shape, frames, 3, 64 << 20).unwrap();
     // A method with real errors: PGM at a quarter grid; on the earth (which PGM refuses)
     // UDLOD at tau 4 px.
     let variant: MethodConfig = if lattice.is_none() {
@@ -78,10 +78,19 @@ fn gpu_metrics_equal_the_cpu_path(spacing: f64, lattice: Option<&Lattice>) {
         }
         .into()
     };
+    // A method with cracks: UDLOD without morphing opens T-junction gaps between levels, so
+    // the crack count (holes with terrain above them) is compared where it is not 0.
+    let cracked: MethodConfig = UdlodSettings {
+        tau_px: 4.0,
+        morph: false,
+        ..Default::default()
+    }
+    .into();
     let mut runs = Vec::new();
     for (method, role) in [
         (MethodConfig::Brute {}, Role::Reference),
         (variant, Role::Variant),
+        (cracked, Role::Variant),
     ] {
         let mut renderer = Renderer::with_world(
             &gpu,
@@ -97,6 +106,7 @@ fn gpu_metrics_equal_the_cpu_path(spacing: f64, lattice: Option<&Lattice>) {
         runs.push((renderer, results, None::<Vec<Option<f64>>>));
     }
     let mut variant_errors = 0;
+    let mut cracks = 0;
     for k in 0..frames {
         let camera = scenario.camera(k * 4);
         let views = ViewColumns::whole(camera, w);
@@ -145,6 +155,9 @@ fn gpu_metrics_equal_the_cpu_path(spacing: f64, lattice: Option<&Lattice>) {
             if i == 1 {
                 variant_errors += (cpu.pixels.quantile(0.99) > 0.05) as usize;
             }
+            if i == 2 {
+                cracks += cpu.holes.cracks;
+            }
             // Negative control: a surface 0.3 m higher is not the one the GPU measured against.
             let (shifted, _) = measure(&higher, true).unwrap();
             assert!(
@@ -166,6 +179,7 @@ fn gpu_metrics_equal_the_cpu_path(spacing: f64, lattice: Option<&Lattice>) {
         variant_errors > 0,
         "the variant (PGM at a quarter grid, UDLOD tau 4) has visible errors"
     );
+    assert!(cracks > 0, "UDLOD without morphing shows cracks");
     drop(runs);
     drop(shared);
     common::assert_no_validation_messages(&gpu);

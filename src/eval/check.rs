@@ -52,7 +52,7 @@ pub struct FrameMeasures {
     pub metres: Histogram,
     pub pixels: Histogram,
     pub popping: Histogram,
-    pub holes: usize,
+    pub holes: metrics::Holes,
     pub psnr_db: f64,
     pub ssim: f64,
 }
@@ -330,7 +330,7 @@ pub fn compare(gpu: &FrameMeasures, cpu: &FrameMeasures, floors: Floors) -> Vec<
         }
     }
     if gpu.holes != cpu.holes {
-        out.push(format!("holes {} vs {}", gpu.holes, cpu.holes));
+        out.push(format!("holes {:?} vs {:?}", gpu.holes, cpu.holes));
     }
     if !(gpu.psnr_db == cpu.psnr_db || close(gpu.psnr_db, cpu.psnr_db, 1e-9, 1e-9)) {
         out.push(format!("PSNR {} vs {} dB", gpu.psnr_db, cpu.psnr_db));
@@ -375,7 +375,7 @@ mod tests {
             metres: histogram((1..500).map(|i| i as f64 * 0.01)),
             pixels: histogram((1..500).map(|i| i as f64 * 0.002)),
             popping: histogram((1..300).map(|i| i as f64 * 0.001)),
-            holes: 3,
+            holes: metrics::Holes { all: 3, cracks: 1 },
             psnr_db: 31.5,
             ssim: 0.93,
         };
@@ -386,7 +386,7 @@ mod tests {
         assert!(compare(&a, &a, floors).is_empty());
         let mut b = a.clone();
         b.pixels = histogram((1..500).map(|i| i as f64 * 0.002 * 1.05));
-        b.holes = 4;
+        b.holes.cracks = 2;
         b.ssim = 0.931;
         let problems = compare(&a, &b, floors);
         assert_eq!(problems.len(), 4, "{problems:?}");

@@ -424,12 +424,27 @@ impl GeometricError {
     }
 }
 
-/// Holes (cracks, gaps): pixels where the method shows sky although the reference and its 8
-/// neighbours all show terrain (inside the reference's silhouette shrunk by one pixel, so a
-/// rasterization difference along a skyline is not counted).
-pub fn holes(reference_depth: &[f32], method_depth: &[f32], width: u32, height: u32) -> usize {
+/// Sky pixels inside the reference's silhouette, split by what lies above them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Holes {
+    /// Pixels where the method shows sky although the reference and its 8 neighbours all
+    /// show terrain (inside the reference's silhouette shrunk by one pixel, so a rasterization
+    /// difference along a skyline is not counted).
+    pub all: usize,
+    /// Those of them with the method's own terrain above in their column: sky seen through
+    /// the surface (a crack or pinhole). The others lie above the method's own skyline: its
+    /// silhouette drawn lower than the reference's, an error of the coarser geometry that the
+    /// pixel target bounds (docs/eval.md, "Holes and cracks").
+    pub cracks: usize,
+}
+
+/// Holes of one frame (rows top down, depth <= 0 is sky). "Above in the column" is the
+/// screen's up: for a heightfield seen without roll the sky in a column is one run at the top,
+/// so sky below terrain is seen through it; with roll a skyline still crosses each column once
+/// while |roll| < 90 deg.
+pub fn holes(reference_depth: &[f32], method_depth: &[f32], width: u32, height: u32) -> Holes {
     let (w, h) = (width as usize, height as usize);
-    (1..h.saturating_sub(1))
+    let (all, cracks) = (1..h.saturating_sub(1))
         .into_par_iter()
         .map(|y| {
             (1..w.saturating_sub(1))
@@ -438,9 +453,13 @@ pub fn holes(reference_depth: &[f32], method_depth: &[f32], width: u32, height: 
                         && (y - 1..=y + 1)
                             .all(|yy| (x - 1..=x + 1).all(|xx| reference_depth[yy * w + xx] > 0.0))
                 })
-                .count()
+                .fold((0, 0), |(all, cracks), x| {
+                    let seen_through = (0..y).any(|above| method_depth[above * w + x] > 0.0);
+                    (all + 1, cracks + usize::from(seen_through))
+                })
         })
-        .sum()
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    Holes { all, cracks }
 }
 
 /// PSNR in dB over the RGB channels of two RGBA8 images (infinite when identical).
@@ -756,6 +775,43 @@ fn observe_point<S: ExactSurface + ?Sized>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A frame whose skyline is row `skyline` (sky above it), with `gaps` of sky below it.
+    fn depth_frame(w: usize, h: usize, skyline: usize, gaps: &[(usize, usize)]) -> Vec<f32> {
+        let mut d: Vec<f32> = (0..w * h)
+            .map(|i| if i / w >= skyline { 10.0 } else { 0.0 })
+            .collect();
+        for &(x, y) in gaps {
+            d[y * w + x] = 0.0;
+        }
+        d
+    }
+
+    #[test]
+    fn holes_tell_cracks_from_a_lowered_skyline() {
+        let (w, h) = (12, 10);
+        let reference = depth_frame(w, h, 3, &[]);
+        assert_eq!(
+            holes(&reference, &reference, w as u32, h as u32),
+            Holes::default()
+        );
+        // The skyline two rows lower: columns 1..11 of row 4 are inside the reference's
+        // shrunk silhouette (row 3 is its edge), and none is a crack.
+        let lowered = depth_frame(w, h, 5, &[]);
+        let expected = Holes {
+            all: w - 2,
+            cracks: 0,
+        };
+        assert_eq!(holes(&reference, &lowered, w as u32, h as u32), expected);
+        // A vertical crack of three pixels below the reference's skyline: all cracks.
+        let cracked = depth_frame(w, h, 3, &[(6, 5), (6, 6), (6, 7)]);
+        let expected = Holes { all: 3, cracks: 3 };
+        assert_eq!(holes(&reference, &cracked, w as u32, h as u32), expected);
+        // A gap reaching up to the method's sky is its skyline, not a crack.
+        let notch = depth_frame(w, h, 3, &[(6, 3), (6, 4), (6, 5)]);
+        let expected = Holes { all: 2, cracks: 0 };
+        assert_eq!(holes(&reference, &notch, w as u32, h as u32), expected);
+    }
 
     #[test]
     fn psnr_and_ssim_of_identical_and_different_images() {

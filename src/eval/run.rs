@@ -148,7 +148,10 @@ pub struct FrameRow {
     pub budget_overflow: u64,
     /// Percentiles to one histogram bin (1.2%, never understated); count, mean, max exact.
     pub error: GeometricError,
+    /// Sky pixels inside the reference's silhouette, and those of them seen through the
+    /// surface (`metrics::Holes`).
     pub holes: usize,
+    pub cracks: usize,
     pub psnr_db: f64,
     pub ssim: f64,
     /// 99th percentile of the per-pixel change of the error image since the previous frame.
@@ -180,6 +183,7 @@ pub struct RunSummary {
     /// Over all pixels of all measured frames (percentiles to 1.2%, never understated).
     pub error: GeometricError,
     pub holes_total: usize,
+    pub cracks_total: usize,
     pub psnr_db_mean: f64,
     pub ssim_mean: f64,
     /// Means over the measured frames FLIP was computed for (`flip_frames`; None: none).
@@ -585,7 +589,8 @@ impl Run {
                 metres: gpu.metres.summary(),
                 pixels: gpu.pixels.summary(),
             },
-            holes: gpu.holes,
+            holes: gpu.holes.all,
+            cracks: gpu.holes.cracks,
             psnr_db: gpu.psnr_db(),
             ssim: gpu.ssim(),
             popping_p99_px: gpu.popping.summary().p99,
@@ -708,6 +713,7 @@ fn finish(
             budget_overflow_frames: measured.iter().filter(|r| r.budget_overflow > 0).count(),
             error: run.errors.summary(),
             holes_total: measured.iter().map(|r| r.holes).sum(),
+            cracks_total: measured.iter().map(|r| r.cracks).sum(),
             psnr_db_mean: finite_mean(|r| r.psnr_db),
             ssim_mean: finite_mean(|r| r.ssim),
             flip_mean: mean_of(|f| f.mean),

@@ -46,8 +46,8 @@ pub const SUMMARY_COLUMNS: &[Column<RunSummary>] = &[
         cell: |s| format!("{:.3}", s.error.metres.p999),
     },
     Column {
-        header: "holes",
-        cell: |s| s.holes_total.to_string(),
+        header: "holes (cracks)",
+        cell: |s| format!("{} ({})", s.holes_total, s.cracks_total),
     },
     Column {
         header: "PSNR dB",

@@ -102,8 +102,8 @@ pub struct Totals {
     pub sq_lo: u32,
     pub sq_hi: u32,
     pub ssim_windows: u32,
-    /// Unused (0): the host counts the popping histogram's entries.
-    pub popping_count: u32,
+    /// The holes with the method's terrain above them in their column (`metrics::Holes`).
+    pub cracks: u32,
     pub missing: u32,
     pub pad1: u32,
     pub pad2: u32,

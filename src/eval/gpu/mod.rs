@@ -24,7 +24,7 @@ use gpu_allocator::MemoryLocation;
 
 use self::layout::{EvalFrame, EvalView, PARTIAL_BYTES, Seed, Totals};
 use self::reference::ReferenceSurface;
-use super::metrics::{Histogram, SWIM_GRID, SWIM_SEED_EVERY};
+use super::metrics::{Histogram, Holes, SWIM_GRID, SWIM_SEED_EVERY};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
@@ -231,7 +231,7 @@ pub struct GpuFrameMetrics {
     pub pixels: Histogram,
     /// Popping against the previous frame (px; empty for the first frame).
     pub popping: Histogram,
-    pub holes: usize,
+    pub holes: Holes,
     /// Sum of squared RGB differences to the reference frame, over `3 * pixels` channels.
     pub squared_error_sum: u64,
     pub channels: u64,
@@ -768,7 +768,10 @@ impl FrameAnalysis for GpuAnalysis {
                 0.0,
                 None,
             ),
-            holes: totals.holes as usize,
+            holes: Holes {
+                all: totals.holes as usize,
+                cracks: totals.cracks as usize,
+            },
             squared_error_sum: totals.sq_lo as u64 | (totals.sq_hi as u64) << 32,
             channels: 3 * shape.width as u64 * shape.height as u64,
             ssim_sum: totals.ssim_sum as f64,
