@@ -49,7 +49,8 @@ fn one_step(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// [`settings`] with the morph cascade over every level the tile allows (`morph_levels = 0`).
+/// [`settings`] with the morph cascade over every level the tile allows (`morph_levels = 0`,
+/// the default).
 fn cascade(grid_size: u32) -> UdlodSettings {
     UdlodSettings {
         morph_levels: 0,
@@ -57,7 +58,7 @@ fn cascade(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// One level step (the default) and the morph cascade, both checked by the structural tests.
+/// One level step and the morph cascade (the default), both checked by the structural tests.
 fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 2] {
     [
         ("one level step", one_step(grid_size)),

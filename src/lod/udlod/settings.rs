@@ -15,12 +15,10 @@ pub struct UdlodSettings {
     /// Fraction of each level's range over which vertices morph (0.05..=0.45).
     pub morph_range: f64,
     /// Levels over which a tile's vertices may morph (`docs/udlod.md`, "The morph cascade"):
-    /// 1 (the default) one level step, the CDLOD-style chain, where neighbours differ by at
-    /// most one level; 0 as many as keep them inside the tile, the power of two in `grid_size`
+    /// 0 (the default) as many as keep them inside the tile, the power of two in `grid_size`
     /// (grid 4: 2, grid 8: 3), the morph cascade: up to 2x fewer triangles where the
-    /// crack-free chain set the distances, but 2 sky pixels at a lowered far silhouette in
-    /// `make bench-eval-short`'s run on the earth at tau 2, which asserts none, so not the
-    /// default yet.
+    /// crack-free chain set the distances; 1 one level step, the CDLOD-style chain, where
+    /// neighbours differ by at most one level.
     pub morph_levels: u32,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
@@ -93,7 +91,10 @@ impl Default for UdlodSettings {
             grid_size: 4,
             tau_px: 1.0,
             morph_range: 0.2,
-            morph_levels: 1,
+            // The morph cascade (issue 18): up to 2x fewer triangles than one level step at
+            // 640x360, -0.6 to -15 % at 1080p on the H200 (docs/udlod.md, "The morph
+            // cascade").
+            morph_levels: 0,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
             max_tiles: 524_288,
