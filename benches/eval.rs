@@ -8,7 +8,8 @@
 //!
 //! `VKTERRAIN_EVAL_SHORT=1` is the CI version (the procedural CI terrain at 320x180, flat and
 //! anchored on the earth, a few minutes at most). It asserts correctness, never absolute times: UDLOD has no cracks
-//! (sky seen through its surface) and at tau > 1 few sky pixels under a lowered silhouette, its
+//! (sky seen through its surface), at tau > 1 few sky pixels under a lowered silhouette and its
+//! skyline no more than 2 tau + 1 px lower, its
 //! 99.9th-percentile screen-space error is within 1.25 tau, brute force measures ~0 error, and
 //! PGM swims more than UDLOD per pixel of error; GPU times are printed as ratios to brute force of the same run;
 //! and the evaluator's GPU time of each method agrees with a plain benchmark loop's (the
@@ -267,6 +268,11 @@ fn swim_share(s: &vkterrain::eval::run::RunSummary) -> f64 {
     s.swimming_px.mean / s.error.pixels.p999.max(1e-6)
 }
 
+/// How far below the reference's UDLOD's skyline may lie, in tau, plus one pixel of
+/// rasterization (`metrics::Holes::silhouette_px`): the skyline is geometry seen at a grazing
+/// angle, whose largest error runs up to about 1.6 tau (docs/udlod.md, "Silhouette holes").
+const SILHOUETTE_DROP_TAU: f64 = 2.0;
+
 /// Sky pixels inside the reference's silhouette that UDLOD may leave above its own skyline
 /// (holes that are not cracks) over `frames` frames `width` pixels wide: none at tau <= 1; at
 /// larger tau the coarser distant geometry may lower a far ridge's silhouette by up to ~2 tau
@@ -298,6 +304,12 @@ fn check(evaluation: &Evaluation) -> anyhow::Result<()> {
                     .map_or(1.0, |p| p.1);
                 if s.cracks_total > 0 {
                     failures.push(format!("{}: {} cracks", s.variant, s.cracks_total));
+                }
+                if f64::from(s.silhouette_px_max) > SILHOUETTE_DROP_TAU * tau + 1.0 {
+                    failures.push(format!(
+                        "{}: skyline {} px below the reference's",
+                        s.variant, s.silhouette_px_max
+                    ));
                 }
                 let silhouette = s.holes_total - s.cracks_total;
                 if silhouette > silhouette_allowance(tau, s.frames, evaluation.width) {

@@ -63,7 +63,8 @@ struct Seed {
 struct Partial {
     // height error |m|, screen-space error px, SSIM of the window, 1 when the window counts.
     sums: vec4<f32>,
-    // maximum height error, maximum screen-space error.
+    // maximum height error, maximum screen-space error, 0 (pass 1 keeps the square sum's
+    // high word here), the silhouette's drop in pixels (metrics::Holes::silhouette_px).
     maxes: vec4<f32>,
     // pixels with an error, holes, squared RGB differences, cracks (the holes with the
     // method's terrain above them in their column).
@@ -76,7 +77,7 @@ struct Totals {
     metres_max: f32,
     pixels_max: f32,
     ssim_sum: f32,
-    pad0: f32,
+    silhouette_px: f32,
     error_count: u32,
     holes: u32,
     sq_lo: u32,
@@ -384,6 +385,17 @@ fn is_hole(i: u32) -> bool {
         && ref_depth[b - 1u] > 0.0 && ref_depth[b] > 0.0 && ref_depth[b + 1u] > 0.0;
 }
 
+// The silhouette's drop at a hole (x, y) that is not a crack: the rows down to the frame's
+// first terrain pixel in the column (the frame's height if none), plus one.
+fn silhouette_drop(x: u32, y: u32) -> u32 {
+    let w = frame.size.x;
+    var below = y + 1u;
+    while below < frame.size.y && depth[below * w + x] <= 0.0 {
+        below += 1u;
+    }
+    return below - y + 1u;
+}
+
 // Whether the frame shows terrain above pixel (x, y) in its column: a hole there is sky seen
 // through the surface, a crack (metrics::holes); without, the method's skyline lies below the
 // reference's. Holes are rare, so the column walk costs little.
@@ -462,6 +474,8 @@ fn blocks_main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 counts.y += 1u;
                 if terrain_above(x, y) {
                     counts.w += 1u;
+                } else {
+                    maxes.w = max(maxes.w, f32(silhouette_drop(x, y)));
                 }
             }
             let c = color[i];
@@ -523,7 +537,7 @@ fn fold_main(@builtin(local_invocation_index) li: u32) {
     }
     // The 64-bit square sum: its low word in counts.z as the blocks' own, its high word
     // bit-cast into maxes.z (unused by the blocks; pass 2 reads it as bits, never as a max).
-    let folded_maxes = vec4<f32>(maxes.xy, bitcast<f32>(sq.y), 0.0);
+    let folded_maxes = vec4<f32>(maxes.xy, bitcast<f32>(sq.y), maxes.w);
     partials[li] = Partial(sums, folded_maxes, vec4<u32>(counts.xy, sq.x, counts.w));
 }
 
@@ -537,7 +551,7 @@ fn reduce_main() {
     for (var i = 0u; i < EVAL_REDUCE_WORKGROUP; i += 1u) {
         let p = partials[i];
         sums += p.sums;
-        maxes = max(maxes, vec4<f32>(p.maxes.xy, 0.0, 0.0));
+        maxes = max(maxes, vec4<f32>(p.maxes.xy, 0.0, p.maxes.w));
         counts += vec4<u32>(p.counts.xy, 0u, p.counts.w);
         sq = add64(sq, vec2<u32>(p.counts.z, bitcast<u32>(p.maxes.z)));
     }
@@ -551,6 +565,7 @@ fn reduce_main() {
         stats.totals.ssim_windows = u32(s.w);
         stats.totals.metres_max = m.x;
         stats.totals.pixels_max = m.y;
+        stats.totals.silhouette_px = m.w;
         stats.totals.error_count = c.x;
         stats.totals.holes = c.y;
         stats.totals.cracks = c.w;

@@ -375,7 +375,11 @@ mod tests {
             metres: histogram((1..500).map(|i| i as f64 * 0.01)),
             pixels: histogram((1..500).map(|i| i as f64 * 0.002)),
             popping: histogram((1..300).map(|i| i as f64 * 0.001)),
-            holes: metrics::Holes { all: 3, cracks: 1 },
+            holes: metrics::Holes {
+                all: 3,
+                cracks: 1,
+                silhouette_px: 2,
+            },
             psnr_db: 31.5,
             ssim: 0.93,
         };

@@ -436,6 +436,13 @@ pub struct Holes {
     /// silhouette drawn lower than the reference's, an error of the coarser geometry that the
     /// pixel target bounds (docs/eval.md, "Holes and cracks").
     pub cracks: usize,
+    /// How far the method's skyline lies below the reference's, in pixels, at most over the
+    /// columns: for each hole that is not a crack, the rows from it down to the method's
+    /// first terrain pixel, plus one. The topmost such hole of a column lies one row below
+    /// the reference's skyline, so this is the skyline's drop there (a drop of one pixel
+    /// leaves no hole inside the shrunk silhouette and reads 0); the method's own pixel error
+    /// does not see it, since the method shows sky there.
+    pub silhouette_px: u32,
 }
 
 /// Holes of one frame (rows top down, depth <= 0 is sky). "Above in the column" is the
@@ -444,7 +451,7 @@ pub struct Holes {
 /// while |roll| < 90 deg.
 pub fn holes(reference_depth: &[f32], method_depth: &[f32], width: u32, height: u32) -> Holes {
     let (w, h) = (width as usize, height as usize);
-    let (all, cracks) = (1..h.saturating_sub(1))
+    (1..h.saturating_sub(1))
         .into_par_iter()
         .map(|y| {
             (1..w.saturating_sub(1))
@@ -453,13 +460,24 @@ pub fn holes(reference_depth: &[f32], method_depth: &[f32], width: u32, height: 
                         && (y - 1..=y + 1)
                             .all(|yy| (x - 1..=x + 1).all(|xx| reference_depth[yy * w + xx] > 0.0))
                 })
-                .fold((0, 0), |(all, cracks), x| {
-                    let seen_through = (0..y).any(|above| method_depth[above * w + x] > 0.0);
-                    (all + 1, cracks + usize::from(seen_through))
+                .fold(Holes::default(), |mut holes, x| {
+                    holes.all += 1;
+                    if (0..y).any(|above| method_depth[above * w + x] > 0.0) {
+                        holes.cracks += 1;
+                    } else {
+                        let skyline = (y + 1..h)
+                            .find(|&below| method_depth[below * w + x] > 0.0)
+                            .unwrap_or(h);
+                        holes.silhouette_px = holes.silhouette_px.max((skyline - y + 1) as u32);
+                    }
+                    holes
                 })
         })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    Holes { all, cracks }
+        .reduce(Holes::default, |a, b| Holes {
+            all: a.all + b.all,
+            cracks: a.cracks + b.cracks,
+            silhouette_px: a.silhouette_px.max(b.silhouette_px),
+        })
 }
 
 /// PSNR in dB over the RGB channels of two RGBA8 images (infinite when identical).
@@ -801,15 +819,25 @@ mod tests {
         let expected = Holes {
             all: w - 2,
             cracks: 0,
+            silhouette_px: 2,
         };
         assert_eq!(holes(&reference, &lowered, w as u32, h as u32), expected);
         // A vertical crack of three pixels below the reference's skyline: all cracks.
         let cracked = depth_frame(w, h, 3, &[(6, 5), (6, 6), (6, 7)]);
-        let expected = Holes { all: 3, cracks: 3 };
+        let expected = Holes {
+            all: 3,
+            cracks: 3,
+            silhouette_px: 0,
+        };
         assert_eq!(holes(&reference, &cracked, w as u32, h as u32), expected);
-        // A gap reaching up to the method's sky is its skyline, not a crack.
+        // A gap reaching up to the method's sky is its skyline, three rows lower there, not a
+        // crack.
         let notch = depth_frame(w, h, 3, &[(6, 3), (6, 4), (6, 5)]);
-        let expected = Holes { all: 2, cracks: 0 };
+        let expected = Holes {
+            all: 2,
+            cracks: 0,
+            silhouette_px: 3,
+        };
         assert_eq!(holes(&reference, &notch, w as u32, h as u32), expected);
     }
 

@@ -88,12 +88,12 @@ fn frames_csv(eval: &Evaluation) -> String {
 
 fn frames_csv_of(rows: &[FrameRow]) -> String {
     let mut csv = String::from(
-        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,gpu_eval_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,cracks,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles\n",
+        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,gpu_eval_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,cracks,silhouette_px,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles\n",
     );
     for r in rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{},{:.3},{:.5},{:.5},{},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{},{},{:.3},{:.5},{:.5},{},{},{}",
             csv_field(&r.variant),
             csv_field(&r.method),
             r.frame,
@@ -112,6 +112,7 @@ fn frames_csv_of(rows: &[FrameRow]) -> String {
             r.error.metres.max,
             r.holes,
             r.cracks,
+            r.silhouette_px,
             r.psnr_db,
             r.ssim,
             r.popping_p99_px,
@@ -129,12 +130,12 @@ fn summary_csv(eval: &Evaluation) -> String {
 
 fn summary_csv_of(summaries: &[RunSummary]) -> String {
     let mut sum = String::from(
-        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,cracks,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median,budget_overflow_frames\n",
+        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,cracks,silhouette_px_max,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median,budget_overflow_frames\n",
     );
     for s in summaries {
         let _ = writeln!(
             sum,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{}",
             csv_field(&s.variant),
             csv_field(&s.method),
             s.frames,
@@ -150,6 +151,7 @@ fn summary_csv_of(summaries: &[RunSummary]) -> String {
             s.error.metres.p999,
             s.holes_total,
             s.cracks_total,
+            s.silhouette_px_max,
             s.psnr_db_mean,
             s.ssim_mean,
             opt(s.flip_mean),
@@ -451,6 +453,7 @@ mod tests {
             error: GeometricError::default(),
             holes: 0,
             cracks: 0,
+            silhouette_px: 0,
             psnr_db: 40.0,
             ssim: 0.99,
             popping_p99_px: 0.1,
@@ -474,6 +477,7 @@ mod tests {
             error: GeometricError::default(),
             holes_total: 0,
             cracks_total: 0,
+            silhouette_px_max: 0,
             psnr_db_mean: 40.0,
             ssim_mean: 0.99,
             flip_mean: None,

@@ -152,6 +152,8 @@ pub struct FrameRow {
     /// surface (`metrics::Holes`).
     pub holes: usize,
     pub cracks: usize,
+    /// How far the method's skyline lies below the reference's (px, `metrics::Holes`).
+    pub silhouette_px: u32,
     pub psnr_db: f64,
     pub ssim: f64,
     /// 99th percentile of the per-pixel change of the error image since the previous frame.
@@ -184,6 +186,8 @@ pub struct RunSummary {
     pub error: GeometricError,
     pub holes_total: usize,
     pub cracks_total: usize,
+    /// The largest silhouette drop of any frame (px).
+    pub silhouette_px_max: u32,
     pub psnr_db_mean: f64,
     pub ssim_mean: f64,
     /// Means over the measured frames FLIP was computed for (`flip_frames`; None: none).
@@ -591,6 +595,7 @@ impl Run {
             },
             holes: gpu.holes.all,
             cracks: gpu.holes.cracks,
+            silhouette_px: gpu.holes.silhouette_px,
             psnr_db: gpu.psnr_db(),
             ssim: gpu.ssim(),
             popping_p99_px: gpu.popping.summary().p99,
@@ -714,6 +719,7 @@ fn finish(
             error: run.errors.summary(),
             holes_total: measured.iter().map(|r| r.holes).sum(),
             cracks_total: measured.iter().map(|r| r.cracks).sum(),
+            silhouette_px_max: measured.iter().map(|r| r.silhouette_px).max().unwrap_or(0),
             psnr_db_mean: finite_mean(|r| r.psnr_db),
             ssim_mean: finite_mean(|r| r.ssim),
             flip_mean: mean_of(|f| f.mean),

@@ -50,6 +50,10 @@ pub const SUMMARY_COLUMNS: &[Column<RunSummary>] = &[
         cell: |s| format!("{} ({})", s.holes_total, s.cracks_total),
     },
     Column {
+        header: "silhouette px",
+        cell: |s| s.silhouette_px_max.to_string(),
+    },
+    Column {
         header: "PSNR dB",
         cell: |s| format!("{:.1}", s.psnr_db_mean),
     },

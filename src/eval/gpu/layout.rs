@@ -96,7 +96,9 @@ pub struct Totals {
     pub metres_max: f32,
     pub pixels_max: f32,
     pub ssim_sum: f32,
-    pub pad0: f32,
+    /// The silhouette's largest drop in pixels (`metrics::Holes::silhouette_px`; a whole
+    /// number, a float so the reduction's maxima stay one vector).
+    pub silhouette_px: f32,
     pub error_count: u32,
     pub holes: u32,
     pub sq_lo: u32,

@@ -771,6 +771,7 @@ impl FrameAnalysis for GpuAnalysis {
             holes: Holes {
                 all: totals.holes as usize,
                 cracks: totals.cracks as usize,
+                silhouette_px: totals.silhouette_px as u32,
             },
             squared_error_sum: totals.sq_lo as u64 | (totals.sq_hi as u64) << 32,
             channels: 3 * shape.width as u64 * shape.height as u64,
