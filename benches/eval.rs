@@ -7,12 +7,12 @@
 //! frame on the ellipsoid by default, where PGM is not run yet: see `run_case`).
 //!
 //! `VKTERRAIN_EVAL_SHORT=1` is the CI version (the procedural CI terrain at 320x180, flat and
-//! anchored on the earth, a few minutes at most). It asserts correctness, never absolute times: UDLOD has no cracks
-//! (sky seen through its surface), at tau > 1 few sky pixels under a lowered silhouette and its
-//! skyline no more than 2 tau + 1 px lower, its
-//! 99.9th-percentile screen-space error is within 1.25 tau, brute force measures ~0 error, and
-//! PGM swims more than UDLOD per pixel of error; GPU times are printed as ratios to brute force of the same run;
-//! and the evaluator's GPU time of each method agrees with a plain benchmark loop's (the
+//! anchored on the earth, a few minutes at most). It asserts correctness, never absolute times:
+//! UDLOD has no cracks (sky seen through its surface), at tau > 1 few sky pixels under a
+//! lowered silhouette and its skyline no more than 2 tau + 1 px lower, its 99.9th-percentile
+//! screen-space error is within 1.25 tau, brute force measures ~0 error, and PGM swims more
+//! than UDLOD per pixel of error; GPU times are printed as ratios to brute force of the same
+//! run; and the evaluator's GPU time of each method agrees with a plain benchmark loop's (the
 //! `vkterrain bench` loop, no evaluation) as a ratio within a generous noise band. Without it,
 //! the Fischer flights S1 (Franconia, flat) and S3 (Pyrenees, rough) run at 1280x720 (data:
 //! `make data`).

@@ -1,9 +1,9 @@
 //! The evaluator's GPU metrics (`src/eval/gpu/`, `shaders/eval_metrics.wgsl`) equal the CPU
 //! definitions (`src/eval/metrics.rs`) on small frames: per frame, the height-error,
 //! screen-space-error and popping histograms within one bin, means and maxima to f32
-//! precision, holes and PSNR exactly, SSIM to 1e-4 — for the reference itself and for a method
-//! with real errors (PGM) and one with cracks (UDLOD without morphing). Negative control: the same frames measured on the CPU against a
-//! surface 0.3 m higher must differ. On the earth (the terrain drawn through an anchored
+//! precision, holes and PSNR exactly, SSIM to 1e-4 — for the reference itself, for a method
+//! with real errors (PGM) and for one with cracks (UDLOD without morphing). Negative control:
+//! the same frames measured on the CPU against a surface 0.3 m higher must differ. On the earth (the terrain drawn through an anchored
 //! geolocation lattice, the GPU inverting it per pixel, the CPU by `Lattice::sample_at`) the
 //! same, with a second negative control: the CPU mapping the points to the grid as on the
 //! flat world must differ. Validation (incl. synchronization) on.

@@ -809,36 +809,26 @@ mod tests {
     fn holes_tell_cracks_from_a_lowered_skyline() {
         let (w, h) = (12, 10);
         let reference = depth_frame(w, h, 3, &[]);
-        assert_eq!(
-            holes(&reference, &reference, w as u32, h as u32),
-            Holes::default()
-        );
+        // (holes, cracks, silhouette px) of a method's depth against the reference.
+        let of = |method: &[f32]| {
+            let holes = holes(&reference, method, w as u32, h as u32);
+            (holes.all, holes.cracks, holes.silhouette_px)
+        };
+        assert_eq!(of(&reference), (0, 0, 0));
         // The skyline two rows lower: columns 1..11 of row 4 are inside the reference's
         // shrunk silhouette (row 3 is its edge), and none is a crack.
-        let lowered = depth_frame(w, h, 5, &[]);
-        let expected = Holes {
-            all: w - 2,
-            cracks: 0,
-            silhouette_px: 2,
-        };
-        assert_eq!(holes(&reference, &lowered, w as u32, h as u32), expected);
+        assert_eq!(of(&depth_frame(w, h, 5, &[])), (w - 2, 0, 2));
         // A vertical crack of three pixels below the reference's skyline: all cracks.
-        let cracked = depth_frame(w, h, 3, &[(6, 5), (6, 6), (6, 7)]);
-        let expected = Holes {
-            all: 3,
-            cracks: 3,
-            silhouette_px: 0,
-        };
-        assert_eq!(holes(&reference, &cracked, w as u32, h as u32), expected);
+        assert_eq!(
+            of(&depth_frame(w, h, 3, &[(6, 5), (6, 6), (6, 7)])),
+            (3, 3, 0)
+        );
         // A gap reaching up to the method's sky is its skyline, three rows lower there, not a
         // crack.
-        let notch = depth_frame(w, h, 3, &[(6, 3), (6, 4), (6, 5)]);
-        let expected = Holes {
-            all: 2,
-            cracks: 0,
-            silhouette_px: 3,
-        };
-        assert_eq!(holes(&reference, &notch, w as u32, h as u32), expected);
+        assert_eq!(
+            of(&depth_frame(w, h, 3, &[(6, 3), (6, 4), (6, 5)])),
+            (2, 0, 3)
+        );
     }
 
     #[test]
