@@ -796,13 +796,43 @@ mod tests {
 
     /// A frame whose skyline is row `skyline` (sky above it), with `gaps` of sky below it.
     fn depth_frame(w: usize, h: usize, skyline: usize, gaps: &[(usize, usize)]) -> Vec<f32> {
+        rolled_frame(w, h, |_| skyline, gaps)
+    }
+
+    /// A frame whose skyline in column `x` is row `skyline(x)`, with `gaps` of sky below it.
+    fn rolled_frame(
+        w: usize,
+        h: usize,
+        skyline: impl Fn(usize) -> usize,
+        gaps: &[(usize, usize)],
+    ) -> Vec<f32> {
         let mut d: Vec<f32> = (0..w * h)
-            .map(|i| if i / w >= skyline { 10.0 } else { 0.0 })
+            .map(|i| if i / w >= skyline(i % w) { 10.0 } else { 0.0 })
             .collect();
         for &(x, y) in gaps {
             d[y * w + x] = 0.0;
         }
         d
+    }
+
+    /// With roll the skyline is tilted on screen but still crosses each column once, so the
+    /// column split holds: a tilted skyline three rows lower leaves no crack and falls 3 px;
+    /// sky under a tilted edge of the surface is seen through it.
+    #[test]
+    fn holes_under_roll() {
+        let (w, h) = (24, 20);
+        // Half a row per column: a roll of about 27 degrees.
+        let reference = rolled_frame(w, h, |x| 4 + x / 2, &[]);
+        let of = |method: &[f32]| {
+            let holes = holes(&reference, method, w as u32, h as u32);
+            (holes.all, holes.cracks, holes.silhouette_px)
+        };
+        let (all, cracks, fall) = of(&rolled_frame(w, h, |x| 7 + x / 2, &[]));
+        assert!(all >= w - 2, "{all} holes");
+        assert_eq!((cracks, fall), (0, 3));
+        // A crack along the tilted edge of a tile, under the skyline.
+        let edge: Vec<(usize, usize)> = (8..14).map(|x| (x, 12 + x / 2)).collect();
+        assert_eq!(of(&rolled_frame(w, h, |x| 4 + x / 2, &edge)), (6, 6, 0));
     }
 
     #[test]
