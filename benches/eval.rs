@@ -21,6 +21,7 @@ use std::path::PathBuf;
 
 use clap::Parser;
 use vkterrain::cli::render::{Prepared, RenderArgs, prepare};
+use vkterrain::eval::metrics::Holes;
 use vkterrain::eval::run::{EvalSetup, Evaluation, evaluate, variants};
 use vkterrain::eval::{report, table};
 use vkterrain::lod::{MethodConfig, MethodKind, sweep};
@@ -268,24 +269,6 @@ fn swim_share(s: &vkterrain::eval::run::RunSummary) -> f64 {
     s.swimming_px.mean / s.error.pixels.p999.max(1e-6)
 }
 
-/// How far below the reference's UDLOD's skyline may lie, in tau, plus one pixel of
-/// rasterization (`metrics::Holes::silhouette_px`): the skyline is geometry seen at a grazing
-/// angle, whose largest error runs up to about 1.6 tau (docs/udlod.md, "Silhouette holes").
-const SILHOUETTE_DROP_TAU: f64 = 2.0;
-
-/// Sky pixels inside the reference's silhouette that UDLOD may leave above its own skyline
-/// (holes that are not cracks) over `frames` frames `width` pixels wide: none at tau <= 1; at
-/// larger tau the coarser distant geometry may lower a far ridge's silhouette by up to ~2 tau
-/// (docs/udlod.md, "Silhouette holes"), at most one in 16 columns a frame, the bound
-/// `tests/eval_earth.rs` asserts on the earth.
-fn silhouette_allowance(tau: f64, frames: usize, width: u32) -> usize {
-    if tau <= 1.0 {
-        0
-    } else {
-        frames * width as usize / 16
-    }
-}
-
 /// Correctness of the short run: the assertions CI makes.
 fn check(evaluation: &Evaluation) -> anyhow::Result<()> {
     let mut failures = Vec::new();
@@ -305,14 +288,14 @@ fn check(evaluation: &Evaluation) -> anyhow::Result<()> {
                 if s.cracks_total > 0 {
                     failures.push(format!("{}: {} cracks", s.variant, s.cracks_total));
                 }
-                if f64::from(s.silhouette_px_max) > SILHOUETTE_DROP_TAU * tau + 1.0 {
+                if f64::from(s.silhouette_px_max) > Holes::allowed_fall_px(tau) {
                     failures.push(format!(
                         "{}: skyline {} px below the reference's",
                         s.variant, s.silhouette_px_max
                     ));
                 }
                 let silhouette = s.holes_total - s.cracks_total;
-                if silhouette > silhouette_allowance(tau, s.frames, evaluation.width) {
+                if silhouette > Holes::allowed_silhouette_pixels(tau, s.frames, evaluation.width) {
                     failures.push(format!(
                         "{}: {silhouette} sky pixels under a lowered silhouette",
                         s.variant

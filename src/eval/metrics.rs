@@ -445,6 +445,28 @@ pub struct Holes {
     pub silhouette_px: u32,
 }
 
+impl Holes {
+    /// How far a LOD method's skyline may fall below the reference's at pixel target `tau`:
+    /// 2 tau (the skyline is geometry seen at a grazing angle, whose largest error runs up to
+    /// about 1.6 tau; every run measured at most 2 tau) plus one pixel of rasterization
+    /// (docs/udlod.md, "Silhouette holes").
+    pub fn allowed_fall_px(tau: f64) -> f64 {
+        2.0 * tau + 1.0
+    }
+
+    /// Sky pixels under a lowered skyline (holes that are not cracks) a LOD method may leave
+    /// over `frames` frames `width` pixels wide at pixel target `tau`: none at tau <= 1; above,
+    /// one per 16 columns a frame, a count set at 320x180 (at 1080p tau 4 leaves about three
+    /// times that, each within [`Holes::allowed_fall_px`]: docs/udlod.md, "Silhouette holes").
+    pub fn allowed_silhouette_pixels(tau: f64, frames: usize, width: u32) -> usize {
+        if tau <= 1.0 {
+            0
+        } else {
+            frames * width as usize / 16
+        }
+    }
+}
+
 /// Holes of one frame (rows top down, depth <= 0 is sky). "Above in the column" is the
 /// screen's up: for a heightfield seen without roll the sky in a column is one run at the top,
 /// so sky below terrain is seen through it; with roll a skyline still crosses each column once
