@@ -271,3 +271,77 @@ fn an_overflowing_tile_budget_is_reported() {
         "{report}"
     );
 }
+
+/// The coarse pixels (docs/eval.md, "Coarse pixels"): UDLOD reports the share of the pixels it
+/// drew with tiles coarser than level 0 and their 99.9th percentile; brute force draws no
+/// tiles and reports none. Without morphing a level-0 tile is the data itself, so the pixels
+/// over one measure no error but f32 noise (brute force's scale, < 0.05 px), while the coarse
+/// ones at tau 4 measure tenths of a pixel: a lookup that read the tiles wrongly (x for y, or
+/// another tile size) puts coarse pixels among the level-0 ones (negative control, by hand:
+/// `level_at` with x and y swapped fails it).
+#[test]
+fn coarse_pixels_are_those_over_tiles_coarser_than_level_0() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("ev");
+    let scenario = common::cli::shipped_config("scenarios/default.toml");
+    let ci = std::fs::read_to_string(ci_config()).unwrap();
+    let config = tmp.path().join("unmorphed.toml");
+    std::fs::write(
+        &config,
+        ci.replace("name = \"brute\"", "name = \"udlod\"\nmorph = false")
+            .replace(
+                "path = \"scenarios/default.toml\"",
+                &format!("path = {:?}", scenario.display().to_string()),
+            ),
+    )
+    .unwrap();
+    let o = vkterrain(&[
+        "eval",
+        "--config",
+        config.to_str().unwrap(),
+        "--methods",
+        "brute,udlod",
+        "--sweep",
+        "tau_px=0.5,4",
+        "--frames",
+        "6",
+        "--warmup",
+        "1",
+        "--width",
+        "192",
+        "--height",
+        "108",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    let summary = |variant: &str| {
+        json["summaries"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["variant"] == variant)
+            .unwrap_or_else(|| panic!("{variant} in {json}"))
+            .clone()
+    };
+    assert!(summary("brute")["coarse"].is_null());
+    let coarse = |variant: &str| {
+        let s = summary(variant);
+        let c = &s["coarse"];
+        let f = |k: &str| c[k].as_f64().unwrap_or_else(|| panic!("{k} in {s}"));
+        (f("share"), f("p999_px"), f("level0_max_px"), s)
+    };
+    let (fine_share, _, fine_level0, s) = coarse("udlod tau_px=0.5");
+    let (share, p999, level0, s4) = coarse("udlod tau_px=4");
+    assert!(
+        0.0 < fine_share && fine_share < share && share < 1.0,
+        "{s}\n{s4}"
+    );
+    assert!(p999 > 0.25, "{s4}");
+    assert!(fine_level0 < 0.05 && level0 < 0.05, "{s}\n{s4}");
+    let frames = std::fs::read_to_string(out.join("frames.csv")).unwrap();
+    let header: Vec<&str> = frames.lines().next().unwrap().split(',').collect();
+    assert!(header.ends_with(&["coarse_px_p999", "coarse_share", "level0_px_max"]));
+}

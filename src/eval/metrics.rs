@@ -165,6 +165,8 @@ pub struct PixelError {
     pub metres: f64,
     /// Screen-space error in pixels (non-negative).
     pub pixels: f64,
+    /// The surface point's level-0 sample position (columns, rows).
+    pub sample: [f64; 2],
 }
 
 /// Mean, percentiles and maximum of a set of non-negative values.
@@ -385,6 +387,7 @@ fn pixel_error<S: ExactSurface + ?Sized>(
         y,
         metres,
         pixels: metres.abs() * v.camera.focal_px(height) / distance,
+        sample: [g.x / data.spacing(), g.y / data.spacing()],
     })
 }
 

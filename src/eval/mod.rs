@@ -7,6 +7,7 @@
 
 pub mod chart;
 pub mod check;
+pub mod coarse;
 pub mod flip;
 pub mod gpu;
 pub mod metrics;

@@ -88,12 +88,12 @@ fn frames_csv(eval: &Evaluation) -> String {
 
 fn frames_csv_of(rows: &[FrameRow]) -> String {
     let mut csv = String::from(
-        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,gpu_eval_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,cracks,silhouette_px,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles\n",
+        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,gpu_eval_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,cracks,silhouette_px,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles,coarse_px_p999,coarse_share,level0_px_max\n",
     );
     for r in rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{},{},{:.3},{:.5},{:.5},{},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{},{},{:.3},{:.5},{:.5},{},{},{},{},{},{}",
             csv_field(&r.variant),
             csv_field(&r.method),
             r.frame,
@@ -118,7 +118,10 @@ fn frames_csv_of(rows: &[FrameRow]) -> String {
             r.popping_p99_px,
             opt(r.flip.map(|f| f.mean)),
             opt(r.flip.map(|f| f.p99)),
-            optional(r.oracle_triangles.map(|v| v as f64), 0)
+            optional(r.oracle_triangles.map(|v| v as f64), 0),
+            opt(r.coarse.map(|c| c.p999_px)),
+            opt(r.coarse.map(|c| c.share)),
+            opt(r.coarse.map(|c| c.level0_max_px))
         );
     }
     csv
@@ -130,12 +133,12 @@ fn summary_csv(eval: &Evaluation) -> String {
 
 fn summary_csv_of(summaries: &[RunSummary]) -> String {
     let mut sum = String::from(
-        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,cracks,silhouette_px_max,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median,budget_overflow_frames\n",
+        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,cracks,silhouette_px_max,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median,budget_overflow_frames,coarse_px_p999,coarse_share,level0_px_max\n",
     );
     for s in summaries {
         let _ = writeln!(
             sum,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{},{},{},{}",
             csv_field(&s.variant),
             csv_field(&s.method),
             s.frames,
@@ -164,7 +167,10 @@ fn summary_csv_of(summaries: &[RunSummary]) -> String {
             s.swimming_m.mean,
             optional(s.oracle_triangles_median, 0),
             optional(s.oracle_ratio_median, 3),
-            s.budget_overflow_frames
+            s.budget_overflow_frames,
+            opt(s.coarse.map(|c| c.p999_px)),
+            opt(s.coarse.map(|c| c.share)),
+            opt(s.coarse.map(|c| c.level0_max_px))
         );
     }
     sum
@@ -459,6 +465,7 @@ mod tests {
             popping_p99_px: 0.1,
             flip: None,
             oracle_triangles: None,
+            coarse: None,
         }
     }
 
@@ -488,6 +495,7 @@ mod tests {
             swimming_px: Summary::default(),
             oracle_triangles_median: None,
             oracle_ratio_median: None,
+            coarse: None,
         }
     }
 

@@ -16,20 +16,23 @@ use crossbeam_channel::{Receiver, Sender, unbounded};
 use serde::Serialize;
 
 use super::check::{CpuFrame, CrossCheck};
+use super::coarse::{self, CoarseErrors, CoarseSummary, TileLevels};
 use super::flip::{self, FlipStats};
 use super::gpu::reference::ViewCone;
 use super::gpu::{EvalShared, FrameShape, GpuAnalysis, GpuFrameMetrics, Role};
-use super::metrics::{ErrorHistogram, GeometricError, Summary, SwimTracker};
+use super::metrics::{ErrorHistogram, GeometricError, OnEarth, Summary, SwimTracker};
 use super::oracle::Oracle;
 use crate::config::Config;
 use crate::dataset::Terrain;
 use crate::driver::Gpu;
 use crate::error::{Error, Result};
+use crate::geo::Lattice;
 use crate::lod::{MethodConfig, MethodKind};
 use crate::readback::FrameView;
 use crate::render::stats::Percentiles;
 use crate::render::{FrameRequest, RenderOptions, Renderer};
 use crate::scene::Scenario;
+use crate::slots::ViewSlot;
 
 /// At most this many measured frames (evenly spaced) get the triangle oracle (seconds per
 /// frame on large data sets).
@@ -163,6 +166,9 @@ pub struct FrameRow {
     /// The triangle oracle's count for this frame at the variant's tau (UDLOD variants, on
     /// the frames the oracle runs on: `eval::oracle`).
     pub oracle_triangles: Option<u64>,
+    /// The pixels drawn coarser than level 0 (methods that report their tiles, on the
+    /// oracle's frames: `eval::coarse`).
+    pub coarse: Option<CoarseSummary>,
 }
 
 /// Summary of one variant over the frames after warm-up.
@@ -203,6 +209,9 @@ pub struct RunSummary {
     /// triangles divided by it (UDLOD variants only).
     pub oracle_triangles_median: Option<f64>,
     pub oracle_ratio_median: Option<f64>,
+    /// Over the coarse pixels of the oracle's frames (`eval::coarse`; None: a method without
+    /// tiles).
+    pub coarse: Option<CoarseSummary>,
 }
 
 /// A frame kept for the side-by-side images.
@@ -328,6 +337,11 @@ struct Run {
     swim: SwimTracker,
     images: Vec<ImageFrame>,
     cpu: Option<super::check::CpuRun>,
+    /// Read-back depth of the last frame (with `--cross-check`, and for methods that report
+    /// their tiles: `eval::coarse`).
+    depth: Option<Arc<Vec<f32>>>,
+    /// The coarse pixels of the measured frames among the oracle's.
+    coarse: CoarseErrors,
 }
 
 /// The reference frame of the current iteration, as far as the variants need it on the host.
@@ -408,6 +422,9 @@ pub fn evaluate(
         let mut reference = ReferenceFrame::default();
         for (i, run) in runs.iter_mut().enumerate() {
             let spawned = run.frame(setup, k, &requests, &mut reference, i, &flip_tx)?;
+            if sampled_frame(setup, k) {
+                run.measure_coarse(setup, lattice.as_ref(), &requests, k)?;
+            }
             // The oracle refines in the flat grid's frame (its frustum and distances): on the
             // earth it would count for the wrong place, so it is left out there (docs/eval.md).
             if lattice.is_none()
@@ -455,7 +472,7 @@ fn open_run(
     config.method = method.clone();
     let mut options = setup.options.clone();
     options.frames_in_flight = 1;
-    options.readback_depth = setup.cross_check;
+    options.readback_depth = setup.cross_check || reports_tiles(method);
     let mut renderer = config.open_renderer(setup.gpu, setup.data, options)?;
     let (analysis, rx) = GpuAnalysis::new(shared, role, setup.image_frames.clone())?;
     renderer.set_analysis(Box::new(analysis))?;
@@ -473,7 +490,15 @@ fn open_run(
         cpu: setup
             .cross_check
             .then(|| super::check::CpuRun::new(shape_of(setup), shared.lattice().cloned())),
+        depth: None,
+        coarse: CoarseErrors::default(),
     })
+}
+
+/// Whether `method` reports the tiles it drew ([`crate::lod::LodMethod::drawn_tiles`]), which
+/// the coarse pixels need (with read-back depth).
+fn reports_tiles(method: &MethodConfig) -> bool {
+    matches!(method, MethodConfig::Udlod(_))
 }
 
 fn shape_of(setup: &EvalSetup<'_>) -> FrameShape {
@@ -530,6 +555,7 @@ impl Run {
         }
         let rgba = Arc::new(rgba);
         let depth = depth.map(Arc::new);
+        self.depth = depth.clone();
         if is_reference {
             reference.rgba = keep_rgba.then(|| rgba.clone());
             reference.depth = depth.clone();
@@ -601,8 +627,50 @@ impl Run {
             popping_p99_px: gpu.popping.summary().p99,
             flip,
             oracle_triangles: None,
+            coarse: None,
         });
         Ok(spawned)
+    }
+
+    /// Measures the coarse pixels of the frame just rendered (`eval::coarse`) into its row and,
+    /// after warm-up, into the run's pool; nothing for a method without tiles.
+    fn measure_coarse(
+        &mut self,
+        setup: &EvalSetup<'_>,
+        lattice: Option<&Lattice>,
+        requests: &[FrameRequest],
+        k: u64,
+    ) -> Result<()> {
+        let Some(depth) = self.depth.clone() else {
+            return Ok(());
+        };
+        let mut levels = Vec::with_capacity(requests.len());
+        for v in 0..requests.len() {
+            // One frame in flight (open_run): view v's slot is frame slot 0's.
+            match self.renderer.method().drawn_tiles(ViewSlot(v))? {
+                Some(drawn) => levels.push(TileLevels::new(&drawn)),
+                None => return Ok(()),
+            }
+        }
+        let views = super::check::views_of(setup, requests);
+        let shape = (setup.options.width, setup.options.height);
+        let errors = match lattice {
+            None => coarse::measure(setup.data, &views, &levels, shape, &depth),
+            Some(lattice) => {
+                let surface = OnEarth {
+                    surface: setup.data,
+                    lattice,
+                };
+                coarse::measure(&surface, &views, &levels, shape, &depth)
+            }
+        };
+        if k >= setup.warmup as u64 {
+            self.coarse.merge(&errors);
+        }
+        if let Some(row) = self.rows.last_mut() {
+            row.coarse = errors.summary();
+        }
+        Ok(())
     }
 }
 
@@ -644,15 +712,21 @@ fn oracle_count(
     else {
         return None;
     };
-    let warmup = setup.warmup as u64;
-    let measured = (setup.frames as u64).saturating_sub(warmup);
-    let stride = measured.div_ceil(ORACLE_FRAMES as u64).max(1);
-    if k < warmup || (k - warmup) % stride != 0 {
+    if !sampled_frame(setup, k) {
         return None;
     }
     let o = oracle.get_or_insert_with(|| Oracle::new(data));
     let (w, h) = (setup.options.width, setup.options.height);
     Some(o.count(data, &request.camera, w, h, s.tau_px).triangles)
+}
+
+/// Whether frame `k` is one of the at most [`ORACLE_FRAMES`] evenly spaced measured frames the
+/// oracle and the coarse pixels are measured on.
+fn sampled_frame(setup: &EvalSetup<'_>, k: u64) -> bool {
+    let warmup = setup.warmup as u64;
+    let measured = (setup.frames as u64).saturating_sub(warmup);
+    let stride = measured.div_ceil(ORACLE_FRAMES as u64).max(1);
+    k >= warmup && (k - warmup) % stride == 0
 }
 
 fn apply_flip(runs: &mut [Run], (run, frame, stats, colours): FlipDone) {
@@ -729,6 +803,7 @@ fn finish(
             swimming_m,
             swimming_px,
             oracle_triangles_median: oracle_median(&measured, |_, o| o as f64),
+            coarse: run.coarse.summary(),
             oracle_ratio_median: oracle_median(&measured, |r, o| {
                 r.triangles as f64 / o.max(1) as f64
             }),

@@ -42,6 +42,14 @@ pub const SUMMARY_COLUMNS: &[Column<RunSummary>] = &[
         },
     },
     Column {
+        header: "coarse px p99.9 (share)",
+        cell: |s| match s.coarse {
+            Some(c) if c.share > 0.0 => format!("{:.3} ({:.1}%)", c.p999_px, 100.0 * c.share),
+            Some(_) => "- (0%)".into(),
+            None => "-".into(),
+        },
+    },
+    Column {
         header: "error m (p99.9)",
         cell: |s| format!("{:.3}", s.error.metres.p999),
     },

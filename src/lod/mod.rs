@@ -236,6 +236,14 @@ pub struct MethodContext<'a> {
     pub lattice: Option<&'a std::sync::Arc<crate::geo::Lattice>>,
 }
 
+/// The tiles of a frame: `[x, y, lod]` each, in tiles of their level. A level-`lod` tile spans
+/// `tile_samples << lod` level-0 sample steps per side, from `(x, y)` times that.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct DrawnTiles {
+    pub tiles: Vec<[u32; 3]>,
+    pub tile_samples: u32,
+}
+
 /// One LOD method. Per frame the renderer calls `update` (host side, slot free), then records
 /// `record_prepass` outside and `record_draw` inside the terrain render pass; set 0 (frame
 /// uniforms + terrain textures) is bound by the method with its own pipeline layout.
@@ -267,6 +275,12 @@ pub trait LodMethod {
     /// Method-specific counters of the last completed frame of `slot` (e.g. tiles, overflow).
     fn counters(&self, _slot: ViewSlot) -> Vec<(&'static str, u64)> {
         Vec::new()
+    }
+    /// The tiles the last completed frame of `slot` drew (`None`: the method draws no
+    /// quadtree of tiles). The evaluator reads from them which pixels show geometry coarser
+    /// than the data's level 0 (docs/eval.md, "Coarse pixels").
+    fn drawn_tiles(&self, _slot: ViewSlot) -> Result<Option<DrawnTiles>> {
+        Ok(None)
     }
     #[cfg(feature = "test-support")]
     /// Tests only: the tiles the GPU selected in the last completed frame of `slot`.

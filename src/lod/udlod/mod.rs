@@ -17,7 +17,7 @@ use std::sync::Arc;
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
-use super::{LodMethod, MethodContext};
+use super::{DrawnTiles, LodMethod, MethodContext};
 use crate::dataset::stats::{Finest, TileStats};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
@@ -442,6 +442,55 @@ impl Udlod {
         })
     }
 
+    /// The GPU's final tile list of `slot`'s last completed frame, `[x, y, lod]` each.
+    fn final_tiles(&self, slot: ViewSlot) -> Result<Vec<[u32; 3]>> {
+        let c = self.read_counters(slot);
+        // The static tiles from the list's front, the morphing ones from its back.
+        let (front, back) = (c.draw[1] as u64, c.morph_draw[1] as u64);
+        let n = front + back;
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let host = Buffer::new(
+            &self.gpu,
+            "udlod final tiles",
+            n * TILE_BYTES,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+        )?;
+        let lists = &self.slots[slot.index()].lists;
+        let regions: Vec<vk::BufferCopy> = [
+            (0, 0, front),
+            (
+                (lists.capacity as u64 - back) * TILE_BYTES,
+                front * TILE_BYTES,
+                back,
+            ),
+        ]
+        .into_iter()
+        .filter(|&(_, _, tiles)| tiles > 0)
+        .map(|(src_offset, dst_offset, tiles)| vk::BufferCopy {
+            src_offset,
+            dst_offset,
+            size: tiles * TILE_BYTES,
+        })
+        .collect();
+        let b = Barriers::new(&self.gpu);
+        self.gpu.one_shot(|cmd| unsafe {
+            b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
+            self.gpu
+                .device
+                .cmd_copy_buffer(cmd, lists.final_tiles.raw, host.raw, &regions);
+            b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+        })?;
+        let bytes = host
+            .mapped()
+            .and_then(|b| b.get(..(n * TILE_BYTES) as usize))
+            .ok_or_else(|| Error::invalid("udlod", "tile list readback not mapped"))?;
+        let tiles: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(bytes);
+        Ok(tiles.iter().map(|t| [t[0], t[1], t[2]]).collect())
+    }
+
     /// The counters of `slot`'s last completed frame (zero before its first).
     fn read_counters(&self, slot: ViewSlot) -> TilingState {
         let s = &self.slots[slot.index()];
@@ -668,53 +717,16 @@ impl LodMethod for Udlod {
         ]
     }
 
+    fn drawn_tiles(&self, slot: ViewSlot) -> Result<Option<DrawnTiles>> {
+        Ok(Some(DrawnTiles {
+            tiles: self.final_tiles(slot)?,
+            tile_samples: self.settings.grid_size,
+        }))
+    }
+
     #[cfg(feature = "test-support")]
     fn debug_tiles(&self, slot: ViewSlot) -> Result<Option<Vec<[u32; 3]>>> {
-        let c = self.read_counters(slot);
-        // The static tiles from the list's front, the morphing ones from its back.
-        let (front, back) = (c.draw[1] as u64, c.morph_draw[1] as u64);
-        let n = front + back;
-        if n == 0 {
-            return Ok(Some(Vec::new()));
-        }
-        let host = Buffer::new(
-            &self.gpu,
-            "udlod debug tiles",
-            n * TILE_BYTES,
-            vk::BufferUsageFlags::TRANSFER_DST,
-            MemoryLocation::GpuToCpu,
-        )?;
-        let lists = &self.slots[slot.index()].lists;
-        let regions: Vec<vk::BufferCopy> = [
-            (0, 0, front),
-            (
-                (lists.capacity as u64 - back) * TILE_BYTES,
-                front * TILE_BYTES,
-                back,
-            ),
-        ]
-        .into_iter()
-        .filter(|&(_, _, tiles)| tiles > 0)
-        .map(|(src_offset, dst_offset, tiles)| vk::BufferCopy {
-            src_offset,
-            dst_offset,
-            size: tiles * TILE_BYTES,
-        })
-        .collect();
-        let b = Barriers::new(&self.gpu);
-        self.gpu.one_shot(|cmd| unsafe {
-            b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
-            self.gpu
-                .device
-                .cmd_copy_buffer(cmd, lists.final_tiles.raw, host.raw, &regions);
-            b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
-        })?;
-        let bytes = host
-            .mapped()
-            .and_then(|b| b.get(..(n * TILE_BYTES) as usize))
-            .ok_or_else(|| Error::invalid("udlod", "debug buffer not mapped"))?;
-        let tiles: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(bytes);
-        Ok(Some(tiles.iter().map(|t| [t[0], t[1], t[2]]).collect()))
+        self.final_tiles(slot).map(Some)
     }
 
     #[cfg(feature = "test-support")]
