@@ -475,3 +475,71 @@ fn udlod_per_axis_metric_on_a_geographic_grid_stays_within_tau() {
     }
     common::assert_no_validation_messages(&gpu);
 }
+
+/// The crack/silhouette split under roll (docs/eval.md, "Holes and cracks"): the eight long
+/// views of the geographic grid above, banked by -25 to +25 degrees, at tau 2. A rolled
+/// skyline still crosses each screen column once, so the default UDLOD's lowered far
+/// silhouette counts as holes without cracks, and the GPU's `Holes` equal the CPU
+/// definition's on every frame (in `measure`); UDLOD without morphing opens T-junction gaps,
+/// which count as cracks under roll too (the control). Measured: 48 holes, 0 cracks, the
+/// skyline 3 px lower; without morphing 293 holes, 288 cracks.
+#[test]
+fn rolled_views_tell_cracks_from_a_lowered_skyline() {
+    let gpu = common::gpu(false);
+    let (data, lattice) = common::poses::geographic_native(513, 46.0, 1, procedural::Style::Alpine);
+    let data = Arc::new(data);
+    let ((ex, ey), (_, top)) = (data.extent(), data.height_range());
+    let cameras: Vec<Camera> = (0..8)
+        .map(|k| {
+            let grid = glam::DVec2::new((0.2 + 0.08 * k as f64) * ex, 0.05 * ey) / data.spacing;
+            Camera {
+                position: lattice.position(grid, top as f64 + 800.0),
+                yaw_deg: 10.0 + 8.0 * k as f64,
+                pitch_deg: -6.0,
+                roll_deg: -25.0 + 50.0 * k as f64 / 7.0,
+                near: 1.0,
+                far: 80_000.0,
+                ..Camera::default()
+            }
+        })
+        .collect();
+    let lattice = Arc::unwrap_or_clone(lattice);
+    let tau_px = 2.0;
+    let default = UdlodSettings {
+        tau_px,
+        ..Default::default()
+    };
+    let unmorphed = UdlodSettings {
+        morph: false,
+        ..default.clone()
+    };
+    let measured = measure(
+        &gpu,
+        &data,
+        Some(&lattice),
+        &[
+            (MethodConfig::Brute {}, Some(&lattice)),
+            (default.into(), Some(&lattice)),
+            (unmorphed.into(), Some(&lattice)),
+        ],
+        &cameras,
+        (320, 180),
+    );
+    for (name, m) in ["brute force", "UDLOD", "unmorphed"].iter().zip(&measured) {
+        println!(
+            "{name}: holes {} (cracks {}), skyline {} px lower",
+            m.holes, m.cracks, m.silhouette_px
+        );
+        assert_eq!(m.missing, 0, "{name}: every pixel found its reference tile");
+    }
+    let (udlod, unmorphed) = (&measured[1], &measured[2]);
+    assert!(udlod.holes > 0, "the rolled views lower the far skyline");
+    assert_eq!(udlod.cracks, 0, "no sky seen through the surface");
+    assert!(
+        f64::from(udlod.silhouette_px) <= metrics::Holes::allowed_fall_px(tau_px),
+        "skyline {} px lower",
+        udlod.silhouette_px
+    );
+    assert!(unmorphed.cracks > 0, "T-junction gaps count as cracks");
+    common::assert_no_validation_messages(&gpu);
+}
