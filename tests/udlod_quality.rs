@@ -109,7 +109,8 @@ fn flight_poses(data: &Heightmap, n: usize) -> Vec<Camera> {
 }
 
 /// The rendered surface's screen-space error stays within tau (+ tolerance) at the 99.9th
-/// percentile over 40 poses, for tau = 1 and 4, with the error field on; brute force measures
+/// percentile over 40 poses, and within 2 tau at its worst pixel, for tau = 1 and 4, with the
+/// error field on; brute force measures
 /// ~0 (the metric's own noise), and tau = 4 shows errors above 1 px (the metric can fail).
 #[test]
 fn screen_space_error_is_within_tau() {
@@ -155,6 +156,14 @@ fn screen_space_error_is_within_tau_at(grid: u32) {
             udlod.pixels.p999 <= tau * tolerance,
             "grid {grid}, tau {tau}: 99.9th percentile {} px",
             udlod.pixels.p999
+        );
+        // The worst pixel too: a fold of the morph (triangles turned over where the factor
+        // jumped between neighbouring vertices, docs/udlod.md "The morph cascade") showed as
+        // single pixels 5-10 tau off, or far more. Measured: 1.30-1.54 tau.
+        assert!(
+            udlod.pixels.max <= 2.0 * tau,
+            "grid {grid}, tau {tau}: worst pixel {} px",
+            udlod.pixels.max
         );
         if tau == 4.0 {
             assert!(
