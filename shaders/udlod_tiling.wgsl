@@ -184,6 +184,9 @@ var<workgroup> wg_morph_base: u32;
 
 // Four invocations per parent: their parent's slot in the workgroup's reservations.
 var<workgroup> wg_parent_local: array<u32, UDLOD_WORKGROUP / 4u>;
+// Per parent: 1 when one of its four invocations found a vertex of the (final) parent that
+// may make slivers (`tile_mid_morph`).
+var<workgroup> wg_slivers: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 
 const_assert UDLOD_WORKGROUP % 4u == 0u;
 
@@ -211,6 +214,9 @@ fn refine(
         atomicStore(&wg_requests, 0u);
         atomicStore(&wg_culled, 0u);
         atomicStore(&wg_overflow, 0u);
+    }
+    if (li & 3u) == 0u {
+        atomicStore(&wg_slivers[li / 4u], 0u);
     }
     workgroupBarrier();
     let invocation = (group.y * groups.x + group.x) * UDLOD_WORKGROUP + li;
@@ -243,11 +249,17 @@ fn refine(
             action = ACTION_FINAL;
         }
     }
+    // A final tile's vertices are checked by all four of its invocations (one checking them
+    // all was the prepass's slowest path on the H200 at 1080p).
+    if action == ACTION_FINAL && tile_mid_morph(t, k) {
+        atomicOr(&wg_slivers[li / 4u], 1u);
+    }
+    workgroupBarrier();
     if k == 0u {
         if action == ACTION_SPLIT {
             wg_parent_local[li / 4u] = atomicAdd(&wg_children, 4u);
         } else if action == ACTION_FINAL {
-            morphs = tile_mid_morph(t);
+            morphs = atomicLoad(&wg_slivers[li / 4u]) != 0u;
             if morphs {
                 wg_parent_local[li / 4u] = atomicAdd(&wg_morphing, 1u);
             } else {
@@ -342,21 +354,20 @@ fn decided(t: Tile) -> Tile {
     return Tile(t.x, t.y, t.lod, flags);
 }
 
-// Whether some vertex of final tile `t` may make sliver triangles (`morph_cascade`, the vertex
+// Whether some vertex of final tile `t` may make sliver triangles (`morph_moved`, the vertex
 // stage's own arithmetic): one part-way through its morph, or one carried on past the tile's
 // own level. A tile whose vertices all stay put or slide fully onto the parent grid at the
 // tile's level keeps the parent grid's triangles (or degenerate ones) and is drawn with
-// back-face culling (docs/udlod.md, "Pinholes far away and back faces").
-fn tile_mid_morph(t: Tile) -> bool {
+// back-face culling (docs/udlod.md, "Pinholes far away and back faces"). Invocation `k` of
+// the tile's four checks every fourth vertex from its `k`th.
+fn tile_mid_morph(t: Tile, k: u32) -> bool {
     let quads = udlod.sizes.x;
     let step = 1u << t.lod;
     let origin = vec2<u32>(t.x, t.y) * quads * step;
-    for (var j = 0u; j <= quads; j++) {
-        for (var i = 0u; i <= quads; i++) {
-            let c = morph_cascade(vec2<i32>(origin + vec2<u32>(i, j) * step), t.lod);
-            if c.moved == MORPH_SLIVERS {
-                return true;
-            }
+    for (var v = k; v < (quads + 1u) * (quads + 1u); v += 4u) {
+        let local = vec2<u32>(v % (quads + 1u), v / (quads + 1u));
+        if morph_moved(vec2<i32>(origin + local * step), t.lod) == MORPH_SLIVERS {
+            return true;
         }
     }
     return false;

@@ -87,6 +87,30 @@ fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
     return c;
 }
 
+// `morph_cascade(sample, lod).moved` without the positions (no per-level arrays): the same walk
+// up, the same factors, and it stops at the first sliver, the only answer the prepass's
+// back-face split needs from every vertex of every final tile (`tile_mid_morph`).
+fn morph_moved(sample: vec2<i32>, lod: u32) -> u32 {
+    var moved = MORPH_STILL;
+    var point = sample;
+    for (var j = lod; j < udlod.sizes.y; j++) {
+        let odd = vec2<i32>((vec2<u32>(point) >> vec2<u32>(j)) & vec2<u32>(1u));
+        if all(odd == vec2<i32>(0)) {
+            continue;
+        }
+        let f = morph_factor(point, j);
+        if f == 0.0 {
+            break;
+        }
+        if !(moved == MORPH_STILL && j == lod && f == 1.0) {
+            return MORPH_SLIVERS;
+        }
+        moved = MORPH_ONE_LEVEL;
+        point = point - odd * i32(1u << j);
+    }
+    return moved;
+}
+
 // A tile's grid vertex after morphing: the position in samples as an integer cell and a
 // fraction in [0, 1) (what `project` takes), the same position as one vector (texturing and
 // height lookup), its height and the morph factor at its first odd level.

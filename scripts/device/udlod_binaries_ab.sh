@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# UDLOD's frame time on the GPU machine, binary against binary: `bench` (1920x1080, 2 frames
+# in flight, 300 frames after 20 of warm-up) on the CI terrain and Puget Sound at tau 1 and 4,
+# two rounds, the binaries alternated within each. Binaries (each skipped when absent):
+#   .device-vk/vkterrain-before  main before issue 18 (3ab4290: grid 16, its own defaults)
+#   .device-vk/vkterrain-main    an earlier build of today's main, at its default and grid 16
+#   .device-vk/vkterrain         this build, at its default (grid 4) and grid 16 and 8
+# Here, before carrying: release builds stripped and copied there (prepare.sh for this one),
+# and the Puget Sound heights in .device-vk/data (scripts/device/udlod_before_after.sh).
+# Run there from the repository root: `bash scripts/device/udlod_binaries_ab.sh > $OUT/ab.txt`
+# (`PUGET_ONLY=1`: Puget Sound only).
+set -u
+. .device-vk/env.sh
+. scripts/device/puget_config.sh
+# A copy of config $1 with UDLOD as its method plus the lines $2, its scenario path absolute.
+udlod_config() {
+  local cfg
+  cfg=$(mktemp --suffix=.toml)
+  sed "s#\"scenarios/default.toml\"#\"$PWD/config/scenarios/default.toml\"#" "$1" > "$cfg"
+  if grep -q '^\[method\]' "$cfg"; then sed -i '/^\[method\]/,/^$/d' "$cfg"; fi
+  printf '\n[method]\nname = "udlod"\n%b\n' "$2" >> "$cfg"
+  echo "$cfg"
+}
+bases=(config/ci.toml "$PUGET")
+[ -n "${PUGET_ONLY:-}" ] && bases=("$PUGET")
+for base in "${bases[@]}"; do
+  for tau in 1 4; do
+    for round in 1 2; do
+      for v in before main main-g16 new new-g16 new-g8; do
+        bin=.device-vk/vkterrain
+        extra=""
+        case $v in
+          before) bin=.device-vk/vkterrain-before ;;
+          main) bin=.device-vk/vkterrain-main ;;
+          main-g16) bin=.device-vk/vkterrain-main; extra="grid_size = 16" ;;
+          new-g16) extra="grid_size = 16" ;;
+          new-g8) extra="grid_size = 8" ;;
+        esac
+        [ -x "$bin" ] || continue
+        cfg=$(udlod_config "$base" "$extra")
+        r=$("$bin" bench --config "$cfg" --method udlod --tau-px "$tau" --resolutions 1920x1080 \
+          --compare-frames-in-flight 2 --frames 300 --warmup 20 --out "$(mktemp -d)" 2>&1 |
+          grep -E '1920x1080   2|rror')
+        echo "$(basename "$base") tau $tau round $round $v: $r"
+      done
+    done
+  done
+done
+rm -f "$PUGET"
