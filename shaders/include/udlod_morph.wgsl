@@ -26,13 +26,6 @@ fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
     return clamp(1.0 - (1.0 - scaled / parent_split) / morph_range, 0.0, 1.0) * udlod.params.z;
 }
 
-// How a grid point moved: not at all; fully onto the next level's grid at the tile's own level
-// and no further (the tile's triangles stay the parent grid's, or degenerate); anything else
-// (part-way, or on through further levels: sliver triangles possible).
-const MORPH_STILL: u32 = 0u;
-const MORPH_ONE_LEVEL: u32 = 1u;
-const MORPH_SLIVERS: u32 = 2u;
-
 // Where grid point `sample` of a level-`lod` tile ends up after the morph cascade (docs/udlod.md,
 // "The morph cascade"). Up: at every level `j` from `lod` on at which the point reached is
 // odd, it has the factor `f_j` (`morph_factor` there) and slides towards its lower even
@@ -43,16 +36,15 @@ const MORPH_SLIVERS: u32 = 2u;
 // levels between two neighbours is bit-identical to the coarser one's, and a vertex nearly
 // morphed onto its neighbour lies a small multiple of their offset away from it, never off
 // to one side by rounding. Result: an integer cell plus a fraction (not yet folded or
-// clamped), the factor at the first odd level, and how the point moved.
+// clamped) and the factor at the first odd level (how the point moved: `morph_moved`).
 struct Cascade {
     cell: vec2<i32>,
     frac: vec2<f32>,
     morph: f32,
-    moved: u32,
 }
 
 fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
-    var c = Cascade(sample, vec2<f32>(0.0), 0.0, MORPH_STILL);
+    var c = Cascade(sample, vec2<f32>(0.0), 0.0);
     var points: array<vec2<i32>, UDLOD_MAX_LEVELS>;
     var factors: array<f32, UDLOD_MAX_LEVELS>;
     var n = 0u;
@@ -71,7 +63,6 @@ fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
         if f == 0.0 {
             break;
         }
-        c.moved = select(MORPH_SLIVERS, MORPH_ONE_LEVEL, c.moved == MORPH_STILL && j == lod && f == 1.0);
         points[n] = point;
         factors[n] = f;
         n++;
@@ -87,9 +78,17 @@ fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
     return c;
 }
 
-// `morph_cascade(sample, lod).moved` without the positions (no per-level arrays): the same walk
-// up, the same factors, and it stops at the first sliver, the only answer the prepass's
-// back-face split needs from every vertex of every final tile (`tile_mid_morph`).
+// How a grid point moved: not at all; fully onto the next level's grid at the tile's own level
+// and no further (the tile's triangles stay the parent grid's, or degenerate); anything else
+// (part-way, or on through further levels: sliver triangles possible).
+const MORPH_STILL: u32 = 0u;
+const MORPH_ONE_LEVEL: u32 = 1u;
+const MORPH_SLIVERS: u32 = 2u;
+
+// How grid point `sample` of a level-`lod` tile moves in `morph_cascade`: the same walk up and
+// the same factors without the positions (no per-level arrays), stopping at the first sliver,
+// the only answer the prepass's back-face split needs from every vertex of every final tile
+// (`tile_mid_morph`). Mirrored by `Cascade::moved` of `morph_cascade` in select.rs.
 fn morph_moved(sample: vec2<i32>, lod: u32) -> u32 {
     var moved = MORPH_STILL;
     var point = sample;

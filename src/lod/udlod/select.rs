@@ -933,7 +933,8 @@ pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod:
     (1.0 - (1.0 - scaled / parent_split) / p.morph_range).clamp(0.0, 1.0) * on
 }
 
-/// How a grid point moved in [`morph_cascade`] (`MORPH_*` in `shaders/include/udlod_morph.wgsl`).
+/// How a grid point moved in [`morph_cascade`] (`MORPH_*` and `morph_moved` in
+/// `shaders/include/udlod_morph.wgsl`, which the prepass's back-face split asks of every vertex).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Moved {
     /// Not at all.
@@ -954,6 +955,7 @@ pub struct Cascade {
     pub frac: [f32; 2],
     /// The factor at the point's first odd level (0 if it reached none).
     pub morph: f32,
+    /// How it moved (on the GPU its own walk, `morph_moved`).
     pub moved: Moved,
     /// Levels at which it moved (CPU only: tests count vertices morphing over several).
     pub levels: u32,
