@@ -16,7 +16,8 @@
 #   DATA=ci bash scripts/device/udlod_before_after.sh > $OUT/ba.txt 2>&1
 # `PART=bench` instead times each binary's `bench` (frames back to back, 2 in flight, 300
 # frames after 20 of warm-up) per tau on both data sets: the old evaluator's GPU times come
-# from frames minutes apart, when the GPU's clocks may have fallen, so they time no work.
+# from frames seconds apart, when the GPU's clocks may have fallen, so they do not time the
+# work alone.
 set -u
 . .device-vk/env.sh
 log() { echo "### $*"; }

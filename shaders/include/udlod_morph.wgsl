@@ -26,6 +26,12 @@ fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
     return clamp(1.0 - (1.0 - scaled / parent_split) / morph_range, 0.0, 1.0) * udlod.params.z;
 }
 
+// The walk's step at level `j` (`morph_cascade`, `morph_moved`): which of the point's
+// coordinates are odd there (all zero: the point does not move at `j`).
+fn odd_at(point: vec2<i32>, j: u32) -> vec2<i32> {
+    return vec2<i32>((vec2<u32>(point) >> vec2<u32>(j)) & vec2<u32>(1u));
+}
+
 // Where grid point `sample` of a level-`lod` tile ends up after the morph cascade (docs/udlod.md,
 // "The morph cascade"). Up: at every level `j` from `lod` on at which the point reached is
 // odd, it has the factor `f_j` (`morph_factor` there) and slides towards its lower even
@@ -51,7 +57,7 @@ fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
     var point = sample;
     var first = true;
     for (var j = lod; j < udlod.sizes.y; j++) {
-        let odd = vec2<i32>((vec2<u32>(point) >> vec2<u32>(j)) & vec2<u32>(1u));
+        let odd = odd_at(point, j);
         if all(odd == vec2<i32>(0)) {
             continue;
         }
@@ -93,7 +99,7 @@ fn morph_moved(sample: vec2<i32>, lod: u32) -> u32 {
     var moved = MORPH_STILL;
     var point = sample;
     for (var j = lod; j < udlod.sizes.y; j++) {
-        let odd = vec2<i32>((vec2<u32>(point) >> vec2<u32>(j)) & vec2<u32>(1u));
+        let odd = odd_at(point, j);
         if all(odd == vec2<i32>(0)) {
             continue;
         }
