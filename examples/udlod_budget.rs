@@ -3,6 +3,7 @@
 //! oracle's count. CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
 //!
 //!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
+//!     [--grid 4] [--morph-levels 0] [--field-density 2]
 
 use std::path::PathBuf;
 
@@ -18,11 +19,15 @@ fn main() -> anyhow::Result<()> {
     let mut frames = 6usize;
     let mut taus = vec![0.5, 1.0, 2.0, 4.0];
     let mut grid = None;
+    let mut morph_levels = None;
+    let mut field_density = None;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--config" => config = args.next().map(PathBuf::from),
             "--scenario" => scenario = args.next().map(PathBuf::from),
             "--grid" => grid = Some(args.next().unwrap().parse()?),
+            "--morph-levels" => morph_levels = Some(args.next().unwrap().parse()?),
+            "--field-density" => field_density = Some(args.next().unwrap().parse()?),
             "--frames" => frames = args.next().unwrap().parse()?,
             "--tau" => {
                 taus = args
@@ -48,9 +53,16 @@ fn main() -> anyhow::Result<()> {
     if let Some(g) = grid {
         settings.grid_size = g;
     }
+    if let Some(q) = morph_levels {
+        settings.morph_levels = q;
+    }
+    if let Some(d) = field_density {
+        settings.field_density = d;
+    }
+    settings.validate()?;
     let (w, h) = (p.config.render.width, p.config.render.height);
     let t0 = std::time::Instant::now();
-    let levels = Levels::new(&*data, settings.grid_size)?;
+    let levels = Levels::for_settings(&*data, &settings)?;
     let t1 = std::time::Instant::now();
     let oracle = Oracle::new(&data);
     println!(
@@ -82,7 +94,7 @@ fn main() -> anyhow::Result<()> {
         // Level 0's field is all ones and not stored.
         for l in 1..=levels.root_lod as usize {
             let screen = levels.level_error[l] * focal / tau;
-            let (nx, ny) = levels.tiles_per_side[l];
+            let (nx, ny) = levels.field_cells_per_side(l as u32);
             let off = field.corner_offsets[l] as usize;
             let m = &field.corners[off..off + ((nx + 1) * (ny + 1)) as usize];
             println!(
@@ -213,6 +225,74 @@ fn main() -> anyhow::Result<()> {
             }
             println!(
                 "  cf {name:48}: tiles {n:6} triangles {:9} ratio {:.2}",
+                n as u64 * g2,
+                (n as u64 * g2) as f64 / tris_o.max(1) as f64
+            );
+        }
+        for (name, ns, ratio) in [
+            ("node every cell, nest", 1u32, 0.0),
+            ("node every cell, nest, gentle 1.25", 1, 1.25),
+            ("node every 2 cells, nest", 2, 0.0),
+            ("node every 2 cells, nest, gentle 1.56", 2, 1.5625),
+            ("node every tile, nest", levels.grid_size, 0.0),
+        ] {
+            if ns > levels.grid_size {
+                continue;
+            }
+            let kk = select::worst_case_share(levels.grid_size);
+            let cf = cell_field(&levels, &data, kk * focal / tau, ns, ratio);
+            let mut n = 0usize;
+            for &k in &picks {
+                let cam = p.scenario.camera(k);
+                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                n += select_generic(&levels, &sp, |t| {
+                    let l = t.lod as usize;
+                    let g = levels.grid_size / ns;
+                    let (w1, h1) = cf[l].1;
+                    let mut mx = 0.0f64;
+                    for j in t.y * g..=((t.y + 1) * g).min(h1 - 1) {
+                        for i in t.x * g..=((t.x + 1) * g).min(w1 - 1) {
+                            mx = mx.max(cf[l].0[(j * w1 + i) as usize]);
+                        }
+                    }
+                    (select::tile_distance(&levels, &sp, t) as f64) < mx
+                })
+                .len();
+            }
+            println!(
+                "  cf {:48}: tiles {n:6} triangles {:9} ratio {:.2}",
+                name,
+                n as u64 * g2,
+                (n as u64 * g2) as f64 / tris_o.max(1) as f64
+            );
+        }
+        for (name, kk, boxd) in [
+            ("own need k=1, ref dist", 1.0, false),
+            (
+                "own need k=share, ref dist",
+                select::worst_case_share(levels.grid_size),
+                false,
+            ),
+            ("own need k=1, box dist", 1.0, true),
+        ] {
+            let mut n = 0usize;
+            for &k in &picks {
+                let cam = p.scenario.camera(k);
+                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                n += select_generic(&levels, &sp, |t| {
+                    let need = kk * levels.tile_error(t) as f64 * focal / tau;
+                    let d = if boxd {
+                        box_distance(&levels, &cam, t)
+                    } else {
+                        select::tile_distance(&levels, &sp, t) as f64
+                    };
+                    d < need
+                })
+                .len();
+            }
+            println!(
+                "  cf {:48}: tiles {n:6} triangles {:9} ratio {:.2}",
+                name,
                 n as u64 * g2,
                 (n as u64 * g2) as f64 / tris_o.max(1) as f64
             );
@@ -517,4 +597,85 @@ fn tile_exact_splits(
         }
     }
     false
+}
+
+/// Counterfactual split field with nodes every `ns` quads of each level (no reach, zone or
+/// cap; nesting and, with `ratio > 1`, a chamfer of `ratio` per node step): per level, node
+/// values in metres, each the largest need of the cells around it.
+fn cell_field(
+    levels: &Levels,
+    data: &vkterrain::dataset::Heightmap,
+    scale: f64,
+    ns: u32,
+    ratio: f64,
+) -> Vec<(Vec<f64>, (u32, u32))> {
+    let mut out: Vec<(Vec<f64>, (u32, u32))> = Vec::new();
+    for l in 0..=levels.root_lod {
+        let step = ns << l;
+        let ncx = (data.width - 1).div_ceil(step);
+        let ncy = (data.height - 1).div_ceil(step);
+        let (w1, h1) = (ncx + 1, ncy + 1);
+        let mut nodes = vec![0.0f64; (w1 * h1) as usize];
+        if l >= 1 {
+            let mut need = vec![0.0f64; (ncx * ncy) as usize];
+            for cy in 0..ncy {
+                for cx in 0..ncx {
+                    let mut e = 0.0f64;
+                    for r in cy * step..=((cy + 1) * step).min(data.height - 1) {
+                        for c in cx * step..=((cx + 1) * step).min(data.width - 1) {
+                            let lh = select::level_height(data, l, c, r).unwrap();
+                            e = e.max((lh - data.sample(c, r) as f64).abs());
+                        }
+                    }
+                    let mut v = e * scale;
+                    {
+                        // Nesting: no less than the level below anywhere in the cell.
+                        let (fine, (fw, fh)) = &out[l as usize - 1];
+                        for j in 2 * cy..=(2 * cy + 2).min(fh - 1) {
+                            for i in 2 * cx..=(2 * cx + 2).min(fw - 1) {
+                                v = v.max(fine[(j * fw + i) as usize]);
+                            }
+                        }
+                    }
+                    need[(cy * ncx + cx) as usize] = v;
+                }
+            }
+            for cy in 0..ncy {
+                for cx in 0..ncx {
+                    let v = need[(cy * ncx + cx) as usize];
+                    for (i, j) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let k = ((cy + j) * w1 + cx + i) as usize;
+                        nodes[k] = nodes[k].max(v);
+                    }
+                }
+            }
+            if ratio > 1.0 {
+                for _ in 0..2 {
+                    for k in 0..nodes.len() {
+                        let (x, y) = ((k as u32 % w1) as i64, (k as u32 / w1) as i64);
+                        for (ox, oy) in [
+                            (-1i64, 0i64),
+                            (1, 0),
+                            (0, -1),
+                            (0, 1),
+                            (-1, -1),
+                            (1, 1),
+                            (-1, 1),
+                            (1, -1),
+                        ] {
+                            let (sx, sy) = (x + ox, y + oy);
+                            if sx >= 0 && sy >= 0 && sx < w1 as i64 && sy < h1 as i64 {
+                                let n = nodes[(sy * w1 as i64 + sx) as usize] / ratio;
+                                if n > nodes[k] {
+                                    nodes[k] = n;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out.push((nodes, (w1, h1)));
+    }
+    out
 }

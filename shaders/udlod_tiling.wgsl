@@ -330,7 +330,7 @@ fn outside_data(t: Tile) -> bool {
 // Split on the smallest scaled distance over the tile: the field's minimum (its corners)
 // times the distance to the nearest point (mirrors `tile_splits` in select.rs).
 fn splits_by_distance(t: Tile) -> bool {
-    return t.lod > 0u && field_range(t.x, t.y, t.lod).x * tile_distance(t) < udlod.split[t.lod].x;
+    return t.lod > 0u && tile_field_min(t.x, t.y, t.lod) * tile_distance(t) < udlod.split[t.lod].x;
 }
 
 // Tile flags in `Tile.pad` of the temporary list: what `refine` will do with the tile, decided

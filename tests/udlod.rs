@@ -58,11 +58,22 @@ fn cascade(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// One level step and the morph cascade (the default), both checked by the structural tests.
-fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 2] {
+/// [`cascade`] with a split field of two nodes per tile side (`field_density = 2`:
+/// docs/udlod.md, "A finer split field").
+fn finer_field(grid_size: u32) -> UdlodSettings {
+    UdlodSettings {
+        field_density: 2,
+        ..cascade(grid_size)
+    }
+}
+
+/// One level step, the morph cascade (the default) and the cascade with the finer split
+/// field, each checked by the structural tests.
+fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 3] {
     [
         ("one level step", one_step(grid_size)),
         ("cascade", cascade(grid_size)),
+        ("finer field", finer_field(grid_size)),
     ]
 }
 
@@ -77,7 +88,7 @@ fn gpu_and_cpu_tiles(
     let mut out = Vec::new();
     {
         let mut r = Renderer::new(&gpu, data, lod.clone(), options).unwrap();
-        let levels = Levels::new(data, lod.grid_size).unwrap();
+        let levels = Levels::for_settings(data, &lod).unwrap();
         let mut sink = CollectSink::default();
         for cam in cameras {
             r.render(*cam, &mut sink).unwrap();
@@ -218,7 +229,7 @@ impl MorphComparison {
 /// with) at every vertex of every tile the GPU drew, against `select::morphed_vertex`.
 fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> MorphComparison {
     let gpu = common::gpu(false);
-    let levels = Levels::new(data, lod.grid_size).unwrap();
+    let levels = Levels::for_settings(data, lod).unwrap();
     let g = lod.grid_size;
     let mut out = MorphComparison {
         exact: gpu.info.device_type == ash::vk::PhysicalDeviceType::CPU
@@ -330,6 +341,15 @@ fn gpu_vertex_morph_equals_the_cpu_mirror() {
     for grid in grids() {
         morph_equals_the_cpu_mirror(&data, &cameras, grid);
     }
+    // The finer split field's bilinear cells (negative control by hand: cells as large as the
+    // tiles on the GPU, `span = quads << lod`, fails here).
+    let finer = compare_morph(&data, &cameras, &finer_field(4));
+    println!("grid 4, finer field: {finer:?}");
+    finer.assert_agrees(4);
+    assert!(
+        finer.mid_morph >= 2000 && finer.cascaded >= 100,
+        "{finer:?}"
+    );
 }
 
 fn morph_equals_the_cpu_mirror(data: &Heightmap, cameras: &[Camera], grid: u32) {
@@ -418,7 +438,7 @@ fn edges_coincide_after_morphing_between_tiles_of_any_levels() {
 
 fn edges_coincide_after_morphing_at(grid: u32, name: &str, lod: UdlodSettings) {
     let data = terrain(257, 30.0);
-    let levels = Levels::new(&data, lod.grid_size).unwrap();
+    let levels = Levels::for_settings(&data, &lod).unwrap();
     let mut checked = EdgeCount::default();
     // At tau 4 and 8 the ties between levels, not the pixel target, set more of the distances.
     for tau_px in [1.0, 4.0, 8.0] {
@@ -548,7 +568,7 @@ fn pure_rotation_keeps_the_tile_set_without_culling_at(grid: u32) {
         cull: false,
         ..settings(grid)
     };
-    let levels = Levels::new(&data, lod.grid_size).unwrap();
+    let levels = Levels::for_settings(&data, &lod).unwrap();
     for base in poses(&data, 20) {
         let sel = |c: &Camera| {
             let p = SelectionParams::new(&levels, &data, &lod, c, c.position, W, H);
@@ -576,7 +596,7 @@ fn culling_keeps_every_tile_a_brute_force_box_test_keeps() {
 fn culling_keeps_every_tile_a_brute_force_box_test_keeps_at(grid: u32) {
     let data = terrain(257, 30.0);
     let lod = settings(grid);
-    let levels = Levels::new(&data, lod.grid_size).unwrap();
+    let levels = Levels::for_settings(&data, &lod).unwrap();
     for cam in poses(&data, 60) {
         let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
         let mut no_cull = p.clone();
@@ -828,7 +848,7 @@ fn repeated_frames(
     lod: &UdlodSettings,
     frames: usize,
 ) -> Vec<(u64, bool)> {
-    let levels = Levels::new(data, lod.grid_size).unwrap();
+    let levels = Levels::for_settings(data, lod).unwrap();
     let p = SelectionParams::new(&levels, data, lod, cam, cam.position, W, H);
     let cpu: HashSet<Tile> = select::select_tiles(&levels, &p).into_iter().collect();
     let gpu = common::gpu(false);
@@ -968,7 +988,7 @@ fn tile_list_bound_is_far_below_max_tiles_on_a_large_terrain() {
         tau_px: 0.5,
         ..UdlodSettings::default()
     };
-    let levels = Levels::new(&data, lod.grid_size).unwrap();
+    let levels = Levels::for_settings(&data, &lod).unwrap();
     let (mut largest, mut reserved_max) = (0, 0);
     let mut worst_levels = String::new();
     for cam in poses(&data, 40) {
@@ -1037,7 +1057,7 @@ fn earth_selections(
 ) -> Vec<EarthSelections> {
     let gpu = common::gpu(false);
     // The LOD metric the renderer gives UDLOD on the earth (per axis on the 60 N grid).
-    let levels = Levels::new(data, lod.grid_size)
+    let levels = Levels::for_settings(data, lod)
         .unwrap()
         .on_lattice(data.axis_spacing, lattice);
     let mut out = Vec::new();
@@ -1194,7 +1214,7 @@ fn udlod_measures_each_axis_with_its_own_spacing_on_the_earth() {
         cull: false,
         ..settings(8)
     };
-    let single = Levels::new(&data, lod.grid_size).unwrap();
+    let single = Levels::for_settings(&data, &lod).unwrap();
     let axis = single.clone().on_lattice(data.axis_spacing, &lattice);
     let step = 1.0 / 1200.0;
     // East-west: the poleward row's samples (the lattice's last node row lies at or past it).
@@ -1277,7 +1297,7 @@ fn udlod_distances_are_lower_bounds_from_beyond_the_poleward_edge() {
     let (data, lattice) = common::poses::geographic_60n(257);
     let cams = common::poses::earth_poses(&data, &lattice, 60);
     let lod = settings(8);
-    let levels = Levels::new(&data, lod.grid_size)
+    let levels = Levels::for_settings(&data, &lod)
         .unwrap()
         .on_lattice(data.axis_spacing, &lattice);
     let (mut worst, mut worst_unlowered, mut lowered_poses) = (0.0f64, 0.0f64, 0);
@@ -1348,4 +1368,44 @@ fn longest_ratio(metric: [f64; 2], lattice: &vkterrain::geo::Lattice, size: u32)
         }
     }
     worst
+}
+
+/// The finer split field reads the statistics of small tiles and tiles with large ones: the
+/// large tiles' statistics coarsened from the small ones are bit for bit those computed
+/// directly, also where the data's edge cuts tiles (129 and 257 samples), and the levels built
+/// with two field nodes per tile side hold the tiles' statistics of one node per corner.
+#[test]
+fn coarsened_tile_statistics_equal_computed_ones() {
+    use vkterrain::dataset::stats::TileStats;
+    for size in [130, 257] {
+        let data = terrain(size, 30.0);
+        for (fine, factor) in [(2, 2), (2, 4), (4, 4)] {
+            let small = TileStats::compute_serial(&data, fine).unwrap();
+            let coarse = small.coarsened(factor).unwrap();
+            let direct = TileStats::compute_serial(&data, fine * factor).unwrap();
+            assert_eq!(coarse, direct, "size {size}: grid {fine} x {factor}");
+        }
+        let lod = finer_field(4);
+        let levels = Levels::for_settings(&data, &lod).unwrap();
+        let plain = Levels::new(&data, 4).unwrap();
+        assert_eq!(levels.min_max, plain.min_max);
+        assert_eq!(levels.tile_error, plain.tile_error);
+        assert_eq!(levels.level_error, plain.level_error);
+        // Every tile's error is its four cells' largest.
+        for lod in 1..=levels.root_lod {
+            let (nx, ny) = levels.tiles_per_side[lod as usize];
+            for (x, y) in (0..ny).flat_map(|y| (0..nx).map(move |x| (x, y))) {
+                let cells = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                    .map(|(i, j)| levels.field_cell_error(lod, 2 * x + i, 2 * y + j));
+                let t = levels.tile_error(Tile { x, y, lod });
+                assert_eq!(cells.into_iter().fold(0.0, f32::max), t, "size {size}");
+            }
+        }
+    }
+    assert!(
+        TileStats::compute_serial(&terrain(65, 30.0), 2)
+            .unwrap()
+            .coarsened(3)
+            .is_err()
+    );
 }

@@ -353,7 +353,7 @@ fn effective_step(data: &Heightmap, start: DVec3, step: DVec3, frames: usize) ->
 /// every later `phi` is 0 and this is the bound above. Without morphing a level switch moves
 /// the surface by a level's whole error at once.
 fn pop_bound(data: &Heightmap, settings: &UdlodSettings, step: f64) -> f64 {
-    let levels = Levels::new(data, settings.grid_size).unwrap();
+    let levels = Levels::for_settings(data, settings).unwrap();
     let focal = Camera::default().focal_px(H);
     let field = SplitField::new(&levels, FieldKey::new(settings, focal));
     let mut slope = 0.0f64;

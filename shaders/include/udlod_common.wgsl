@@ -9,7 +9,7 @@ struct Udlod {
     // the split distance; the morph cascade sets it: `SplitField::zone`).
     split: array<vec4<f32>, UDLOD_MAX_LEVELS>,
     // x: offset of the level's min/max entries, y/z: tiles per side of the level, w: offset
-    // of the level's split-field corners ((y + 1) x (z + 1) values).
+    // of the level's split-field nodes ((y d + 1) x (z d + 1) values, d = counts.z).
     levels: array<vec4<u32>, UDLOD_MAX_LEVELS>,
     // x: quads per tile side, y: root level, z: final list capacity, w: temporary list capacity.
     sizes: vec4<u32>,
@@ -18,7 +18,8 @@ struct Udlod {
     // The LOD viewer (distances for levels and morphs are measured from it): x/y relative to
     // the camera (m), z: reference height (terrain under the LOD viewer) minus its height.
     viewer: vec4<f32>,
-    // x: indices per tile (6 * quads^2), y: workgroups per row of a `refine` dispatch.
+    // x: indices per tile (6 * quads^2), y: workgroups per row of a `refine` dispatch,
+    // z: split-field nodes per tile side (`field_density`: 1 = the tiles' corners).
     counts: vec4<u32>,
     // xy: the LOD metric's stretch of the grid frame per axis (metres per sample along x and
     // y, each a lower bound on the drawn surface, over the grid frame's spacing): exactly
@@ -51,27 +52,41 @@ fn viewer_xy(sample: vec2<i32>) -> vec2<f32> {
 
 fn field_corner(lod: u32, i: u32, j: u32) -> f32 {
     let level = udlod.levels[lod];
-    return split_field[level.w + j * (level.y + 1u) + i];
+    return split_field[level.w + j * (level.y * udlod.counts.z + 1u) + i];
 }
 
-// (min, max) of the split field over a tile of level `lod` at (x, y): its corners.
-fn field_range(x: u32, y: u32, lod: u32) -> vec2<f32> {
-    let c00 = field_corner(lod, x, y);
-    let c10 = field_corner(lod, x + 1u, y);
-    let c01 = field_corner(lod, x, y + 1u);
-    let c11 = field_corner(lod, x + 1u, y + 1u);
+// (min, max) of the split field over field cell (i, j) of level `lod`: its corners.
+fn cell_field_range(i: u32, j: u32, lod: u32) -> vec2<f32> {
+    let c00 = field_corner(lod, i, j);
+    let c10 = field_corner(lod, i + 1u, j);
+    let c01 = field_corner(lod, i, j + 1u);
+    let c11 = field_corner(lod, i + 1u, j + 1u);
     return vec2<f32>(min(min(c00, c10), min(c01, c11)), max(max(c00, c10), max(c01, c11)));
 }
 
-// The split field of level `lod` at an integer sample position: bilinear in the level's tile
+// The least split field over a tile of level `lod` at (x, y): its (d + 1)^2 nodes (mirrors
+// `SplitField::tile_range`).
+fn tile_field_min(x: u32, y: u32, lod: u32) -> f32 {
+    let d = udlod.counts.z;
+    var m = field_corner(lod, x * d, y * d);
+    for (var j = 0u; j <= d; j++) {
+        for (var i = 0u; i <= d; i++) {
+            m = min(m, field_corner(lod, x * d + i, y * d + j));
+        }
+    }
+    return m;
+}
+
+// The split field of level `lod` at an integer sample position: bilinear in the level's field
 // cell, clamped to the cell's corner range; 1 past the root (mirrors `SplitField::at`).
 fn field_at(sample: vec2<i32>, lod: u32) -> f32 {
     if lod > udlod.sizes.y {
         return 1.0;
     }
-    let span = i32(udlod.sizes.x << lod);
+    let d = udlod.counts.z;
+    let span = i32((udlod.sizes.x / d) << lod);
     let level = udlod.levels[lod];
-    let cell = clamp(sample / span, vec2<i32>(0), vec2<i32>(i32(level.y) - 1, i32(level.z) - 1));
+    let cell = clamp(sample / span, vec2<i32>(0), vec2<i32>(i32(level.y * d) - 1, i32(level.z * d) - 1));
     let f = vec2<f32>(sample - cell * span) / f32(span);
     let c = vec2<u32>(cell);
     let c00 = field_corner(lod, c.x, c.y);
@@ -81,6 +96,6 @@ fn field_at(sample: vec2<i32>, lod: u32) -> f32 {
     let south = c00 * (1.0 - f.x) + c10 * f.x;
     let north = c01 * (1.0 - f.x) + c11 * f.x;
     let v = south * (1.0 - f.y) + north * f.y;
-    let range = field_range(c.x, c.y, lod);
+    let range = cell_field_range(c.x, c.y, lod);
     return clamp(v, range.x, range.y);
 }

@@ -532,6 +532,60 @@ impl TileStats {
         self
     }
 
+    /// The statistics of tiles `factor` (a power of two) times larger, bit for bit those
+    /// [`TileStats::compute`] gives at `grid_size x factor`: a tile's samples are the union of
+    /// its `factor x factor` smaller tiles' (clipped at the data's edge), so its min, max and
+    /// error are theirs, and f32 rounding keeps the order of the exact errors. UDLOD's finer
+    /// split field reads the small tiles' errors and tiles with the large ones
+    /// (`Levels::with_field_density`). A level without tiles (the finest, dropped) stays so.
+    pub fn coarsened(&self, factor: u32) -> Result<Self> {
+        if !factor.is_power_of_two() {
+            return Err(Error::invalid(
+                "tile statistics",
+                format!("coarsening factor {factor} is not a power of two"),
+            ));
+        }
+        let grid = self.grid_size.checked_mul(factor).ok_or_else(|| {
+            Error::invalid(
+                "tile statistics",
+                format!("grid size {} x {factor}", self.grid_size),
+            )
+        })?;
+        let shape = Shape::new(self.width, self.height, grid)?;
+        let mut levels = Vec::with_capacity(shape.levels.len());
+        for (lod, &(nx, ny, _)) in shape.levels.iter().enumerate() {
+            let fine = &self.levels[lod];
+            let held = fine.min_max.len() == (fine.tiles.0 * fine.tiles.1) as usize;
+            let mut out = LevelTiles {
+                tiles: (nx, ny),
+                min_max: Vec::new(),
+                error: Vec::new(),
+                max_error: fine.max_error,
+            };
+            if held && !fine.min_max.is_empty() {
+                let n = (nx * ny) as usize;
+                out.min_max = vec![[f32::INFINITY, f32::NEG_INFINITY]; n];
+                out.error = vec![0.0; n];
+                for fy in 0..fine.tiles.1 {
+                    for fx in 0..fine.tiles.0 {
+                        let f = (fy * fine.tiles.0 + fx) as usize;
+                        let c = ((fy / factor) * nx + fx / factor) as usize;
+                        let [lo, hi] = fine.min_max[f];
+                        out.min_max[c] = [out.min_max[c][0].min(lo), out.min_max[c][1].max(hi)];
+                        out.error[c] = out.error[c].max(fine.error[f]);
+                    }
+                }
+            }
+            levels.push(out);
+        }
+        Ok(TileStats {
+            grid_size: grid,
+            width: self.width,
+            height: self.height,
+            levels,
+        })
+    }
+
     /// Whether the finest level's tiles are held ([`TileStats::without_finest`]).
     pub fn has_finest(&self) -> bool {
         let l = &self.levels[0];

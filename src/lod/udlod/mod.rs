@@ -264,15 +264,19 @@ impl Udlod {
     /// earth with `lod_metric = "axis"` the per-axis metric; a one-line error for a tree deeper
     /// than the shaders hold.
     fn build_levels(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Levels> {
+        // With a finer split field the statistics of its cells (tiles of `grid_size /
+        // field_density` quads), from which the tiles' own follow bit for bit.
+        let density = settings.field_density;
+        let cell_quads = settings.grid_size / density;
         let (stats, spacing) = match ctx.data {
             Terrain::Grid(h) => (
-                TileStats::compute(&**h, settings.grid_size, &|_| {})?.without_finest(),
+                TileStats::compute(&**h, cell_quads, &|_| {})?.without_finest(),
                 h.spacing,
             ),
-            Terrain::Pyramid(p) => (p.tile_stats(settings.grid_size, Finest::Skip)?, p.spacing()),
+            Terrain::Pyramid(p) => (p.tile_stats(cell_quads, Finest::Skip)?, p.spacing()),
         };
         // Without level 0's tiles: the tiling shader bounds them by their parents.
-        let mut levels = Levels::from_stats(stats, spacing);
+        let mut levels = Levels::with_field_density(stats, density, spacing)?;
         debug_assert!(!levels.finest_held || levels.root_lod == 0);
         if let (Some(lattice), LodMetric::Axis) = (ctx.lattice, settings.lod_metric) {
             levels = levels.on_lattice(ctx.data.axis_spacing(), lattice);
@@ -308,11 +312,9 @@ impl Udlod {
         min_max.write(mm_bytes)?;
         // Corner values per level from level 1: (nx + 1) x (ny + 1) floats (level 0's are
         // ones and not stored; a one-level tree has none, and a buffer is never empty).
-        let field_bytes: u64 = levels
-            .tiles_per_side
-            .iter()
-            .skip(1)
-            .map(|&(nx, ny)| (nx as u64 + 1) * (ny as u64 + 1) * 4)
+        let field_bytes: u64 = (1..levels.levels())
+            .map(|lod| levels.field_cells_per_side(lod))
+            .map(|(nx, ny)| (nx as u64 + 1) * (ny as u64 + 1) * 4)
             .sum::<u64>()
             .max(4);
         let grid = super::brute::grid_indices(settings.grid_size);
@@ -575,7 +577,12 @@ impl LodMethod for Udlod {
             if p.morph { 1.0 } else { 0.0 },
             if p.cull { 1.0 } else { 0.0 },
         ];
-        u.counts = [self.index_count, self.settings.dispatch_row, 0, 0];
+        u.counts = [
+            self.index_count,
+            self.settings.dispatch_row,
+            self.levels.field_density,
+            0,
+        ];
         u.metric = [p.stretch[0], p.stretch[1], 0.0, 0.0];
         let s = &mut self.slots[slot.index()];
         if s.field_key != Some(p.field.key) {

@@ -63,6 +63,16 @@ pub struct Levels {
     /// Whether level 0's tiles are held (chunked LOD's levels) or stand in for by their
     /// parents (UDLOD's, when there is a coarser level: [`Levels::stats_tile`]).
     pub finest_held: bool,
+    /// Split-field nodes per tile side (`UdlodSettings::field_density`): 1 puts the field's
+    /// nodes at the tiles' corners; `d` puts them every `grid_size / d` quads, whose cells
+    /// take the errors of the smaller tiles ([`Levels::field_cell_error`]).
+    pub field_density: u32,
+    /// With `field_density > 1`: the geometric error of every field cell (a tile of
+    /// `grid_size / field_density` quads), per level from level 1 at `field_offsets`, row-major
+    /// over `field_tiles_per_side`. Empty with one node per tile corner (the tiles' own).
+    pub field_error: Vec<f32>,
+    pub field_offsets: Vec<u32>,
+    pub field_tiles_per_side: Vec<(u32, u32)>,
 }
 
 impl Levels {
@@ -74,6 +84,15 @@ impl Levels {
     pub fn new<D: Level0 + ?Sized>(data: &D, grid_size: u32) -> Result<Self> {
         let stats = TileStats::compute_serial(data, grid_size)?;
         Ok(Self::from_stats(stats, data.spacing()))
+    }
+
+    /// The levels `settings` draw with: tiles of `grid_size` quads and a split field of
+    /// `field_density` nodes per tile side ([`Levels::with_field_density`]), computed on this
+    /// thread.
+    pub fn for_settings<D: Level0 + ?Sized>(data: &D, settings: &UdlodSettings) -> Result<Self> {
+        let d = settings.field_density;
+        let stats = TileStats::compute_serial(data, settings.grid_size / d.max(1))?;
+        Self::with_field_density(stats.without_finest(), d, data.spacing())
     }
 
     /// [`Levels::new`] holding level 0's tiles too (chunked LOD culls and bounds its level-0
@@ -123,7 +142,58 @@ impl Levels {
             tile_error,
             level_error,
             finest_held,
+            field_density: 1,
+            field_error: Vec::new(),
+            field_offsets: Vec::new(),
+            field_tiles_per_side: Vec::new(),
         }
+    }
+
+    /// The levels of tiles `density` times larger than `fine`'s (without their finest level's
+    /// tiles, [`TileStats::without_finest`]), with a split field of `density` nodes per tile
+    /// side whose cells take `fine`'s errors (`docs/udlod.md`, "A finer split field").
+    pub fn with_field_density(fine: TileStats, density: u32, spacing: f64) -> Result<Self> {
+        let mut levels = Self::from_stats(fine.coarsened(density)?.without_finest(), spacing);
+        if density == 1 {
+            return Ok(levels);
+        }
+        levels.field_density = density;
+        for (lod, level) in fine.levels.into_iter().enumerate() {
+            if lod > levels.root_lod as usize {
+                break;
+            }
+            levels.field_offsets.push(levels.field_error.len() as u32);
+            levels.field_tiles_per_side.push(level.tiles);
+            if lod > 0 {
+                levels.field_error.extend(level.error);
+            }
+        }
+        Ok(levels)
+    }
+
+    /// Quads per split-field cell side (`grid_size / field_density`).
+    pub fn field_cell_quads(&self) -> u32 {
+        self.grid_size / self.field_density
+    }
+
+    /// Split-field cells per side of level `lod`: `field_density` per tile (cells past the
+    /// data's edge have no error).
+    pub fn field_cells_per_side(&self, lod: u32) -> (u32, u32) {
+        let (nx, ny) = self.tiles_per_side[lod as usize];
+        (nx * self.field_density, ny * self.field_density)
+    }
+
+    /// The geometric error of split-field cell `(x, y)` of level `lod` >= 1: the tile's own
+    /// with one node per tile corner, else the small tile's (0 past the data's edge).
+    pub fn field_cell_error(&self, lod: u32, x: u32, y: u32) -> f32 {
+        if self.field_density == 1 {
+            return self.tile_error(Tile { x, y, lod });
+        }
+        let (nx, ny) = self.field_tiles_per_side[lod as usize];
+        if x >= nx || y >= ny {
+            return 0.0;
+        }
+        self.field_error[(self.field_offsets[lod as usize] + y * nx + x) as usize]
     }
 
     pub fn levels(&self) -> u32 {
@@ -307,12 +377,13 @@ const CHAIN_MARGIN: f64 = 1e-5;
 /// and "The morph cascade").
 ///
 /// Stored as the GPU reads it: per level a split distance `D[l]` (the level's largest) and a
-/// field `m_l >= 1` at the corners of the level's tiles, interpolated bilinearly; a point's
+/// field `m_l >= 1` at the corners of the level's tiles (with `field_density` `d > 1` at the
+/// corners of its field cells, `d` per tile side), interpolated bilinearly; a point's
 /// split distance is `s_l(p) = D[l] / m_l(p)`. A tile splits when its nearest point (at the
 /// reference height) is nearer than the largest `s` of its corners (`m_min * d < D`);
 /// grid points of level `l - 1` morph over the last `morph_range` of `s_l(p)`. With `s_Q` the
 /// smallest and `S_Q` the largest corner value of tile `Q`, for every tile `Q` of level `l`
-/// (`tile_requirement`):
+/// (`cell_requirement`, per field cell; with one node per tile corner the cells are the tiles):
 /// 1. pixel target: `s_Q >= k e_Q f / tau` (`e_Q`: the tile's own error, `k`:
 ///    [`worst_case_share`] of the grid size), so wherever `Q`'s geometry is drawn, unmorphed
 ///    or blended into its children's morph zone, it is at least that far away (with the morph
@@ -362,26 +433,25 @@ impl SplitField {
         let mut corners = Vec::new();
         let mut corner_offsets = Vec::new();
         let zone = zone_widths(levels, &key);
-        // Per level below, each tile's split distance as the GPU evaluates it (the largest
-        // of its corners' D / m).
-        let mut tile_splits: Vec<Vec<f64>> = Vec::new();
+        // Per level below, each field cell's split distance as the GPU evaluates it (the
+        // largest of its corners' D / m; with one node per tile corner the tiles').
+        let mut cell_splits: Vec<Vec<f64>> = Vec::new();
         for lod in 0..=levels.root_lod {
-            let (nx, ny) = levels.tiles_per_side[lod as usize];
+            let (nx, ny) = levels.field_cells_per_side(lod);
             let cw = nx as usize + 1;
             corner_offsets.push(corners.len() as u32);
             if lod == 0 {
                 // Level 0 never splits: its field is 1 everywhere and not stored.
                 split[0] = 0.0;
-                tile_splits.push(vec![0.0; (nx * ny) as usize]);
+                cell_splits.push(vec![0.0; (nx * ny) as usize]);
                 continue;
             }
             let mut s = vec![0.0f64; cw * (ny as usize + 1)];
-            for ty in 0..ny {
-                for tx in 0..nx {
-                    let t = Tile { x: tx, y: ty, lod };
-                    let need = tile_requirement(levels, &key, &zone, t, &tile_splits);
+            for cy in 0..ny {
+                for cx in 0..nx {
+                    let need = cell_requirement(levels, &key, &zone, [cx, cy, lod], &cell_splits);
                     for (i, j) in QUAD {
-                        let k = (ty + j) as usize * cw + (tx + i) as usize;
+                        let k = (cy + j) as usize * cw + (cx + i) as usize;
                         s[k] = s[k].max(need);
                     }
                 }
@@ -399,15 +469,15 @@ impl SplitField {
                 corners.push(m);
                 at_corners.push(largest as f64 / m as f64);
             }
-            let tile_split = |tx: u32, ty: u32| {
+            let cell_split = |cx: u32, cy: u32| {
                 QUAD.iter()
-                    .map(|&(i, j)| at_corners[(ty + j) as usize * cw + (tx + i) as usize])
+                    .map(|&(i, j)| at_corners[(cy + j) as usize * cw + (cx + i) as usize])
                     .fold(0.0, f64::max)
             };
-            tile_splits.push(
+            cell_splits.push(
                 (0..ny)
-                    .flat_map(|ty| (0..nx).map(move |tx| (tx, ty)))
-                    .map(|(tx, ty)| tile_split(tx, ty))
+                    .flat_map(|cy| (0..nx).map(move |cx| (cx, cy)))
+                    .map(|(cx, cy)| cell_split(cx, cy))
                     .collect(),
             );
         }
@@ -450,17 +520,32 @@ impl SplitField {
         if lod == 0 {
             return 1.0;
         }
-        let (nx, _) = levels.tiles_per_side[lod as usize];
+        let (nx, _) = levels.field_cells_per_side(lod);
         self.corners[(self.corner_offsets[lod as usize] + j * (nx + 1) + i) as usize]
     }
 
-    /// (min, max) of the field over a tile: its corners (bilinear interpolation).
-    pub fn tile_range(&self, levels: &Levels, t: Tile) -> [f32; 2] {
-        let c = QUAD.map(|(i, j)| self.corner(levels, t.lod, t.x + i, t.y + j));
+    /// (min, max) of the field over field cell `(i, j)` of level `lod`: its corners (bilinear
+    /// interpolation).
+    fn cell_range(&self, levels: &Levels, lod: u32, i: u32, j: u32) -> [f32; 2] {
+        let c = QUAD.map(|(a, b)| self.corner(levels, lod, i + a, j + b));
         [
             c[0].min(c[1]).min(c[2].min(c[3])),
             c[0].max(c[1]).max(c[2].max(c[3])),
         ]
+    }
+
+    /// (min, max) of the field over a tile: its `(field_density + 1)^2` nodes (mirrors
+    /// `tile_field_min` in `udlod_common.wgsl`).
+    pub fn tile_range(&self, levels: &Levels, t: Tile) -> [f32; 2] {
+        let d = levels.field_density;
+        let mut range = [f32::INFINITY, f32::NEG_INFINITY];
+        for j in 0..=d {
+            for i in 0..=d {
+                let c = self.corner(levels, t.lod, t.x * d + i, t.y * d + j);
+                range = [range[0].min(c), range[1].max(c)];
+            }
+        }
+        range
     }
 
     /// A tile's split distance: the largest of its corners' (`D / m_min`).
@@ -475,28 +560,25 @@ impl SplitField {
         if lod > levels.root_lod {
             return 1.0;
         }
-        let span = (levels.grid_size << lod) as i32;
-        let (nx, ny) = levels.tiles_per_side[lod as usize];
+        let span = (levels.field_cell_quads() << lod) as i32;
+        let (nx, ny) = levels.field_cells_per_side(lod);
         let cx = (sample[0] / span).clamp(0, nx as i32 - 1);
         let cy = (sample[1] / span).clamp(0, ny as i32 - 1);
         let fx = (sample[0] - cx * span) as f32 / span as f32;
         let fy = (sample[1] - cy * span) as f32 / span as f32;
-        let t = Tile {
-            x: cx as u32,
-            y: cy as u32,
-            lod,
-        };
-        let c = QUAD.map(|(i, j)| self.corner(levels, lod, t.x + i, t.y + j));
+        let (i, j) = (cx as u32, cy as u32);
+        let c = QUAD.map(|(a, b)| self.corner(levels, lod, i + a, j + b));
         let south = c[0] * (1.0 - fx) + c[1] * fx;
         let north = c[2] * (1.0 - fx) + c[3] * fx;
         let v = south * (1.0 - fy) + north * fy;
-        let [lo, hi] = self.tile_range(levels, t);
+        let [lo, hi] = self.cell_range(levels, lod, i, j);
         v.clamp(lo, hi)
     }
 }
 
-/// The smallest split distance tile `t` (level >= 1) allows at its corners (`tile_splits`:
-/// per level below, each tile's split distance as the GPU evaluates it):
+/// The smallest split distance field cell `[x, y, level]` (level >= 1; the tile with one
+/// node per tile corner) allows at its corners, in the terms below for tile `t` (`cell_splits`:
+/// per level below, each field cell's split distance as the GPU evaluates it, the largest of its corners):
 /// - its own error at the pixel target;
 /// - nesting: no less than any child's, so a point's split distance never falls from one level
 ///   to the next and an unsplit tile's neighbours are fully morphed onto it through every level
@@ -508,24 +590,28 @@ impl SplitField {
 ///   `a + q - 1` only, which keeps them inside the tile (its culling box stays true), and
 ///   neighbours differ by at most `q` levels. With `q = 1` this is the CDLOD-style chain
 ///   UDLOD had before the cascade (`(1 - r) s_Q >= S_P + diagonal(l - 1)` over the children).
-fn tile_requirement(
+fn cell_requirement(
     levels: &Levels,
     key: &FieldKey,
     zone: &[f32],
-    t: Tile,
-    tile_splits: &[Vec<f64>],
+    [cx, cy, lod]: [u32; 3],
+    cell_splits: &[Vec<f64>],
 ) -> f64 {
-    let screen = worst_case_share(levels.grid_size) * levels.tile_error(t) as f64 * key.focal_px
+    let screen = worst_case_share(levels.grid_size)
+        * levels.field_cell_error(lod, cx, cy) as f64
+        * key.focal_px
         / key.tau_px;
     // This tile's geometry shows, blended, from the start of its morph zone on: no nearer than
     // one level step lets it (`(1 - r)` of the pixel term), also where the zone is `W` wide.
-    let screen = screen.max((1.0 - key.morph_range) * screen + zone[t.lod as usize] as f64);
-    let nesting = largest_below(levels, t, t.lod - 1, tile_splits);
-    let reach = match t.lod.checked_sub(key.morph_levels) {
-        Some(lod) if lod >= 1 => {
-            // Where the zone is `max(W, r s)`: `s - max(W, r s) >= beyond`.
-            let beyond = largest_below(levels, t, lod, tile_splits) + levels.tile_diagonal(lod);
-            (beyond / (1.0 - key.morph_range)).max(beyond + zone[t.lod as usize] as f64)
+    let screen = screen.max((1.0 - key.morph_range) * screen + zone[lod as usize] as f64);
+    let nesting = largest_below(levels, [cx, cy, lod], lod - 1, cell_splits);
+    let reach = match lod.checked_sub(key.morph_levels) {
+        Some(below) if below >= 1 => {
+            // Where the zone is `max(W, r s)`: `s - max(W, r s) >= beyond`. The tiles of
+            // level `lod - q` under a field cell are its cells of that level, whole.
+            let beyond = largest_below(levels, [cx, cy, lod], below, cell_splits)
+                + levels.tile_diagonal(below);
+            (beyond / (1.0 - key.morph_range)).max(beyond + zone[lod as usize] as f64)
         }
         _ => 0.0,
     };
@@ -567,7 +653,10 @@ fn zone_widths(levels: &Levels, key: &FieldKey) -> Vec<f32> {
 /// at most `0.25 + 1 / (2 grid_size r)` (0.875 at grid 4) per step, under the full slide.
 /// Applied only with `morph_levels > 1`, so one level step keeps the selection it had.
 fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f64]) {
-    let (nx, ny) = levels.tiles_per_side[lod as usize];
+    let (nx, ny) = levels.field_cells_per_side(lod);
+    // The same growth per grid step wherever the nodes are: `d` nodes per tile side share
+    // the tile's growth.
+    let ratio = 1.0 + (FIELD_STEP_RATIO - 1.0) / levels.field_density as f64;
     let (w, h) = (nx as usize + 1, ny as usize + 1);
     let pass = |s: &mut [f64], order: &mut dyn Iterator<Item = usize>, back: bool| {
         for k in order {
@@ -577,7 +666,7 @@ fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f64]) {
                 let (sx, sy) = (x + ox, y + oy);
                 let visited_row = oy != 0 || (if back { ox > 0 } else { ox < 0 });
                 if visited_row && sx >= 0 && sy >= 0 && (sx as usize) < w && (sy as usize) < h {
-                    let n = s[sy as usize * w + sx as usize] / FIELD_STEP_RATIO;
+                    let n = s[sy as usize * w + sx as usize] / ratio;
                     if n > s[k] {
                         s[k] = n;
                     }
@@ -596,13 +685,19 @@ pub fn cascade_levels(grid_size: u32) -> u32 {
     grid_size.trailing_zeros().max(1)
 }
 
-/// The largest split distance of the tiles of level `lod` (<= `t.lod`) under tile `t`.
-fn largest_below(levels: &Levels, t: Tile, lod: u32, tile_splits: &[Vec<f64>]) -> f64 {
-    let k = t.lod - lod;
-    let (nx, ny) = levels.tiles_per_side[lod as usize];
-    let xs = (t.x << k)..((t.x + 1) << k).min(nx);
-    let ys = (t.y << k)..((t.y + 1) << k).min(ny);
-    let row = |y: u32| &tile_splits[lod as usize][(y * nx) as usize..][..nx as usize];
+/// The largest split distance of the field cells of level `lod` (<= `c`'s) under field cell
+/// `c` (`[x, y, level]`).
+fn largest_below(
+    levels: &Levels,
+    [cx, cy, cl]: [u32; 3],
+    lod: u32,
+    cell_splits: &[Vec<f64>],
+) -> f64 {
+    let k = cl - lod;
+    let (nx, ny) = levels.field_cells_per_side(lod);
+    let xs = (cx << k)..((cx + 1) << k).min(nx);
+    let ys = (cy << k)..((cy + 1) << k).min(ny);
+    let row = |y: u32| &cell_splits[lod as usize][(y * nx) as usize..][..nx as usize];
     ys.flat_map(|y| xs.clone().map(move |x| row(y)[x as usize]))
         .fold(0.0, f64::max)
 }

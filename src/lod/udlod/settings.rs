@@ -20,6 +20,13 @@ pub struct UdlodSettings {
     /// crack-free chain set the distances; 1 one level step, the CDLOD-style chain, where
     /// neighbours differ by at most one level.
     pub morph_levels: u32,
+    /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 1 at the
+    /// tiles' corners; 2 also at their edges' midpoints and centres, each cell taking the error
+    /// of its quarter of the tile, so a rough tile raises its neighbours' split distances over
+    /// half a tile instead of a whole one (0-31 % fewer triangles at grid 4; not yet the
+    /// default: "Open issues" there). A power of two that leaves at least 2 quads per cell
+    /// (`grid_size / field_density >= 2`).
+    pub field_density: u32,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
     pub max_tiles: u32,
@@ -95,6 +102,7 @@ impl Default for UdlodSettings {
             // 640x360, -0.6 to -15 % at 1080p on the H200 (docs/udlod.md, "The morph
             // cascade").
             morph_levels: 0,
+            field_density: 1,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
             max_tiles: 524_288,
@@ -127,6 +135,11 @@ impl UdlodSettings {
             key: "grid_size",
             help: "quads per tile side",
             apply: |s, v| s.grid_size = v as u32,
+        },
+        Sweep {
+            key: "field_density",
+            help: "split-field nodes per tile side (1, 2, ...)",
+            apply: |s, v| s.field_density = v as u32,
         },
         Sweep {
             key: "max_tiles",
@@ -179,6 +192,13 @@ impl UdlodSettings {
             return bad(format!(
                 "morph_levels {} must be 0 (all) or within 1..={most} at grid_size {} (more would move vertices out of their tile)",
                 self.morph_levels, self.grid_size
+            ));
+        }
+        let d = self.field_density;
+        if !d.is_power_of_two() || self.grid_size % d != 0 || self.grid_size / d < 2 {
+            return bad(format!(
+                "field_density {d} must be a power of two with at least 2 quads per cell (grid_size {} / field_density >= 2)",
+                self.grid_size
             ));
         }
         if !(16..=1 << 22).contains(&self.max_tiles) {
