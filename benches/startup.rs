@@ -1,6 +1,6 @@
 //! UDLOD start-up on tile pyramids (a benchmark, not a test): the tile statistics `Levels`
-//! needs, (a) read from the data set (`stats-g{GRID}.bin`, `GRID` UDLOD's default grid size,
-//! stored by `vkterrain preprocess`: what start-up does now), (b) computed from level 0 through the bounded node reader on one
+//! needs, (a) read from the data set (`stats-g{GRID}.bin`, `GRID` the tile size whose statistics
+//! UDLOD's default reads, stored by `vkterrain preprocess`: what start-up does now), (b) computed from level 0 through the bounded node reader on one
 //! thread (what start-up did before), (c) computed from level 0's file in parallel (a grid size
 //! that was not stored). `cargo bench --bench startup`.
 //!
@@ -19,8 +19,9 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// UDLOD's default tile size (stored by `vkterrain preprocess` by default).
-const GRID: u32 = 8;
+/// The tile size whose statistics UDLOD's default reads (stored by `vkterrain preprocess` by
+/// default: grid-4 tiles with two split-field nodes per side read 2-quad cells').
+const GRID: u32 = vkterrain::dataset::preprocess::DEFAULT_STATS_GRID_SIZES[0];
 
 fn main() {
     let sets = std::env::var("VKT_STARTUP_DATASETS")

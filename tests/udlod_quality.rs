@@ -453,8 +453,14 @@ fn popping_at(grid: u32, morph_levels: u32, field_max: f64) -> (f64, f64, f64) {
     let start = DVec3::new(0.1 * ex, 0.15 * ey, 400.0);
     let step = DVec3::new(0.6 * ex, 0.5 * ey, 0.0).normalize() * 2.0;
     let frames = 160;
+    // One level step (the ablation before the cascade) with the field at the tiles' corners,
+    // as it was measured; with it and two nodes per tile side, the default's density, the
+    // largest switch without morphing at grid 8 is only 0.475 px on this flight, too weak a
+    // control against 1.5 x its 0.475 px bound. The cascade takes the default's density.
+    let field_density = if morph_levels == 1 { 1 } else { 0 };
     let with_levels = |morph| UdlodSettings {
         morph_levels,
+        field_density,
         ..lod(grid, 2.0, morph, field_max)
     };
     let on = with_levels(true);
@@ -593,7 +599,10 @@ fn vertex_pulling_draws_the_same_surface_as_the_indexed_grid_at(grid: u32) {
 /// flight at 640x360, frames 85 and 127 at tau 4; with today's selection frames 102 and 150 at
 /// tau 1, one pixel each, in a scan of every third frame, with one level step,
 /// `morph_levels = 1`; with the morph cascade, `morph_levels = 0`, frames 139 and 179 only,
-/// one pixel each, in a scan of all 330 frames; both variants are checked on their frames).
+/// one pixel each, in a scan of all 330 frames; with two field nodes per tile side, the
+/// default since issue 18's eighth round, frames 109, 111, 215 and 227 with one level step
+/// and 145, 160, 196 and 228 with the cascade, one pixel each, and none with `"static"` in
+/// any of the 330; each variant is checked on two of its frames).
 /// UDLOD therefore culls back faces only on tiles none of whose vertices can morph
 /// (`back_faces = "static"`, the default): no sky pixel there has terrain on all 8 sides.
 /// Control: culling every tile (`"all"`) leaves such pixels. Skipped (with a note) without
@@ -616,8 +625,14 @@ fn no_pinholes_from_back_facing_slivers_far_away() {
     let p = vkterrain::cli::render::prepare(&args).expect("the Puget Sound flight prepares");
     let (w, h) = (640u32, 360u32);
     let gpu = common::gpu(false);
-    // Each morph variant with the frames where culling every tile showed pinholes.
-    for (morph_levels, frames) in [(1, &[102u64, 150][..]), (0, &[139, 179][..])] {
+    // Each morph variant and field density with frames where culling every tile showed
+    // pinholes.
+    let variants = [
+        (1, 2, &[109u64, 215][..]),
+        (0, 2, &[145, 196][..]),
+        (0, 1, &[139, 179][..]),
+    ];
+    for (morph_levels, field_density, frames) in variants {
         let requests: Vec<FrameRequest> = frames
             .iter()
             .map(|&k| p.scenario.camera(k).into())
@@ -630,6 +645,7 @@ fn no_pinholes_from_back_facing_slivers_far_away() {
                     tau_px: 1.0,
                     back_faces,
                     morph_levels,
+                    field_density,
                     ..Default::default()
                 },
                 common::options(w, h, 1),
@@ -639,7 +655,7 @@ fn no_pinholes_from_back_facing_slivers_far_away() {
         };
         let (default, control) = (pinholes(BackFaces::Static), pinholes(BackFaces::All));
         println!(
-            "morph_levels {morph_levels}: pinholes per frame: {default:?}; culling every tile: {control:?}"
+            "morph_levels {morph_levels}, field_density {field_density}: pinholes per frame: {default:?}; culling every tile: {control:?}"
         );
         assert!(
             default.iter().all(|&n| n == 0),
