@@ -1151,9 +1151,11 @@ fn stored_tile_statistics_equal_the_computed_ones() {
             && bits(&a.tile_error) == bits(&b.tile_error)
             && e64(&a.level_error) == e64(&b.level_error)
     };
-    // Stored (UDLOD's default grid, which preprocess stores): no level-0 node read.
+    // Stored (the cells of UDLOD's default split field, which preprocess stores): no level-0
+    // node read.
     let g = preprocess::DEFAULT_STATS_GRID_SIZES[0];
-    assert_eq!(g, UdlodSettings::default().grid_size);
+    let udlod = UdlodSettings::default();
+    assert_eq!(g, udlod.grid_size / udlod.field_density());
     let file_name = format!("stats-g{g}.bin");
     let stored = reader
         .store()
