@@ -20,7 +20,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// The tile size whose statistics UDLOD's default reads (stored by `vkterrain preprocess` by
-/// default: grid-4 tiles with two split-field nodes per side read 2-quad cells').
+/// default).
 const GRID: u32 = vkterrain::dataset::preprocess::DEFAULT_STATS_GRID_SIZES[0];
 
 fn main() {

@@ -1155,7 +1155,7 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     // node read.
     let g = preprocess::DEFAULT_STATS_GRID_SIZES[0];
     let udlod = UdlodSettings::default();
-    assert_eq!(g, udlod.grid_size / udlod.field_density());
+    assert_eq!(g, udlod.grid_size / udlod.field_density);
     let file_name = format!("stats-g{g}.bin");
     let stored = reader
         .store()

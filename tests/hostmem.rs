@@ -82,28 +82,52 @@ const MIB: f64 = (1 << 20) as f64;
 /// statistics while level 0's tiles were held) and grid 8.
 const GRIDS: [u32; 2] = [4, 8];
 
-fn dataset() -> PathBuf {
-    common::procedural_pyramid_with_stats("hostmem", SIZE, 5, CENTER, &GRIDS)
+/// The default split field's density at `grid` (`UdlodSettings::field_density`).
+fn density(grid: u32) -> u32 {
+    UdlodSettings {
+        grid_size: grid,
+        ..UdlodSettings::default()
+    }
+    .field_density
 }
 
-/// UDLOD's statistics as held: per tile of levels 1 and up, min/max and error (12 bytes) and
-/// a split-field corner (4 bytes), and while the field is built levels 1 and 2's corner
-/// distances in f64; level 0's tiles are not held.
+fn dataset() -> PathBuf {
+    // The statistics UDLOD reads at each grid: those of its split field's cells.
+    let cells = GRIDS.map(|g| g / density(g));
+    common::procedural_pyramid_with_stats("hostmem", SIZE, 5, CENTER, &cells)
+}
+
+/// UDLOD's statistics as held: per tile of levels 1 and up, min/max and error (12 bytes); with
+/// `d` split-field nodes per tile side the statistics of the field's cells (tiles of `grid /
+/// d` quads, 12 bytes each) while the tiles' are coarsened from them, and their errors (4
+/// bytes) after; a split-field node (4 bytes) per cell corner; and while the field is built
+/// levels 1 and 2's node distances in f64. Level 0's tiles are not held.
 fn udlod_stats_bytes(grid: u32) -> usize {
-    let mut corners = Vec::new();
-    let mut tiles = 0;
-    let mut span = grid * 2;
-    loop {
-        let n = (SIZE - 1).div_ceil(span) as usize;
-        tiles += n * n;
-        corners.push((n + 1) * (n + 1));
-        if n == 1 {
-            break;
+    let d = density(grid) as usize;
+    let tiles_per_level = |quads: u32| {
+        let mut n_per_level = Vec::new();
+        let mut span = quads * 2;
+        loop {
+            let n = (SIZE - 1).div_ceil(span) as usize;
+            n_per_level.push(n);
+            if n == 1 {
+                break;
+            }
+            span *= 2;
         }
-        span *= 2;
-    }
+        n_per_level
+    };
+    let tiles: usize = tiles_per_level(grid).iter().map(|n| n * n).sum();
+    let corners: Vec<usize> = tiles_per_level(grid)
+        .iter()
+        .map(|n| (n * d + 1) * (n * d + 1))
+        .collect();
+    let cells: usize = match d {
+        1 => 0,
+        _ => tiles_per_level(grid / d as u32).iter().map(|n| n * n).sum(),
+    };
     let field_build = 8 * (corners[0] + corners.get(1).copied().unwrap_or(0));
-    tiles * 12 + corners.iter().sum::<usize>() * 4 + field_build
+    tiles * 12 + cells * (12 + 4) + corners.iter().sum::<usize>() * 4 + field_build
 }
 
 #[test]

@@ -59,11 +59,9 @@ pub struct Options {
     pub memory_budget: Option<u64>,
 }
 
-/// The tile size whose statistics are stored unless told otherwise: what UDLOD's default reads
-/// (grid-4 tiles with a split field of two nodes per side take the statistics of 2-quad
-/// cells and coarsen them for the tiles, `Levels::with_field_density`); other sizes are
-/// computed from level 0 at start-up, or stored with `--stats-grid-sizes`.
-pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [2];
+/// The tile size whose statistics are stored unless told otherwise (UDLOD's default; other
+/// sizes are computed from level 0 at start-up, or stored with `--stats-grid-sizes`).
+pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [4];
 
 impl Default for Options {
     fn default() -> Self {

@@ -266,7 +266,7 @@ impl Udlod {
     fn build_levels(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Levels> {
         // With a finer split field the statistics of its cells (tiles of `grid_size /
         // field_density` quads), from which the tiles' own follow bit for bit.
-        let density = settings.field_density();
+        let density = settings.field_density;
         let cell_quads = settings.grid_size / density;
         let (stats, spacing) = match ctx.data {
             Terrain::Grid(h) => (

@@ -90,7 +90,7 @@ impl Levels {
     /// `field_density` nodes per tile side ([`Levels::with_field_density`]), computed on this
     /// thread.
     pub fn for_settings<D: Level0 + ?Sized>(data: &D, settings: &UdlodSettings) -> Result<Self> {
-        let d = settings.field_density();
+        let d = settings.field_density;
         let stats = TileStats::compute_serial(data, settings.grid_size / d.max(1))?;
         Self::with_field_density(stats.without_finest(), d, data.spacing())
     }

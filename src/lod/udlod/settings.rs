@@ -20,12 +20,13 @@ pub struct UdlodSettings {
     /// crack-free chain set the distances; 1 one level step, the CDLOD-style chain, where
     /// neighbours differ by at most one level.
     pub morph_levels: u32,
-    /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 1 at the
-    /// tiles' corners; 2 also at their edges' midpoints and centres, each cell taking the error
-    /// of its quarter of the tile, so a rough tile raises its neighbours' split distances over
-    /// half a tile instead of a whole one. A power of two that leaves at least 2 quads per
-    /// cell (`grid_size / field_density >= 2`); 0 (the default): 2 where the grid size allows
-    /// (grid 4 and larger), else 1 (`UdlodSettings::field_density()`).
+    /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 1 (the
+    /// default) at the tiles' corners; 2 also at their edges' midpoints and centres, each cell
+    /// taking the error of its quarter of the tile, so a rough tile raises its neighbours'
+    /// split distances over half a tile instead of a whole one: 2-31 % fewer triangles at
+    /// grid 4, for a 3x larger peak host heap at start-up (`tests/hostmem.rs`; not the default
+    /// for that). A power of two that leaves at least 2 quads per cell
+    /// (`grid_size / field_density >= 2`).
     pub field_density: u32,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
@@ -102,9 +103,7 @@ impl Default for UdlodSettings {
             // 640x360, -0.6 to -15 % at 1080p on the H200 (docs/udlod.md, "The morph
             // cascade").
             morph_levels: 0,
-            // 0-31 % fewer triangles than 1 at the same tau on the CI, Puget Sound and SRTM1
-            // data (docs/udlod.md, "A finer split field").
-            field_density: 0,
+            field_density: 1,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
             max_tiles: 524_288,
@@ -140,7 +139,7 @@ impl UdlodSettings {
         },
         Sweep {
             key: "field_density",
-            help: "split-field nodes per tile side (1, 2, ...; 0 = 2 where the grid allows)",
+            help: "split-field nodes per tile side (1, 2, ...)",
             apply: |s, v| s.field_density = v as u32,
         },
         Sweep {
@@ -166,16 +165,6 @@ impl UdlodSettings {
         match self.morph_levels {
             0 => super::select::cascade_levels(self.grid_size),
             n => n,
-        }
-    }
-
-    /// Split-field nodes per tile side: `field_density`, or with 0 two where `grid_size`
-    /// leaves 2 quads per cell, else one.
-    pub fn field_density(&self) -> u32 {
-        match self.field_density {
-            0 if self.grid_size >= 4 => 2,
-            0 => 1,
-            d => d,
         }
     }
 
@@ -206,10 +195,10 @@ impl UdlodSettings {
                 self.morph_levels, self.grid_size
             ));
         }
-        let d = self.field_density();
+        let d = self.field_density;
         if !d.is_power_of_two() || self.grid_size % d != 0 || self.grid_size / d < 2 {
             return bad(format!(
-                "field_density {d} must be 0 (auto) or a power of two with at least 2 quads per cell (grid_size {} / field_density >= 2)",
+                "field_density {d} must be a power of two with at least 2 quads per cell (grid_size {} / field_density >= 2)",
                 self.grid_size
             ));
         }
