@@ -158,6 +158,11 @@ impl Levels {
             return Ok(levels);
         }
         levels.field_density = density;
+        let held: usize = fine.levels[1..=levels.root_lod as usize]
+            .iter()
+            .map(|l| l.error.len())
+            .sum();
+        levels.field_error.reserve_exact(held);
         for (lod, level) in fine.levels.into_iter().enumerate() {
             if lod > levels.root_lod as usize {
                 break;
@@ -430,7 +435,12 @@ impl SplitField {
     pub fn new(levels: &Levels, key: FieldKey) -> Self {
         let cap = key.field_max.max(1.0);
         let mut split = vec![UDLOD_NO_SPLIT; UDLOD_MAX_LEVELS as usize];
-        let mut corners = Vec::new();
+        // Every level's nodes, allocated once (the field is the largest array UDLOD builds).
+        let nodes: usize = (1..=levels.root_lod)
+            .map(|lod| levels.field_cells_per_side(lod))
+            .map(|(nx, ny)| (nx as usize + 1) * (ny as usize + 1))
+            .sum();
+        let mut corners = Vec::with_capacity(nodes);
         let mut corner_offsets = Vec::new();
         let zone = zone_widths(levels, &key);
         // Per level below, each field cell's split distance as the GPU evaluates it (the
@@ -463,15 +473,17 @@ impl SplitField {
             let largest = s.iter().copied().fold(1e-3 * levels.spacing, f64::max) as f32;
             split[lod as usize] = largest;
             let floor = largest as f64 / cap;
-            let mut at_corners = Vec::with_capacity(s.len());
+            let offset = corners.len();
             for v in s {
                 let m = ((largest as f64 / v.max(floor)) as f32).clamp(1.0, cap as f32);
                 corners.push(m);
-                at_corners.push(largest as f64 / m as f64);
             }
+            let level = &corners[offset..];
+            // A node's split distance as the GPU evaluates it: `D / m`.
+            let at_corner = |k: usize| largest as f64 / level[k] as f64;
             let cell_split = |cx: u32, cy: u32| {
                 QUAD.iter()
-                    .map(|&(i, j)| at_corners[(cy + j) as usize * cw + (cx + i) as usize])
+                    .map(|&(i, j)| at_corner((cy + j) as usize * cw + (cx + i) as usize))
                     .fold(0.0, f64::max)
             };
             cell_splits.push(
