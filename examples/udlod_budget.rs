@@ -223,11 +223,7 @@ fn main() -> anyhow::Result<()> {
                 let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
                 n += select_cf(&levels, &sp, &cam, &f, *cf).len();
             }
-            println!(
-                "  cf {name:48}: tiles {n:6} triangles {:9} ratio {:.2}",
-                n as u64 * g2,
-                (n as u64 * g2) as f64 / tris_o.max(1) as f64
-            );
+            print_cf(name, n, g2, tris_o);
         }
         for (name, ns, ratio) in [
             ("node every cell, nest", 1u32, 0.0),
@@ -259,12 +255,7 @@ fn main() -> anyhow::Result<()> {
                 })
                 .len();
             }
-            println!(
-                "  cf {:48}: tiles {n:6} triangles {:9} ratio {:.2}",
-                name,
-                n as u64 * g2,
-                (n as u64 * g2) as f64 / tris_o.max(1) as f64
-            );
+            print_cf(name, n, g2, tris_o);
         }
         for (name, kk, boxd) in [
             ("own need k=1, ref dist", 1.0, false),
@@ -290,12 +281,7 @@ fn main() -> anyhow::Result<()> {
                 })
                 .len();
             }
-            println!(
-                "  cf {:48}: tiles {n:6} triangles {:9} ratio {:.2}",
-                name,
-                n as u64 * g2,
-                (n as u64 * g2) as f64 / tris_o.max(1) as f64
-            );
+            print_cf(name, n, g2, tris_o);
         }
         {
             let mut n = 0usize;
@@ -307,11 +293,11 @@ fn main() -> anyhow::Result<()> {
                 })
                 .len();
             }
-            println!(
-                "  cf {:48}: tiles {n:6} triangles {:9} ratio {:.2}",
+            print_cf(
                 "tile oracle (exact per-sample, no chain/morph)",
-                n as u64 * g2,
-                (n as u64 * g2) as f64 / tris_o.max(1) as f64
+                n,
+                g2,
+                tris_o,
             );
         }
         slack.sort_by(f64::total_cmp);
@@ -678,4 +664,13 @@ fn cell_field(
         out.push((nodes, (w1, h1)));
     }
     out
+}
+
+/// One counterfactual's line: its tiles, their triangles and the ratio to the oracle's.
+fn print_cf(name: &str, tiles: usize, triangles_per_tile: u64, oracle: u64) {
+    let triangles = tiles as u64 * triangles_per_tile;
+    println!(
+        "  cf {name:48}: tiles {tiles:6} triangles {triangles:9} ratio {:.2}",
+        triangles as f64 / oracle.max(1) as f64
+    );
 }
