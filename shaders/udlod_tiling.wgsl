@@ -327,7 +327,7 @@ fn outside_data(t: Tile) -> bool {
     return t.x >= level.y || t.y >= level.z;
 }
 
-// Split on the smallest scaled distance over the tile: the field's minimum (its corners)
+// Split on the smallest scaled distance over the tile: the field's minimum (its nodes)
 // times the distance to the nearest point (mirrors `tile_splits` in select.rs).
 fn splits_by_distance(t: Tile) -> bool {
     return t.lod > 0u && tile_field_min(t.x, t.y, t.lod) * tile_distance(t) < udlod.split[t.lod].x;

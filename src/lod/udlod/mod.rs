@@ -310,13 +310,8 @@ impl Udlod {
             MemoryLocation::CpuToGpu,
         )?;
         min_max.write(mm_bytes)?;
-        // Corner values per level from level 1: (nx + 1) x (ny + 1) floats (level 0's are
-        // ones and not stored; a one-level tree has none, and a buffer is never empty).
-        let field_bytes: u64 = (1..levels.levels())
-            .map(|lod| levels.field_cells_per_side(lod))
-            .map(|(nx, ny)| (nx as u64 + 1) * (ny as u64 + 1) * 4)
-            .sum::<u64>()
-            .max(4);
+        // The split field's nodes (a one-level tree has none, and a buffer is never empty).
+        let field_bytes = (levels.field_nodes() as u64 * 4).max(4);
         let grid = super::brute::grid_indices(settings.grid_size);
         let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
         let mut indices = Buffer::new(

@@ -188,6 +188,15 @@ impl Levels {
         (nx * self.field_density, ny * self.field_density)
     }
 
+    /// Split-field nodes stored over all levels from level 1 (level 0's are ones and not
+    /// stored): `(nx + 1) x (ny + 1)` per level for its [`Levels::field_cells_per_side`].
+    pub fn field_nodes(&self) -> usize {
+        (1..=self.root_lod)
+            .map(|lod| self.field_cells_per_side(lod))
+            .map(|(nx, ny)| (nx as usize + 1) * (ny as usize + 1))
+            .sum()
+    }
+
     /// The geometric error of split-field cell `(x, y)` of level `lod` >= 1: the tile's own
     /// with one node per tile corner, else the small tile's (0 past the data's edge).
     pub fn field_cell_error(&self, lod: u32, x: u32, y: u32) -> f32 {
@@ -436,11 +445,7 @@ impl SplitField {
         let cap = key.field_max.max(1.0);
         let mut split = vec![UDLOD_NO_SPLIT; UDLOD_MAX_LEVELS as usize];
         // Every level's nodes, allocated once (the field is the largest array UDLOD builds).
-        let nodes: usize = (1..=levels.root_lod)
-            .map(|lod| levels.field_cells_per_side(lod))
-            .map(|(nx, ny)| (nx as usize + 1) * (ny as usize + 1))
-            .sum();
-        let mut corners = Vec::with_capacity(nodes);
+        let mut corners = Vec::with_capacity(levels.field_nodes());
         let mut corner_offsets = Vec::new();
         let zone = zone_widths(levels, &key);
         // Per level below, each field cell's split distance as the GPU evaluates it (the
