@@ -1128,13 +1128,15 @@ impl std::fmt::Debug for Bits {
 
 /// UDLOD's statistics stored by `vkterrain preprocess` equal the ones computed from level 0,
 /// bit for bit (and the sample-by-sample definition), so start-up reads no level 0; a grid
-/// size that was not stored is computed from level 0 to the same bits. Negative controls: one
-/// stored minimum moved by one ulp (still a valid file) makes the levels differ; a NaN is a
-/// one-line error naming the file.
+/// size that was not stored is computed from level 0 to the same bits, and twice a stored grid
+/// folded from it; UDLOD's finer split field reads the stored tiles as its cells keeping
+/// their errors only, to the same bits as reading them whole. Negative controls: one stored
+/// minimum moved by one ulp (still a valid file) makes the levels and the folded read differ;
+/// a NaN is a one-line error naming the file, from either read.
 #[test]
 fn stored_tile_statistics_equal_the_computed_ones() {
     use vkterrain::dataset::preprocess;
-    use vkterrain::dataset::stats::{Finest, TileStats};
+    use vkterrain::dataset::stats::{FieldStats, Finest, TileStats};
     use vkterrain::lod::udlod::settings::UdlodSettings;
     let data = heightmap();
     let reader = PyramidReader::open(dataset()).unwrap();
@@ -1182,6 +1184,46 @@ fn stored_tile_statistics_equal_the_computed_ones() {
         &Levels::from_stats(coarse, reader.spacing()),
         &from_disk
     ));
+    // A split field of two nodes per tile side whose cells are the stored tiles
+    // (`field_density = 2` at twice the grid): the cells' heights fold into the tiles' as they
+    // are read, equal to folding them in memory, and the levels equal those computed from the
+    // settings. The default's read (one node per corner) is the stored tiles'.
+    let d = 2;
+    let finer = UdlodSettings {
+        grid_size: d * g,
+        field_density: d,
+        ..UdlodSettings::default()
+    };
+    let field = reader.field_stats(g, d).unwrap();
+    assert_eq!(reader.node_loads(), 0);
+    assert!(field.cells.is_some() && !field.tiles.has_finest());
+    assert_eq!(field, FieldStats::from_cells(stored.clone(), d).unwrap());
+    let field_levels = Levels::from_field_stats(field.clone(), reader.spacing());
+    let from_settings = Levels::for_settings(&data, &finer).unwrap();
+    assert!(same(&field_levels, &from_settings));
+    assert_eq!(
+        bits(&field_levels.field_error),
+        bits(&from_settings.field_error)
+    );
+    assert_eq!(
+        reader.field_stats(g, 1).unwrap(),
+        FieldStats::from_cells(stored.clone(), 1).unwrap()
+    );
+    // One node per tile corner at twice the stored grid (not stored): folded from the stored
+    // tiles, no level-0 node read, equal to computing them.
+    assert!(
+        reader
+            .store()
+            .stored_stats(2 * g, Finest::Skip)
+            .unwrap()
+            .is_none()
+    );
+    let corners = reader.field_stats(2 * g, 1).unwrap();
+    assert_eq!(reader.node_loads(), 0);
+    assert_eq!(
+        corners,
+        FieldStats::from_cells(TileStats::compute(&data, 2 * g, &|_| {}).unwrap(), 1).unwrap()
+    );
     // Not stored (grid 16): computed from level 0, equal to the in-memory computation.
     assert!(
         reader
@@ -1202,9 +1244,18 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     let file = moved.join(&file_name);
     let mut bytes = std::fs::read(&file).unwrap();
     let levels = stored.levels.len();
-    // Tile 5 of level 1 (level 0's tiles are not part of `Levels`): (min, max, error).
+    // A tile of level 1 (level 0's tiles are not part of `Levels`) whose minimum is its
+    // field tile's, so the folded read must see it too: (min, max, error).
     let (nx0, ny0) = stored.levels[0].tiles;
-    let first_tile = 40 + 16 * levels + 12 * (nx0 * ny0) as usize + 12 * 5;
+    let (cells, tiles) = (&stored.levels[1], &field.tiles.levels[1]);
+    let pick = (0..cells.min_max.len())
+        .find(|&i| {
+            let (x, y) = (i as u32 % cells.tiles.0, i as u32 / cells.tiles.0);
+            let t = (y / d * tiles.tiles.0 + x / d) as usize;
+            cells.min_max[i][0] == tiles.min_max[t][0]
+        })
+        .unwrap();
+    let first_tile = 40 + 16 * levels + 12 * (nx0 * ny0) as usize + 12 * pick;
     let v = f32::from_le_bytes(bytes[first_tile..first_tile + 4].try_into().unwrap());
     bytes[first_tile..first_tile + 4]
         .copy_from_slice(&f32::from_bits(v.to_bits() - 1).to_le_bytes());
@@ -1216,10 +1267,17 @@ fn stored_tile_statistics_equal_the_computed_ones() {
         .unwrap()
         .unwrap();
     assert!(!same(&Levels::from_stats(m, reader.spacing()), &computed));
+    let moved_field = mutated.field_stats(g, d).unwrap();
+    assert_ne!(
+        moved_field.tiles, field.tiles,
+        "the folded read missed the change"
+    );
     // A NaN: refused with a one-line error naming the file.
     bytes[first_tile..first_tile + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     std::fs::write(&file, &bytes).unwrap();
     let e = mutated.tile_stats(g, Finest::Skip).unwrap_err().to_string();
+    assert!(e.contains(&file_name) && !e.contains('\n'), "{e}");
+    let e = mutated.field_stats(g, d).unwrap_err().to_string();
     assert!(e.contains(&file_name) && !e.contains('\n'), "{e}");
     // A NaN in level 0: refused where level 0 is read; UDLOD's read never looks at it.
     let level0_tile = 40 + 16 * levels + 12 * 5;

@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use super::Heightmap;
 use super::interp::GridCell;
 use super::pyramid::{LayerSet, Layout, LevelRows, Node};
-use super::stats::{Finest, TileStats};
+use super::stats::{FieldStats, Finest, TileStats};
 use super::tiles::Dataset;
 use super::tiles::LoadGrid;
 use super::xyz::XyzPyramid;
@@ -273,6 +273,27 @@ impl PyramidReader {
             Finest::Keep => stats,
             Finest::Skip => stats.without_finest(),
         })
+    }
+
+    /// UDLOD's statistics for a split field of `density` nodes per tile side of
+    /// `cell_grid * density` quads: from the cells' stored statistics without holding their
+    /// heights ([`FieldStats::read`]); with one node per tile corner also from those of
+    /// half-size tiles (what UDLOD's default stores), folded into the tiles; else as
+    /// [`PyramidReader::tile_stats`] computes them.
+    pub fn field_stats(&self, cell_grid: u32, density: u32) -> Result<FieldStats> {
+        if let Some(s) = self.store.stored_field_stats(cell_grid, density)? {
+            return Ok(s);
+        }
+        if density == 1 && cell_grid % 2 == 0 {
+            if let Some(s) = self.store.stored_field_stats(cell_grid / 2, 2)? {
+                return Ok(FieldStats {
+                    density: 1,
+                    tiles: s.tiles,
+                    cells: None,
+                });
+            }
+        }
+        FieldStats::from_cells(self.tile_stats(cell_grid, Finest::Skip)?, density)
     }
 
     /// Most nodes the cache holds.
@@ -626,6 +647,11 @@ pub trait NodeStore: Send + Sync {
     fn stored_stats(&self, _grid_size: u32, _finest: Finest) -> Result<Option<TileStats>> {
         Ok(None)
     }
+    /// UDLOD's statistics for a split field of `density` nodes per tile side whose cells are
+    /// tiles of `cell_grid` quads, if the cells' are stored ([`FieldStats::read`]).
+    fn stored_field_stats(&self, _cell_grid: u32, _density: u32) -> Result<Option<FieldStats>> {
+        Ok(None)
+    }
     /// Level-0 rows straight from storage (parallel statistics), where that is cheap.
     fn level0_rows(&self) -> Option<Result<LevelRows>> {
         None
@@ -720,6 +746,9 @@ impl NodeStore for DiskStore {
     }
     fn stored_stats(&self, grid_size: u32, finest: Finest) -> Result<Option<TileStats>> {
         self.dataset.tile_stats(grid_size, finest)
+    }
+    fn stored_field_stats(&self, cell_grid: u32, density: u32) -> Result<Option<FieldStats>> {
+        self.dataset.field_stats(cell_grid, density)
     }
     fn georef(&self) -> Result<Option<super::crs::Georef>> {
         Ok(self.dataset.manifest.georef.clone())

@@ -31,6 +31,8 @@ pub const STATS_VERSION: u32 = 1;
 const HEADER: usize = 40;
 const LEVEL_ENTRY: usize = 16;
 const TILE_ENTRY: usize = 12;
+/// Tiles read per buffer fill: reading a level needs no buffer of the level's size.
+const READ_TILES: usize = 4096;
 /// Rows per band of the parallel sweep.
 const BAND_ROWS: u32 = 256;
 
@@ -271,6 +273,11 @@ impl TileStats {
     /// Statistics to fold into: every tile empty; with [`Finest::Skip`] and a coarser
     /// level, none held for level 0.
     fn empty(shape: &Shape, finest: Finest) -> Self {
+        Self::empty_holding(shape, finest, true)
+    }
+
+    /// [`TileStats::empty`], with the tiles' heights held or (`heights` false) not.
+    fn empty_holding(shape: &Shape, finest: Finest, heights: bool) -> Self {
         let skip = finest == Finest::Skip && shape.levels.len() > 1;
         TileStats {
             grid_size: shape.grid,
@@ -288,7 +295,7 @@ impl TileStats {
                     };
                     LevelTiles {
                         tiles: (nx, ny),
-                        min_max: vec![[f32::INFINITY, f32::NEG_INFINITY]; held],
+                        min_max: vec![[f32::INFINITY, f32::NEG_INFINITY]; held * heights as usize],
                         error: vec![0.0; held],
                         max_error: 0.0,
                     }
@@ -420,12 +427,22 @@ impl TileStats {
             ));
         }
         let mut cursor = std::io::Cursor::new(bytes);
-        Self::parse(&mut cursor, what, width, height, grid_size, Finest::Keep)
+        Self::parse(
+            &mut cursor,
+            what,
+            width,
+            height,
+            grid_size,
+            Finest::Keep,
+            None,
+        )
     }
 
-    /// Parses the stored form from `r` (its length already checked), level by level, so no
-    /// buffer is larger than one level; with [`Finest::Skip`] the finest level's tiles are
-    /// skipped unread (when a coarser level exists: [`TileStats::without_finest`]).
+    /// Parses the stored form from `r` (its length already checked), level by level and
+    /// [`READ_TILES`] tiles at a time into the level's arrays; with [`Finest::Skip`] the
+    /// finest level's tiles are skipped unread (when a coarser level exists:
+    /// [`TileStats::without_finest`]); with `coarse` (a coarser tiling's empty statistics)
+    /// the tiles' heights fold into it as they are read and only their errors are kept.
     fn parse<R: std::io::Read + std::io::Seek>(
         r: &mut R,
         what: &str,
@@ -433,38 +450,15 @@ impl TileStats {
         height: u32,
         grid_size: u32,
         finest: Finest,
+        mut coarse: Option<&mut TileStats>,
     ) -> Result<Self> {
         let bad = |m: String| Error::invalid(what, m);
         let shape = Shape::new(width, height, grid_size)?;
-        let mut head = vec![0u8; HEADER + shape.levels.len() * LEVEL_ENTRY];
-        r.read_exact(&mut head)
-            .map_err(|e| bad(format!("unreadable header: {e}")))?;
-        if &head[..8] != STATS_MAGIC {
-            return Err(bad("not a vkterrain statistics file".into()));
-        }
+        let head = read_header(r, &shape).map_err(bad)?;
         let u32_at =
             |b: &[u8], o: usize| u32::from_le_bytes(b[o..o + 4].try_into().expect("4 bytes"));
-        let u64_at = |o: usize| u64::from_le_bytes(head[o..o + 8].try_into().expect("8 bytes"));
-        let header = (
-            u32_at(&head, 8),
-            u32_at(&head, 12),
-            u64_at(16),
-            u64_at(24),
-            u32_at(&head, 32) as usize,
-        );
-        let expected = (
-            STATS_VERSION,
-            grid_size,
-            width as u64,
-            height as u64,
-            shape.levels.len(),
-        );
-        if header != expected {
-            return Err(bad(format!(
-                "header (version, grid, width, height, levels) {header:?} disagrees with {expected:?}"
-            )));
-        }
-        let mut out = Self::empty(&shape, finest);
+        let folding = coarse.is_some();
+        let mut out = Self::empty_holding(&shape, finest, !folding);
         let skip_finest = finest == Finest::Skip && out.levels.len() > 1;
         let mut buf = Vec::new();
         for (lod, level) in out.levels.iter_mut().enumerate() {
@@ -476,7 +470,6 @@ impl TileStats {
                     level.tiles
                 )));
             }
-            let count = level.min_max.len();
             if lod == 0 && skip_finest {
                 let stored = level.tiles.0 as usize * level.tiles.1 as usize;
                 r.seek(std::io::SeekFrom::Current((stored * TILE_ENTRY) as i64))
@@ -484,29 +477,36 @@ impl TileStats {
                 continue;
             }
             level.max_error = f64::from_le_bytes(head[e + 8..e + 16].try_into().expect("8"));
-            buf.resize(count * TILE_ENTRY, 0);
-            r.read_exact(&mut buf)
-                .map_err(|e| bad(format!("level {lod}: unreadable (truncated?): {e}")))?;
             let mut largest = 0.0f32;
-            let values = buf.chunks_exact(TILE_ENTRY);
-            for ((m, err), v) in level
-                .min_max
-                .iter_mut()
-                .zip(level.error.iter_mut())
-                .zip(values)
-            {
-                let f = |o: usize| f32::from_le_bytes(v[o..o + 4].try_into().expect("4 bytes"));
-                let (lo, hi, er) = (f(0), f(4), f(8));
-                if !(lo.is_finite() && hi.is_finite() && lo <= hi && er.is_finite() && er >= 0.0)
-                    || (lod == 0 && er != 0.0)
+            let nx = level.tiles.0 as usize;
+            // The coarse tiling has fewer levels: the finer ones past its root fold nowhere.
+            let mut coarse_level = coarse.as_deref_mut().and_then(|c| {
+                let factor = (c.grid_size / grid_size) as usize;
+                c.levels.get_mut(lod).map(|l| (factor, l))
+            });
+            for (chunk, error) in level.error.chunks_mut(READ_TILES).enumerate() {
+                buf.resize(error.len() * TILE_ENTRY, 0);
+                r.read_exact(&mut buf)
+                    .map_err(|e| bad(format!("level {lod}: unreadable (truncated?): {e}")))?;
+                let first = chunk * READ_TILES;
+                for (k, (err, v)) in error
+                    .iter_mut()
+                    .zip(buf.chunks_exact(TILE_ENTRY))
+                    .enumerate()
                 {
-                    return Err(bad(format!(
-                        "level {lod}: tile (min {lo}, max {hi}, error {er}) is not valid"
-                    )));
+                    let [lo, hi, er] = tile_entry(v, lod).map_err(bad)?;
+                    *err = er;
+                    largest = largest.max(er);
+                    let i = first + k;
+                    match &mut coarse_level {
+                        None if folding => {}
+                        None => level.min_max[i] = [lo, hi],
+                        Some((factor, c)) => fold_tile(c, *factor, (i % nx, i / nx), [lo, hi, er]),
+                    }
                 }
-                *m = [lo, hi];
-                *err = er;
-                largest = largest.max(er);
+            }
+            if let Some((_, c)) = coarse_level {
+                c.max_error = level.max_error;
             }
             if !(level.max_error.is_finite() && level.max_error as f32 == largest) {
                 return Err(bad(format!(
@@ -611,6 +611,20 @@ impl TileStats {
         grid_size: u32,
         finest: Finest,
     ) -> Result<Self> {
+        Self::read_folding(path, width, height, grid_size, finest, None)
+    }
+
+    /// [`TileStats::read`], with `coarse` (a coarser tiling's empty statistics): the tiles'
+    /// heights and errors folded into it as they are read, only their errors kept
+    /// ([`FieldStats::read`]).
+    fn read_folding(
+        path: &std::path::Path,
+        width: u32,
+        height: u32,
+        grid_size: u32,
+        finest: Finest,
+        coarse: Option<&mut TileStats>,
+    ) -> Result<Self> {
         let what = path.display().to_string();
         let want = Self::stored_size(width, height, grid_size)?;
         let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
@@ -622,8 +636,70 @@ impl TileStats {
             ));
         }
         let mut r = std::io::BufReader::new(&mut file);
-        Self::parse(&mut r, &what, width, height, grid_size, finest)
+        Self::parse(&mut r, &what, width, height, grid_size, finest, coarse)
     }
+}
+
+/// Reads the stored form's header and level entries from `r` and checks them against the
+/// tiling `shape` describes: magic, version, grid size, samples and level count (the entries'
+/// tile counts are checked level by level as they are read).
+fn read_header<R: std::io::Read>(r: &mut R, shape: &Shape) -> std::result::Result<Vec<u8>, String> {
+    let mut head = vec![0u8; HEADER + shape.levels.len() * LEVEL_ENTRY];
+    r.read_exact(&mut head)
+        .map_err(|e| format!("unreadable header: {e}"))?;
+    if &head[..8] != STATS_MAGIC {
+        return Err("not a vkterrain statistics file".into());
+    }
+    let u32_at = |o: usize| u32::from_le_bytes(head[o..o + 4].try_into().expect("4 bytes"));
+    let u64_at = |o: usize| u64::from_le_bytes(head[o..o + 8].try_into().expect("8 bytes"));
+    let header = (
+        u32_at(8),
+        u32_at(12),
+        u64_at(16),
+        u64_at(24),
+        u32_at(32) as usize,
+    );
+    let expected = (
+        STATS_VERSION,
+        shape.grid,
+        shape.width as u64,
+        shape.height as u64,
+        shape.levels.len(),
+    );
+    if header != expected {
+        return Err(format!(
+            "header (version, grid, width, height, levels) {header:?} disagrees with {expected:?}"
+        ));
+    }
+    Ok(head)
+}
+
+/// One stored tile `(min, max, error)` of level `lod`, checked: finite, `min <= max`, error
+/// `>= 0` (0 at level 0).
+fn tile_entry(v: &[u8], lod: usize) -> std::result::Result<[f32; 3], String> {
+    let f = |o: usize| f32::from_le_bytes(v[o..o + 4].try_into().expect("4 bytes"));
+    let (lo, hi, er) = (f(0), f(4), f(8));
+    let valid = lo.is_finite() && hi.is_finite() && lo <= hi && er.is_finite() && er >= 0.0;
+    if !valid || (lod == 0 && er != 0.0) {
+        return Err(format!(
+            "level {lod}: tile (min {lo}, max {hi}, error {er}) is not valid"
+        ));
+    }
+    Ok([lo, hi, er])
+}
+
+/// Folds tile `(x, y)` (`[min, max, error]`) into the tile `factor` times larger of `coarse`
+/// that holds it: the same reductions as [`TileStats::coarsened`].
+fn fold_tile(
+    coarse: &mut LevelTiles,
+    factor: usize,
+    (x, y): (usize, usize),
+    [lo, hi, er]: [f32; 3],
+) {
+    let c = (y / factor) * coarse.tiles.0 as usize + x / factor;
+    let m = &mut coarse.min_max[c];
+    *m = [m[0].min(lo), m[1].max(hi)];
+    coarse.error[c] = coarse.error[c].max(er);
 }
 
 /// Whether a read of stored statistics keeps the finest level's tiles: UDLOD reads without
@@ -632,4 +708,84 @@ impl TileStats {
 pub enum Finest {
     Keep,
     Skip,
+}
+
+/// UDLOD's statistics for a split field of `density` nodes per tile side
+/// (`Levels::from_field_stats`): the tiles' (`grid_size` quads) and the errors of the field's
+/// cells (tiles of `grid_size / density` quads, whose heights are not held), both without
+/// level 0's tiles. With one node per tile corner the cells are the tiles and `cells` is
+/// empty. The tiles' statistics are coarsened from the cells', bit for bit those computed at
+/// `grid_size` ([`TileStats::coarsened`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FieldStats {
+    pub density: u32,
+    pub tiles: TileStats,
+    /// With `density > 1`: every level's cells with their errors (`min_max` empty).
+    pub cells: Option<TileStats>,
+}
+
+impl FieldStats {
+    /// From the cells' statistics in memory.
+    pub fn from_cells(cells: TileStats, density: u32) -> Result<Self> {
+        if density == 1 {
+            return Ok(FieldStats {
+                density,
+                tiles: cells.without_finest(),
+                cells: None,
+            });
+        }
+        let mut cells = cells.without_finest();
+        let tiles = cells.coarsened(density)?.without_finest();
+        for level in &mut cells.levels {
+            level.min_max = Vec::new();
+        }
+        Ok(FieldStats {
+            density,
+            tiles,
+            cells: Some(cells),
+        })
+    }
+
+    /// Reads the cells' stored statistics (`stats-g{cell grid}.bin` of `width x height`
+    /// samples), checked as [`TileStats::read`] checks them, without ever holding the cells'
+    /// heights: they fold into the tiles' as they are read. Equal to [`FieldStats::from_cells`]
+    /// of the whole file.
+    pub fn read(
+        path: &std::path::Path,
+        width: u32,
+        height: u32,
+        cell_grid: u32,
+        density: u32,
+    ) -> Result<Self> {
+        if density == 1 {
+            let cells = TileStats::read(path, width, height, cell_grid, Finest::Skip)?;
+            return Self::from_cells(cells, 1);
+        }
+        if !density.is_power_of_two() {
+            return Err(Error::invalid(
+                "tile statistics",
+                format!("field density {density} is not a power of two"),
+            ));
+        }
+        let grid = cell_grid.checked_mul(density).ok_or_else(|| {
+            Error::invalid(
+                "tile statistics",
+                format!("grid size {cell_grid} x {density}"),
+            )
+        })?;
+        let mut tiles = TileStats::empty(&Shape::new(width, height, grid)?, Finest::Skip);
+        let cells = TileStats::read_folding(
+            path,
+            width,
+            height,
+            cell_grid,
+            Finest::Skip,
+            Some(&mut tiles),
+        )?;
+        Ok(FieldStats {
+            density,
+            tiles,
+            cells: Some(cells),
+        })
+    }
 }

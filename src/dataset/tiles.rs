@@ -8,7 +8,7 @@ use super::manifest::{self, Manifest};
 use super::pyramid::{
     LEVEL_HEADER, LEVEL_MAGIC, LayerSet, Layout, Node, level_header, read_node_from,
 };
-use super::stats::{Finest, TileStats};
+use super::stats::{FieldStats, Finest, TileStats};
 use super::{Albedo, Heightmap};
 use crate::error::{Error, Result};
 
@@ -74,22 +74,35 @@ impl Dataset {
     /// The stored UDLOD tile statistics for `grid_size`, checked against level 0's size
     /// (`finest`: whether level 0's tiles are read).
     pub fn tile_stats(&self, grid_size: u32, finest: Finest) -> Result<Option<TileStats>> {
-        let Some(info) = self
+        let Some(path) = self.stats_file(grid_size) else {
+            return Ok(None);
+        };
+        let (width, height) = self.level0_size();
+        TileStats::read(&path, width, height, grid_size, finest).map(Some)
+    }
+
+    /// The stored statistics of tiles of `cell_grid` quads read for a split field of
+    /// `density` nodes per tile side ([`FieldStats::read`]).
+    pub fn field_stats(&self, cell_grid: u32, density: u32) -> Result<Option<FieldStats>> {
+        let Some(path) = self.stats_file(cell_grid) else {
+            return Ok(None);
+        };
+        let (width, height) = self.level0_size();
+        FieldStats::read(&path, width, height, cell_grid, density).map(Some)
+    }
+
+    /// The statistics file stored for `grid_size`, if any.
+    fn stats_file(&self, grid_size: u32) -> Option<PathBuf> {
+        let info = self
             .manifest
             .tile_stats
             .iter()
-            .find(|s| s.grid_size == grid_size)
-        else {
-            return Ok(None);
-        };
-        TileStats::read(
-            &self.dir.join(&info.file),
-            self.manifest.width as u32,
-            self.manifest.height as u32,
-            grid_size,
-            finest,
-        )
-        .map(Some)
+            .find(|s| s.grid_size == grid_size)?;
+        Some(self.dir.join(&info.file))
+    }
+
+    fn level0_size(&self) -> (u32, u32) {
+        (self.manifest.width as u32, self.manifest.height as u32)
     }
 
     fn level_file(&self, lod: u32) -> Result<(File, PathBuf)> {

@@ -18,7 +18,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use super::{DrawnTiles, LodMethod, MethodContext};
-use crate::dataset::stats::{Finest, TileStats};
+use crate::dataset::stats::TileStats;
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
@@ -265,18 +265,21 @@ impl Udlod {
     /// than the shaders hold.
     fn build_levels(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Levels> {
         // With a finer split field the statistics of its cells (tiles of `grid_size /
-        // field_density` quads), from which the tiles' own follow bit for bit.
+        // field_density` quads), from which the tiles' own follow bit for bit; a pyramid's
+        // stored ones are read without holding the cells' heights.
         let density = settings.field_density;
         let cell_quads = settings.grid_size / density;
-        let (stats, spacing) = match ctx.data {
-            Terrain::Grid(h) => (
-                TileStats::compute(&**h, cell_quads, &|_| {})?.without_finest(),
-                h.spacing,
-            ),
-            Terrain::Pyramid(p) => (p.tile_stats(cell_quads, Finest::Skip)?, p.spacing()),
-        };
         // Without level 0's tiles: the tiling shader bounds them by their parents.
-        let mut levels = Levels::with_field_density(stats, density, spacing)?;
+        let mut levels = match ctx.data {
+            Terrain::Grid(h) => Levels::with_field_density(
+                TileStats::compute(&**h, cell_quads, &|_| {})?,
+                density,
+                h.spacing,
+            )?,
+            Terrain::Pyramid(p) => {
+                Levels::from_field_stats(p.field_stats(cell_quads, density)?, p.spacing())
+            }
+        };
         debug_assert!(!levels.finest_held || levels.root_lod == 0);
         if let (Some(lattice), LodMetric::Axis) = (ctx.lattice, settings.lod_metric) {
             levels = levels.on_lattice(ctx.data.axis_spacing(), lattice);

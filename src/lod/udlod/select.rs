@@ -14,7 +14,7 @@ use std::sync::Arc;
 use glam::{DVec3, Vec3};
 
 use super::settings::UdlodSettings;
-use crate::dataset::stats::{TileStats, level_interpolate};
+use crate::dataset::stats::{FieldStats, TileStats, level_interpolate};
 use crate::dataset::{Heightmap, Level0};
 use crate::error::Result;
 use crate::geo::{EarthCull, Lattice};
@@ -149,21 +149,30 @@ impl Levels {
         }
     }
 
-    /// The levels of tiles `density` times larger than `fine`'s (without their finest level's
-    /// tiles, [`TileStats::without_finest`]), with a split field of `density` nodes per tile
-    /// side whose cells take `fine`'s errors (`docs/udlod.md`, "A finer split field").
+    /// The levels of tiles `density` times larger than `fine`'s, with a split field of
+    /// `density` nodes per tile side whose cells take `fine`'s errors (`docs/udlod.md`, "A
+    /// finer split field").
     pub fn with_field_density(fine: TileStats, density: u32, spacing: f64) -> Result<Self> {
-        let mut levels = Self::from_stats(fine.coarsened(density)?.without_finest(), spacing);
-        if density == 1 {
-            return Ok(levels);
-        }
-        levels.field_density = density;
-        let held: usize = fine.levels[1..=levels.root_lod as usize]
+        Ok(Self::from_field_stats(
+            FieldStats::from_cells(fine, density)?,
+            spacing,
+        ))
+    }
+
+    /// The levels of `stats.tiles` with a split field of `stats.density` nodes per tile side
+    /// whose cells take the errors of `stats.cells`.
+    pub fn from_field_stats(stats: FieldStats, spacing: f64) -> Self {
+        let mut levels = Self::from_stats(stats.tiles, spacing);
+        let Some(cells) = stats.cells else {
+            return levels;
+        };
+        levels.field_density = stats.density;
+        let held: usize = cells.levels[1..=levels.root_lod as usize]
             .iter()
             .map(|l| l.error.len())
             .sum();
         levels.field_error.reserve_exact(held);
-        for (lod, level) in fine.levels.into_iter().enumerate() {
+        for (lod, level) in cells.levels.into_iter().enumerate() {
             if lod > levels.root_lod as usize {
                 break;
             }
@@ -173,7 +182,7 @@ impl Levels {
                 levels.field_error.extend(level.error);
             }
         }
-        Ok(levels)
+        levels
     }
 
     /// Quads per split-field cell side (`grid_size / field_density`).
@@ -443,69 +452,26 @@ const QUAD: [(u32, u32); 4] = [(0, 0), (1, 0), (0, 1), (1, 1)];
 impl SplitField {
     pub fn new(levels: &Levels, key: FieldKey) -> Self {
         let cap = key.field_max.max(1.0);
-        let mut split = vec![UDLOD_NO_SPLIT; UDLOD_MAX_LEVELS as usize];
-        // Every level's nodes, allocated once (the field is the largest array UDLOD builds).
-        let mut corners = Vec::with_capacity(levels.field_nodes());
-        let mut corner_offsets = Vec::new();
         let zone = zone_widths(levels, &key);
-        // Per level below, each field cell's split distance as the GPU evaluates it (the
-        // largest of its corners' D / m; with one node per tile corner the tiles').
-        let mut cell_splits: Vec<Vec<f64>> = Vec::new();
-        for lod in 0..=levels.root_lod {
-            let (nx, ny) = levels.field_cells_per_side(lod);
-            let cw = nx as usize + 1;
-            corner_offsets.push(corners.len() as u32);
-            if lod == 0 {
-                // Level 0 never splits: its field is 1 everywhere and not stored.
-                split[0] = 0.0;
-                cell_splits.push(vec![0.0; (nx * ny) as usize]);
-                continue;
-            }
-            let mut s = vec![0.0f64; cw * (ny as usize + 1)];
-            for cy in 0..ny {
-                for cx in 0..nx {
-                    let need = cell_requirement(levels, &key, &zone, [cx, cy, lod], &cell_splits);
-                    for (i, j) in QUAD {
-                        let k = (cy + j) as usize * cw + (cx + i) as usize;
-                        s[k] = s[k].max(need);
-                    }
-                }
-            }
-            if key.morph_levels > 1 {
-                gentle_morph(levels, lod, &mut s);
-            }
-            // A level whose tiles need nothing (flat data) keeps a tiny positive distance.
-            let largest = s.iter().copied().fold(1e-3 * levels.spacing, f64::max) as f32;
-            split[lod as usize] = largest;
-            let floor = largest as f64 / cap;
-            let offset = corners.len();
-            for v in s {
-                let m = ((largest as f64 / v.max(floor)) as f32).clamp(1.0, cap as f32);
-                corners.push(m);
-            }
-            let level = &corners[offset..];
-            // A node's split distance as the GPU evaluates it: `D / m`.
-            let at_corner = |k: usize| largest as f64 / level[k] as f64;
-            let cell_split = |cx: u32, cy: u32| {
-                QUAD.iter()
-                    .map(|&(i, j)| at_corner((cy + j) as usize * cw + (cx + i) as usize))
-                    .fold(0.0, f64::max)
-            };
-            cell_splits.push(
-                (0..ny)
-                    .flat_map(|cy| (0..nx).map(move |cx| (cx, cy)))
-                    .map(|(cx, cy)| cell_split(cx, cy))
-                    .collect(),
-            );
-        }
         let mut field = SplitField {
             key,
-            split,
+            split: vec![UDLOD_NO_SPLIT; UDLOD_MAX_LEVELS as usize],
             zone,
-            corners,
-            corner_offsets,
+            // Every level's nodes, allocated once (the field is the largest array UDLOD
+            // builds); the levels below are read from them as the GPU evaluates them.
+            corners: Vec::with_capacity(levels.field_nodes()),
+            corner_offsets: Vec::new(),
             split_ranks: Vec::new(),
         };
+        for lod in 0..=levels.root_lod {
+            field.corner_offsets.push(field.corners.len() as u32);
+            if lod == 0 {
+                // Level 0 never splits: its field is 1 everywhere and not stored.
+                field.split[0] = 0.0;
+                continue;
+            }
+            field.build_level(levels, lod, cap);
+        }
         field.split_ranks = (0..=levels.root_lod)
             .map(|lod| match lod {
                 0 => Vec::new(),
@@ -513,6 +479,41 @@ impl SplitField {
             })
             .collect();
         field
+    }
+
+    /// Builds level `lod`'s nodes (the levels below built): each node's split distance `s`,
+    /// the largest requirement of the cells around it ([`cell_requirement`]), the gentle morph
+    /// with the cascade, then its field value `D / s` clamped to `[1, cap]`.
+    fn build_level(&mut self, levels: &Levels, lod: u32, cap: f64) {
+        let (nx, ny) = levels.field_cells_per_side(lod);
+        let cw = nx as usize + 1;
+        // The level's nodes hold their split distances `s` first (f32: the chain's margin
+        // covers the rounding), then their field values: no second array of the level.
+        let offset = self.corners.len();
+        self.corners.resize(offset + cw * (ny as usize + 1), 0.0);
+        for cy in 0..ny {
+            for cx in 0..nx {
+                let need = cell_requirement(levels, self, [cx, cy, lod]) as f32;
+                for (i, j) in QUAD {
+                    let s = &mut self.corners[offset + (cy + j) as usize * cw + (cx + i) as usize];
+                    *s = s.max(need);
+                }
+            }
+        }
+        let s = &mut self.corners[offset..];
+        if self.key.morph_levels > 1 {
+            gentle_morph(levels, lod, s);
+        }
+        // A level whose tiles need nothing (flat data) keeps a tiny positive distance.
+        let largest = s
+            .iter()
+            .map(|&v| v as f64)
+            .fold(1e-3 * levels.spacing, f64::max) as f32;
+        self.split[lod as usize] = largest;
+        let floor = largest as f64 / cap;
+        for v in s {
+            *v = ((largest as f64 / (*v as f64).max(floor)) as f32).clamp(1.0, cap as f32);
+        }
     }
 
     /// The `(k, s)` pairs of [`Self::split_ranks`] for one level.
@@ -570,6 +571,25 @@ impl SplitField {
         self.split[t.lod as usize] as f64 / self.tile_range(levels, t)[0] as f64
     }
 
+    /// The largest split distance, as the GPU evaluates it (`D / m` at the nodes), of the
+    /// field cells of level `lod` (below `cl`, built) under field cell `[cx, cy, cl]`: `D`
+    /// over the least node of their `(2^(cl - lod) + 1)^2` nodes. 0 at level 0, which never
+    /// splits.
+    fn largest_below(&self, levels: &Levels, [cx, cy, cl]: [u32; 3], lod: u32) -> f64 {
+        let k = cl - lod;
+        let (nx, ny) = levels.field_cells_per_side(lod);
+        let (x0, y0) = (cx << k, cy << k);
+        if lod == 0 || x0 >= nx || y0 >= ny {
+            return 0.0;
+        }
+        let (x1, y1) = (((cx + 1) << k).min(nx), ((cy + 1) << k).min(ny));
+        let least = (y0..=y1)
+            .flat_map(|j| (x0..=x1).map(move |i| (i, j)))
+            .map(|(i, j)| self.corner(levels, lod, i, j))
+            .fold(f32::INFINITY, f32::min);
+        self.split[lod as usize] as f64 / least as f64
+    }
+
     /// The field of level `lod` at integer sample `sample` (mirrors `field_at` in
     /// `udlod_common.wgsl`): bilinear in the level's tile cell, clamped to the cell's corner
     /// range so rounding never leaves it; 1 past the root level.
@@ -594,8 +614,8 @@ impl SplitField {
 }
 
 /// The smallest split distance field cell `[x, y, level]` (level >= 1; the tile with one
-/// node per tile corner) allows at its corners, in the terms below for tile `t` (`cell_splits`:
-/// per level below, each field cell's split distance as the GPU evaluates it, the largest of its corners):
+/// node per tile corner) allows at its corners, in the terms below (`field`: the field built
+/// up to the level below, whose cells' split distances it reads as the GPU evaluates them):
 /// - its own error at the pixel target;
 /// - nesting: no less than any child's, so a point's split distance never falls from one level
 ///   to the next and an unsplit tile's neighbours are fully morphed onto it through every level
@@ -607,13 +627,8 @@ impl SplitField {
 ///   `a + q - 1` only, which keeps them inside the tile (its culling box stays true), and
 ///   neighbours differ by at most `q` levels. With `q = 1` this is the CDLOD-style chain
 ///   UDLOD had before the cascade (`(1 - r) s_Q >= S_P + diagonal(l - 1)` over the children).
-fn cell_requirement(
-    levels: &Levels,
-    key: &FieldKey,
-    zone: &[f32],
-    [cx, cy, lod]: [u32; 3],
-    cell_splits: &[Vec<f64>],
-) -> f64 {
+fn cell_requirement(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> f64 {
+    let (key, zone) = (&field.key, &field.zone);
     let screen = worst_case_share(levels.grid_size)
         * levels.field_cell_error(lod, cx, cy) as f64
         * key.focal_px
@@ -621,13 +636,13 @@ fn cell_requirement(
     // This tile's geometry shows, blended, from the start of its morph zone on: no nearer than
     // one level step lets it (`(1 - r)` of the pixel term), also where the zone is `W` wide.
     let screen = screen.max((1.0 - key.morph_range) * screen + zone[lod as usize] as f64);
-    let nesting = largest_below(levels, [cx, cy, lod], lod - 1, cell_splits);
+    let nesting = field.largest_below(levels, [cx, cy, lod], lod - 1);
     let reach = match lod.checked_sub(key.morph_levels) {
-        Some(below) if below >= 1 => {
+        Some(level) if level >= 1 => {
             // Where the zone is `max(W, r s)`: `s - max(W, r s) >= beyond`. The tiles of
             // level `lod - q` under a field cell are its cells of that level, whole.
-            let beyond = largest_below(levels, [cx, cy, lod], below, cell_splits)
-                + levels.tile_diagonal(below);
+            let beyond =
+                field.largest_below(levels, [cx, cy, lod], level) + levels.tile_diagonal(level);
             (beyond / (1.0 - key.morph_range)).max(beyond + zone[lod as usize] as f64)
         }
         _ => 0.0,
@@ -669,13 +684,13 @@ fn zone_widths(levels: &Levels, key: &FieldKey) -> Vec<f32> {
 /// `(ratio - 1) s` against a zone of at least `r s`: with the distance's `1 / ZONE_STEPS`,
 /// at most `0.25 + 1 / (2 grid_size r)` (0.875 at grid 4) per step, under the full slide.
 /// Applied only with `morph_levels > 1`, so one level step keeps the selection it had.
-fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f64]) {
+fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f32]) {
     let (nx, ny) = levels.field_cells_per_side(lod);
     // The same growth per grid step wherever the nodes are: `d` nodes per tile side share
     // the tile's growth.
     let ratio = 1.0 + (FIELD_STEP_RATIO - 1.0) / levels.field_density as f64;
     let (w, h) = (nx as usize + 1, ny as usize + 1);
-    let pass = |s: &mut [f64], order: &mut dyn Iterator<Item = usize>, back: bool| {
+    let pass = |s: &mut [f32], order: &mut dyn Iterator<Item = usize>, back: bool| {
         for k in order {
             let (x, y) = ((k % w) as i64, (k / w) as i64);
             let dy = if back { 1 } else { -1 };
@@ -683,7 +698,7 @@ fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f64]) {
                 let (sx, sy) = (x + ox, y + oy);
                 let visited_row = oy != 0 || (if back { ox > 0 } else { ox < 0 });
                 if visited_row && sx >= 0 && sy >= 0 && (sx as usize) < w && (sy as usize) < h {
-                    let n = s[sy as usize * w + sx as usize] / ratio;
+                    let n = (s[sy as usize * w + sx as usize] as f64 / ratio) as f32;
                     if n > s[k] {
                         s[k] = n;
                     }
@@ -700,23 +715,6 @@ fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f64]) {
 /// odd at level `j` slides `2^j` towards the tile's origin, onto a multiple of `2^(j + 1)`).
 pub fn cascade_levels(grid_size: u32) -> u32 {
     grid_size.trailing_zeros().max(1)
-}
-
-/// The largest split distance of the field cells of level `lod` (<= `c`'s) under field cell
-/// `c` (`[x, y, level]`).
-fn largest_below(
-    levels: &Levels,
-    [cx, cy, cl]: [u32; 3],
-    lod: u32,
-    cell_splits: &[Vec<f64>],
-) -> f64 {
-    let k = cl - lod;
-    let (nx, ny) = levels.field_cells_per_side(lod);
-    let xs = (cx << k)..((cx + 1) << k).min(nx);
-    let ys = (cy << k)..((cy + 1) << k).min(ny);
-    let row = |y: u32| &cell_splits[lod as usize][(y * nx) as usize..][..nx as usize];
-    ys.flat_map(|y| xs.clone().map(move |x| row(y)[x as usize]))
-        .fold(0.0, f64::max)
 }
 
 /// Frustum planes in camera-relative world space (metres), `(normal, offset)` with
