@@ -1,4 +1,4 @@
-//! Host memory with heights through the clipmap: a UDLOD render of a 2049² pyramid must not
+//! Host memory with heights through the clipmap: a UDLOD render of a 4097² pyramid must not
 //! allocate anything of level-0 size on the host. A counting global allocator (this test
 //! binary only; lavapipe's own C allocations are not counted) records the peak of live Rust
 //! heap bytes and the largest single allocation while the renderer is built and flies; the
@@ -74,36 +74,29 @@ fn start() -> usize {
     now
 }
 
-const SIZE: u32 = 2049;
+const SIZE: u32 = 4097;
 const CENTER: u32 = 64;
 const MIB: f64 = (1 << 20) as f64;
 
-/// The UDLOD tile sizes checked: the default (grid 4, which needed four times grid 8's
-/// statistics while level 0's tiles were held) and grid 8.
-const GRIDS: [u32; 2] = [4, 8];
-
-/// The default split field's density at `grid` (`UdlodSettings::field_density`).
-fn density(grid: u32) -> u32 {
-    UdlodSettings {
-        grid_size: grid,
-        ..UdlodSettings::default()
-    }
-    .field_density
-}
+/// The UDLOD tile sizes and split-field densities checked: the default (grid 4, which needed
+/// four times grid 8's statistics while level 0's tiles were held), grid 8, and grid 4 with
+/// the finer split field (two nodes per tile side, whose cells hold their errors too).
+const VARIANTS: [(u32, u32); 3] = [(4, 1), (8, 1), (4, 2)];
 
 fn dataset() -> PathBuf {
-    // The statistics UDLOD reads at each grid: those of its split field's cells.
-    let cells = GRIDS.map(|g| g / density(g));
+    // The statistics UDLOD reads for each variant: those of its split field's cells.
+    let cells = VARIANTS.map(|(grid, d)| grid / d);
     common::procedural_pyramid_with_stats("hostmem", SIZE, 5, CENTER, &cells)
 }
 
-/// UDLOD's statistics as held: per tile of levels 1 and up, min/max and error (12 bytes); with
-/// `d` split-field nodes per tile side the statistics of the field's cells (tiles of `grid /
-/// d` quads, 12 bytes each) while the tiles' are coarsened from them, and their errors (4
-/// bytes) after; a split-field node (4 bytes) per cell corner; and while the field is built
-/// levels 1 and 2's node distances in f64. Level 0's tiles are not held.
-fn udlod_stats_bytes(grid: u32) -> usize {
-    let d = density(grid) as usize;
+/// UDLOD's statistics: held, per tile of levels 1 and up min/max and error (12 bytes), with
+/// `d` split-field nodes per tile side the errors of the field's cells (tiles of `grid / d`
+/// quads, 4 bytes each; their heights fold into the tiles' as they are read), and a
+/// split-field node (4 bytes) per cell corner; while they are built, one more copy of the
+/// larger of the tiles' and the cells' arrays (moved into place level by level). Level 0's
+/// tiles are not held.
+fn udlod_stats_bytes(grid: u32, d: u32) -> usize {
+    let d = d as usize;
     let tiles_per_level = |quads: u32| {
         let mut n_per_level = Vec::new();
         let mut span = quads * 2;
@@ -118,16 +111,16 @@ fn udlod_stats_bytes(grid: u32) -> usize {
         n_per_level
     };
     let tiles: usize = tiles_per_level(grid).iter().map(|n| n * n).sum();
-    let corners: Vec<usize> = tiles_per_level(grid)
+    let nodes: usize = tiles_per_level(grid)
         .iter()
         .map(|n| (n * d + 1) * (n * d + 1))
-        .collect();
+        .sum();
     let cells: usize = match d {
         1 => 0,
         _ => tiles_per_level(grid / d as u32).iter().map(|n| n * n).sum(),
     };
-    let field_build = 8 * (corners[0] + corners.get(1).copied().unwrap_or(0));
-    tiles * 12 + cells * (12 + 4) + corners.iter().sum::<usize>() * 4 + field_build
+    let held = tiles * 12 + cells * 4 + nodes * 4;
+    held + (tiles * 12).max(cells * 4)
 }
 
 #[test]
@@ -135,13 +128,14 @@ fn clipmap_render_holds_no_level0_sized_array_on_the_host() {
     let dir = dataset();
     let gpu = common::gpu(false);
     let level0_bytes = SIZE as usize * SIZE as usize * 4;
+    let default = UdlodSettings::default();
     assert_eq!(
-        UdlodSettings::default().grid_size,
-        GRIDS[0],
-        "the default grid is checked first"
+        (default.grid_size, default.field_density),
+        VARIANTS[0],
+        "the default is checked first"
     );
-    for grid in GRIDS {
-        render_within_budget(&gpu, &dir, grid, level0_bytes);
+    for (grid, d) in VARIANTS {
+        render_within_budget(&gpu, &dir, grid, d, level0_bytes);
     }
 
     // Control: the whole height map is one level-0-sized allocation, and the counter sees it.
@@ -154,9 +148,9 @@ fn clipmap_render_holds_no_level0_sized_array_on_the_host() {
     let _ = std::fs::remove_dir_all(dir.parent().unwrap());
 }
 
-/// Flies UDLOD at `grid` through the clipmap and checks the Rust heap's peak and largest
-/// allocation against the budget.
-fn render_within_budget(gpu: &Arc<Gpu>, dir: &Path, grid: u32, level0_bytes: usize) {
+/// Flies UDLOD at `grid` with `d` split-field nodes per tile side through the clipmap and
+/// checks the Rust heap's peak and largest allocation against the budget.
+fn render_within_budget(gpu: &Arc<Gpu>, dir: &Path, grid: u32, d: u32, level0_bytes: usize) {
     let base = start();
     let reader = Arc::new(PyramidReader::open(dir).unwrap());
     let source = DatasetSource::open(dir).unwrap();
@@ -189,6 +183,7 @@ fn render_within_budget(gpu: &Arc<Gpu>, dir: &Path, grid: u32, level0_bytes: usi
     let cm = Clipmap::new(geometry, settings, Arc::new(source), 1).unwrap();
     let udlod = UdlodSettings {
         grid_size: grid,
+        field_density: d,
         ..UdlodSettings::default()
     };
     let mut renderer = Renderer::with_clipmap(
@@ -223,10 +218,10 @@ fn render_within_budget(gpu: &Arc<Gpu>, dir: &Path, grid: u32, level0_bytes: usi
     let queued = (cm.settings.max_in_flight + cm.settings.max_uploads_per_frame) as usize;
     let shading = queued * (side * side * 4 + cm.geometry.shading_texels() as usize * 8);
     let cache = reader.max_cached_bytes() as usize;
-    let udlod_stats = udlod_stats_bytes(grid);
+    let udlod_stats = udlod_stats_bytes(grid, d);
     let budget = atlas_cpu + shading + cache + udlod_stats + (1 << 20);
     eprintln!(
-        "grid {grid}: peak Rust heap {:.2} MiB (budget {:.2}: atlas {:.2} + queued loads {:.2} + cache {:.2} + udlod {:.2} + 1 slack), largest allocation {:.2} MiB, level 0 {:.2} MiB; cache now {:.2} MiB in {} loads",
+        "grid {grid}, field density {d}: peak Rust heap {:.2} MiB (budget {:.2}: atlas {:.2} + queued loads {:.2} + cache {:.2} + udlod {:.2} + 1 slack), largest allocation {:.2} MiB, level 0 {:.2} MiB; cache now {:.2} MiB in {} loads",
         peak as f64 / MIB,
         budget as f64 / MIB,
         atlas_cpu as f64 / MIB,
