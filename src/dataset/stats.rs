@@ -539,19 +539,11 @@ impl TileStats {
     /// split field reads the small tiles' errors and tiles with the large ones
     /// (`Levels::with_field_density`). A level without tiles (the finest, dropped) stays so.
     pub fn coarsened(&self, factor: u32) -> Result<Self> {
-        if !factor.is_power_of_two() {
-            return Err(Error::invalid(
-                "tile statistics",
-                format!("coarsening factor {factor} is not a power of two"),
-            ));
-        }
-        let grid = self.grid_size.checked_mul(factor).ok_or_else(|| {
-            Error::invalid(
-                "tile statistics",
-                format!("grid size {} x {factor}", self.grid_size),
-            )
-        })?;
-        let shape = Shape::new(self.width, self.height, grid)?;
+        let shape = Shape::new(
+            self.width,
+            self.height,
+            coarse_grid(self.grid_size, factor)?,
+        )?;
         let mut levels = Vec::with_capacity(shape.levels.len());
         for (lod, &(nx, ny, _)) in shape.levels.iter().enumerate() {
             let fine = &self.levels[lod];
@@ -579,7 +571,7 @@ impl TileStats {
             levels.push(out);
         }
         Ok(TileStats {
-            grid_size: grid,
+            grid_size: shape.grid,
             width: self.width,
             height: self.height,
             levels,
@@ -674,6 +666,18 @@ fn read_header<R: std::io::Read>(r: &mut R, shape: &Shape) -> std::result::Resul
     Ok(head)
 }
 
+/// The grid size of tiles `factor` (a power of two) times larger than tiles of `grid` quads.
+fn coarse_grid(grid: u32, factor: u32) -> Result<u32> {
+    if !factor.is_power_of_two() {
+        return Err(Error::invalid(
+            "tile statistics",
+            format!("coarsening factor {factor} is not a power of two"),
+        ));
+    }
+    grid.checked_mul(factor)
+        .ok_or_else(|| Error::invalid("tile statistics", format!("grid size {grid} x {factor}")))
+}
+
 /// One stored tile `(min, max, error)` of level `lod`, checked: finite, `min <= max`, error
 /// `>= 0` (0 at level 0).
 fn tile_entry(v: &[u8], lod: usize) -> std::result::Result<[f32; 3], String> {
@@ -761,18 +765,7 @@ impl FieldStats {
             let cells = TileStats::read(path, width, height, cell_grid, Finest::Skip)?;
             return Self::from_cells(cells, 1);
         }
-        if !density.is_power_of_two() {
-            return Err(Error::invalid(
-                "tile statistics",
-                format!("field density {density} is not a power of two"),
-            ));
-        }
-        let grid = cell_grid.checked_mul(density).ok_or_else(|| {
-            Error::invalid(
-                "tile statistics",
-                format!("grid size {cell_grid} x {density}"),
-            )
-        })?;
+        let grid = coarse_grid(cell_grid, density)?;
         let mut tiles = TileStats::empty(&Shape::new(width, height, grid)?, Finest::Skip);
         let cells = TileStats::read_folding(
             path,
