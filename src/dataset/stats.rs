@@ -558,14 +558,9 @@ impl TileStats {
                 let n = (nx * ny) as usize;
                 out.min_max = vec![[f32::INFINITY, f32::NEG_INFINITY]; n];
                 out.error = vec![0.0; n];
-                for fy in 0..fine.tiles.1 {
-                    for fx in 0..fine.tiles.0 {
-                        let f = (fy * fine.tiles.0 + fx) as usize;
-                        let c = ((fy / factor) * nx + fx / factor) as usize;
-                        let [lo, hi] = fine.min_max[f];
-                        out.min_max[c] = [out.min_max[c][0].min(lo), out.min_max[c][1].max(hi)];
-                        out.error[c] = out.error[c].max(fine.error[f]);
-                    }
+                let fnx = fine.tiles.0 as usize;
+                for (f, (&[lo, hi], &er)) in fine.min_max.iter().zip(&fine.error).enumerate() {
+                    fold_tile(&mut out, factor as usize, (f % fnx, f / fnx), [lo, hi, er]);
                 }
             }
             levels.push(out);
@@ -693,7 +688,8 @@ fn tile_entry(v: &[u8], lod: usize) -> std::result::Result<[f32; 3], String> {
 }
 
 /// Folds tile `(x, y)` (`[min, max, error]`) into the tile `factor` times larger of `coarse`
-/// that holds it: the same reductions as [`TileStats::coarsened`].
+/// that holds it (min, max, max: any order gives the same bits), for
+/// [`TileStats::coarsened`] and the folded read.
 fn fold_tile(
     coarse: &mut LevelTiles,
     factor: usize,
