@@ -456,3 +456,30 @@ fn render_through_the_clipmap_reports_streaming() {
         &["pgm", "clipmap"],
     );
 }
+
+/// `cargo run` (the README's `make run`, the Makefile's data targets) must run the product:
+/// with the tests' helper binary beside it, the manifest names it as `default-run`, else
+/// cargo refuses to choose ("could not determine which binary to run"; how `make run` failed
+/// until issue 18's ninth round). Negative control: without the key the test fails.
+#[test]
+fn cargo_run_runs_the_product() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("Cargo.toml");
+    let manifest: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
+    let bins: Vec<&str> = manifest["bin"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["name"].as_str().unwrap())
+        .collect();
+    assert!(bins.contains(&"vkterrain"), "{bins:?}");
+    if bins.len() > 1 {
+        assert_eq!(
+            manifest["package"]
+                .get("default-run")
+                .and_then(|v| v.as_str()),
+            Some("vkterrain"),
+            "{} binaries {bins:?} and no default-run",
+            bins.len()
+        );
+    }
+}
