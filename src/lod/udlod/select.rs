@@ -346,6 +346,9 @@ pub struct FieldKey {
     /// Largest ratio between a level's largest and a tile's split distance (1: one distance
     /// per level, the distance-only selection).
     pub field_max: f64,
+    /// The share of a tile's worst-case projected error spent on `tau`
+    /// ([`worst_case_share`] unless the settings override it).
+    pub share: f64,
 }
 
 impl FieldKey {
@@ -356,6 +359,7 @@ impl FieldKey {
             morph_range: settings.morph_range,
             morph_levels: settings.morph_levels(),
             field_max: settings.error_field_max,
+            share: settings.worst_case_share(),
         }
     }
 }
@@ -375,8 +379,9 @@ impl FieldKey {
 /// measured ones interpolate in `log2(grid_size)`; larger ones take the grid-8 share (larger
 /// tiles should overstate more, so that refines them more than needed; not measured).
 ///
-/// The only place the share enters: [`SplitField::new`] bakes it into the split field that
-/// the CPU reference selection and the GPU prepass both read.
+/// The only place the share enters: [`SplitField::new`] bakes it (through [`FieldKey::share`],
+/// which `UdlodSettings::worst_case_share` may override) into the split field that the CPU
+/// reference selection and the GPU prepass both read.
 pub fn worst_case_share(grid_size: u32) -> f64 {
     // (grid_size, share), increasing grid sizes.
     const MEASURED: [(u32, f64); 3] = [(2, 0.9), (4, 0.72), (8, 0.7)];
@@ -629,10 +634,8 @@ impl SplitField {
 ///   UDLOD had before the cascade (`(1 - r) s_Q >= S_P + diagonal(l - 1)` over the children).
 fn cell_requirement(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> f64 {
     let (key, zone) = (&field.key, &field.zone);
-    let screen = worst_case_share(levels.grid_size)
-        * levels.field_cell_error(lod, cx, cy) as f64
-        * key.focal_px
-        / key.tau_px;
+    let screen =
+        key.share * levels.field_cell_error(lod, cx, cy) as f64 * key.focal_px / key.tau_px;
     // This tile's geometry shows, blended, from the start of its morph zone on: no nearer than
     // one level step lets it (`(1 - r)` of the pixel term), also where the zone is `W` wide.
     let screen = screen.max((1.0 - key.morph_range) * screen + zone[lod as usize] as f64);

@@ -28,6 +28,10 @@ pub struct UdlodSettings {
     /// for that). A power of two that leaves at least 2 quads per cell
     /// (`grid_size / field_density >= 2`).
     pub field_density: u32,
+    /// The share of a tile's worst-case projected error the split rule spends on `tau`
+    /// (`select::worst_case_share`): 0 (the default) the share measured per grid size; a value
+    /// in (0, 1] overrides it, for measuring it again (`eval --sweep worst_case_share=...`).
+    pub worst_case_share: f64,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
     /// tree's leaves).
     pub max_tiles: u32,
@@ -104,6 +108,7 @@ impl Default for UdlodSettings {
             // cascade").
             morph_levels: 0,
             field_density: 1,
+            worst_case_share: 0.0,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
             max_tiles: 524_288,
@@ -143,6 +148,11 @@ impl UdlodSettings {
             apply: |s, v| s.field_density = v as u32,
         },
         Sweep {
+            key: "worst_case_share",
+            help: "share of a tile's worst-case error spent on tau (0 = measured per grid)",
+            apply: |s, v| s.worst_case_share = v,
+        },
+        Sweep {
             key: "max_tiles",
             help: "tile budget per frame and view",
             apply: |s, v| s.max_tiles = v as u32,
@@ -165,6 +175,15 @@ impl UdlodSettings {
         match self.morph_levels {
             0 => super::select::cascade_levels(self.grid_size),
             n => n,
+        }
+    }
+
+    /// The share of a tile's worst-case projected error spent on `tau`: `worst_case_share`,
+    /// or with 0 the one measured for `grid_size` (`select::worst_case_share`).
+    pub fn worst_case_share(&self) -> f64 {
+        match self.worst_case_share {
+            0.0 => super::select::worst_case_share(self.grid_size),
+            k => k,
         }
     }
 
@@ -202,6 +221,12 @@ impl UdlodSettings {
                 self.grid_size
             ));
         }
+        let k = self.worst_case_share;
+        if !(k == 0.0 || (k > 0.0 && k <= 1.0)) {
+            return bad(format!(
+                "worst_case_share {k} must be 0 (measured per grid) or within (0, 1]"
+            ));
+        }
         if !(16..=1 << 22).contains(&self.max_tiles) {
             return bad(format!(
                 "max_tiles {} must be within 16..=4194304",
@@ -227,5 +252,30 @@ impl UdlodSettings {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::UdlodSettings;
+
+    /// 0 takes the share measured for the grid, a value in (0, 1] overrides it, and anything
+    /// else is a one-line error naming the setting.
+    #[test]
+    fn worst_case_share_is_measured_or_overridden_within_0_1() {
+        let at = |k: f64| UdlodSettings {
+            worst_case_share: k,
+            ..UdlodSettings::default()
+        };
+        let measured = super::super::select::worst_case_share(4);
+        assert_eq!(at(0.0).worst_case_share(), measured);
+        assert_eq!(at(0.5).worst_case_share(), 0.5);
+        for ok in [0.0, 0.3, 1.0] {
+            assert!(at(ok).validate().is_ok(), "{ok}");
+        }
+        for bad in [-0.1, 1.5, f64::NAN, f64::INFINITY] {
+            let e = at(bad).validate().unwrap_err().to_string();
+            assert!(e.contains("worst_case_share") && !e.contains('\n'), "{e}");
+        }
     }
 }
