@@ -278,7 +278,8 @@ impl PyramidReader {
     /// UDLOD's statistics for a split field of `density` nodes per tile side of
     /// `cell_grid * density` quads: from the cells' stored statistics without holding their
     /// heights ([`FieldStats::read`]); with one node per tile corner also from those of
-    /// half-size tiles (what UDLOD's default stores), folded into the tiles; else as
+    /// half-size tiles (what two nodes per side at this grid read), folded into the tiles;
+    /// else as
     /// [`PyramidReader::tile_stats`] computes them.
     pub fn field_stats(&self, cell_grid: u32, density: u32) -> Result<FieldStats> {
         if let Some(s) = self.store.stored_field_stats(cell_grid, density)? {
