@@ -53,6 +53,53 @@ fn vs_pulled_morphing(@builtin(vertex_index) vertex: u32, @builtin(instance_inde
     return tile_vertex(morphing_tile(instance), pulled_local(vertex));
 }
 
+// Collapsed tiles (`tile_collapses` in udlod_tiling.wgsl: every odd vertex fully on the grid
+// above) are drawn as that grid, `quads / 2` per side over the tile's even vertices, from the
+// final list's second half (static ones from its front, morphing ones from its back). The
+// even vertices morph as in the full grid, so the surface is the same bit for bit.
+fn collapsed_tile(instance: u32) -> Tile {
+    return final_tiles[udlod.sizes.z + instance];
+}
+
+fn collapsed_morphing_tile(instance: u32) -> Tile {
+    return final_tiles[2u * udlod.sizes.z - 1u - instance];
+}
+
+// The collapsed grid's index (`udlod.counts.w` past the full grid's in the index buffer).
+fn collapsed_indexed_local(vertex: u32) -> vec2<u32> {
+    let half = udlod.sizes.x / 2u;
+    return 2u * vec2<u32>(vertex % (half + 1u), vertex / (half + 1u));
+}
+
+fn collapsed_pulled_local(vertex: u32) -> vec2<u32> {
+    let half = udlod.sizes.x / 2u;
+    let quad = vertex / 6u;
+    let corner = vertex % 6u;
+    let dx = select(0u, 1u, corner == 1u || corner == 3u || corner == 4u);
+    let dy = select(0u, 1u, corner == 2u || corner == 4u || corner == 5u);
+    return 2u * vec2<u32>(quad % half + dx, quad / half + dy);
+}
+
+@vertex
+fn vs_collapsed(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    return tile_vertex(collapsed_tile(instance), collapsed_indexed_local(vertex));
+}
+
+@vertex
+fn vs_collapsed_morphing(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    return tile_vertex(collapsed_morphing_tile(instance), collapsed_indexed_local(vertex));
+}
+
+@vertex
+fn vs_pulled_collapsed(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    return tile_vertex(collapsed_tile(instance), collapsed_pulled_local(vertex));
+}
+
+@vertex
+fn vs_pulled_collapsed_morphing(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
+    return tile_vertex(collapsed_morphing_tile(instance), collapsed_pulled_local(vertex));
+}
+
 // The morphed vertex (`morphed_vertex`, shared with the test probe) projected.
 fn tile_vertex(tile: Tile, local: vec2<u32>) -> TerrainVertex {
     let v = morphed_vertex(tile, local);

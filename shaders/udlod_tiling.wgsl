@@ -3,7 +3,8 @@
 // indirect dispatch size) and a `refine` over those parents. One temporary list is used from
 // both ends: even passes read parents from the front and write children from the back, odd
 // passes the other way round. Tiles that do not split go to the final list; `finish` writes
-// the indexed indirect draw (one instance per final tile).
+// the indexed indirect draws (one instance per final tile; four draws: static and morphing
+// tiles, each with its own grid or collapsed onto its parent's).
 //
 // Capacity: a pass splits only if all of its splits fit (3 more final-list entries each: a
 // split turns one would-be leaf into four, and 4 temporary slots). The splits are known
@@ -54,6 +55,21 @@ struct TilingState {
     morph_first_index: u32,
     morph_vertex_offset: i32,
     morph_first_instance: u32,
+    // Final tiles drawn as their parent's grid (`tile_collapses`), in the final list's second
+    // half: the static ones from its front, the morphing ones from its back.
+    collapsed_count: atomic<u32>,
+    collapsed_morph_count: atomic<u32>,
+    // vkCmdDrawIndexedIndirect arguments of the collapsed static and morphing tiles.
+    collapsed_index_count: u32,
+    collapsed_instance_count: u32,
+    collapsed_first_index: u32,
+    collapsed_vertex_offset: i32,
+    collapsed_first_instance: u32,
+    collapsed_morph_index_count: u32,
+    collapsed_morph_instance_count: u32,
+    collapsed_morph_first_index: u32,
+    collapsed_morph_vertex_offset: i32,
+    collapsed_morph_first_instance: u32,
 }
 
 @group(1) @binding(1) var<storage, read_write> state: TilingState;
@@ -76,6 +92,8 @@ fn prepare() {
         requests = select(0u, 1u, root.pad == (TILE_DECIDED | TILE_SPLITS));
         atomicStore(&state.final_count, 0u);
         atomicStore(&state.morph_count, 0u);
+        atomicStore(&state.collapsed_count, 0u);
+        atomicStore(&state.collapsed_morph_count, 0u);
         atomicStore(&state.reserved_leaves, 1u);
         atomicStore(&state.overflow, 0u);
         atomicStore(&state.culled, 0u);
@@ -175,18 +193,25 @@ fn cull_slack(t: Tile) -> f32 {
 var<workgroup> wg_children: atomic<u32>;
 var<workgroup> wg_finals: atomic<u32>;
 var<workgroup> wg_morphing: atomic<u32>;
+var<workgroup> wg_collapsed: atomic<u32>;
+var<workgroup> wg_collapsed_morphing: atomic<u32>;
 var<workgroup> wg_requests: atomic<u32>;
 var<workgroup> wg_culled: atomic<u32>;
 var<workgroup> wg_overflow: atomic<u32>;
 var<workgroup> wg_child_base: u32;
 var<workgroup> wg_final_base: u32;
 var<workgroup> wg_morph_base: u32;
+var<workgroup> wg_collapsed_base: u32;
+var<workgroup> wg_collapsed_morph_base: u32;
 
 // Four invocations per parent: their parent's slot in the workgroup's reservations.
 var<workgroup> wg_parent_local: array<u32, UDLOD_WORKGROUP / 4u>;
 // Per parent: 1 when one of its four invocations found a vertex of the (final) parent that
 // may make slivers (`tile_mid_morph`).
 var<workgroup> wg_slivers: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
+// Per parent: 1 when one of its four invocations found a vertex odd at the (final) parent's
+// level that is not fully on the grid above (`tile_collapses`): the tile keeps its own grid.
+var<workgroup> wg_keeps_grid: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 
 const_assert UDLOD_WORKGROUP % 4u == 0u;
 
@@ -211,12 +236,15 @@ fn refine(
         atomicStore(&wg_children, 0u);
         atomicStore(&wg_finals, 0u);
         atomicStore(&wg_morphing, 0u);
+        atomicStore(&wg_collapsed, 0u);
+        atomicStore(&wg_collapsed_morphing, 0u);
         atomicStore(&wg_requests, 0u);
         atomicStore(&wg_culled, 0u);
         atomicStore(&wg_overflow, 0u);
     }
     if (li & 3u) == 0u {
         atomicStore(&wg_slivers[li / 4u], 0u);
+        atomicStore(&wg_keeps_grid[li / 4u], 0u);
     }
     workgroupBarrier();
     let invocation = (group.y * groups.x + group.x) * UDLOD_WORKGROUP + li;
@@ -225,6 +253,7 @@ fn refine(
     let parents = state.parent_count;
     var action = ACTION_NONE;
     var morphs = false;
+    var collapses = false;
     var t = Tile(0u, 0u, 0u, 0u);
     var child = Tile(0u, 0u, 0u, 0u);
     if parent < parents {
@@ -254,13 +283,21 @@ fn refine(
     if action == ACTION_FINAL && tile_mid_morph(t, k) {
         atomicOr(&wg_slivers[li / 4u], 1u);
     }
+    if action == ACTION_FINAL && !tile_collapses(t, k) {
+        atomicOr(&wg_keeps_grid[li / 4u], 1u);
+    }
     workgroupBarrier();
     if k == 0u {
         if action == ACTION_SPLIT {
             wg_parent_local[li / 4u] = atomicAdd(&wg_children, 4u);
         } else if action == ACTION_FINAL {
             morphs = atomicLoad(&wg_slivers[li / 4u]) != 0u;
-            if morphs {
+            collapses = atomicLoad(&wg_keeps_grid[li / 4u]) == 0u;
+            if collapses && morphs {
+                wg_parent_local[li / 4u] = atomicAdd(&wg_collapsed_morphing, 1u);
+            } else if collapses {
+                wg_parent_local[li / 4u] = atomicAdd(&wg_collapsed, 1u);
+            } else if morphs {
                 wg_parent_local[li / 4u] = atomicAdd(&wg_morphing, 1u);
             } else {
                 wg_parent_local[li / 4u] = atomicAdd(&wg_finals, 1u);
@@ -281,11 +318,19 @@ fn refine(
             atomicAdd(&state.overflow, 1u);
         }
     } else if action == ACTION_FINAL && k == 0u {
-        // Static tiles from the front, morphing ones from the back: the leaves reserved
-        // before (`reserved_leaves`) fit both.
-        let i = select(wg_final_base, wg_morph_base, morphs) + local;
-        if i < udlod.sizes.z {
-            final_tiles[select(i, udlod.sizes.z - 1u - i, morphs)] = Tile(t.x, t.y, t.lod, 0u);
+        // Static tiles from the front of their half, morphing ones from its back (the
+        // collapsed ones' half second): the leaves reserved before (`reserved_leaves`) fit
+        // each half.
+        let base = select(
+            select(wg_final_base, wg_morph_base, morphs),
+            select(wg_collapsed_base, wg_collapsed_morph_base, morphs),
+            collapses,
+        );
+        let i = base + local;
+        let n = udlod.sizes.z;
+        if i < n {
+            let half = select(0u, n, collapses);
+            final_tiles[half + select(i, n - 1u - i, morphs)] = Tile(t.x, t.y, t.lod, 0u);
         } else {
             atomicAdd(&state.overflow, 1u);
         }
@@ -307,6 +352,14 @@ fn reserve_in_lists() {
     let nm = atomicLoad(&wg_morphing);
     if nm > 0u {
         wg_morph_base = atomicAdd(&state.morph_count, nm);
+    }
+    let nc_static = atomicLoad(&wg_collapsed);
+    if nc_static > 0u {
+        wg_collapsed_base = atomicAdd(&state.collapsed_count, nc_static);
+    }
+    let nc_morph = atomicLoad(&wg_collapsed_morphing);
+    if nc_morph > 0u {
+        wg_collapsed_morph_base = atomicAdd(&state.collapsed_morph_count, nc_morph);
     }
     let requests = atomicLoad(&wg_requests);
     if requests > 0u {
@@ -373,11 +426,34 @@ fn tile_mid_morph(t: Tile, k: u32) -> bool {
     return false;
 }
 
+// Whether every vertex of final tile `t` odd at its level lies fully on the grid above, with
+// `UDLOD_COLLAPSE_MARGIN` to spare (`tile_collapses` in select.rs): then the tile's surface is
+// its parent grid's over its even vertices, and it is drawn as that grid (`vs_collapsed`;
+// docs/udlod.md, "Collapsed tiles"). Only with `udlod.params.x` (the setting `collapse`) and
+// morphing on. Invocation `k` of the tile's four checks every fourth vertex from its `k`th.
+fn tile_collapses(t: Tile, k: u32) -> bool {
+    if udlod.params.x < 0.5 || udlod.params.z < 0.5 {
+        return false;
+    }
+    let quads = udlod.sizes.x;
+    let step = 1u << t.lod;
+    let origin = vec2<u32>(t.x, t.y) * quads * step;
+    for (var v = k; v < (quads + 1u) * (quads + 1u); v += 4u) {
+        let local = vec2<u32>(v % (quads + 1u), v / (quads + 1u));
+        if ((local.x | local.y) & 1u) == 1u
+            && morph_ramp(vec2<i32>(origin + local * step), t.lod) < 1.0 + UDLOD_COLLAPSE_MARGIN {
+            return false;
+        }
+    }
+    return true;
+}
+
 @compute @workgroup_size(1)
 fn finish() {
-    let morphing = min(atomicLoad(&state.morph_count), udlod.sizes.z);
+    let n = udlod.sizes.z;
+    let morphing = min(atomicLoad(&state.morph_count), n);
     state.index_count = udlod.counts.x;
-    state.instance_count = min(atomicLoad(&state.final_count), udlod.sizes.z - morphing);
+    state.instance_count = min(atomicLoad(&state.final_count), n - morphing);
     state.first_index = 0u;
     state.vertex_offset = 0;
     state.first_instance = 0u;
@@ -386,4 +462,18 @@ fn finish() {
     state.morph_first_index = 0u;
     state.morph_vertex_offset = 0;
     state.morph_first_instance = 0u;
+    // The collapsed tiles: a grid of `quads / 2` per side (a quarter of the indices), after
+    // the full grid's in the index buffer (`udlod.counts.w`; 0 with vertex pulling).
+    let collapsed_morphing = min(atomicLoad(&state.collapsed_morph_count), n);
+    state.collapsed_index_count = udlod.counts.x / 4u;
+    state.collapsed_instance_count =
+        min(atomicLoad(&state.collapsed_count), n - collapsed_morphing);
+    state.collapsed_first_index = udlod.counts.w;
+    state.collapsed_vertex_offset = 0;
+    state.collapsed_first_instance = 0u;
+    state.collapsed_morph_index_count = udlod.counts.x / 4u;
+    state.collapsed_morph_instance_count = collapsed_morphing;
+    state.collapsed_morph_first_index = udlod.counts.w;
+    state.collapsed_morph_vertex_offset = 0;
+    state.collapsed_morph_first_instance = 0u;
 }

@@ -18,7 +18,8 @@ use vkterrain::frame::terrain::TERRAIN_SET;
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
 use vkterrain::lod::pgm::PGM_SET;
 use vkterrain::lod::udlod::{
-    DRAW_OFFSET, DRAW_STRIDE, MORPH_DRAW_OFFSET, TilingState, UDLOD_SET, UdlodUniforms,
+    COLLAPSED_DRAW_OFFSET, COLLAPSED_MORPH_DRAW_OFFSET, DRAW_OFFSET, DRAW_STRIDE,
+    MORPH_DRAW_OFFSET, TilingState, UDLOD_SET, UdlodUniforms,
 };
 
 /// The drawing shaders (the probes come on top where a test covers them too).
@@ -272,6 +273,8 @@ fn tiling_state_matches_the_wgsl_struct() {
     // The WGSL side spells the indirect-argument arrays out member by member.
     let draw = offset_of!(TilingState, draw);
     let morph_draw = offset_of!(TilingState, morph_draw);
+    let collapsed = offset_of!(TilingState, collapsed_draw);
+    let collapsed_morph = offset_of!(TilingState, collapsed_morph_draw);
     let rust = [
         ("dispatch_x", offset_of!(TilingState, dispatch)),
         ("dispatch_y", offset_of!(TilingState, dispatch) + 4),
@@ -297,6 +300,21 @@ fn tiling_state_matches_the_wgsl_struct() {
         ("morph_first_index", morph_draw + 8),
         ("morph_vertex_offset", morph_draw + 12),
         ("morph_first_instance", morph_draw + 16),
+        ("collapsed_count", offset_of!(TilingState, collapsed_count)),
+        (
+            "collapsed_morph_count",
+            offset_of!(TilingState, collapsed_morph_count),
+        ),
+        ("collapsed_index_count", collapsed),
+        ("collapsed_instance_count", collapsed + 4),
+        ("collapsed_first_index", collapsed + 8),
+        ("collapsed_vertex_offset", collapsed + 12),
+        ("collapsed_first_instance", collapsed + 16),
+        ("collapsed_morph_index_count", collapsed_morph),
+        ("collapsed_morph_instance_count", collapsed_morph + 4),
+        ("collapsed_morph_first_index", collapsed_morph + 8),
+        ("collapsed_morph_vertex_offset", collapsed_morph + 12),
+        ("collapsed_morph_first_instance", collapsed_morph + 16),
     ];
     assert_struct_layout(
         &[("udlod_tiling", UDLOD_TILING_WGSL)],
@@ -357,7 +375,21 @@ fn indirect_arguments_are_vulkan_commands() {
         at("morph_first_instance"),
         morph + offset_of!(I, first_instance)
     );
-    assert!(morph + size_of::<I>() <= size_of::<TilingState>());
+    assert!(morph + size_of::<I>() <= offset_of!(TilingState, collapsed_count));
+    // The collapsed tiles' two draws, the same way.
+    for (prefix, offset) in [
+        ("collapsed", COLLAPSED_DRAW_OFFSET as usize),
+        ("collapsed_morph", COLLAPSED_MORPH_DRAW_OFFSET as usize),
+    ] {
+        let at = |member: &str| at(&format!("{prefix}_{member}"));
+        assert_eq!(offset % 4, 0);
+        assert_eq!(at("index_count"), offset + offset_of!(I, index_count));
+        assert_eq!(at("instance_count"), offset + offset_of!(I, instance_count));
+        assert_eq!(at("first_index"), offset + offset_of!(I, first_index));
+        assert_eq!(at("vertex_offset"), offset + offset_of!(I, vertex_offset));
+        assert_eq!(at("first_instance"), offset + offset_of!(I, first_instance));
+        assert!(offset + size_of::<I>() <= size_of::<TilingState>());
+    }
 }
 
 /// Member names and byte offsets of WGSL struct `name`.

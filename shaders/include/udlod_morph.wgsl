@@ -11,6 +11,12 @@
 // last `morph_range` of it; with the morph cascade (`split[l].y`, the zone's least width, > 0)
 // over the last `max(zone, morph_range s)` metres of the point's split distance `s`.
 fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
+    return clamp(morph_ramp(sample, lod), 0.0, 1.0) * udlod.params.z;
+}
+
+// `morph_factor` before its clamp and the on/off switch: at least 1 where the point lies fully
+// on the next level's grid (the prepass's `tile_collapses` asks for a margin past it).
+fn morph_ramp(sample: vec2<i32>, lod: u32) -> f32 {
     let d = length(vec3<f32>(viewer_xy(sample) * udlod.metric.xy, udlod.viewer.z));
     let field = field_at(sample, lod + 1u);
     let parent_split = udlod.split[lod + 1u].x;
@@ -20,10 +26,10 @@ fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
         // The morph cascade: the zone is at least `zone` wide (a few grid steps).
         let s = parent_split / field;
         let width = max(zone, morph_range * s);
-        return clamp(1.0 - (s - d) / width, 0.0, 1.0) * udlod.params.z;
+        return 1.0 - (s - d) / width;
     }
     let scaled = d * field;
-    return clamp(1.0 - (1.0 - scaled / parent_split) / morph_range, 0.0, 1.0) * udlod.params.z;
+    return 1.0 - (1.0 - scaled / parent_split) / morph_range;
 }
 
 // The walk's step at level `j` (`morph_cascade`, `morph_moved`): which of the point's

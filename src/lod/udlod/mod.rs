@@ -68,6 +68,27 @@ pub struct TilingState {
     pub morph_count: u32,
     /// The indexed indirect draw of those tiles.
     pub morph_draw: [u32; 5],
+    /// Final tiles drawn as their parent's grid (the final list's second half): static ones
+    /// from its front, morphing ones from its back.
+    pub collapsed_count: u32,
+    pub collapsed_morph_count: u32,
+    /// The indexed indirect draws of the collapsed static and morphing tiles.
+    pub collapsed_draw: [u32; 5],
+    pub collapsed_morph_draw: [u32; 5],
+}
+
+impl TilingState {
+    /// Tiles drawn with their own grid (static, morphing) and collapsed onto their parent's
+    /// (static, morphing): the four draws' instance counts.
+    pub fn drawn(&self) -> [u64; 4] {
+        [
+            self.draw[1],
+            self.morph_draw[1],
+            self.collapsed_draw[1],
+            self.collapsed_morph_draw[1],
+        ]
+        .map(u64::from)
+    }
 }
 
 /// Descriptor set 1 (`shaders/include/udlod_common.wgsl`, `shaders/udlod_tiling.wgsl`,
@@ -90,6 +111,10 @@ pub const UDLOD_SET: &[Binding] = {
 pub const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
 /// Byte offset of the morphing tiles' draw arguments in [`TilingState`].
 pub const MORPH_DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, morph_draw) as u64;
+/// Byte offsets of the collapsed tiles' draw arguments in [`TilingState`].
+pub const COLLAPSED_DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, collapsed_draw) as u64;
+pub const COLLAPSED_MORPH_DRAW_OFFSET: u64 =
+    std::mem::offset_of!(TilingState, collapsed_morph_draw) as u64;
 /// Bytes between consecutive indexed indirect draws (one is drawn; Vulkan wants the stride).
 pub const DRAW_STRIDE: u32 = size_of::<[u32; 5]>() as u32;
 pub const TILE_BYTES: u64 = 16;
@@ -114,9 +139,11 @@ struct SlotBuffers {
 struct TileLists {
     /// Read and written by the prepass only (through the descriptor set).
     temp: Buffer,
+    /// Two halves of `capacity` entries: tiles drawn with their own grid, then those drawn
+    /// as their parent's (collapsed).
     #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
     final_tiles: Buffer,
-    /// Entries of the final list.
+    /// Entries of each half of the final list.
     capacity: u32,
 }
 
@@ -136,7 +163,7 @@ impl TileLists {
         let final_tiles = Buffer::new(
             gpu,
             &format!("udlod final tiles {i}"),
-            capacity as u64 * TILE_BYTES,
+            2 * capacity as u64 * TILE_BYTES,
             storage | vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::GpuOnly,
         )?;
@@ -237,6 +264,7 @@ pub struct Udlod {
     /// GPU mirror of `levels.min_max` (bound in every slot's set, written again when a slot's
     /// lists grow).
     min_max: Buffer,
+    /// The tile grid's indices, then the collapsed grid's (`grid_size / 2` per side).
     indices: Buffer,
     index_count: u32,
     slots: Vec<SlotBuffers>,
@@ -251,6 +279,10 @@ pub struct Udlod {
     draw: Pipeline,
     /// Draws the others (its back), without it unless `back_faces = "all"`.
     draw_morphing: Pipeline,
+    /// The same two for the collapsed tiles (the list's second half), drawn as their
+    /// parent's grid.
+    draw_collapsed: Pipeline,
+    draw_collapsed_morphing: Pipeline,
     /// The most tiles a slot's lists grow to: `max_tiles`, at most the full tree's leaves.
     tile_cap: u32,
     /// The final-list capacity every slot grows to at its next frame: `initial_tiles` at
@@ -316,7 +348,13 @@ impl Udlod {
         // The split field's nodes (a one-level tree has none, and a buffer is never empty).
         let field_bytes = (levels.field_nodes() as u64 * 4).max(4);
         let grid = super::brute::grid_indices(settings.grid_size);
-        let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
+        // The collapsed tiles' grid (`vs_collapsed`) after the tile grid's.
+        let both: Vec<u16> = [
+            grid.clone(),
+            super::brute::grid_indices(settings.grid_size / 2),
+        ]
+        .concat();
+        let index_bytes: &[u8] = bytemuck::cast_slice(&both);
         let mut indices = Buffer::new(
             gpu,
             "udlod grid indices",
@@ -365,17 +403,25 @@ impl Udlod {
         // culling, the others without (docs/udlod.md, "Pinholes far away and back faces").
         let cull_static = settings.back_faces != BackFaces::None;
         let cull_morphing = settings.back_faces == BackFaces::All;
-        let (draw, draw_morphing) = if settings.vertex_pulling {
-            (
-                draw_pipeline(c"vs_pulled", cull_static)?,
-                draw_pipeline(c"vs_pulled_morphing", cull_morphing)?,
-            )
+        let entries: [&std::ffi::CStr; 4] = if settings.vertex_pulling {
+            [
+                c"vs_pulled",
+                c"vs_pulled_morphing",
+                c"vs_pulled_collapsed",
+                c"vs_pulled_collapsed_morphing",
+            ]
         } else {
-            (
-                draw_pipeline(c"vs_main", cull_static)?,
-                draw_pipeline(c"vs_main_morphing", cull_morphing)?,
-            )
+            [
+                c"vs_main",
+                c"vs_main_morphing",
+                c"vs_collapsed",
+                c"vs_collapsed_morphing",
+            ]
         };
+        let draw = draw_pipeline(entries[0], cull_static)?;
+        let draw_morphing = draw_pipeline(entries[1], cull_morphing)?;
+        let draw_collapsed = draw_pipeline(entries[2], cull_static)?;
+        let draw_collapsed_morphing = draw_pipeline(entries[3], cull_morphing)?;
         Ok(Udlod {
             gpu: gpu.clone(),
             settings,
@@ -393,6 +439,8 @@ impl Udlod {
             finish,
             draw,
             draw_morphing,
+            draw_collapsed,
+            draw_collapsed_morphing,
             tile_cap,
             wanted_tiles: first,
         })
@@ -442,12 +490,12 @@ impl Udlod {
         })
     }
 
-    /// The GPU's final tile list of `slot`'s last completed frame, `[x, y, lod]` each.
+    /// The GPU's final tile list of `slot`'s last completed frame, `[x, y, lod]` each: the
+    /// static tiles (those with their own grid, then the collapsed ones), then the morphing
+    /// ones (the collapsed ones, then those with their own grid).
     fn final_tiles(&self, slot: ViewSlot) -> Result<Vec<[u32; 3]>> {
-        let c = self.read_counters(slot);
-        // The static tiles from the list's front, the morphing ones from its back.
-        let (front, back) = (c.draw[1] as u64, c.morph_draw[1] as u64);
-        let n = front + back;
+        let [front, back, collapsed, collapsed_back] = self.read_counters(slot).drawn();
+        let n = front + back + collapsed + collapsed_back;
         if n == 0 {
             return Ok(Vec::new());
         }
@@ -459,22 +507,26 @@ impl Udlod {
             MemoryLocation::GpuToCpu,
         )?;
         let lists = &self.slots[slot.index()].lists;
-        let regions: Vec<vk::BufferCopy> = [
-            (0, 0, front),
-            (
-                (lists.capacity as u64 - back) * TILE_BYTES,
-                front * TILE_BYTES,
-                back,
-            ),
-        ]
-        .into_iter()
-        .filter(|&(_, _, tiles)| tiles > 0)
-        .map(|(src_offset, dst_offset, tiles)| vk::BufferCopy {
-            src_offset,
-            dst_offset,
-            size: tiles * TILE_BYTES,
-        })
-        .collect();
+        let half = lists.capacity as u64;
+        // (first source entry, entries) in the order above.
+        let ranges = [
+            (0, front),
+            (half, collapsed),
+            (2 * half - collapsed_back, collapsed_back),
+            (half - back, back),
+        ];
+        let mut dst = 0;
+        let mut regions = Vec::new();
+        for (src, tiles) in ranges {
+            if tiles > 0 {
+                regions.push(vk::BufferCopy {
+                    src_offset: src * TILE_BYTES,
+                    dst_offset: dst * TILE_BYTES,
+                    size: tiles * TILE_BYTES,
+                });
+            }
+            dst += tiles;
+        }
         let b = Barriers::new(&self.gpu);
         self.gpu.one_shot(|cmd| unsafe {
             b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
@@ -570,7 +622,7 @@ impl LodMethod for Udlod {
         ];
         u.viewer = [p.viewer[0], p.viewer[1], p.viewer[2], 0.0];
         u.params = [
-            0.0,
+            if self.settings.collapse { 1.0 } else { 0.0 },
             p.morph_range,
             if p.morph { 1.0 } else { 0.0 },
             if p.cull { 1.0 } else { 0.0 },
@@ -579,7 +631,12 @@ impl LodMethod for Udlod {
             self.index_count,
             self.settings.dispatch_row,
             self.levels.field_density,
-            0,
+            // Where the collapsed grid's indices start (vertex pulling reads no indices).
+            if self.settings.vertex_pulling {
+                0
+            } else {
+                self.index_count
+            },
         ];
         u.metric = [p.stretch[0], p.stretch[1], 0.0, 0.0];
         let s = &mut self.slots[slot.index()];
@@ -677,6 +734,8 @@ impl LodMethod for Udlod {
         for (pipeline, offset) in [
             (&self.draw, DRAW_OFFSET),
             (&self.draw_morphing, MORPH_DRAW_OFFSET),
+            (&self.draw_collapsed, COLLAPSED_DRAW_OFFSET),
+            (&self.draw_collapsed_morphing, COLLAPSED_MORPH_DRAW_OFFSET),
         ] {
             unsafe {
                 d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
@@ -703,8 +762,9 @@ impl LodMethod for Udlod {
     }
 
     fn triangles(&self, slot: ViewSlot) -> u64 {
-        let c = self.read_counters(slot);
-        (c.draw[1] + c.morph_draw[1]) as u64 * 2 * (self.settings.grid_size as u64).pow(2)
+        let [own, own_morphing, collapsed, collapsed_morphing] = self.read_counters(slot).drawn();
+        let full = 2 * (self.settings.grid_size as u64).pow(2);
+        (own + own_morphing) * full + (collapsed + collapsed_morphing) * full / 4
     }
 
     fn budget_overflow(&self, slot: ViewSlot) -> u64 {
@@ -713,9 +773,12 @@ impl LodMethod for Udlod {
 
     fn counters(&self, slot: ViewSlot) -> Vec<(&'static str, u64)> {
         let c = self.read_counters(slot);
+        let [own, own_morphing, collapsed, collapsed_morphing] = c.drawn();
         vec![
-            ("tiles", (c.draw[1] + c.morph_draw[1]) as u64),
-            ("morphing", c.morph_draw[1] as u64),
+            ("tiles", own + own_morphing + collapsed + collapsed_morphing),
+            ("morphing", own_morphing + collapsed_morphing),
+            ("collapsed", collapsed + collapsed_morphing),
+            ("collapsed_morphing", collapsed_morphing),
             ("overflow", c.overflow as u64),
             ("culled", c.culled as u64),
             ("passes", c.passes_started as u64),

@@ -18,7 +18,7 @@ use crate::dataset::stats::{FieldStats, TileStats, level_interpolate};
 use crate::dataset::{Heightmap, Level0};
 use crate::error::Result;
 use crate::geo::{EarthCull, Lattice};
-use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
+use crate::gpu_constants::{UDLOD_COLLAPSE_MARGIN, UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
 use crate::scene::Camera;
 
 /// A quadtree tile: `(x, y)` in tiles of its level, `lod` 0 = full resolution.
@@ -1031,19 +1031,43 @@ pub fn level_splits_bound(levels: &Levels, field: &SplitField, stretch: [f32; 2]
 /// level, so vertices shared by tiles agree. `morph_factor` in
 /// `shaders/include/udlod_morph.wgsl`, operation for operation.
 pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
+    let on = if p.morph { 1.0 } else { 0.0 };
+    morph_ramp(levels, p, sample, lod).clamp(0.0, 1.0) * on
+}
+
+/// [`morph_factor`] before its clamp to `[0, 1]` and the on/off switch (`morph_ramp` in
+/// `shaders/include/udlod_morph.wgsl`): at least 1 where the point lies fully on the next
+/// level's grid.
+fn morph_ramp(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
     let rel = p.from_viewer(sample);
     let d = Vec3::new(rel[0] * p.stretch[0], rel[1] * p.stretch[1], p.viewer[2]).length();
     let field = p.field.at(levels, sample, lod + 1);
     let parent_split = p.field.split[lod as usize + 1];
     let zone = p.field.zone[lod as usize + 1];
-    let on = if p.morph { 1.0 } else { 0.0 };
     if zone > 0.0 {
         let s = parent_split / field;
         let width = zone.max(p.morph_range * s);
-        return (1.0 - (s - d) / width).clamp(0.0, 1.0) * on;
+        return 1.0 - (s - d) / width;
     }
     let scaled = d * field;
-    (1.0 - (1.0 - scaled / parent_split) / p.morph_range).clamp(0.0, 1.0) * on
+    1.0 - (1.0 - scaled / parent_split) / p.morph_range
+}
+
+/// Whether every grid vertex of tile `t` odd at the tile's level (`grid_size` must be even)
+/// lies fully on the parent's grid (`tile_collapses` in `shaders/udlod_tiling.wgsl`): then
+/// the odd vertices coincide with even ones, the tile's triangles are the parent grid's over
+/// its even vertices (each parent quad's two, the same diagonal) and degenerate ones, and
+/// the tile is drawn as that grid (`docs/udlod.md`, "Collapsed tiles").
+pub fn tile_collapses(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
+    let g = levels.grid_size;
+    p.morph
+        && (0..=g)
+            .flat_map(|j| (0..=g).map(move |i| [i, j]))
+            .filter(|&[i, j]| (i | j) & 1 == 1)
+            .all(|local| {
+                morph_ramp(levels, p, tile_sample(levels, t, local), t.lod)
+                    >= 1.0 + UDLOD_COLLAPSE_MARGIN
+            })
 }
 
 /// How a grid point moved in [`morph_cascade`] (`MORPH_*` and `morph_moved` in

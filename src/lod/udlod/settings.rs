@@ -50,6 +50,10 @@ pub struct UdlodSettings {
     /// field's cap; 1 = distance-only selection: every tile refined for the level's worst
     /// error and the chain). Larger lets smooth tiles keep coarser levels.
     pub error_field_max: f64,
+    /// Draw a tile whose vertices odd at its level all lie fully on its parent's grid as that
+    /// grid (`grid_size^2 / 2` triangles instead of `2 grid_size^2`; the same surface, bit for
+    /// bit: `docs/udlod.md`, "Collapsed tiles"). Off only to measure it.
+    pub collapse: bool,
     /// Draw without an index buffer (six vertex-shader runs per quad) instead of the shared
     /// indexed grid; kept for measurement (`benches/udlod.rs` compares the two).
     pub vertex_pulling: bool,
@@ -117,6 +121,7 @@ impl Default for UdlodSettings {
             cull: true,
             back_faces: BackFaces::Static,
             error_field_max: 1024.0,
+            collapse: true,
             vertex_pulling: false,
             lod_metric: LodMetric::Axis,
             dispatch_row: 65_535,
@@ -156,6 +161,11 @@ impl UdlodSettings {
             key: "max_tiles",
             help: "tile budget per frame and view",
             apply: |s, v| s.max_tiles = v as u32,
+        },
+        Sweep {
+            key: "collapse",
+            help: "draw fully morphed tiles as their parent's grid (1, the default; 0 = off)",
+            apply: |s, v| s.collapse = v != 0.0,
         },
         Sweep {
             key: "morph_range",
