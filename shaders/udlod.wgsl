@@ -11,7 +11,7 @@
 
 // Two draws read the final list: the tiles with no vertex part-way through its morph from its
 // front (by default with back-face culling), the others from its back (`*_morphing`, without:
-// `tile_mid_morph` in udlod_tiling.wgsl).
+// `final_tile_checks` in udlod_tiling.wgsl).
 fn morphing_tile(instance: u32) -> Tile {
     return final_tiles[udlod.sizes.z - 1u - instance];
 }
@@ -53,7 +53,7 @@ fn vs_pulled_morphing(@builtin(vertex_index) vertex: u32, @builtin(instance_inde
     return tile_vertex(morphing_tile(instance), pulled_local(vertex));
 }
 
-// Collapsed tiles (`tile_collapses` in udlod_tiling.wgsl: every odd vertex fully on the grid
+// Collapsed tiles (`final_tile_checks` in udlod_tiling.wgsl: every odd vertex fully on the grid
 // above) are drawn as that grid, `quads / 2` per side over the tile's even vertices, from the
 // final list's second half (static ones from its front, morphing ones from its back). The
 // even vertices morph as in the full grid, so the surface is the same bit for bit.

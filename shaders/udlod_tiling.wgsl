@@ -46,7 +46,7 @@ struct TilingState {
     // Tiles written for the next pass that will want to split there.
     split_requests: atomic<u32>,
     // Final tiles with a vertex part-way through its morph, written from the back of the
-    // final list (`tile_mid_morph`); the others from the front.
+    // final list (`final_tile_checks`); the others from the front.
     morph_count: atomic<u32>,
     // vkCmdDrawIndexedIndirect arguments of those tiles (by default drawn without back-face
     // culling: docs/udlod.md, "Pinholes far away and back faces").
@@ -55,7 +55,7 @@ struct TilingState {
     morph_first_index: u32,
     morph_vertex_offset: i32,
     morph_first_instance: u32,
-    // Final tiles drawn as their parent's grid (`tile_collapses`), in the final list's second
+    // Final tiles drawn as their parent's grid (`final_tile_checks`), in the final list's second
     // half: the static ones from its front, the morphing ones from its back.
     collapsed_count: atomic<u32>,
     collapsed_morph_count: atomic<u32>,
@@ -207,10 +207,10 @@ var<workgroup> wg_collapsed_morph_base: u32;
 // Four invocations per parent: their parent's slot in the workgroup's reservations.
 var<workgroup> wg_parent_local: array<u32, UDLOD_WORKGROUP / 4u>;
 // Per parent: 1 when one of its four invocations found a vertex of the (final) parent that
-// may make slivers (`tile_mid_morph`).
+// may make slivers (`final_tile_checks`).
 var<workgroup> wg_slivers: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 // Per parent: 1 when one of its four invocations found a vertex odd at the (final) parent's
-// level that is not fully on the grid above (`tile_collapses`): the tile keeps its own grid.
+// level that is not fully on the grid above (`final_tile_checks`): the tile keeps its own grid.
 var<workgroup> wg_keeps_grid: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 
 const_assert UDLOD_WORKGROUP % 4u == 0u;
@@ -280,11 +280,14 @@ fn refine(
     }
     // A final tile's vertices are checked by all four of its invocations (one checking them
     // all was the prepass's slowest path on the H200 at 1080p).
-    if action == ACTION_FINAL && tile_mid_morph(t, k) {
-        atomicOr(&wg_slivers[li / 4u], 1u);
-    }
-    if action == ACTION_FINAL && !tile_collapses(t, k) {
-        atomicOr(&wg_keeps_grid[li / 4u], 1u);
+    if action == ACTION_FINAL {
+        let checks = final_tile_checks(t, k);
+        if checks.x {
+            atomicOr(&wg_slivers[li / 4u], 1u);
+        }
+        if checks.y {
+            atomicOr(&wg_keeps_grid[li / 4u], 1u);
+        }
     }
     workgroupBarrier();
     if k == 0u {
@@ -407,45 +410,44 @@ fn decided(t: Tile) -> Tile {
     return Tile(t.x, t.y, t.lod, flags);
 }
 
-// Whether some vertex of final tile `t` may make sliver triangles (`morph_moved`, the vertex
-// stage's own arithmetic): one part-way through its morph, or one carried on past the tile's
-// own level. A tile whose vertices all stay put or slide fully onto the parent grid at the
-// tile's level keeps the parent grid's triangles (or degenerate ones) and is drawn with
-// back-face culling (docs/udlod.md, "Pinholes far away and back faces"). Invocation `k` of
-// the tile's four checks every fourth vertex from its `k`th.
-fn tile_mid_morph(t: Tile, k: u32) -> bool {
-    let quads = udlod.sizes.x;
-    let step = 1u << t.lod;
-    let origin = vec2<u32>(t.x, t.y) * quads * step;
-    for (var v = k; v < (quads + 1u) * (quads + 1u); v += 4u) {
-        let local = vec2<u32>(v % (quads + 1u), v / (quads + 1u));
-        if morph_moved(vec2<i32>(origin + local * step), t.lod) == MORPH_SLIVERS {
-            return true;
-        }
-    }
-    return false;
-}
-
-// Whether every vertex of final tile `t` odd at its level lies fully on the grid above, with
-// `UDLOD_COLLAPSE_MARGIN` to spare (`tile_collapses` in select.rs): then the tile's surface is
+// Two questions about final tile `t`, one walk over its vertices (invocation `k` of the tile's
+// four checks every fourth vertex from its `k`th):
+// x: whether some vertex may make sliver triangles (`morph_moved`, the vertex stage's own
+// arithmetic): one part-way through its morph, or one carried on past the tile's own level.
+// A tile whose vertices all stay put or slide fully onto the parent grid at the tile's level
+// keeps the parent grid's triangles (or degenerate ones) and is drawn with back-face culling
+// (docs/udlod.md, "Pinholes far away and back faces").
+// y: whether the tile keeps its own grid: some vertex odd at its level lies short of the grid
+// above by `UDLOD_COLLAPSE_MARGIN` (`select::tile_collapses`); else the tile's surface is
 // its parent grid's over its even vertices, and it is drawn as that grid (`vs_collapsed`;
-// docs/udlod.md, "Collapsed tiles"). Only with `udlod.params.x` (the setting `collapse`) and
-// morphing on. Invocation `k` of the tile's four checks every fourth vertex from its `k`th.
-fn tile_collapses(t: Tile, k: u32) -> bool {
-    if udlod.params.x < 0.5 || udlod.params.z < 0.5 {
-        return false;
-    }
+// docs/udlod.md, "Collapsed tiles"). Always true without the setting `collapse`
+// (`udlod.params.x`) or with morphing off.
+fn final_tile_checks(t: Tile, k: u32) -> vec2<bool> {
+    var slivers = false;
+    var keeps_grid = udlod.params.x < 0.5 || udlod.params.z < 0.5;
     let quads = udlod.sizes.x;
     let step = 1u << t.lod;
     let origin = vec2<u32>(t.x, t.y) * quads * step;
     for (var v = k; v < (quads + 1u) * (quads + 1u); v += 4u) {
         let local = vec2<u32>(v % (quads + 1u), v / (quads + 1u));
-        if ((local.x | local.y) & 1u) == 1u
-            && morph_ramp(vec2<i32>(origin + local * step), t.lod) < 1.0 + UDLOD_COLLAPSE_MARGIN {
-            return false;
+        let sample = vec2<i32>(origin + local * step);
+        let odd = ((local.x | local.y) & 1u) == 1u;
+        var ramp = 0.0;
+        if !slivers {
+            let m = morph_moved(sample, t.lod);
+            slivers = m.moved == MORPH_SLIVERS;
+            ramp = m.first_ramp;
+        } else if odd && !keeps_grid {
+            ramp = morph_ramp(sample, t.lod);
+        }
+        if odd && !keeps_grid {
+            keeps_grid = ramp < 1.0 + UDLOD_COLLAPSE_MARGIN;
+        }
+        if slivers && keeps_grid {
+            break;
         }
     }
-    return true;
+    return vec2<bool>(slivers, keeps_grid);
 }
 
 @compute @workgroup_size(1)

@@ -151,7 +151,7 @@ fn gpu_selection_equals_cpu_reference() {
 /// variant: the GPU collapses exactly the tiles the CPU mirror (`select::tile_collapses`)
 /// does, and the frames with and without collapsing are identical, colour and depth, bit for
 /// bit, while they draw fewer triangles. Negative control by hand: a margin of -0.5 in the
-/// prepass's `tile_collapses` (tiles half-way through their morph collapse) changes the
+/// prepass's `final_tile_checks` (tiles half-way through their morph collapse) changes the
 /// frames and the GPU's set.
 #[test]
 fn collapsed_tiles_draw_the_same_surface() {

@@ -15,7 +15,7 @@ fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
 }
 
 // `morph_factor` before its clamp and the on/off switch: at least 1 where the point lies fully
-// on the next level's grid (the prepass's `tile_collapses` asks for a margin past it).
+// on the next level's grid (the prepass's `final_tile_checks` asks for a margin past it).
 fn morph_ramp(sample: vec2<i32>, lod: u32) -> f32 {
     let d = length(vec3<f32>(viewer_xy(sample) * udlod.metric.xy, udlod.viewer.z));
     let field = field_at(sample, lod + 1u);
@@ -100,26 +100,40 @@ const MORPH_SLIVERS: u32 = 2u;
 // How grid point `sample` of a level-`lod` tile moves in `morph_cascade`: the same walk up and
 // the same factors without the positions (no per-level arrays), stopping at the first sliver,
 // the only answer the prepass's back-face split needs from every vertex of every final tile
-// (`tile_mid_morph`). Mirrored by `Cascade::moved` of `morph_cascade` in select.rs.
-fn morph_moved(sample: vec2<i32>, lod: u32) -> u32 {
-    var moved = MORPH_STILL;
+// (`final_tile_checks`); and for a point odd at `lod` the unclamped factor there
+// (`morph_ramp`), which the prepass's collapse check reads. Mirrored by `Cascade::moved` of
+// `morph_cascade` in select.rs.
+struct Moved {
+    moved: u32,
+    // `morph_ramp(sample, lod)` where the point is odd at `lod` (else 0).
+    first_ramp: f32,
+}
+
+fn morph_moved(sample: vec2<i32>, lod: u32) -> Moved {
+    var m = Moved(MORPH_STILL, 0.0);
     var point = sample;
     for (var j = lod; j < udlod.sizes.y; j++) {
         let odd = odd_at(point, j);
         if all(odd == vec2<i32>(0)) {
             continue;
         }
-        let f = morph_factor(point, j);
+        // `morph_factor`, its ramp kept.
+        let ramp = morph_ramp(point, j);
+        let f = clamp(ramp, 0.0, 1.0) * udlod.params.z;
+        if j == lod {
+            m.first_ramp = ramp;
+        }
         if f == 0.0 {
             break;
         }
-        if !(moved == MORPH_STILL && j == lod && f == 1.0) {
-            return MORPH_SLIVERS;
+        if !(m.moved == MORPH_STILL && j == lod && f == 1.0) {
+            m.moved = MORPH_SLIVERS;
+            return m;
         }
-        moved = MORPH_ONE_LEVEL;
+        m.moved = MORPH_ONE_LEVEL;
         point = point - odd * i32(1u << j);
     }
-    return moved;
+    return m;
 }
 
 // A tile's grid vertex after morphing: the position in samples as an integer cell and a

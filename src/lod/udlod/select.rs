@@ -1054,7 +1054,7 @@ fn morph_ramp(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) 
 }
 
 /// Whether every grid vertex of tile `t` odd at the tile's level (`grid_size` must be even)
-/// lies fully on the parent's grid (`tile_collapses` in `shaders/udlod_tiling.wgsl`): then
+/// lies fully on the parent's grid (`final_tile_checks` in `shaders/udlod_tiling.wgsl`): then
 /// the odd vertices coincide with even ones, the tile's triangles are the parent grid's over
 /// its even vertices (each parent quad's two, the same diagonal) and degenerate ones, and
 /// the tile is drawn as that grid (`docs/udlod.md`, "Collapsed tiles").
@@ -1080,7 +1080,7 @@ pub enum Moved {
     /// triangles stay the parent grid's (or degenerate).
     OneLevel,
     /// Part-way, or on through further levels: sliver triangles possible (the prepass's
-    /// `tile_mid_morph` draws the tile without back-face culling).
+    /// `final_tile_checks` draws the tile without back-face culling).
     Slivers,
 }
 
