@@ -16,10 +16,14 @@ fn morphing_tile(instance: u32) -> Tile {
     return final_tiles[udlod.sizes.z - 1u - instance];
 }
 
-// Indexed drawing: the shared index grid names grid vertices `row * (quads + 1) + column`.
-fn indexed_local(vertex: u32) -> vec2<u32> {
-    let quads = udlod.sizes.x;
+// Indexed drawing: an index grid of `quads` per side names grid vertices
+// `row * (quads + 1) + column`.
+fn grid_indexed_local(vertex: u32, quads: u32) -> vec2<u32> {
     return vec2<u32>(vertex % (quads + 1u), vertex / (quads + 1u));
+}
+
+fn indexed_local(vertex: u32) -> vec2<u32> {
+    return grid_indexed_local(vertex, udlod.sizes.x);
 }
 
 @vertex
@@ -32,15 +36,19 @@ fn vs_main_morphing(@builtin(vertex_index) vertex: u32, @builtin(instance_index)
     return tile_vertex(morphing_tile(instance), indexed_local(vertex));
 }
 
-// Vertex pulling without an index buffer: six vertices per quad, in the index grid's order
-// (triangles (0,0) (1,0) (0,1) and (1,0) (1,1) (0,1); `lod::brute::grid_indices`).
-fn pulled_local(vertex: u32) -> vec2<u32> {
-    let quads = udlod.sizes.x;
+// Vertex pulling without an index buffer: six vertices per quad of a grid of `quads` per side,
+// in the index grid's order (triangles (0,0) (1,0) (0,1) and (1,0) (1,1) (0,1);
+// `lod::brute::grid_indices`).
+fn grid_pulled_local(vertex: u32, quads: u32) -> vec2<u32> {
     let quad = vertex / 6u;
     let corner = vertex % 6u;
     let dx = select(0u, 1u, corner == 1u || corner == 3u || corner == 4u);
     let dy = select(0u, 1u, corner == 2u || corner == 4u || corner == 5u);
     return vec2<u32>(quad % quads + dx, quad / quads + dy);
+}
+
+fn pulled_local(vertex: u32) -> vec2<u32> {
+    return grid_pulled_local(vertex, udlod.sizes.x);
 }
 
 @vertex
@@ -65,19 +73,14 @@ fn collapsed_morphing_tile(instance: u32) -> Tile {
     return final_tiles[2u * udlod.sizes.z - 1u - instance];
 }
 
-// The collapsed grid's index (`udlod.counts.w` past the full grid's in the index buffer).
+// The collapsed grid (its indices `udlod.counts.w` past the full grid's in the index buffer):
+// every other vertex of the tile's grid.
 fn collapsed_indexed_local(vertex: u32) -> vec2<u32> {
-    let half = udlod.sizes.x / 2u;
-    return 2u * vec2<u32>(vertex % (half + 1u), vertex / (half + 1u));
+    return 2u * grid_indexed_local(vertex, udlod.sizes.x / 2u);
 }
 
 fn collapsed_pulled_local(vertex: u32) -> vec2<u32> {
-    let half = udlod.sizes.x / 2u;
-    let quad = vertex / 6u;
-    let corner = vertex % 6u;
-    let dx = select(0u, 1u, corner == 1u || corner == 3u || corner == 4u);
-    let dy = select(0u, 1u, corner == 2u || corner == 4u || corner == 5u);
-    return 2u * vec2<u32>(quad % half + dx, quad / half + dy);
+    return 2u * grid_pulled_local(vertex, udlod.sizes.x / 2u);
 }
 
 @vertex
