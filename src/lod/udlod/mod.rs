@@ -139,8 +139,8 @@ struct SlotBuffers {
 struct TileLists {
     /// Read and written by the prepass only (through the descriptor set).
     temp: Buffer,
-    /// Two halves of `capacity` entries: tiles drawn with their own grid, then those drawn
-    /// as their parent's (collapsed).
+    /// Tiles drawn with their own grid (`capacity` entries), then with `collapse` the same
+    /// again for those drawn as their parent's.
     #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
     final_tiles: Buffer,
     /// Entries of each half of the final list.
@@ -151,7 +151,7 @@ impl TileLists {
     /// Lists for `capacity` final tiles. Parents and children of one pass share the
     /// temporary list: a pass has at most `4/3 * capacity + 1` children (every split
     /// reserved 3 final entries).
-    fn new(gpu: &Arc<Gpu>, i: usize, capacity: u32) -> Result<Self> {
+    fn new(gpu: &Arc<Gpu>, i: usize, capacity: u32, collapse: bool) -> Result<Self> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let temp = Buffer::new(
             gpu,
@@ -163,7 +163,7 @@ impl TileLists {
         let final_tiles = Buffer::new(
             gpu,
             &format!("udlod final tiles {i}"),
-            2 * capacity as u64 * TILE_BYTES,
+            (1 + collapse as u64) * capacity as u64 * TILE_BYTES,
             storage | vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::GpuOnly,
         )?;
@@ -186,7 +186,7 @@ impl SlotBuffers {
         gpu: &Arc<Gpu>,
         sets: &DescriptorSets,
         (i, set): (usize, vk::DescriptorSet),
-        (capacity, field_bytes): (u32, u64),
+        (capacity, field_bytes, collapse): (u32, u64, bool),
         min_max: &Buffer,
     ) -> Result<Self> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
@@ -224,7 +224,7 @@ impl SlotBuffers {
         let slot = SlotBuffers {
             uniforms,
             state,
-            lists: TileLists::new(gpu, i, capacity)?,
+            lists: TileLists::new(gpu, i, capacity, collapse)?,
             counters,
             field,
             field_key: None,
@@ -378,7 +378,15 @@ impl Udlod {
         }
         .min(tile_cap);
         let slots = (sets.sets.iter().enumerate())
-            .map(|(i, &set)| SlotBuffers::new(gpu, &sets, (i, set), (first, field_bytes), &min_max))
+            .map(|(i, &set)| {
+                SlotBuffers::new(
+                    gpu,
+                    &sets,
+                    (i, set),
+                    (first, field_bytes, settings.collapse),
+                    &min_max,
+                )
+            })
             .collect::<Result<Vec<_>>>()?;
         let set_layouts = [ctx.terrain.descriptors.layout, sets.layout];
         let tiling = crate::driver::shaders::UDLOD_TILING_SPV;
@@ -575,7 +583,8 @@ impl Udlod {
                 "udlod: slot {i}'s tile lists grow from {have} to {} tiles (overflow {overflow})",
                 self.wanted_tiles
             );
-            self.slots[i].lists = TileLists::new(&self.gpu, i, self.wanted_tiles)?;
+            self.slots[i].lists =
+                TileLists::new(&self.gpu, i, self.wanted_tiles, self.settings.collapse)?;
             self.slots[i].write_set(&self.sets, i, &self.min_max)?;
         }
         Ok(self.slots[i].lists.capacity)
