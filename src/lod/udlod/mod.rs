@@ -330,6 +330,71 @@ impl Udlod {
         Ok(levels)
     }
 
+    /// The index buffer: the tile grid's indices, then the collapsed grid's (`vs_collapsed`,
+    /// `grid_size / 2` quads per side); and how many of them are the tile grid's.
+    fn grid_indices(gpu: &Arc<Gpu>, grid_size: u32) -> Result<(Buffer, u32)> {
+        let grid = super::brute::grid_indices(grid_size);
+        let index_count = grid.len() as u32;
+        let both = [grid, super::brute::grid_indices(grid_size / 2)].concat();
+        let index_bytes: &[u8] = bytemuck::cast_slice(&both);
+        let mut indices = Buffer::new(
+            gpu,
+            "udlod grid indices",
+            index_bytes.len() as u64,
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        indices.write(index_bytes)?;
+        Ok((indices, index_count))
+    }
+
+    /// The four draws' pipelines: static and morphing tiles, each with its own grid and
+    /// collapsed onto the parent's. By default the tiles with no vertex part-way through its
+    /// morph with back-face culling, the others without (docs/udlod.md, "Pinholes far away
+    /// and back faces").
+    fn draw_pipelines(
+        ctx: &MethodContext<'_>,
+        settings: &UdlodSettings,
+        set_layouts: &[vk::DescriptorSetLayout],
+    ) -> Result<[Pipeline; 4]> {
+        let cull_static = settings.back_faces != BackFaces::None;
+        let cull_morphing = settings.back_faces == BackFaces::All;
+        let entries: [&std::ffi::CStr; 4] = if settings.vertex_pulling {
+            [
+                c"vs_pulled",
+                c"vs_pulled_morphing",
+                c"vs_pulled_collapsed",
+                c"vs_pulled_collapsed_morphing",
+            ]
+        } else {
+            [
+                c"vs_main",
+                c"vs_main_morphing",
+                c"vs_collapsed",
+                c"vs_collapsed_morphing",
+            ]
+        };
+        let culls = [cull_static, cull_morphing, cull_static, cull_morphing];
+        let mut pipelines = Vec::with_capacity(4);
+        for (entry, cull_back_faces) in entries.into_iter().zip(culls) {
+            pipelines.push(terrain_pipeline(
+                ctx.gpu,
+                &ctx.formats,
+                &TerrainPipelineDesc {
+                    spv: crate::driver::shaders::UDLOD_SPV,
+                    vertex_entry: entry,
+                    fragment_entry: c"fs_main",
+                    set_layouts,
+                    topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+                    cull_back_faces,
+                },
+            )?);
+        }
+        pipelines
+            .try_into()
+            .map_err(|_| Error::invalid("udlod", "four draw pipelines"))
+    }
+
     pub fn new(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Self> {
         let gpu = ctx.gpu;
         let settings = settings.clone();
@@ -347,22 +412,7 @@ impl Udlod {
         min_max.write(mm_bytes)?;
         // The split field's nodes (a one-level tree has none, and a buffer is never empty).
         let field_bytes = (levels.field_nodes() as u64 * 4).max(4);
-        let grid = super::brute::grid_indices(settings.grid_size);
-        // The collapsed tiles' grid (`vs_collapsed`) after the tile grid's.
-        let both: Vec<u16> = [
-            grid.clone(),
-            super::brute::grid_indices(settings.grid_size / 2),
-        ]
-        .concat();
-        let index_bytes: &[u8] = bytemuck::cast_slice(&both);
-        let mut indices = Buffer::new(
-            gpu,
-            "udlod grid indices",
-            index_bytes.len() as u64,
-            vk::BufferUsageFlags::INDEX_BUFFER,
-            MemoryLocation::CpuToGpu,
-        )?;
-        indices.write(index_bytes)?;
+        let (indices, index_count) = Self::grid_indices(gpu, settings.grid_size)?;
 
         // No selection reserves more leaves than the full tree over the root's square has
         // (4^root_lod), so small data sets do not allocate the whole budget.
@@ -393,43 +443,8 @@ impl Udlod {
         let prepare = compute_pipeline(gpu, tiling, c"prepare", &set_layouts)?;
         let refine = compute_pipeline(gpu, tiling, c"refine", &set_layouts)?;
         let finish = compute_pipeline(gpu, tiling, c"finish", &set_layouts)?;
-        let draw_pipeline = |entry: &std::ffi::CStr, cull_back_faces| {
-            terrain_pipeline(
-                gpu,
-                &ctx.formats,
-                &TerrainPipelineDesc {
-                    spv: crate::driver::shaders::UDLOD_SPV,
-                    vertex_entry: entry,
-                    fragment_entry: c"fs_main",
-                    set_layouts: &set_layouts,
-                    topology: vk::PrimitiveTopology::TRIANGLE_LIST,
-                    cull_back_faces,
-                },
-            )
-        };
-        // By default the tiles with no vertex part-way through its morph with back-face
-        // culling, the others without (docs/udlod.md, "Pinholes far away and back faces").
-        let cull_static = settings.back_faces != BackFaces::None;
-        let cull_morphing = settings.back_faces == BackFaces::All;
-        let entries: [&std::ffi::CStr; 4] = if settings.vertex_pulling {
-            [
-                c"vs_pulled",
-                c"vs_pulled_morphing",
-                c"vs_pulled_collapsed",
-                c"vs_pulled_collapsed_morphing",
-            ]
-        } else {
-            [
-                c"vs_main",
-                c"vs_main_morphing",
-                c"vs_collapsed",
-                c"vs_collapsed_morphing",
-            ]
-        };
-        let draw = draw_pipeline(entries[0], cull_static)?;
-        let draw_morphing = draw_pipeline(entries[1], cull_morphing)?;
-        let draw_collapsed = draw_pipeline(entries[2], cull_static)?;
-        let draw_collapsed_morphing = draw_pipeline(entries[3], cull_morphing)?;
+        let [draw, draw_morphing, draw_collapsed, draw_collapsed_morphing] =
+            Self::draw_pipelines(ctx, &settings, &set_layouts)?;
         Ok(Udlod {
             gpu: gpu.clone(),
             settings,
@@ -439,7 +454,7 @@ impl Udlod {
             field: None,
             min_max,
             indices,
-            index_count: grid.len() as u32,
+            index_count,
             slots,
             sets,
             prepare,
