@@ -9,6 +9,7 @@ use std::path::PathBuf;
 
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::eval::oracle::Oracle;
+use vkterrain::lod::udlod::grid;
 use vkterrain::lod::udlod::select::{self, FieldKey, Levels, SelectionParams, SplitField, Tile};
 use vkterrain::lod::{MethodConfig, UdlodSettings};
 
@@ -115,11 +116,11 @@ fn main() -> anyhow::Result<()> {
         // parent alone would do): split by the parent's own pixel term (rule looseness) or
         // only by the crack-free chain.
         let (mut over_rule, mut over_chain) = (0usize, 0usize);
-        // What the renderer draws (tiles whose odd vertices all lie fully on the parent's grid
-        // drawn as that grid: `select::tile_collapses`), and the counterfactual of collapsing
-        // each quarter of a tile on its own (not built).
-        let (mut collapse_tris, mut collapse_quads) = (0u64, 0u64);
-        let (mut drawn_tris, mut collapsed_tiles) = (0u64, 0usize);
+        // What the renderer draws (quadrants whose odd vertices all lie fully on the parent's
+        // grid drawn as that grid: `select::tile_collapse_mask`), and collapsing whole tiles
+        // only (the tenth round's build) for comparison.
+        let (mut whole_tris, mut whole_tiles) = (0u64, 0usize);
+        let (mut drawn_tris, mut collapsed_quadrants) = (0u64, 0u32);
         let mut per_level = vec![0usize; levels.levels() as usize];
         for &k in &picks {
             let cam = p.scenario.camera(k);
@@ -127,16 +128,12 @@ fn main() -> anyhow::Result<()> {
             let tiles = select::select_tiles(&levels, &sp);
             tiles_n += tiles.len();
             for t in &tiles {
-                let (tr, cq) = collapsed_triangles(&levels, &sp, *t);
-                collapse_tris += tr;
-                collapse_quads += cq;
-                let full = 2 * (levels.grid_size as u64).pow(2);
-                if select::tile_collapses(&levels, &sp, *t) {
-                    drawn_tris += full / 4;
-                    collapsed_tiles += 1;
-                } else {
-                    drawn_tris += full;
-                }
+                let mask = select::tile_collapse_mask(&levels, &sp, *t);
+                drawn_tris += grid::mask_triangles(levels.grid_size, mask);
+                collapsed_quadrants += mask.count_ones();
+                let whole = (mask == grid::ALL_QUADRANTS) as u32 * mask;
+                whole_tris += grid::mask_triangles(levels.grid_size, whole);
+                whole_tiles += (whole != 0) as usize;
             }
             let mut parents = std::collections::HashMap::new();
             for t in &tiles {
@@ -320,15 +317,13 @@ fn main() -> anyhow::Result<()> {
         slack.sort_by(f64::total_cmp);
         let q = |f: f64| slack[((slack.len() - 1) as f64 * f) as usize];
         println!(
-            "  drawn, collapsed tiles as their parent's grid: {collapsed_tiles} of {tiles_n} tiles collapsed, triangles {drawn_tris} ratio {:.2}",
+            "  drawn, collapsed quadrants as their parent's grid: {collapsed_quadrants} of {} quadrants, triangles {drawn_tris} ratio {:.2}",
+            tiles_n * 4,
             drawn_tris as f64 / tris_o as f64
         );
         println!(
-            "  cf collapsing each quarter of a tile: {} of {} quarters, triangles {} ratio {:.2}",
-            collapse_quads,
-            tiles_n * 4,
-            collapse_tris,
-            collapse_tris as f64 / tris_o as f64
+            "  cf collapsing whole tiles only: {whole_tiles} of {tiles_n} tiles, triangles {whole_tris} ratio {:.2}",
+            whole_tris as f64 / tris_o as f64
         );
         println!(
             "  frames {:?}: tiles {} triangles uncollapsed {} oracle {} ratio {:.2}",
@@ -701,38 +696,4 @@ fn print_cf(name: &str, tiles: usize, triangles_per_tile: u64, oracle: u64) {
         "  cf {name:48}: tiles {tiles:6} triangles {triangles:9} ratio {:.2}",
         triangles as f64 / oracle.max(1) as f64
     );
-}
-
-/// Counterfactual: triangles of tile `t` when each quarter whose vertices odd at the tile's
-/// level all lie fully on the parent grid is drawn as the parent grid's triangles (the
-/// renderer collapses whole tiles only), and how many quarters collapse.
-fn collapsed_triangles(levels: &Levels, p: &SelectionParams, t: Tile) -> (u64, u64) {
-    let g = levels.grid_size;
-    let h = g / 2;
-    let full = 2 * (h as u64) * (h as u64);
-    let mut tris = 0u64;
-    let mut quads = 0u64;
-    for (qx, qy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-        let mut collapses = true;
-        'v: for j in 0..=h {
-            for i in 0..=h {
-                let local = [qx * h + i, qy * h + j];
-                if local[0] % 2 == 0 && local[1] % 2 == 0 {
-                    continue;
-                }
-                let v = select::morphed_vertex(levels, p, t, local);
-                if !(v.morph == 1.0) {
-                    collapses = false;
-                    break 'v;
-                }
-            }
-        }
-        if collapses {
-            quads += 1;
-            tris += full / 4;
-        } else {
-            tris += full;
-        }
-    }
-    (tris, quads)
 }

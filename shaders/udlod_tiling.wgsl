@@ -2,9 +2,10 @@
 // `prepare` (turns the children of the last pass into this pass's parents and writes the
 // indirect dispatch size) and a `refine` over those parents. One temporary list is used from
 // both ends: even passes read parents from the front and write children from the back, odd
-// passes the other way round. Tiles that do not split go to the final list; `finish` writes
-// the indexed indirect draws (one instance per final tile; four draws: static and morphing
-// tiles, each with its own grid or collapsed onto its parent's).
+// passes the other way round. Tiles that do not split go to the final list's first half,
+// unsorted, each with its draw group (static or morphing, and which quadrants collapse onto
+// the parent's grid); `finish` writes one indirect draw per group (one instance per tile)
+// and `scatter` sorts the tiles by group into the list's second half, which the draws read.
 //
 // Capacity: a pass splits only if all of its splits fit (3 more final-list entries each: a
 // split turns one would-be leaf into four, and 4 temporary slots). The splits are known
@@ -21,20 +22,29 @@
 //!include udlod_common.wgsl
 //!include udlod_morph.wgsl
 
+// One indirect draw: `VkDrawIndexedIndirectCommand`, or with vertex pulling
+// `VkDrawIndirectCommand` in its first four words (vertex count, instances, first vertex,
+// first instance) and the fifth unused.
+struct IndirectDraw {
+    index_count: u32,
+    instance_count: u32,
+    first_index: u32,
+    vertex_offset: u32,
+    first_instance: u32,
+}
+
+// Draw groups: static tiles per collapse mask, then morphing ones (`draw_group`).
+const DRAW_GROUPS: u32 = 2u * UDLOD_COLLAPSE_MASKS;
+
 struct TilingState {
-    // vkCmdDispatchIndirect arguments of the next refine pass.
+    // vkCmdDispatchIndirect arguments of the next refine pass (after `finish`: of `scatter`).
     dispatch_x: u32,
     dispatch_y: u32,
     dispatch_z: u32,
     pass_index: u32,
-    // vkCmdDrawIndexedIndirect arguments.
-    index_count: u32,
-    instance_count: u32,
-    first_index: u32,
-    vertex_offset: i32,
-    first_instance: u32,
     parent_count: u32,
     child_count: atomic<u32>,
+    // Final tiles, written unsorted into the final list's first half.
     final_count: atomic<u32>,
     reserved_leaves: atomic<u32>,
     overflow: atomic<u32>,
@@ -45,31 +55,12 @@ struct TilingState {
     splits_allowed: u32,
     // Tiles written for the next pass that will want to split there.
     split_requests: atomic<u32>,
-    // Final tiles with a vertex part-way through its morph, written from the back of the
-    // final list (`final_tile_checks`); the others from the front.
-    morph_count: atomic<u32>,
-    // vkCmdDrawIndexedIndirect arguments of those tiles (by default drawn without back-face
-    // culling: docs/udlod.md, "Pinholes far away and back faces").
-    morph_index_count: u32,
-    morph_instance_count: u32,
-    morph_first_index: u32,
-    morph_vertex_offset: i32,
-    morph_first_instance: u32,
-    // Final tiles drawn as their parent's grid (`final_tile_checks`), in the final list's second
-    // half: the static ones from its front, the morphing ones from its back.
-    collapsed_count: atomic<u32>,
-    collapsed_morph_count: atomic<u32>,
-    // vkCmdDrawIndexedIndirect arguments of the collapsed static and morphing tiles.
-    collapsed_index_count: u32,
-    collapsed_instance_count: u32,
-    collapsed_first_index: u32,
-    collapsed_vertex_offset: i32,
-    collapsed_first_instance: u32,
-    collapsed_morph_index_count: u32,
-    collapsed_morph_instance_count: u32,
-    collapsed_morph_first_index: u32,
-    collapsed_morph_vertex_offset: i32,
-    collapsed_morph_first_instance: u32,
+    // Final tiles per draw group, and (`finish`) where each group starts in the sorted half.
+    group_count: array<atomic<u32>, DRAW_GROUPS>,
+    group_first: array<u32, DRAW_GROUPS>,
+    // One draw per group (`finish`): the static groups' with back-face culling by default,
+    // the morphing groups' without (docs/udlod.md, "Pinholes far away and back faces").
+    draws: array<IndirectDraw, DRAW_GROUPS>,
 }
 
 @group(1) @binding(1) var<storage, read_write> state: TilingState;
@@ -91,9 +82,6 @@ fn prepare() {
         parents = 1u;
         requests = select(0u, 1u, root.pad == (TILE_DECIDED | TILE_SPLITS));
         atomicStore(&state.final_count, 0u);
-        atomicStore(&state.morph_count, 0u);
-        atomicStore(&state.collapsed_count, 0u);
-        atomicStore(&state.collapsed_morph_count, 0u);
         atomicStore(&state.reserved_leaves, 1u);
         atomicStore(&state.overflow, 0u);
         atomicStore(&state.culled, 0u);
@@ -192,38 +180,52 @@ fn cull_slack(t: Tile) -> f32 {
 // thousands of invocations on one address: 4 ms of prepass on the H200 at 17,600 tiles.)
 var<workgroup> wg_children: atomic<u32>;
 var<workgroup> wg_finals: atomic<u32>;
-var<workgroup> wg_morphing: atomic<u32>;
-var<workgroup> wg_collapsed: atomic<u32>;
-var<workgroup> wg_collapsed_morphing: atomic<u32>;
 var<workgroup> wg_requests: atomic<u32>;
 var<workgroup> wg_culled: atomic<u32>;
 var<workgroup> wg_overflow: atomic<u32>;
 var<workgroup> wg_child_base: u32;
 var<workgroup> wg_final_base: u32;
-var<workgroup> wg_morph_base: u32;
-var<workgroup> wg_collapsed_base: u32;
-var<workgroup> wg_collapsed_morph_base: u32;
+// Per draw group: the workgroup's final tiles, and their first rank in the group.
+var<workgroup> wg_groups: array<atomic<u32>, DRAW_GROUPS>;
+var<workgroup> wg_group_base: array<u32, DRAW_GROUPS>;
 
-// Four invocations per parent: their parent's slot in the workgroup's reservations.
+// Four invocations per parent: their parent's slot in the workgroup's reservations (children,
+// or the final tiles), and a final tile's rank in its draw group.
 var<workgroup> wg_parent_local: array<u32, UDLOD_WORKGROUP / 4u>;
+var<workgroup> wg_parent_rank: array<u32, UDLOD_WORKGROUP / 4u>;
 // Per parent: 1 when one of its four invocations found a vertex of the (final) parent that
 // may make slivers (`final_tile_checks`).
 var<workgroup> wg_slivers: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
-// Per parent: 1 when one of its four invocations found a vertex odd at the (final) parent's
-// level that is not fully on the grid above (`final_tile_checks`): the tile keeps its own grid.
+// Per parent: the quadrants (bits) of the (final) parent in which one of its four invocations
+// found a vertex odd at its level that is not fully on the grid above (`final_tile_checks`):
+// they keep their own grid.
 var<workgroup> wg_keeps_grid: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 
 const_assert UDLOD_WORKGROUP % 4u == 0u;
+const_assert UDLOD_WORKGROUP >= DRAW_GROUPS;
 
 const ACTION_NONE: u32 = 0u;
 const ACTION_FINAL: u32 = 1u;
 const ACTION_SPLIT: u32 = 2u;
 
+// A final tile's draw group: its collapse mask (which quadrants are drawn as the parent grid;
+// at grid 2 all or none: `grid::drawn_mask` in src/lod/udlod/grid.rs), plus
+// `UDLOD_COLLAPSE_MASKS` when a vertex may make slivers.
+fn draw_group(keeps_grid: u32, slivers: bool) -> u32 {
+    let all = UDLOD_COLLAPSE_MASKS - 1u;
+    var mask = all & ~keeps_grid;
+    if udlod.sizes.x == 2u && mask != all {
+        mask = 0u;
+    }
+    return mask + select(0u, UDLOD_COLLAPSE_MASKS, slivers);
+}
+
 // Refines this pass's parents, four invocations per parent, one per child (a pass waits on its
 // slowest invocation: one invocation deciding all four children, each with its culling box,
 // was most of the prepass's time on the earth). A splitting tile writes its four children
 // (each decided by its own invocation, for the next pass) into the temporary list; the others
-// go to the final list. The parent's own bookkeeping is its first invocation's. A pass splits
+// go to the final list's first half, unsorted, with their draw group and rank in it (`scatter`
+// sorts them). The parent's own bookkeeping is its first invocation's. A pass splits
 // only when `prepare` found room for all of its splits (`splits_allowed`), so the slots
 // reserved here always fit; writes past a list's end are skipped all the same.
 @compute @workgroup_size(UDLOD_WORKGROUP)
@@ -235,12 +237,12 @@ fn refine(
     if li == 0u {
         atomicStore(&wg_children, 0u);
         atomicStore(&wg_finals, 0u);
-        atomicStore(&wg_morphing, 0u);
-        atomicStore(&wg_collapsed, 0u);
-        atomicStore(&wg_collapsed_morphing, 0u);
         atomicStore(&wg_requests, 0u);
         atomicStore(&wg_culled, 0u);
         atomicStore(&wg_overflow, 0u);
+    }
+    if li < DRAW_GROUPS {
+        atomicStore(&wg_groups[li], 0u);
     }
     if (li & 3u) == 0u {
         atomicStore(&wg_slivers[li / 4u], 0u);
@@ -252,8 +254,7 @@ fn refine(
     let k = invocation % 4u;
     let parents = state.parent_count;
     var action = ACTION_NONE;
-    var morphs = false;
-    var collapses = false;
+    var draw = 0u;
     var t = Tile(0u, 0u, 0u, 0u);
     var child = Tile(0u, 0u, 0u, 0u);
     if parent < parents {
@@ -282,11 +283,11 @@ fn refine(
     // all was the prepass's slowest path on the H200 at 1080p).
     if action == ACTION_FINAL {
         let checks = final_tile_checks(t, k);
-        if checks.x {
+        if checks.slivers {
             atomicOr(&wg_slivers[li / 4u], 1u);
         }
-        if checks.y {
-            atomicOr(&wg_keeps_grid[li / 4u], 1u);
+        if checks.keeps_grid != 0u {
+            atomicOr(&wg_keeps_grid[li / 4u], checks.keeps_grid);
         }
     }
     workgroupBarrier();
@@ -294,22 +295,21 @@ fn refine(
         if action == ACTION_SPLIT {
             wg_parent_local[li / 4u] = atomicAdd(&wg_children, 4u);
         } else if action == ACTION_FINAL {
-            morphs = atomicLoad(&wg_slivers[li / 4u]) != 0u;
-            collapses = atomicLoad(&wg_keeps_grid[li / 4u]) == 0u;
-            if collapses && morphs {
-                wg_parent_local[li / 4u] = atomicAdd(&wg_collapsed_morphing, 1u);
-            } else if collapses {
-                wg_parent_local[li / 4u] = atomicAdd(&wg_collapsed, 1u);
-            } else if morphs {
-                wg_parent_local[li / 4u] = atomicAdd(&wg_morphing, 1u);
-            } else {
-                wg_parent_local[li / 4u] = atomicAdd(&wg_finals, 1u);
-            }
+            let slivers = atomicLoad(&wg_slivers[li / 4u]) != 0u;
+            draw = draw_group(atomicLoad(&wg_keeps_grid[li / 4u]), slivers);
+            wg_parent_local[li / 4u] = atomicAdd(&wg_finals, 1u);
+            wg_parent_rank[li / 4u] = atomicAdd(&wg_groups[draw], 1u);
         }
     }
     workgroupBarrier();
     if li == 0u {
         reserve_in_lists();
+    }
+    if li < DRAW_GROUPS {
+        let n = atomicLoad(&wg_groups[li]);
+        if n > 0u {
+            wg_group_base[li] = atomicAdd(&state.group_count[li], n);
+        }
     }
     workgroupBarrier();
     let local = wg_parent_local[li / 4u];
@@ -321,24 +321,20 @@ fn refine(
             atomicAdd(&state.overflow, 1u);
         }
     } else if action == ACTION_FINAL && k == 0u {
-        // Static tiles from the front of their half, morphing ones from its back (the
-        // collapsed ones' half second): the leaves reserved before (`reserved_leaves`) fit
-        // each half.
-        let base = select(
-            select(wg_final_base, wg_morph_base, morphs),
-            select(wg_collapsed_base, wg_collapsed_morph_base, morphs),
-            collapses,
-        );
-        let i = base + local;
-        let n = udlod.sizes.z;
-        if i < n {
-            let half = select(0u, n, collapses);
-            final_tiles[half + select(i, n - 1u - i, morphs)] = Tile(t.x, t.y, t.lod, 0u);
+        // The leaves reserved before (`reserved_leaves`) fit the first half.
+        let i = wg_final_base + local;
+        if i < udlod.sizes.z {
+            let rank = wg_group_base[draw] + wg_parent_rank[li / 4u];
+            final_tiles[i] = Tile(t.x, t.y, t.lod, draw | (rank << DRAW_GROUP_BITS));
         } else {
             atomicAdd(&state.overflow, 1u);
         }
     }
 }
+
+// An unsorted final tile's `pad`: its draw group in the low bits, its rank in the group above.
+const DRAW_GROUP_BITS: u32 = 5u;
+const_assert DRAW_GROUPS <= (1u << DRAW_GROUP_BITS);
 
 // `refine`'s one invocation per workgroup: reserves the workgroup's children and final tiles
 // in the global lists (`wg_child_base`, `wg_final_base`) and adds its counts to the state's.
@@ -351,18 +347,6 @@ fn reserve_in_lists() {
     let nf = atomicLoad(&wg_finals);
     if nf > 0u {
         wg_final_base = atomicAdd(&state.final_count, nf);
-    }
-    let nm = atomicLoad(&wg_morphing);
-    if nm > 0u {
-        wg_morph_base = atomicAdd(&state.morph_count, nm);
-    }
-    let nc_static = atomicLoad(&wg_collapsed);
-    if nc_static > 0u {
-        wg_collapsed_base = atomicAdd(&state.collapsed_count, nc_static);
-    }
-    let nc_morph = atomicLoad(&wg_collapsed_morphing);
-    if nc_morph > 0u {
-        wg_collapsed_morph_base = atomicAdd(&state.collapsed_morph_count, nc_morph);
     }
     let requests = atomicLoad(&wg_requests);
     if requests > 0u {
@@ -412,19 +396,25 @@ fn decided(t: Tile) -> Tile {
 
 // Two questions about final tile `t`, one walk over its vertices (invocation `k` of the tile's
 // four checks every fourth vertex from its `k`th):
-// x: whether some vertex may make sliver triangles (`morph_moved`, the vertex stage's own
-// arithmetic): one part-way through its morph, or one carried on past the tile's own level.
-// A tile whose vertices all stay put or slide fully onto the parent grid at the tile's level
-// keeps the parent grid's triangles (or degenerate ones) and is drawn with back-face culling
-// (docs/udlod.md, "Pinholes far away and back faces").
-// y: whether the tile keeps its own grid: some vertex odd at its level lies short of the grid
-// above by `UDLOD_COLLAPSE_MARGIN` (`select::tile_collapses`); else the tile's surface is
-// its parent grid's over its even vertices, and it is drawn as that grid (`vs_collapsed`;
-// docs/udlod.md, "Collapsed tiles"). Always true without the setting `collapse`
-// (`udlod.params.x`) or with morphing off.
-fn final_tile_checks(t: Tile, k: u32) -> vec2<bool> {
+// slivers: whether some vertex may make sliver triangles (`morph_moved`, the vertex stage's
+// own arithmetic): one part-way through its morph, or one carried on past the tile's own
+// level. A tile whose vertices all stay put or slide fully onto the parent grid at the tile's
+// level keeps the parent grid's triangles (or degenerate ones) and is drawn with back-face
+// culling (docs/udlod.md, "Pinholes far away and back faces").
+// keeps_grid: the quadrants (bit `qx + 2 qy`) that keep their own grid: those with a vertex odd
+// at the tile's level short of the grid above by `UDLOD_COLLAPSE_MARGIN`
+// (`select::tile_collapse_mask`); the others' surface is the parent grid's over their even
+// vertices, and they are drawn as that grid (docs/udlod.md, "Collapsed quadrants"). All four
+// without the setting `collapse` (`udlod.params.x`) or with morphing off.
+struct TileChecks {
+    slivers: bool,
+    keeps_grid: u32,
+}
+
+fn final_tile_checks(t: Tile, k: u32) -> TileChecks {
+    let all = UDLOD_COLLAPSE_MASKS - 1u;
     var slivers = false;
-    var keeps_grid = udlod.params.x < 0.5 || udlod.params.z < 0.5;
+    var keeps_grid = select(0u, all, udlod.params.x < 0.5 || udlod.params.z < 0.5);
     let quads = udlod.sizes.x;
     let step = 1u << t.lod;
     let origin = vec2<u32>(t.x, t.y) * quads * step;
@@ -432,50 +422,84 @@ fn final_tile_checks(t: Tile, k: u32) -> vec2<bool> {
         let local = vec2<u32>(v % (quads + 1u), v / (quads + 1u));
         let sample = vec2<i32>(origin + local * step);
         let odd = ((local.x | local.y) & 1u) == 1u;
+        let quadrants = select(0u, quadrants_of(local, quads), odd);
+        let open = (quadrants & ~keeps_grid) != 0u;
         var ramp = 0.0;
         if !slivers {
             let m = morph_moved(sample, t.lod);
             slivers = m.moved == MORPH_SLIVERS;
             ramp = m.first_ramp;
-        } else if odd && !keeps_grid {
+        } else if open {
             ramp = morph_ramp(sample, t.lod);
         }
-        if odd && !keeps_grid {
-            keeps_grid = ramp < 1.0 + UDLOD_COLLAPSE_MARGIN;
+        if open && ramp < 1.0 + UDLOD_COLLAPSE_MARGIN {
+            keeps_grid |= quadrants;
         }
-        if slivers && keeps_grid {
+        if slivers && keeps_grid == all {
             break;
         }
     }
-    return vec2<bool>(slivers, keeps_grid);
+    return TileChecks(slivers, keeps_grid);
 }
 
+// The quadrants (bits) holding grid vertex `local` of a tile of `quads` per side: one, two on
+// a middle line, four at the centre (`grid::quadrants_of` in src/lod/udlod/grid.rs).
+fn quadrants_of(local: vec2<u32>, quads: u32) -> u32 {
+    let h = quads / 2u;
+    let xs = select(0u, 1u, local.x <= h) | select(0u, 2u, local.x >= h);
+    let ys = select(0u, 1u, local.y <= h) | select(0u, 2u, local.y >= h);
+    // Bit qx + 2 qy for every qx in xs and qy in ys.
+    return xs * (ys & 1u) | ((xs * (ys >> 1u)) << 2u);
+}
+
+// One invocation: each draw group's first entry in the final list's second half (the groups
+// one after another), its indirect draw (the mask's index list from `udlod.masks`, its tiles
+// as instances from that entry on), and `scatter`'s dispatch. A frame whose final tiles did not
+// all fit the list (never by construction: `reserved_leaves`) draws nothing rather than a
+// stale entry.
 @compute @workgroup_size(1)
 fn finish() {
     let n = udlod.sizes.z;
-    let morphing = min(atomicLoad(&state.morph_count), n);
-    state.index_count = udlod.counts.x;
-    state.instance_count = min(atomicLoad(&state.final_count), n - morphing);
-    state.first_index = 0u;
-    state.vertex_offset = 0;
-    state.first_instance = 0u;
-    state.morph_index_count = udlod.counts.x;
-    state.morph_instance_count = morphing;
-    state.morph_first_index = 0u;
-    state.morph_vertex_offset = 0;
-    state.morph_first_instance = 0u;
-    // The collapsed tiles: a grid of `quads / 2` per side (a quarter of the indices), after
-    // the full grid's in the index buffer (`udlod.counts.w`; 0 with vertex pulling).
-    let collapsed_morphing = min(atomicLoad(&state.collapsed_morph_count), n);
-    state.collapsed_index_count = udlod.counts.x / 4u;
-    state.collapsed_instance_count =
-        min(atomicLoad(&state.collapsed_count), n - collapsed_morphing);
-    state.collapsed_first_index = udlod.counts.w;
-    state.collapsed_vertex_offset = 0;
-    state.collapsed_first_instance = 0u;
-    state.collapsed_morph_index_count = udlod.counts.x / 4u;
-    state.collapsed_morph_instance_count = collapsed_morphing;
-    state.collapsed_morph_first_index = udlod.counts.w;
-    state.collapsed_morph_vertex_offset = 0;
-    state.collapsed_morph_first_instance = 0u;
+    let total = atomicLoad(&state.final_count);
+    let fits = total <= n;
+    let pulling = udlod.counts.w != 0u;
+    var first = 0u;
+    for (var g = 0u; g < DRAW_GROUPS; g++) {
+        let count = select(0u, atomicLoad(&state.group_count[g]), fits);
+        let mask = udlod.masks[g % UDLOD_COLLAPSE_MASKS];
+        state.group_first[g] = first;
+        if pulling {
+            state.draws[g] = IndirectDraw(mask.x, count, 0u, first, 0u);
+        } else {
+            state.draws[g] = IndirectDraw(mask.x, count, mask.y, 0u, first);
+        }
+        first += count;
+    }
+    let groups = (select(0u, total, fits) + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;
+    let row = max(udlod.counts.y, 1u);
+    state.dispatch_x = min(groups, row);
+    state.dispatch_y = (groups + row - 1u) / row;
+    state.dispatch_z = 1u;
+}
+
+// One invocation per final tile: moves it from the first half, unsorted, to its place in the
+// second half (its group's first entry plus its rank), where the draws read it as
+// instance `first_instance + i` with its group in `pad`.
+@compute @workgroup_size(UDLOD_WORKGROUP)
+fn scatter(
+    @builtin(workgroup_id) group: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
+    let i = (group.y * groups.x + group.x) * UDLOD_WORKGROUP + li;
+    let n = udlod.sizes.z;
+    if i >= min(atomicLoad(&state.final_count), n) {
+        return;
+    }
+    let t = final_tiles[i];
+    let draw = t.pad & ((1u << DRAW_GROUP_BITS) - 1u);
+    let slot = state.group_first[draw] + (t.pad >> DRAW_GROUP_BITS);
+    if slot < n {
+        final_tiles[n + slot] = Tile(t.x, t.y, t.lod, draw);
+    }
 }

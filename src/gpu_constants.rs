@@ -60,11 +60,14 @@ shared_constants! {
     UDLOD_NO_SPLIT: f32 = 3.0e38;
     /// Threads per workgroup of the tiling passes.
     UDLOD_WORKGROUP: u32 = 64;
-    /// How far past 1 a tile's odd vertices' unclamped morph factor must lie for the tile to
-    /// be drawn as its parent's grid (`select::tile_collapses`): the vertex stage, which
+    /// How far past 1 a quadrant's odd vertices' unclamped morph factor must lie for the
+    /// quadrant to be drawn as its parent's grid (`select::tile_collapse_mask`): the vertex stage, which
     /// recomputes the factor, then clamps it to exactly 1 even where a device rounds the two
     /// stages' arithmetic differently (Vulkan allows it; the H200 does).
     UDLOD_COLLAPSE_MARGIN: f32 = 1e-3;
+    /// Collapse masks of a tile (which of its four quadrants are drawn as the parent grid:
+    /// `lod::udlod::grid`), each with its own index list and indirect draw.
+    UDLOD_COLLAPSE_MASKS: u32 = 16;
     /// Most levels a clipmap quadtree holds (per-level windows in the quadtree header).
     CLIPMAP_MAX_LEVELS: u32 = 16;
     /// A quadtree entry is `atlas_index | atlas_lod << CLIPMAP_LOD_SHIFT` (R16G16_UINT-like).

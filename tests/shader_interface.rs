@@ -18,8 +18,7 @@ use vkterrain::frame::terrain::TERRAIN_SET;
 use vkterrain::gpu_constants::{WGSL_CONSTANTS, WgslValue};
 use vkterrain::lod::pgm::PGM_SET;
 use vkterrain::lod::udlod::{
-    COLLAPSED_DRAW_OFFSET, COLLAPSED_MORPH_DRAW_OFFSET, DRAW_OFFSET, DRAW_STRIDE,
-    MORPH_DRAW_OFFSET, TilingState, UDLOD_SET, UdlodUniforms,
+    DRAW_GROUPS, DRAW_STRIDE, DRAWS_OFFSET, TilingState, UDLOD_SET, UdlodUniforms,
 };
 
 /// The drawing shaders (the probes come on top where a test covers them too).
@@ -166,6 +165,7 @@ fn udlod_uniforms_match_the_wgsl_struct() {
         ("viewer", offset_of!(UdlodUniforms, viewer)),
         ("counts", offset_of!(UdlodUniforms, counts)),
         ("metric", offset_of!(UdlodUniforms, metric)),
+        ("masks", offset_of!(UdlodUniforms, masks)),
     ];
     let shaders = composed_shaders();
     assert_struct_layout(&shaders[1..3], "Udlod", &rust, size_of::<UdlodUniforms>());
@@ -270,21 +270,11 @@ fn chunk_state_matches_the_wgsl_struct() {
 
 #[test]
 fn tiling_state_matches_the_wgsl_struct() {
-    // The WGSL side spells the indirect-argument arrays out member by member.
-    let draw = offset_of!(TilingState, draw);
-    let morph_draw = offset_of!(TilingState, morph_draw);
-    let collapsed = offset_of!(TilingState, collapsed_draw);
-    let collapsed_morph = offset_of!(TilingState, collapsed_morph_draw);
     let rust = [
         ("dispatch_x", offset_of!(TilingState, dispatch)),
         ("dispatch_y", offset_of!(TilingState, dispatch) + 4),
         ("dispatch_z", offset_of!(TilingState, dispatch) + 8),
         ("pass_index", offset_of!(TilingState, pass_index)),
-        ("index_count", draw),
-        ("instance_count", draw + 4),
-        ("first_index", draw + 8),
-        ("vertex_offset", draw + 12),
-        ("first_instance", draw + 16),
         ("parent_count", offset_of!(TilingState, parent_count)),
         ("child_count", offset_of!(TilingState, child_count)),
         ("final_count", offset_of!(TilingState, final_count)),
@@ -294,41 +284,38 @@ fn tiling_state_matches_the_wgsl_struct() {
         ("passes_started", offset_of!(TilingState, passes_started)),
         ("splits_allowed", offset_of!(TilingState, splits_allowed)),
         ("split_requests", offset_of!(TilingState, split_requests)),
-        ("morph_count", offset_of!(TilingState, morph_count)),
-        ("morph_index_count", morph_draw),
-        ("morph_instance_count", morph_draw + 4),
-        ("morph_first_index", morph_draw + 8),
-        ("morph_vertex_offset", morph_draw + 12),
-        ("morph_first_instance", morph_draw + 16),
-        ("collapsed_count", offset_of!(TilingState, collapsed_count)),
-        (
-            "collapsed_morph_count",
-            offset_of!(TilingState, collapsed_morph_count),
-        ),
-        ("collapsed_index_count", collapsed),
-        ("collapsed_instance_count", collapsed + 4),
-        ("collapsed_first_index", collapsed + 8),
-        ("collapsed_vertex_offset", collapsed + 12),
-        ("collapsed_first_instance", collapsed + 16),
-        ("collapsed_morph_index_count", collapsed_morph),
-        ("collapsed_morph_instance_count", collapsed_morph + 4),
-        ("collapsed_morph_first_index", collapsed_morph + 8),
-        ("collapsed_morph_vertex_offset", collapsed_morph + 12),
-        ("collapsed_morph_first_instance", collapsed_morph + 16),
+        ("group_count", offset_of!(TilingState, group_count)),
+        ("group_first", offset_of!(TilingState, group_first)),
+        ("draws", offset_of!(TilingState, draws)),
     ];
-    assert_struct_layout(
-        &[("udlod_tiling", UDLOD_TILING_WGSL)],
-        "TilingState",
-        &rust,
-        size_of::<TilingState>(),
-    );
+    let tiling = [("udlod_tiling", UDLOD_TILING_WGSL)];
+    assert_struct_layout(&tiling, "TilingState", &rust, size_of::<TilingState>());
+    // The arrays' lengths and strides.
+    let module = naga::front::wgsl::parse_str(UDLOD_TILING_WGSL).unwrap();
+    let (_, state) = (module.types.iter())
+        .find(|(_, t)| t.name.as_deref() == Some("TilingState"))
+        .unwrap();
+    let naga::TypeInner::Struct { members, .. } = &state.inner else {
+        panic!("TilingState is not a struct")
+    };
+    for (m, stride) in members[members.len() - 3..].iter().zip([4, 4, DRAW_STRIDE]) {
+        let naga::TypeInner::Array {
+            size: naga::ArraySize::Constant(n),
+            stride: s,
+            ..
+        } = module.types[m.ty].inner
+        else {
+            panic!("{:?} is not a fixed-size array", m.name)
+        };
+        assert_eq!((n.get() as usize, s), (DRAW_GROUPS, stride), "{:?}", m.name);
+    }
 }
 
 /// The indirect arguments inside `TilingState` are laid out as Vulkan reads them: the WGSL
 /// members sit at the offsets of `VkDispatchIndirectCommand` (at 0, where the prepass
-/// dispatches from) and `VkDrawIndexedIndirectCommand` (at `DRAW_OFFSET`, drawn with
-/// `DRAW_STRIDE`, and the morphing tiles' at `MORPH_DRAW_OFFSET`), and the first four draw
-/// words read as a `VkDrawIndirectCommand` for vertex pulling.
+/// dispatches from) and each group's `IndirectDraw` at those of
+/// `VkDrawIndexedIndirectCommand` (from `DRAWS_OFFSET`, drawn with `DRAW_STRIDE`), its first
+/// four words at those of a `VkDrawIndirectCommand` for vertex pulling.
 #[test]
 fn indirect_arguments_are_vulkan_commands() {
     let module = naga::front::wgsl::parse_str(UDLOD_TILING_WGSL).unwrap();
@@ -338,58 +325,29 @@ fn indirect_arguments_are_vulkan_commands() {
     assert_eq!(at("dispatch_x"), offset_of!(D, x));
     assert_eq!(at("dispatch_y"), offset_of!(D, y));
     assert_eq!(at("dispatch_z"), offset_of!(D, z));
-    type I = vk::DrawIndexedIndirectCommand;
-    let draw = DRAW_OFFSET as usize;
-    assert_eq!(draw, offset_of!(TilingState, draw));
-    assert_eq!(at("index_count"), draw + offset_of!(I, index_count));
-    assert_eq!(at("instance_count"), draw + offset_of!(I, instance_count));
-    assert_eq!(at("first_index"), draw + offset_of!(I, first_index));
-    assert_eq!(at("vertex_offset"), draw + offset_of!(I, vertex_offset));
-    assert_eq!(at("first_instance"), draw + offset_of!(I, first_instance));
+    assert_eq!(at("draws"), DRAWS_OFFSET as usize);
     // Vulkan: the offset is a multiple of 4, the stride at least the command's size.
-    assert_eq!(draw % 4, 0);
+    assert_eq!(DRAWS_OFFSET % 4, 0);
+    let draw = struct_offsets(&module, "IndirectDraw");
+    let at = |name: &str| draw.iter().find(|(n, _)| n == name).unwrap().1;
+    type I = vk::DrawIndexedIndirectCommand;
     assert_eq!(DRAW_STRIDE as usize, size_of::<I>());
-    // The whole command lies inside `draw`, before the next member.
-    assert!(draw + size_of::<I>() <= offset_of!(TilingState, parent_count));
+    assert_eq!(at("index_count"), offset_of!(I, index_count));
+    assert_eq!(at("instance_count"), offset_of!(I, instance_count));
+    assert_eq!(at("first_index"), offset_of!(I, first_index));
+    assert_eq!(at("vertex_offset"), offset_of!(I, vertex_offset));
+    assert_eq!(at("first_instance"), offset_of!(I, first_instance));
     // Vertex pulling: vertex_count, instance_count, first_vertex, first_instance read
-    // index_count, instance_count, first_index and vertex_offset (which `finish` leaves 0).
+    // index_count, instance_count, first_index and vertex_offset (`finish` writes them so).
     type P = vk::DrawIndirectCommand;
-    assert_eq!(at("index_count"), draw + offset_of!(P, vertex_count));
-    assert_eq!(at("instance_count"), draw + offset_of!(P, instance_count));
-    assert_eq!(at("first_index"), draw + offset_of!(P, first_vertex));
-    assert_eq!(at("vertex_offset"), draw + offset_of!(P, first_instance));
-    // The morphing tiles' draw, the same way.
-    let morph = MORPH_DRAW_OFFSET as usize;
-    assert_eq!(morph % 4, 0);
-    assert_eq!(at("morph_index_count"), morph + offset_of!(I, index_count));
-    assert_eq!(
-        at("morph_instance_count"),
-        morph + offset_of!(I, instance_count)
-    );
-    assert_eq!(at("morph_first_index"), morph + offset_of!(I, first_index));
-    assert_eq!(
-        at("morph_vertex_offset"),
-        morph + offset_of!(I, vertex_offset)
-    );
-    assert_eq!(
-        at("morph_first_instance"),
-        morph + offset_of!(I, first_instance)
-    );
-    assert!(morph + size_of::<I>() <= offset_of!(TilingState, collapsed_count));
-    // The collapsed tiles' two draws, the same way.
-    for (prefix, offset) in [
-        ("collapsed", COLLAPSED_DRAW_OFFSET as usize),
-        ("collapsed_morph", COLLAPSED_MORPH_DRAW_OFFSET as usize),
-    ] {
-        let at = |member: &str| at(&format!("{prefix}_{member}"));
-        assert_eq!(offset % 4, 0);
-        assert_eq!(at("index_count"), offset + offset_of!(I, index_count));
-        assert_eq!(at("instance_count"), offset + offset_of!(I, instance_count));
-        assert_eq!(at("first_index"), offset + offset_of!(I, first_index));
-        assert_eq!(at("vertex_offset"), offset + offset_of!(I, vertex_offset));
-        assert_eq!(at("first_instance"), offset + offset_of!(I, first_instance));
-        assert!(offset + size_of::<I>() <= size_of::<TilingState>());
-    }
+    assert!(size_of::<P>() <= DRAW_STRIDE as usize);
+    assert_eq!(at("index_count"), offset_of!(P, vertex_count));
+    assert_eq!(at("instance_count"), offset_of!(P, instance_count));
+    assert_eq!(at("first_index"), offset_of!(P, first_vertex));
+    assert_eq!(at("vertex_offset"), offset_of!(P, first_instance));
+    // The last group's draw ends inside the state.
+    let end = DRAWS_OFFSET as usize + DRAW_GROUPS * DRAW_STRIDE as usize;
+    assert_eq!(end, size_of::<TilingState>());
 }
 
 /// Member names and byte offsets of WGSL struct `name`.

@@ -12,6 +12,7 @@ use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::interp::GridCell;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
+use vkterrain::lod::udlod::{draw_group, grid};
 use vkterrain::lod::{MethodKind, UdlodSettings};
 use vkterrain::readback::CollectSink;
 use vkterrain::render::{FrameRequest, Renderer};
@@ -145,14 +146,14 @@ fn gpu_selection_equals_cpu_reference() {
     }
 }
 
-/// Collapsed tiles (docs/udlod.md, "Collapsed tiles"): the prepass draws a tile whose odd
-/// vertices all lie fully on its parent's grid as that grid, and that is the same surface. Over
-/// a low flight (most tiles in their morph zones) and 30 poses, at every grid size and morph
-/// variant: the GPU collapses exactly the tiles the CPU mirror (`select::tile_collapses`)
-/// does, and the frames with and without collapsing are identical, colour and depth, bit for
-/// bit, while they draw fewer triangles. Negative control by hand: a margin of -0.5 in the
-/// prepass's `final_tile_checks` (tiles half-way through their morph collapse) changes the
-/// frames and the GPU's set.
+/// Collapsed quadrants (docs/udlod.md, "Collapsed quadrants"): the prepass draws each quadrant
+/// of a tile whose odd vertices all lie fully on its parent's grid as that grid, and that is
+/// the same surface. Over a low flight (most tiles in their morph zones) and 30 poses, at every
+/// grid size and morph variant: the GPU gives every tile the collapse mask the CPU mirror
+/// (`select::tile_collapse_mask`) does, and the frames with and without collapsing are
+/// identical, colour and depth, bit for bit, while they draw exactly the triangles the masks
+/// save (`grid::mask_triangles`). Negative control by hand: a threshold of 0.5 instead of
+/// `1 + margin` in the prepass's `final_tile_checks` changes the GPU's masks at the first pose.
 #[test]
 fn collapsed_tiles_draw_the_same_surface() {
     let data = terrain(257, 30.0);
@@ -164,6 +165,9 @@ fn collapsed_tiles_draw_the_same_surface() {
         }
     }
 }
+
+/// Per pose: each drawn tile's collapse mask, and how many collapsing tiles morph.
+type DrawnMasks = (HashMap<Tile, u32>, u64);
 
 fn collapsed_tiles_draw_the_same_surface_at(
     data: &Heightmap,
@@ -182,52 +186,48 @@ fn collapsed_tiles_draw_the_same_surface_at(
             ..lod.clone()
         };
         let mut sink = CollectSink::default();
-        let mut collapsed_sets = Vec::new();
-        let mut collapsed_morphing = 0;
+        let mut drawn: Vec<DrawnMasks> = Vec::new();
         {
             let mut r = Renderer::new(&gpu, data, lod.clone(), options).unwrap();
             for cam in cams {
                 r.render(*cam, &mut sink).unwrap();
                 r.finish(&mut sink).unwrap();
                 let tiles = r.method().debug_tiles(ViewSlot(0)).unwrap().unwrap();
-                let c: HashMap<_, _> = r.method().counters(ViewSlot(0)).into_iter().collect();
-                // The static tiles (own grid, then collapsed), then the morphing ones
-                // (collapsed, then own grid).
-                let statics = (c["tiles"] - c["morphing"]) as usize;
-                let collapsed_static = (c["collapsed"] - c["collapsed_morphing"]) as usize;
-                let morphing_start = statics;
-                let set: HashSet<Tile> = tiles[statics - collapsed_static..statics]
+                let draws = r.method().debug_tile_draws(ViewSlot(0)).unwrap().unwrap();
+                let masks: HashMap<Tile, u32> = tiles
                     .iter()
-                    .chain(
-                        &tiles[morphing_start..morphing_start + c["collapsed_morphing"] as usize],
-                    )
-                    .map(|&[x, y, lod]| Tile { x, y, lod })
+                    .zip(&draws)
+                    .map(|(&[x, y, lod], &g)| (Tile { x, y, lod }, draw_group(g as usize).0))
                     .collect();
-                collapsed_sets.push(set);
-                collapsed_morphing += c["collapsed_morphing"];
+                assert_eq!(masks.len(), tiles.len(), "a tile drawn twice");
+                let collapsing_morphing = (draws.iter())
+                    .filter(|&&g| draw_group(g as usize).1 && draw_group(g as usize).0 != 0)
+                    .count();
+                drawn.push((masks, collapsing_morphing as u64));
             }
         }
         common::assert_no_validation_messages(&gpu);
-        (sink.frames, collapsed_sets, collapsed_morphing)
+        (sink.frames, drawn)
     };
-    let (on, on_sets, on_morphing) = render(true);
-    let (off, off_sets, _) = render(false);
-    let (mut tiles, mut collapsed) = (0usize, 0usize);
+    let (on, on_masks) = render(true);
+    let (off, off_masks) = render(false);
+    let full = grid::mask_triangles(grid, 0);
+    let (mut tiles, mut collapsing, mut partial, mut quadrants) = (0usize, 0usize, 0usize, 0u32);
+    let mut collapsing_morphing = 0u64;
     for (i, cam) in cams.iter().enumerate() {
         let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
-        let cpu_tiles = select::select_tiles(&levels, &p);
-        let cpu: HashSet<Tile> = cpu_tiles
-            .iter()
-            .copied()
-            .filter(|&t| select::tile_collapses(&levels, &p, t))
+        let cpu: HashMap<Tile, u32> = select::select_tiles(&levels, &p)
+            .into_iter()
+            .map(|t| (t, select::tile_collapse_mask(&levels, &p, t)))
             .collect();
         assert_eq!(
-            on_sets[i], cpu,
-            "grid {grid} {name} pose {i}: the GPU's collapsed tiles are not the CPU mirror's"
+            on_masks[i].0, cpu,
+            "grid {grid} {name} pose {i}: the GPU's collapse masks are not the CPU mirror's"
         );
-        assert!(off_sets[i].is_empty(), "grid {grid} {name}: collapse off");
-        tiles += cpu_tiles.len();
-        collapsed += cpu.len();
+        assert!(
+            off_masks[i].0.values().all(|&m| m == 0),
+            "grid {grid} {name}: collapse off"
+        );
         let (a, b) = (&on[i], &off[i]);
         assert_eq!(
             a.rgba, b.rgba,
@@ -237,23 +237,45 @@ fn collapsed_tiles_draw_the_same_surface_at(
             a.depth, b.depth,
             "grid {grid} {name} pose {i}: depth differs"
         );
-        let full = 2 * (grid as u64).pow(2);
+        let saved: u64 = cpu
+            .values()
+            .map(|&m| full - grid::mask_triangles(grid, m))
+            .sum();
         assert_eq!(
             b.triangles - a.triangles,
-            cpu.len() as u64 * (full - full / 4),
+            saved,
             "grid {grid} {name} pose {i}"
         );
+        assert_eq!(b.triangles, full * cpu.len() as u64);
+        tiles += cpu.len();
+        collapsing += cpu.values().filter(|&&m| m != 0).count();
+        partial += cpu
+            .values()
+            .filter(|&&m| m != 0 && m != grid::ALL_QUADRANTS)
+            .count();
+        quadrants += cpu.values().map(|m| m.count_ones()).sum::<u32>();
+        collapsing_morphing += on_masks[i].1;
     }
     println!(
-        "grid {grid} {name}: {collapsed} of {tiles} tiles collapsed ({on_morphing} of them drawn without back-face culling), frames identical"
+        "grid {grid} {name}: {collapsing} of {tiles} tiles collapse ({partial} in part; {quadrants} quadrants), frames identical"
     );
-    // Enough collapsed tiles, in both of their draws, for the comparison to mean something
-    // (with one level step even vertices never move, so no collapsed tile has slivers).
-    assert!(collapsed * 10 >= tiles, "{collapsed} of {tiles}");
-    if lod.morph_levels == 1 {
-        assert_eq!(on_morphing, 0);
+    // Enough collapsed quadrants, whole tiles and (from grid 4) single ones, for the comparison
+    // to mean something.
+    assert!(
+        quadrants as usize * 10 >= 4 * tiles,
+        "{quadrants} quadrants of {tiles} tiles"
+    );
+    assert!(collapsing > partial, "no whole tile collapsed");
+    if grid >= 4 {
+        assert!(
+            partial * 20 >= tiles,
+            "{partial} partly collapsed of {tiles}"
+        );
     } else {
-        assert!(on_morphing > 0, "no collapsed tile with slivers");
+        assert_eq!(partial, 0, "grid 2 collapses whole tiles only");
+    }
+    if lod.morph_levels != 1 {
+        assert!(collapsing_morphing > 0, "no collapsing tile with slivers");
     }
 }
 

@@ -13,18 +13,21 @@ struct Udlod {
     levels: array<vec4<u32>, UDLOD_MAX_LEVELS>,
     // x: quads per tile side, y: root level, z: final list capacity, w: temporary list capacity.
     sizes: vec4<u32>,
-    // x: unused, y: morph range, z: 1 = morphing on, w: 1 = frustum culling on.
+    // x: 1 = collapsing quadrants on, y: morph range, z: 1 = morphing on, w: 1 = frustum culling on.
     params: vec4<f32>,
     // The LOD viewer (distances for levels and morphs are measured from it): x/y relative to
     // the camera (m), z: reference height (terrain under the LOD viewer) minus its height.
     viewer: vec4<f32>,
-    // x: indices per tile (6 * quads^2), y: workgroups per row of a `refine` dispatch,
-    // z: split-field nodes per tile side (`field_density`: 1 = the tiles' corners).
+    // x: unused, y: workgroups per row of a `refine` or `scatter` dispatch, z: split-field
+    // nodes per tile side (`field_density`: 1 = the tiles' corners), w: 1 = vertex pulling.
     counts: vec4<u32>,
     // xy: the LOD metric's stretch of the grid frame per axis (metres per sample along x and
     // y, each a lower bound on the drawn surface, over the grid frame's spacing): exactly
     // (1, 1) on square grids (`Levels::stretch` in src/lod/udlod/select.rs).
     metric: vec4<f32>,
+    // Per collapse mask (`grid::IndexLayout` in src/lod/udlod/grid.rs): x: its indices (with
+    // vertex pulling its vertices) per tile, y: its first index in the index buffer.
+    masks: array<vec4<u32>, UDLOD_COLLAPSE_MASKS>,
 }
 
 struct Tile {

@@ -288,6 +288,12 @@ pub trait LodMethod {
         Ok(None)
     }
     #[cfg(feature = "test-support")]
+    /// Tests only: per tile of [`LodMethod::debug_tiles`], the draw it went to (UDLOD:
+    /// `udlod::draw_group`).
+    fn debug_tile_draws(&self, _slot: ViewSlot) -> Result<Option<Vec<u32>>> {
+        Ok(None)
+    }
+    #[cfg(feature = "test-support")]
     /// Tests only: the method's own descriptor set 1 of `slot` (layout, set), for probes that
     /// evaluate its shader functions through it (`None`: the method has none to probe).
     fn probe_set(&self, _slot: ViewSlot) -> Option<(vk::DescriptorSetLayout, vk::DescriptorSet)> {

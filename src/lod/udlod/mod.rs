@@ -7,6 +7,7 @@
 //! distances from the pixel error target, frustum planes); the tile lists never come back to
 //! the host in the render path (only 64 bytes of counters, for statistics).
 
+pub mod grid;
 #[cfg(feature = "test-support")]
 pub mod probe;
 pub mod select;
@@ -27,7 +28,7 @@ use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use crate::error::{Error, Result};
 use crate::frame::ViewState;
-use crate::gpu_constants::UDLOD_MAX_LEVELS;
+use crate::gpu_constants::{UDLOD_COLLAPSE_MASKS, UDLOD_MAX_LEVELS};
 use crate::slots::ViewSlot;
 use select::{FieldKey, Levels, SelectionParams, SplitField};
 use settings::{BackFaces, LodMetric, UdlodSettings};
@@ -45,17 +46,23 @@ pub struct UdlodUniforms {
     pub counts: [u32; 4],
     /// xy: the LOD metric's stretch per axis ([`select::Levels::stretch`]).
     pub metric: [f32; 4],
+    /// Per collapse mask: its indices (vertices with vertex pulling) per tile and first index
+    /// ([`grid::IndexLayout`]).
+    pub masks: [[u32; 4]; UDLOD_COLLAPSE_MASKS as usize],
 }
+
+/// Indirect draws per slot: static tiles per collapse mask, then morphing ones.
+pub const DRAW_GROUPS: usize = 2 * UDLOD_COLLAPSE_MASKS as usize;
 
 /// The tiling state the GPU keeps per slot (`TilingState` in `shaders/udlod_tiling.wgsl`).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct TilingState {
     pub dispatch: [u32; 3],
     pub pass_index: u32,
-    pub draw: [u32; 5],
     pub parent_count: u32,
     pub child_count: u32,
+    /// Final tiles of the frame (every group).
     pub final_count: u32,
     pub reserved_leaves: u32,
     pub overflow: u32,
@@ -63,32 +70,34 @@ pub struct TilingState {
     pub passes_started: u32,
     pub splits_allowed: u32,
     pub split_requests: u32,
-    /// Final tiles with a vertex part-way through its morph, written from the back of the
-    /// final list.
-    pub morph_count: u32,
-    /// The indexed indirect draw of those tiles.
-    pub morph_draw: [u32; 5],
-    /// Final tiles drawn as their parent's grid (the final list's second half): static ones
-    /// from its front, morphing ones from its back.
-    pub collapsed_count: u32,
-    pub collapsed_morph_count: u32,
-    /// The indexed indirect draws of the collapsed static and morphing tiles.
-    pub collapsed_draw: [u32; 5],
-    pub collapsed_morph_draw: [u32; 5],
+    /// Final tiles per draw group (static per collapse mask, then morphing), and where each
+    /// group starts in the final list's sorted half.
+    pub group_count: [u32; DRAW_GROUPS],
+    pub group_first: [u32; DRAW_GROUPS],
+    /// One `VkDrawIndexedIndirectCommand` per group (with vertex pulling a
+    /// `VkDrawIndirectCommand` in the first four words).
+    pub draws: [[u32; 5]; DRAW_GROUPS],
+}
+
+impl Default for TilingState {
+    fn default() -> Self {
+        bytemuck::Zeroable::zeroed()
+    }
 }
 
 impl TilingState {
-    /// Tiles drawn with their own grid (static, morphing) and collapsed onto their parent's
-    /// (static, morphing): the four draws' instance counts.
-    pub fn drawn(&self) -> [u64; 4] {
-        [
-            self.draw[1],
-            self.morph_draw[1],
-            self.collapsed_draw[1],
-            self.collapsed_morph_draw[1],
-        ]
-        .map(u64::from)
+    /// Tiles drawn per draw group: the draws' instance counts (0 in every group of a frame
+    /// whose final tiles did not fit the list).
+    pub fn drawn(&self) -> [u64; DRAW_GROUPS] {
+        self.draws.map(|d| u64::from(d[1]))
     }
+}
+
+/// A draw group's collapse mask and whether its tiles morph (drawn without back-face culling
+/// by default).
+pub fn draw_group(group: usize) -> (u32, bool) {
+    let masks = UDLOD_COLLAPSE_MASKS as usize;
+    ((group % masks) as u32, group >= masks)
 }
 
 /// Descriptor set 1 (`shaders/include/udlod_common.wgsl`, `shaders/udlod_tiling.wgsl`,
@@ -107,15 +116,9 @@ pub const UDLOD_SET: &[Binding] = {
     ]
 };
 
-/// Where `TilingState::draw` starts: the `vkCmdDrawIndexedIndirect` arguments.
-pub const DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, draw) as u64;
-/// Byte offset of the morphing tiles' draw arguments in [`TilingState`].
-pub const MORPH_DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, morph_draw) as u64;
-/// Byte offsets of the collapsed tiles' draw arguments in [`TilingState`].
-pub const COLLAPSED_DRAW_OFFSET: u64 = std::mem::offset_of!(TilingState, collapsed_draw) as u64;
-pub const COLLAPSED_MORPH_DRAW_OFFSET: u64 =
-    std::mem::offset_of!(TilingState, collapsed_morph_draw) as u64;
-/// Bytes between consecutive indexed indirect draws (one is drawn; Vulkan wants the stride).
+/// Where `TilingState::draws` starts: the static groups' draws, then the morphing groups'.
+pub const DRAWS_OFFSET: u64 = std::mem::offset_of!(TilingState, draws) as u64;
+/// Bytes between consecutive indirect draws.
 pub const DRAW_STRIDE: u32 = size_of::<[u32; 5]>() as u32;
 pub const TILE_BYTES: u64 = 16;
 
@@ -139,8 +142,8 @@ struct SlotBuffers {
 struct TileLists {
     /// Read and written by the prepass only (through the descriptor set).
     temp: Buffer,
-    /// Tiles drawn with their own grid (`capacity` entries), then with `collapse` the same
-    /// again for those drawn as their parent's.
+    /// The final tiles as the prepass writes them (`capacity` entries, unsorted), then the
+    /// same sorted by draw group (`scatter`), which the draws read.
     #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
     final_tiles: Buffer,
     /// Entries of each half of the final list.
@@ -151,7 +154,7 @@ impl TileLists {
     /// Lists for `capacity` final tiles. Parents and children of one pass share the
     /// temporary list: a pass has at most `4/3 * capacity + 1` children (every split
     /// reserved 3 final entries).
-    fn new(gpu: &Arc<Gpu>, i: usize, capacity: u32, collapse: bool) -> Result<Self> {
+    fn new(gpu: &Arc<Gpu>, i: usize, capacity: u32) -> Result<Self> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let temp = Buffer::new(
             gpu,
@@ -163,7 +166,7 @@ impl TileLists {
         let final_tiles = Buffer::new(
             gpu,
             &format!("udlod final tiles {i}"),
-            (1 + collapse as u64) * capacity as u64 * TILE_BYTES,
+            2 * capacity as u64 * TILE_BYTES,
             storage | vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::GpuOnly,
         )?;
@@ -186,7 +189,7 @@ impl SlotBuffers {
         gpu: &Arc<Gpu>,
         sets: &DescriptorSets,
         (i, set): (usize, vk::DescriptorSet),
-        (capacity, field_bytes, collapse): (u32, u64, bool),
+        (capacity, field_bytes): (u32, u64),
         min_max: &Buffer,
     ) -> Result<Self> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
@@ -224,7 +227,7 @@ impl SlotBuffers {
         let slot = SlotBuffers {
             uniforms,
             state,
-            lists: TileLists::new(gpu, i, capacity, collapse)?,
+            lists: TileLists::new(gpu, i, capacity)?,
             counters,
             field,
             field_key: None,
@@ -264,9 +267,10 @@ pub struct Udlod {
     /// GPU mirror of `levels.min_max` (bound in every slot's set, written again when a slot's
     /// lists grow).
     min_max: Buffer,
-    /// The tile grid's indices, then the collapsed grid's (`grid_size / 2` per side).
+    /// Every collapse mask's index list ([`grid::IndexLayout`]).
     indices: Buffer,
-    index_count: u32,
+    /// `UdlodUniforms::masks`.
+    masks: [[u32; 4]; UDLOD_COLLAPSE_MASKS as usize],
     slots: Vec<SlotBuffers>,
     /// Set 1 of every slot (`SlotBuffers::set`).
     #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
@@ -274,15 +278,12 @@ pub struct Udlod {
     prepare: Pipeline,
     refine: Pipeline,
     finish: Pipeline,
-    /// Draws the tiles with no vertex part-way through its morph (the final list's front),
-    /// with back-face culling unless `back_faces = "none"`.
+    scatter: Pipeline,
+    /// Draws the static groups (tiles with no vertex part-way through its morph), with
+    /// back-face culling unless `back_faces = "none"`.
     draw: Pipeline,
-    /// Draws the others (its back), without it unless `back_faces = "all"`.
+    /// Draws the morphing groups, without it unless `back_faces = "all"`.
     draw_morphing: Pipeline,
-    /// The same two for the collapsed tiles (the list's second half), drawn as their
-    /// parent's grid.
-    draw_collapsed: Pipeline,
-    draw_collapsed_morphing: Pipeline,
     /// The most tiles a slot's lists grow to: `max_tiles`, at most the full tree's leaves.
     tile_cap: u32,
     /// The final-list capacity every slot grows to at its next frame: `initial_tiles` at
@@ -330,13 +331,14 @@ impl Udlod {
         Ok(levels)
     }
 
-    /// The index buffer: the tile grid's indices, then the collapsed grid's (`vs_collapsed`,
-    /// `grid_size / 2` quads per side); and how many of them are the tile grid's.
-    fn grid_indices(gpu: &Arc<Gpu>, grid_size: u32) -> Result<(Buffer, u32)> {
-        let grid = super::brute::grid_indices(grid_size);
-        let index_count = grid.len() as u32;
-        let both = [grid, super::brute::grid_indices(grid_size / 2)].concat();
-        let index_bytes: &[u8] = bytemuck::cast_slice(&both);
+    /// The index buffer of every collapse mask's triangles, and the masks' uniforms (with
+    /// vertex pulling their vertex counts; the indices are not read).
+    fn grid_indices(
+        gpu: &Arc<Gpu>,
+        grid_size: u32,
+    ) -> Result<(Buffer, [[u32; 4]; UDLOD_COLLAPSE_MASKS as usize])> {
+        let layout = grid::IndexLayout::new(grid_size);
+        let index_bytes: &[u8] = bytemuck::cast_slice(&layout.indices);
         let mut indices = Buffer::new(
             gpu,
             "udlod grid indices",
@@ -345,39 +347,29 @@ impl Udlod {
             MemoryLocation::CpuToGpu,
         )?;
         indices.write(index_bytes)?;
-        Ok((indices, index_count))
+        Ok((
+            indices,
+            layout.ranges.map(|(first, count)| [count, first, 0, 0]),
+        ))
     }
 
-    /// The four draws' pipelines: static and morphing tiles, each with its own grid and
-    /// collapsed onto the parent's. By default the tiles with no vertex part-way through its
-    /// morph with back-face culling, the others without (docs/udlod.md, "Pinholes far away
-    /// and back faces").
+    /// The two draw pipelines: static and morphing tiles. By default the tiles with no vertex
+    /// part-way through its morph with back-face culling, the others without (docs/udlod.md,
+    /// "Pinholes far away and back faces").
     fn draw_pipelines(
         ctx: &MethodContext<'_>,
         settings: &UdlodSettings,
         set_layouts: &[vk::DescriptorSetLayout],
-    ) -> Result<[Pipeline; 4]> {
+    ) -> Result<[Pipeline; 2]> {
+        let entry = if settings.vertex_pulling {
+            c"vs_pulled"
+        } else {
+            c"vs_main"
+        };
         let cull_static = settings.back_faces != BackFaces::None;
         let cull_morphing = settings.back_faces == BackFaces::All;
-        let entries: [&std::ffi::CStr; 4] = if settings.vertex_pulling {
-            [
-                c"vs_pulled",
-                c"vs_pulled_morphing",
-                c"vs_pulled_collapsed",
-                c"vs_pulled_collapsed_morphing",
-            ]
-        } else {
-            [
-                c"vs_main",
-                c"vs_main_morphing",
-                c"vs_collapsed",
-                c"vs_collapsed_morphing",
-            ]
-        };
-        let culls = [cull_static, cull_morphing, cull_static, cull_morphing];
-        let mut pipelines = Vec::with_capacity(4);
-        for (entry, cull_back_faces) in entries.into_iter().zip(culls) {
-            pipelines.push(terrain_pipeline(
+        let pipeline = |cull_back_faces| {
+            terrain_pipeline(
                 ctx.gpu,
                 &ctx.formats,
                 &TerrainPipelineDesc {
@@ -388,11 +380,9 @@ impl Udlod {
                     topology: vk::PrimitiveTopology::TRIANGLE_LIST,
                     cull_back_faces,
                 },
-            )?);
-        }
-        pipelines
-            .try_into()
-            .map_err(|_| Error::invalid("udlod", "four draw pipelines"))
+            )
+        };
+        Ok([pipeline(cull_static)?, pipeline(cull_morphing)?])
     }
 
     pub fn new(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Self> {
@@ -412,7 +402,13 @@ impl Udlod {
         min_max.write(mm_bytes)?;
         // The split field's nodes (a one-level tree has none, and a buffer is never empty).
         let field_bytes = (levels.field_nodes() as u64 * 4).max(4);
-        let (indices, index_count) = Self::grid_indices(gpu, settings.grid_size)?;
+        if !gpu.enabled.draw_indirect_first_instance {
+            return Err(Error::invalid(
+                "udlod",
+                "the device lacks drawIndirectFirstInstance, which UDLOD's draws need",
+            ));
+        }
+        let (indices, masks) = Self::grid_indices(gpu, settings.grid_size)?;
 
         // No selection reserves more leaves than the full tree over the root's square has
         // (4^root_lod), so small data sets do not allocate the whole budget.
@@ -428,23 +424,15 @@ impl Udlod {
         }
         .min(tile_cap);
         let slots = (sets.sets.iter().enumerate())
-            .map(|(i, &set)| {
-                SlotBuffers::new(
-                    gpu,
-                    &sets,
-                    (i, set),
-                    (first, field_bytes, settings.collapse),
-                    &min_max,
-                )
-            })
+            .map(|(i, &set)| SlotBuffers::new(gpu, &sets, (i, set), (first, field_bytes), &min_max))
             .collect::<Result<Vec<_>>>()?;
         let set_layouts = [ctx.terrain.descriptors.layout, sets.layout];
         let tiling = crate::driver::shaders::UDLOD_TILING_SPV;
         let prepare = compute_pipeline(gpu, tiling, c"prepare", &set_layouts)?;
         let refine = compute_pipeline(gpu, tiling, c"refine", &set_layouts)?;
         let finish = compute_pipeline(gpu, tiling, c"finish", &set_layouts)?;
-        let [draw, draw_morphing, draw_collapsed, draw_collapsed_morphing] =
-            Self::draw_pipelines(ctx, &settings, &set_layouts)?;
+        let scatter = compute_pipeline(gpu, tiling, c"scatter", &set_layouts)?;
+        let [draw, draw_morphing] = Self::draw_pipelines(ctx, &settings, &set_layouts)?;
         Ok(Udlod {
             gpu: gpu.clone(),
             settings,
@@ -454,16 +442,15 @@ impl Udlod {
             field: None,
             min_max,
             indices,
-            index_count,
+            masks,
             slots,
             sets,
             prepare,
             refine,
             finish,
+            scatter,
             draw,
             draw_morphing,
-            draw_collapsed,
-            draw_collapsed_morphing,
             tile_cap,
             wanted_tiles: first,
         })
@@ -513,12 +500,10 @@ impl Udlod {
         })
     }
 
-    /// The GPU's final tile list of `slot`'s last completed frame, `[x, y, lod]` each: the
-    /// static tiles (those with their own grid, then the collapsed ones), then the morphing
-    /// ones (the collapsed ones, then those with their own grid).
-    fn final_tiles(&self, slot: ViewSlot) -> Result<Vec<[u32; 3]>> {
-        let [front, back, collapsed, collapsed_back] = self.read_counters(slot).drawn();
-        let n = front + back + collapsed + collapsed_back;
+    /// The GPU's final tile list of `slot`'s last completed frame as drawn, `[x, y, lod,
+    /// group]` each ([`draw_group`]), sorted by group: the static tiles, then the morphing ones.
+    fn final_tiles(&self, slot: ViewSlot) -> Result<Vec<[u32; 4]>> {
+        let n: u64 = self.read_counters(slot).drawn().iter().sum();
         if n == 0 {
             return Ok(Vec::new());
         }
@@ -530,40 +515,24 @@ impl Udlod {
             MemoryLocation::GpuToCpu,
         )?;
         let lists = &self.slots[slot.index()].lists;
-        let half = lists.capacity as u64;
-        // (first source entry, entries) in the order above.
-        let ranges = [
-            (0, front),
-            (half, collapsed),
-            (2 * half - collapsed_back, collapsed_back),
-            (half - back, back),
-        ];
-        let mut dst = 0;
-        let mut regions = Vec::new();
-        for (src, tiles) in ranges {
-            if tiles > 0 {
-                regions.push(vk::BufferCopy {
-                    src_offset: src * TILE_BYTES,
-                    dst_offset: dst * TILE_BYTES,
-                    size: tiles * TILE_BYTES,
-                });
-            }
-            dst += tiles;
-        }
+        let region = vk::BufferCopy {
+            src_offset: lists.capacity as u64 * TILE_BYTES,
+            dst_offset: 0,
+            size: n * TILE_BYTES,
+        };
         let b = Barriers::new(&self.gpu);
         self.gpu.one_shot(|cmd| unsafe {
             b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
             self.gpu
                 .device
-                .cmd_copy_buffer(cmd, lists.final_tiles.raw, host.raw, &regions);
+                .cmd_copy_buffer(cmd, lists.final_tiles.raw, host.raw, &[region]);
             b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
         })?;
         let bytes = host
             .mapped()
             .and_then(|b| b.get(..(n * TILE_BYTES) as usize))
             .ok_or_else(|| Error::invalid("udlod", "tile list readback not mapped"))?;
-        let tiles: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(bytes);
-        Ok(tiles.iter().map(|t| [t[0], t[1], t[2]]).collect())
+        Ok(bytemuck::pod_collect_to_vec(bytes))
     }
 
     /// The counters of `slot`'s last completed frame (zero before its first).
@@ -598,8 +567,7 @@ impl Udlod {
                 "udlod: slot {i}'s tile lists grow from {have} to {} tiles (overflow {overflow})",
                 self.wanted_tiles
             );
-            self.slots[i].lists =
-                TileLists::new(&self.gpu, i, self.wanted_tiles, self.settings.collapse)?;
+            self.slots[i].lists = TileLists::new(&self.gpu, i, self.wanted_tiles)?;
             self.slots[i].write_set(&self.sets, i, &self.min_max)?;
         }
         Ok(self.slots[i].lists.capacity)
@@ -652,16 +620,12 @@ impl LodMethod for Udlod {
             if p.cull { 1.0 } else { 0.0 },
         ];
         u.counts = [
-            self.index_count,
+            0,
             self.settings.dispatch_row,
             self.levels.field_density,
-            // Where the collapsed grid's indices start (vertex pulling reads no indices).
-            if self.settings.vertex_pulling {
-                0
-            } else {
-                self.index_count
-            },
+            self.settings.vertex_pulling as u32,
         ];
+        u.masks = self.masks;
         u.metric = [p.stretch[0], p.stretch[1], 0.0, 0.0];
         let s = &mut self.slots[slot.index()];
         if s.field_key != Some(p.field.key) {
@@ -734,6 +698,14 @@ impl LodMethod for Udlod {
             b.memory(
                 cmd,
                 MemoryAccess::ComputeWrite,
+                MemoryAccess::ComputeReadWrite,
+            );
+            // The final tiles sorted by draw group into the list's second half.
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.scatter.raw);
+            d.cmd_dispatch_indirect(cmd, s.state.raw, 0);
+            b.memory(
+                cmd,
+                MemoryAccess::ComputeWrite,
                 MemoryAccess::VertexShaderRead,
             );
             b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
@@ -755,12 +727,15 @@ impl LodMethod for Udlod {
     ) {
         let d = &self.gpu.device;
         let s = &self.slots[slot.index()];
-        for (pipeline, offset) in [
-            (&self.draw, DRAW_OFFSET),
-            (&self.draw_morphing, MORPH_DRAW_OFFSET),
-            (&self.draw_collapsed, COLLAPSED_DRAW_OFFSET),
-            (&self.draw_collapsed_morphing, COLLAPSED_MORPH_DRAW_OFFSET),
-        ] {
+        let masks = UDLOD_COLLAPSE_MASKS;
+        let group_bytes = masks as u64 * DRAW_STRIDE as u64;
+        // Every mask's draw in one call where the device has multiDrawIndirect.
+        let (calls, per_call) = if self.gpu.enabled.multi_draw_indirect {
+            (1, masks)
+        } else {
+            (masks, 1)
+        };
+        for (pipeline, first) in [(&self.draw, 0), (&self.draw_morphing, group_bytes)] {
             unsafe {
                 d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
                 d.cmd_bind_descriptor_sets(
@@ -771,24 +746,35 @@ impl LodMethod for Udlod {
                     &[frame_set, s.set],
                     &[],
                 );
-                if self.settings.vertex_pulling {
-                    // The indexed arguments (index_count, instance_count, first_index,
-                    // vertex_offset, ...) read as non-indexed ones: 6 * quads^2 vertices per
-                    // instance, first vertex 0, first instance 0.
-                    let stride = size_of::<vk::DrawIndirectCommand>() as u32;
-                    d.cmd_draw_indirect(cmd, s.state.raw, offset, 1, stride);
-                } else {
+                if !self.settings.vertex_pulling {
                     d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
-                    d.cmd_draw_indexed_indirect(cmd, s.state.raw, offset, 1, DRAW_STRIDE);
+                }
+                for call in 0..calls as u64 {
+                    let offset = DRAWS_OFFSET + first + call * DRAW_STRIDE as u64;
+                    if self.settings.vertex_pulling {
+                        // `finish` wrote `VkDrawIndirectCommand`s (vertex count, instances,
+                        // first vertex 0, first instance) in the same stride.
+                        d.cmd_draw_indirect(cmd, s.state.raw, offset, per_call, DRAW_STRIDE);
+                    } else {
+                        d.cmd_draw_indexed_indirect(
+                            cmd,
+                            s.state.raw,
+                            offset,
+                            per_call,
+                            DRAW_STRIDE,
+                        );
+                    }
                 }
             }
         }
     }
 
     fn triangles(&self, slot: ViewSlot) -> u64 {
-        let [own, own_morphing, collapsed, collapsed_morphing] = self.read_counters(slot).drawn();
-        let full = 2 * (self.settings.grid_size as u64).pow(2);
-        (own + own_morphing) * full + (collapsed + collapsed_morphing) * full / 4
+        let grid = self.settings.grid_size;
+        let drawn = self.read_counters(slot).drawn();
+        (drawn.iter().enumerate())
+            .map(|(g, n)| n * grid::mask_triangles(grid, draw_group(g).0))
+            .sum()
     }
 
     fn budget_overflow(&self, slot: ViewSlot) -> u64 {
@@ -797,12 +783,26 @@ impl LodMethod for Udlod {
 
     fn counters(&self, slot: ViewSlot) -> Vec<(&'static str, u64)> {
         let c = self.read_counters(slot);
-        let [own, own_morphing, collapsed, collapsed_morphing] = c.drawn();
+        let drawn = c.drawn();
+        let sum = |f: &dyn Fn(u32, bool) -> u64| -> u64 {
+            (drawn.iter().enumerate())
+                .map(|(g, n)| {
+                    let (mask, morphing) = draw_group(g);
+                    n * f(mask, morphing)
+                })
+                .sum()
+        };
+        let all = grid::ALL_QUADRANTS;
         vec![
-            ("tiles", own + own_morphing + collapsed + collapsed_morphing),
-            ("morphing", own_morphing + collapsed_morphing),
-            ("collapsed", collapsed + collapsed_morphing),
-            ("collapsed_morphing", collapsed_morphing),
+            ("tiles", sum(&|_, _| 1)),
+            ("morphing", sum(&|_, morphing| morphing as u64)),
+            // Tiles with a quadrant drawn as the parent grid, whole tiles drawn so, quadrants.
+            ("collapsing", sum(&|mask, _| (mask != 0) as u64)),
+            ("collapsed", sum(&|mask, _| (mask == all) as u64)),
+            (
+                "collapsed_quadrants",
+                sum(&|mask, _| mask.count_ones() as u64),
+            ),
             ("overflow", c.overflow as u64),
             ("culled", c.culled as u64),
             ("passes", c.passes_started as u64),
@@ -811,14 +811,24 @@ impl LodMethod for Udlod {
 
     fn drawn_tiles(&self, slot: ViewSlot) -> Result<Option<DrawnTiles>> {
         Ok(Some(DrawnTiles {
-            tiles: self.final_tiles(slot)?,
+            tiles: self
+                .final_tiles(slot)?
+                .iter()
+                .map(|t| [t[0], t[1], t[2]])
+                .collect(),
             tile_samples: self.settings.grid_size,
         }))
     }
 
     #[cfg(feature = "test-support")]
     fn debug_tiles(&self, slot: ViewSlot) -> Result<Option<Vec<[u32; 3]>>> {
-        self.final_tiles(slot).map(Some)
+        let tiles = self.final_tiles(slot)?;
+        Ok(Some(tiles.iter().map(|t| [t[0], t[1], t[2]]).collect()))
+    }
+
+    #[cfg(feature = "test-support")]
+    fn debug_tile_draws(&self, slot: ViewSlot) -> Result<Option<Vec<u32>>> {
+        Ok(Some(self.final_tiles(slot)?.iter().map(|t| t[3]).collect()))
     }
 
     #[cfg(feature = "test-support")]

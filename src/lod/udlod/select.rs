@@ -1053,21 +1053,30 @@ fn morph_ramp(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) 
     1.0 - (1.0 - scaled / parent_split) / p.morph_range
 }
 
-/// Whether every grid vertex of tile `t` odd at the tile's level (`grid_size` must be even)
-/// lies fully on the parent's grid (`final_tile_checks` in `shaders/udlod_tiling.wgsl`): then
-/// the odd vertices coincide with even ones, the tile's triangles are the parent grid's over
-/// its even vertices (each parent quad's two, the same diagonal) and degenerate ones, and
-/// the tile is drawn as that grid (`docs/udlod.md`, "Collapsed tiles").
-pub fn tile_collapses(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
+/// Which quadrants of tile `t` are drawn as the parent's grid (bit `qx + 2 qy`,
+/// [`super::grid`]): those whose grid vertices odd at the tile's level all lie fully on the
+/// parent's grid (`final_tile_checks` in `shaders/udlod_tiling.wgsl`; `grid_size` must be
+/// even). Their odd vertices coincide with even ones, so the quadrant's triangles are the
+/// parent grid's over its even vertices (each parent quad's two, the same diagonal) and
+/// degenerate ones (`docs/udlod.md`, "Collapsed quadrants"). At grid 2 all or none.
+pub fn tile_collapse_mask(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
     let g = levels.grid_size;
-    p.morph
-        && (0..=g)
-            .flat_map(|j| (0..=g).map(move |i| [i, j]))
-            .filter(|&[i, j]| (i | j) & 1 == 1)
-            .all(|local| {
-                morph_ramp(levels, p, tile_sample(levels, t, local), t.lod)
-                    >= 1.0 + UDLOD_COLLAPSE_MARGIN
-            })
+    if !p.morph {
+        return 0;
+    }
+    let mut keeps = 0;
+    for j in 0..=g {
+        for i in (0..=g).filter(|i| (i | j) & 1 == 1) {
+            let quadrants = super::grid::quadrants_of(g, [i, j]);
+            if quadrants & !keeps != 0
+                && morph_ramp(levels, p, tile_sample(levels, t, [i, j]), t.lod)
+                    < 1.0 + UDLOD_COLLAPSE_MARGIN
+            {
+                keeps |= quadrants;
+            }
+        }
+    }
+    super::grid::drawn_mask(g, super::grid::ALL_QUADRANTS & !keeps)
 }
 
 /// How a grid point moved in [`morph_cascade`] (`MORPH_*` and `morph_moved` in
