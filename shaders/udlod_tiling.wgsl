@@ -55,11 +55,17 @@ struct TilingState {
     splits_allowed: u32,
     // Tiles written for the next pass that will want to split there.
     split_requests: atomic<u32>,
+    // Draws with tiles (`finish`): the static groups' first in `draws`, the morphing ones'
+    // from entry `UDLOD_COLLAPSE_MASKS` (read by `vkCmdDraw*IndirectCount`).
+    static_draws: u32,
+    morphing_draws: u32,
     // Final tiles per draw group, and (`finish`) where each group starts in the sorted half.
     group_count: array<atomic<u32>, DRAW_GROUPS>,
     group_first: array<u32, DRAW_GROUPS>,
-    // One draw per group (`finish`): the static groups' with back-face culling by default,
-    // the morphing groups' without (docs/udlod.md, "Pinholes far away and back faces").
+    // The draws of the groups with tiles (`finish`), the static ones' (drawn with back-face
+    // culling by default) from entry 0 and the morphing ones' (without: docs/udlod.md,
+    // "Pinholes far away and back faces") from entry `UDLOD_COLLAPSE_MASKS`, each run followed
+    // by draws of no instance.
     draws: array<IndirectDraw, DRAW_GROUPS>,
 }
 
@@ -453,10 +459,12 @@ fn quadrants_of(local: vec2<u32>, quads: u32) -> u32 {
 }
 
 // One invocation: each draw group's first entry in the final list's second half (the groups
-// one after another), its indirect draw (the mask's index list from `udlod.masks`, its tiles
-// as instances from that entry on), and `scatter`'s dispatch. A frame whose final tiles did not
-// all fit the list (never by construction: `reserved_leaves`) draws nothing rather than a
-// stale entry.
+// one after another), the draws of the groups with tiles (the mask's index list from
+// `udlod.masks`, the group's tiles as instances from that entry on), and `scatter`'s
+// dispatch. Empty groups get no draw (on lavapipe each draw costs even without instances), so
+// a run of draws per pipeline with its count, then draws of no instance for devices without
+// `drawIndirectCount`. A frame whose final tiles did not all fit the list (never by
+// construction: `reserved_leaves`) draws nothing rather than a stale entry.
 @compute @workgroup_size(1)
 fn finish() {
     let n = udlod.sizes.z;
@@ -464,17 +472,30 @@ fn finish() {
     let fits = total <= n;
     let pulling = udlod.counts.w != 0u;
     var first = 0u;
+    var drawn = array<u32, 2>(0u, 0u);
     for (var g = 0u; g < DRAW_GROUPS; g++) {
         let count = select(0u, atomicLoad(&state.group_count[g]), fits);
-        let mask = udlod.masks[g % UDLOD_COLLAPSE_MASKS];
         state.group_first[g] = first;
-        if pulling {
-            state.draws[g] = IndirectDraw(mask.x, count, 0u, first, 0u);
-        } else {
-            state.draws[g] = IndirectDraw(mask.x, count, mask.y, 0u, first);
+        if count > 0u {
+            let mask = udlod.masks[g % UDLOD_COLLAPSE_MASKS];
+            let pipeline = g / UDLOD_COLLAPSE_MASKS;
+            let slot = pipeline * UDLOD_COLLAPSE_MASKS + drawn[pipeline];
+            drawn[pipeline] += 1u;
+            if pulling {
+                state.draws[slot] = IndirectDraw(mask.x, count, 0u, first, 0u);
+            } else {
+                state.draws[slot] = IndirectDraw(mask.x, count, mask.y, 0u, first);
+            }
         }
         first += count;
     }
+    for (var pipeline = 0u; pipeline < 2u; pipeline++) {
+        for (var d = drawn[pipeline]; d < UDLOD_COLLAPSE_MASKS; d++) {
+            state.draws[pipeline * UDLOD_COLLAPSE_MASKS + d] = IndirectDraw(0u, 0u, 0u, 0u, 0u);
+        }
+    }
+    state.static_draws = drawn[0];
+    state.morphing_draws = drawn[1];
     let groups = (select(0u, total, fits) + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;
     let row = max(udlod.counts.y, 1u);
     state.dispatch_x = min(groups, row);

@@ -8,7 +8,8 @@
 # Here, before carrying: release builds stripped and copied there (prepare.sh for this one),
 # and the Puget Sound heights in .device-vk/data (scripts/device/udlod_before_after.sh).
 # Run there from the repository root: `bash scripts/device/udlod_binaries_ab.sh > $OUT/ab.txt`
-# (`PUGET_ONLY=1`: Puget Sound only).
+# (`PUGET_ONLY=1`: Puget Sound only; `VARIANTS="main new"` picks variants; `new-off`, not in
+# the default list, is this build with `collapse = false`).
 set -u
 . .device-vk/env.sh
 . scripts/device/puget_config.sh
@@ -26,7 +27,7 @@ bases=(config/ci.toml "$PUGET")
 for base in "${bases[@]}"; do
   for tau in 1 4; do
     for round in 1 2; do
-      for v in before main main-g16 new new-g16 new-g8; do
+      for v in ${VARIANTS:-before main main-g16 new new-g16 new-g8}; do
         bin=.device-vk/vkterrain
         extra=""
         case $v in
@@ -35,6 +36,7 @@ for base in "${bases[@]}"; do
           main-g16) bin=.device-vk/vkterrain-main; extra="grid_size = 16" ;;
           new-g16) extra="grid_size = 16" ;;
           new-g8) extra="grid_size = 8" ;;
+          new-off) extra="collapse = false" ;;
         esac
         [ -x "$bin" ] || continue
         cfg=$(udlod_config "$base" "$extra")

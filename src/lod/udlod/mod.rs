@@ -70,12 +70,17 @@ pub struct TilingState {
     pub passes_started: u32,
     pub splits_allowed: u32,
     pub split_requests: u32,
+    /// Draws with tiles: the static groups' from `draws[0]`, the morphing groups' from
+    /// `draws[UDLOD_COLLAPSE_MASKS]`.
+    pub static_draws: u32,
+    pub morphing_draws: u32,
     /// Final tiles per draw group (static per collapse mask, then morphing), and where each
     /// group starts in the final list's sorted half.
     pub group_count: [u32; DRAW_GROUPS],
     pub group_first: [u32; DRAW_GROUPS],
-    /// One `VkDrawIndexedIndirectCommand` per group (with vertex pulling a
-    /// `VkDrawIndirectCommand` in the first four words).
+    /// The groups' `VkDrawIndexedIndirectCommand`s (with vertex pulling
+    /// `VkDrawIndirectCommand`s in the first four words), only those with tiles, then draws
+    /// of no instance.
     pub draws: [[u32; 5]; DRAW_GROUPS],
 }
 
@@ -86,10 +91,13 @@ impl Default for TilingState {
 }
 
 impl TilingState {
-    /// Tiles drawn per draw group: the draws' instance counts (0 in every group of a frame
-    /// whose final tiles did not fit the list).
+    /// Tiles drawn per draw group: the groups' counts (0 in every group of a frame whose
+    /// final tiles did not fit the list, which draws none).
     pub fn drawn(&self) -> [u64; DRAW_GROUPS] {
-        self.draws.map(|d| u64::from(d[1]))
+        let drawn: u64 = self.draws.iter().map(|d| u64::from(d[1])).sum();
+        let fits = drawn > 0 || self.final_count == 0;
+        self.group_count
+            .map(|n| if fits { u64::from(n) } else { 0 })
     }
 }
 
@@ -118,6 +126,9 @@ pub const UDLOD_SET: &[Binding] = {
 
 /// Where `TilingState::draws` starts: the static groups' draws, then the morphing groups'.
 pub const DRAWS_OFFSET: u64 = std::mem::offset_of!(TilingState, draws) as u64;
+/// Where the static and the morphing draws' counts are (`vkCmdDraw*IndirectCount`).
+pub const STATIC_DRAWS_OFFSET: u64 = std::mem::offset_of!(TilingState, static_draws) as u64;
+pub const MORPHING_DRAWS_OFFSET: u64 = std::mem::offset_of!(TilingState, morphing_draws) as u64;
 /// Bytes between consecutive indirect draws.
 pub const DRAW_STRIDE: u32 = size_of::<[u32; 5]>() as u32;
 pub const TILE_BYTES: u64 = 16;
@@ -546,6 +557,62 @@ impl Udlod {
             .unwrap_or_default()
     }
 
+    /// One pipeline's run of draws in `state` from `offset` (16 entries, the first
+    /// `count_offset`'s count with tiles): with `drawIndirectCount` only those, else all 16
+    /// in one call (`multiDrawIndirect`) or one call each. With vertex pulling `finish` wrote
+    /// `VkDrawIndirectCommand`s in the same stride.
+    fn record_draws(
+        &self,
+        cmd: vk::CommandBuffer,
+        state: vk::Buffer,
+        offset: u64,
+        count_offset: u64,
+    ) {
+        let d = &self.gpu.device;
+        let max = UDLOD_COLLAPSE_MASKS;
+        let pulling = self.settings.vertex_pulling;
+        let caps = &self.gpu.enabled;
+        unsafe {
+            if caps.draw_indirect_count {
+                if pulling {
+                    d.cmd_draw_indirect_count(
+                        cmd,
+                        state,
+                        offset,
+                        state,
+                        count_offset,
+                        max,
+                        DRAW_STRIDE,
+                    );
+                } else {
+                    d.cmd_draw_indexed_indirect_count(
+                        cmd,
+                        state,
+                        offset,
+                        state,
+                        count_offset,
+                        max,
+                        DRAW_STRIDE,
+                    );
+                }
+                return;
+            }
+            let (calls, per_call) = if caps.multi_draw_indirect {
+                (1, max)
+            } else {
+                (max, 1)
+            };
+            for call in 0..calls as u64 {
+                let at = offset + call * DRAW_STRIDE as u64;
+                if pulling {
+                    d.cmd_draw_indirect(cmd, state, at, per_call, DRAW_STRIDE);
+                } else {
+                    d.cmd_draw_indexed_indirect(cmd, state, at, per_call, DRAW_STRIDE);
+                }
+            }
+        }
+    }
+
     /// Grows `slot`'s tile lists, before its next frame, to `needed` tiles and past the
     /// capacity its last frame overflowed (doubled, or by twice the overflow), up to
     /// `max_tiles`. What one slot learns, every slot takes at its next frame. Returns the
@@ -729,13 +796,15 @@ impl LodMethod for Udlod {
         let s = &self.slots[slot.index()];
         let masks = UDLOD_COLLAPSE_MASKS;
         let group_bytes = masks as u64 * DRAW_STRIDE as u64;
-        // Every mask's draw in one call where the device has multiDrawIndirect.
-        let (calls, per_call) = if self.gpu.enabled.multi_draw_indirect {
-            (1, masks)
-        } else {
-            (masks, 1)
-        };
-        for (pipeline, first) in [(&self.draw, 0), (&self.draw_morphing, group_bytes)] {
+        let runs = [
+            (&self.draw, DRAWS_OFFSET, STATIC_DRAWS_OFFSET),
+            (
+                &self.draw_morphing,
+                DRAWS_OFFSET + group_bytes,
+                MORPHING_DRAWS_OFFSET,
+            ),
+        ];
+        for (pipeline, offset, count_offset) in runs {
             unsafe {
                 d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
                 d.cmd_bind_descriptor_sets(
@@ -749,23 +818,8 @@ impl LodMethod for Udlod {
                 if !self.settings.vertex_pulling {
                     d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
                 }
-                for call in 0..calls as u64 {
-                    let offset = DRAWS_OFFSET + first + call * DRAW_STRIDE as u64;
-                    if self.settings.vertex_pulling {
-                        // `finish` wrote `VkDrawIndirectCommand`s (vertex count, instances,
-                        // first vertex 0, first instance) in the same stride.
-                        d.cmd_draw_indirect(cmd, s.state.raw, offset, per_call, DRAW_STRIDE);
-                    } else {
-                        d.cmd_draw_indexed_indirect(
-                            cmd,
-                            s.state.raw,
-                            offset,
-                            per_call,
-                            DRAW_STRIDE,
-                        );
-                    }
-                }
             }
+            self.record_draws(cmd, s.state.raw, offset, count_offset);
         }
     }
 

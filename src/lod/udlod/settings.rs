@@ -50,9 +50,10 @@ pub struct UdlodSettings {
     /// field's cap; 1 = distance-only selection: every tile refined for the level's worst
     /// error and the chain). Larger lets smooth tiles keep coarser levels.
     pub error_field_max: f64,
-    /// Draw a tile whose vertices odd at its level all lie fully on its parent's grid as that
-    /// grid (`grid_size^2 / 2` triangles instead of `2 grid_size^2`; the same surface, bit for
-    /// bit: `docs/udlod.md`, "Collapsed tiles"). Off only to measure it.
+    /// Draw each quadrant of a tile whose vertices odd at the tile's level all lie fully on its
+    /// parent's grid as that grid (a quarter of the quadrant's triangles; the same surface,
+    /// bit for bit: `docs/udlod.md`, "Collapsed quadrants"; at grid 2 whole tiles only). Off
+    /// only to measure it.
     pub collapse: bool,
     /// Draw without an index buffer (six vertex-shader runs per quad) instead of the shared
     /// indexed grid; kept for measurement (`benches/udlod.rs` compares the two).
