@@ -284,6 +284,8 @@ fn tiling_state_matches_the_wgsl_struct() {
         ("passes_started", offset_of!(TilingState, passes_started)),
         ("splits_allowed", offset_of!(TilingState, splits_allowed)),
         ("split_requests", offset_of!(TilingState, split_requests)),
+        ("static_draws", offset_of!(TilingState, static_draws)),
+        ("morphing_draws", offset_of!(TilingState, morphing_draws)),
         ("group_count", offset_of!(TilingState, group_count)),
         ("group_first", offset_of!(TilingState, group_first)),
         ("draws", offset_of!(TilingState, draws)),

@@ -11,6 +11,7 @@ use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::interp::GridCell;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
+use vkterrain::driver::{Gpu, GpuOptions};
 use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
 use vkterrain::lod::udlod::{draw_group, grid};
 use vkterrain::lod::{MethodKind, UdlodSettings};
@@ -277,6 +278,77 @@ fn collapsed_tiles_draw_the_same_surface_at(
     if lod.morph_levels != 1 {
         assert!(collapsing_morphing > 0, "no collapsing tile with slivers");
     }
+}
+
+/// UDLOD's draws without `drawIndirectCount` (each pipeline's 16 draws, those of empty groups
+/// with no instance) and without `multiDrawIndirect` as well (one call per draw) give the same
+/// frames as with both (the default where offered, as on lavapipe); without
+/// `drawIndirectFirstInstance` UDLOD refuses to start with a one-line error naming it.
+#[test]
+fn draws_are_the_same_without_indirect_count_or_multi_draw() {
+    let data = terrain(257, 30.0);
+    let cams = low_flight(&data, 6);
+    let render = |mask: &[&str]| {
+        let gpu = Gpu::new(
+            &GpuOptions {
+                validation: true,
+                mask_features: mask.iter().map(|s| s.to_string()).collect(),
+                ..GpuOptions::default()
+            }
+            .with_env(),
+        )
+        .unwrap();
+        let mut options = common::options(W, H, 1);
+        options.readback_depth = true;
+        let mut sink = CollectSink::default();
+        {
+            let mut r = Renderer::new(&gpu, &data, cascade(4), options).unwrap();
+            for cam in &cams {
+                r.render(*cam, &mut sink).unwrap();
+            }
+            r.finish(&mut sink).unwrap();
+        }
+        common::assert_no_validation_messages(&gpu);
+        let enabled = (
+            gpu.enabled.draw_indirect_count,
+            gpu.enabled.multi_draw_indirect,
+        );
+        (sink.frames, enabled)
+    };
+    let (reference, enabled) = render(&[]);
+    assert_eq!(
+        enabled,
+        (true, true),
+        "the device offers both (lavapipe does)"
+    );
+    for mask in [
+        &["drawIndirectCount"][..],
+        &["drawIndirectCount", "multiDrawIndirect"],
+    ] {
+        let (frames, _) = render(mask);
+        for (a, b) in reference.iter().zip(&frames) {
+            assert_eq!(a.triangles, b.triangles, "{mask:?}");
+            assert!(
+                a.rgba == b.rgba && a.depth == b.depth,
+                "{mask:?}: frame {}",
+                a.index
+            );
+        }
+    }
+    let gpu = Gpu::new(&GpuOptions {
+        validation: true,
+        mask_features: vec!["drawIndirectFirstInstance".into()],
+        ..GpuOptions::default()
+    })
+    .unwrap();
+    let e = Renderer::new(&gpu, &data, cascade(4), common::options(W, H, 1))
+        .err()
+        .expect("UDLOD without drawIndirectFirstInstance")
+        .to_string();
+    assert!(
+        e.contains("drawIndirectFirstInstance") && !e.contains('\n'),
+        "{e}"
+    );
 }
 
 /// A low flight across the data (150 m above the ground, looking ahead and down), where many

@@ -68,6 +68,14 @@ pub enum Feature {
     /// `VkPhysicalDeviceMeshShaderFeaturesEXT::meshShader` with `taskShader`
     /// (`VK_EXT_mesh_shader`).
     MeshShader,
+    /// `VkPhysicalDeviceFeatures::multiDrawIndirect` (UDLOD draws its 16 collapse masks in one
+    /// call with it, else one call each).
+    MultiDrawIndirect,
+    /// `VkPhysicalDeviceVulkan12Features::drawIndirectCount` (UDLOD draws only the masks with
+    /// tiles with it).
+    DrawIndirectCount,
+    /// `VkPhysicalDeviceFeatures::drawIndirectFirstInstance` (UDLOD needs it).
+    DrawIndirectFirstInstance,
 }
 
 impl Feature {
@@ -75,6 +83,9 @@ impl Feature {
         Feature::TessellationShader,
         Feature::GeometryShader,
         Feature::MeshShader,
+        Feature::MultiDrawIndirect,
+        Feature::DrawIndirectCount,
+        Feature::DrawIndirectFirstInstance,
     ];
 
     pub fn vulkan_name(self) -> &'static str {
@@ -82,6 +93,9 @@ impl Feature {
             Feature::TessellationShader => "tessellationShader",
             Feature::GeometryShader => "geometryShader",
             Feature::MeshShader => "meshShader",
+            Feature::MultiDrawIndirect => "multiDrawIndirect",
+            Feature::DrawIndirectCount => "drawIndirectCount",
+            Feature::DrawIndirectFirstInstance => "drawIndirectFirstInstance",
         }
     }
 
@@ -106,6 +120,9 @@ impl Feature {
             Feature::TessellationShader => caps.tessellation_shader,
             Feature::GeometryShader => caps.geometry_shader,
             Feature::MeshShader => caps.mesh_shader,
+            Feature::MultiDrawIndirect => caps.multi_draw_indirect,
+            Feature::DrawIndirectCount => caps.draw_indirect_count,
+            Feature::DrawIndirectFirstInstance => caps.draw_indirect_first_instance,
         }
     }
 
@@ -115,6 +132,9 @@ impl Feature {
             Feature::TessellationShader => caps.tessellation_shader = false,
             Feature::GeometryShader => caps.geometry_shader = false,
             Feature::MeshShader => caps.mesh_shader = false,
+            Feature::MultiDrawIndirect => caps.multi_draw_indirect = false,
+            Feature::DrawIndirectCount => caps.draw_indirect_count = false,
+            Feature::DrawIndirectFirstInstance => caps.draw_indirect_first_instance = false,
         }
     }
 }

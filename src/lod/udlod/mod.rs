@@ -24,6 +24,7 @@ use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
+use crate::driver::device::Feature;
 use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use crate::error::{Error, Result};
@@ -413,12 +414,7 @@ impl Udlod {
         min_max.write(mm_bytes)?;
         // The split field's nodes (a one-level tree has none, and a buffer is never empty).
         let field_bytes = (levels.field_nodes() as u64 * 4).max(4);
-        if !gpu.enabled.draw_indirect_first_instance {
-            return Err(Error::invalid(
-                "udlod",
-                "the device lacks drawIndirectFirstInstance, which UDLOD's draws need",
-            ));
-        }
+        gpu.require(Feature::DrawIndirectFirstInstance, "method udlod")?;
         let (indices, masks) = Self::grid_indices(gpu, settings.grid_size)?;
 
         // No selection reserves more leaves than the full tree over the root's square has
