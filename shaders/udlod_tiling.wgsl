@@ -462,8 +462,8 @@ fn quadrants_of(local: vec2<u32>, quads: u32) -> u32 {
 // one after another), the draws of the groups with tiles (the mask's index list from
 // `udlod.masks`, the group's tiles as instances from that entry on), and `scatter`'s
 // dispatch. Empty groups get no draw (on lavapipe each draw costs even without instances), so
-// a run of draws per pipeline with its count, then draws of no instance for devices without
-// `drawIndirectCount`. A frame whose final tiles did not all fit the list (never by
+// a run of draws per pipeline with its count, then draws of no instance (the state is
+// zero-filled before each frame) for devices without `drawIndirectCount`. A frame whose final tiles did not all fit the list (never by
 // construction: `reserved_leaves`) draws nothing rather than a stale entry.
 @compute @workgroup_size(1)
 fn finish() {
@@ -489,11 +489,7 @@ fn finish() {
         }
         first += count;
     }
-    for (var pipeline = 0u; pipeline < 2u; pipeline++) {
-        for (var d = drawn[pipeline]; d < UDLOD_COLLAPSE_MASKS; d++) {
-            state.draws[pipeline * UDLOD_COLLAPSE_MASKS + d] = IndirectDraw(0u, 0u, 0u, 0u, 0u);
-        }
-    }
+    // The rest stay as the frame's fill left them: draws of no instance.
     state.static_draws = drawn[0];
     state.morphing_draws = drawn[1];
     let groups = (select(0u, total, fits) + UDLOD_WORKGROUP - 1u) / UDLOD_WORKGROUP;

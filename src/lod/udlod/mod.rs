@@ -92,13 +92,14 @@ impl Default for TilingState {
 }
 
 impl TilingState {
-    /// Tiles drawn per draw group: the groups' counts (0 in every group of a frame whose
-    /// final tiles did not fit the list, which draws none).
+    /// Tiles drawn per draw group: the groups' counts, or none in a frame whose final tiles
+    /// did not fit the list (`finish` then gives every draw 0 instances, so the draws' sum
+    /// falls short of `final_count`).
     pub fn drawn(&self) -> [u64; DRAW_GROUPS] {
-        let drawn: u64 = self.draws.iter().map(|d| u64::from(d[1])).sum();
-        let fits = drawn > 0 || self.final_count == 0;
+        let instances: u64 = self.draws.iter().map(|d| u64::from(d[1])).sum();
+        let drew_all = instances == u64::from(self.final_count);
         self.group_count
-            .map(|n| if fits { u64::from(n) } else { 0 })
+            .map(|n| if drew_all { u64::from(n) } else { 0 })
     }
 }
 
