@@ -1,11 +1,12 @@
 //! UDLOD (Kühnert): the quadtree is refined on the GPU in compute, one level per pass with
-//! indirect dispatches, into a final tile list drawn with one indexed indirect draw (one
-//! instance per tile over a shared grid); vertices morph between levels in the vertex shader.
+//! indirect dispatches, into a final tile list drawn with indexed indirect draws (one instance
+//! per tile over a shared grid, one draw per collapse mask: [`grid`]); vertices morph between
+//! levels in the vertex shader.
 //!
 //! CPU state ([`select::Levels`]: per-tile min/max, per-level errors) is built once; its GPU
 //! mirror is the `min_max` buffer. Per frame the host writes only [`UdlodUniforms`] (split
 //! distances from the pixel error target, frustum planes); the tile lists never come back to
-//! the host in the render path (only 64 bytes of counters, for statistics).
+//! the host in the render path (only the tiling state's counters, for statistics).
 
 pub mod grid;
 #[cfg(feature = "test-support")]
@@ -402,6 +403,8 @@ impl Udlod {
         let gpu = ctx.gpu;
         let settings = settings.clone();
         settings.validate()?;
+        // Each draw's first instance is its group's first entry in the sorted list.
+        gpu.require(Feature::DrawIndirectFirstInstance, "method udlod")?;
         let levels = Self::build_levels(ctx, &settings)?;
         let sets = DescriptorSets::new(gpu, UDLOD_SET, ctx.slots)?;
         let mm_bytes: &[u8] = bytemuck::cast_slice(&levels.min_max);
@@ -415,7 +418,6 @@ impl Udlod {
         min_max.write(mm_bytes)?;
         // The split field's nodes (a one-level tree has none, and a buffer is never empty).
         let field_bytes = (levels.field_nodes() as u64 * 4).max(4);
-        gpu.require(Feature::DrawIndirectFirstInstance, "method udlod")?;
         let (indices, masks) = Self::grid_indices(gpu, settings.grid_size)?;
 
         // No selection reserves more leaves than the full tree over the root's square has
