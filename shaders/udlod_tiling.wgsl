@@ -463,8 +463,9 @@ fn quadrants_of(local: vec2<u32>, quads: u32) -> u32 {
 // `udlod.masks`, the group's tiles as instances from that entry on), and `scatter`'s
 // dispatch. Empty groups get no draw (on lavapipe each draw costs even without instances), so
 // a run of draws per pipeline with its count, then draws of no instance (the state is
-// zero-filled before each frame) for devices without `drawIndirectCount`. A frame whose final tiles did not all fit the list (never by
-// construction: `reserved_leaves`) draws nothing rather than a stale entry.
+// zero-filled before each frame) for devices without `drawIndirectCount`. A frame whose final
+// tiles did not all fit the list (never by construction: `reserved_leaves`) draws nothing
+// rather than a stale entry.
 @compute @workgroup_size(1)
 fn finish() {
     let n = udlod.sizes.z;
