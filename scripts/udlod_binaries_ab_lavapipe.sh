@@ -13,14 +13,7 @@ cd "$(dirname "$0")/.."
 old=$1 new=$2
 export $(scripts/lavapipe.sh)
 . scripts/device/puget_config.sh
-udlod_config() {
-  local cfg
-  cfg=$(mktemp --suffix=.toml)
-  sed "s#\"scenarios/default.toml\"#\"$PWD/config/scenarios/default.toml\"#" "$1" > "$cfg"
-  if grep -q '^\[method\]' "$cfg"; then sed -i '/^\[method\]/,/^$/d' "$cfg"; fi
-  printf '\n[method]\nname = "udlod"\n' >> "$cfg"
-  echo "$cfg"
-}
+. scripts/device/udlod_config.sh
 for round in 1 2 3; do
   for base in config/ci.toml "$PUGET"; do
     for tau in 1 4; do

@@ -13,15 +13,7 @@
 set -u
 . .device-vk/env.sh
 . scripts/device/puget_config.sh
-# A copy of config $1 with UDLOD as its method plus the lines $2, its scenario path absolute.
-udlod_config() {
-  local cfg
-  cfg=$(mktemp --suffix=.toml)
-  sed "s#\"scenarios/default.toml\"#\"$PWD/config/scenarios/default.toml\"#" "$1" > "$cfg"
-  if grep -q '^\[method\]' "$cfg"; then sed -i '/^\[method\]/,/^$/d' "$cfg"; fi
-  printf '\n[method]\nname = "udlod"\n%b\n' "$2" >> "$cfg"
-  echo "$cfg"
-}
+. scripts/device/udlod_config.sh
 bases=(config/ci.toml "$PUGET")
 [ -n "${PUGET_ONLY:-}" ] && bases=("$PUGET")
 for base in "${bases[@]}"; do
