@@ -424,8 +424,17 @@ fn final_tile_checks(t: Tile, k: u32) -> TileChecks {
     let quads = udlod.sizes.x;
     let step = 1u << t.lod;
     let origin = vec2<u32>(t.x, t.y) * quads * step;
-    for (var v = k; v < (quads + 1u) * (quads + 1u); v += 4u) {
-        let local = vec2<u32>(v % (quads + 1u), v / (quads + 1u));
+    // Vertex v = k, k + 4, ... at (v mod row, v / row), stepped without dividing.
+    let row = quads + 1u;
+    var local = vec2<u32>(k, 0u);
+    for (; local.y < row; local.x += 4u) {
+        while local.x >= row {
+            local.x -= row;
+            local.y += 1u;
+        }
+        if local.y >= row {
+            break;
+        }
         let sample = vec2<i32>(origin + local * step);
         let odd = ((local.x | local.y) & 1u) == 1u;
         let quadrants = select(0u, quadrants_of(local, quads), odd);
