@@ -150,7 +150,7 @@ fn gpu_selection_equals_cpu_reference() {
 /// Collapsed quadrants (docs/udlod.md, "Collapsed quadrants"): the prepass draws each quadrant
 /// of a tile whose odd vertices all lie fully on its parent's grid as that grid, and that is
 /// the same surface. Over a low flight (most tiles in their morph zones) and 30 poses, at every
-/// grid size and morph variant: the GPU gives every tile the collapse mask the CPU mirror
+/// grid size and morph variant, and at grid 2: the GPU gives every tile the collapse mask the CPU mirror
 /// (`select::tile_collapse_mask`) does, and the frames with and without collapsing are
 /// identical, colour and depth, bit for bit, while they draw exactly the triangles the masks
 /// save (`grid::mask_triangles`). Negative control by hand: a threshold of 0.5 instead of
@@ -165,6 +165,10 @@ fn collapsed_tiles_draw_the_same_surface() {
             collapsed_tiles_draw_the_same_surface_at(&data, &cams, grid, name, lod);
         }
     }
+    // Grid 2 (not among `grids()`): a tile collapses whole or not at all (`grid::drawn_mask`,
+    // `pulled_local`'s one-quad branch). Its cascade is one level step, and a finer field needs
+    // grid 4.
+    collapsed_tiles_draw_the_same_surface_at(&data, &cams, 2, "default", cascade(2));
 }
 
 /// Per pose: each drawn tile's collapse mask, and how many collapsing tiles morph.
@@ -275,7 +279,9 @@ fn collapsed_tiles_draw_the_same_surface_at(
     } else {
         assert_eq!(partial, 0, "grid 2 collapses whole tiles only");
     }
-    if lod.morph_levels != 1 {
+    // With more than one morph level a vertex fully on the parent grid may move on at the next
+    // level: collapsed quadrants in tiles drawn as morphing. (Grid 2's cascade is one level.)
+    if lod.morph_levels() > 1 {
         assert!(collapsing_morphing > 0, "no collapsing tile with slivers");
     }
 }
