@@ -741,8 +741,10 @@ impl LodMethod for Udlod {
                 &sets,
                 &[],
             );
-            for _ in 0..self.levels.levels() {
-                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.prepare.raw);
+            // One invocation sizes the next dispatch in the state (`prepare`, `finish`), then
+            // that indirect dispatch runs (`refine`, `scatter`), its writes read by `then`.
+            let sized_pass = |sizing: &Pipeline, sized: &Pipeline, then: MemoryAccess| {
+                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, sizing.raw);
                 d.cmd_dispatch(cmd, 1, 1, 1);
                 b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::IndirectRead);
                 b.memory(
@@ -750,30 +752,15 @@ impl LodMethod for Udlod {
                     MemoryAccess::ComputeWrite,
                     MemoryAccess::ComputeReadWrite,
                 );
-                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.refine.raw);
+                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, sized.raw);
                 d.cmd_dispatch_indirect(cmd, s.state.raw, 0);
-                b.memory(
-                    cmd,
-                    MemoryAccess::ComputeWrite,
-                    MemoryAccess::ComputeReadWrite,
-                );
+                b.memory(cmd, MemoryAccess::ComputeWrite, then);
+            };
+            for _ in 0..self.levels.levels() {
+                sized_pass(&self.prepare, &self.refine, MemoryAccess::ComputeReadWrite);
             }
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.finish.raw);
-            d.cmd_dispatch(cmd, 1, 1, 1);
-            b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::IndirectRead);
-            b.memory(
-                cmd,
-                MemoryAccess::ComputeWrite,
-                MemoryAccess::ComputeReadWrite,
-            );
             // The final tiles sorted by draw group into the list's second half.
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.scatter.raw);
-            d.cmd_dispatch_indirect(cmd, s.state.raw, 0);
-            b.memory(
-                cmd,
-                MemoryAccess::ComputeWrite,
-                MemoryAccess::VertexShaderRead,
-            );
+            sized_pass(&self.finish, &self.scatter, MemoryAccess::VertexShaderRead);
             b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
             let region = vk::BufferCopy {
                 src_offset: 0,
