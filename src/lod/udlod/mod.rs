@@ -305,6 +305,21 @@ pub struct Udlod {
     wanted_tiles: u32,
 }
 
+/// `vkCmdDraw(Indexed)IndirectCount` and `vkCmdDraw(Indexed)Indirect` as ash takes them:
+/// the indexed and non-indexed commands share their arguments (`Udlod::record_draws`).
+type DrawIndirectCount = unsafe fn(
+    &ash::Device,
+    vk::CommandBuffer,
+    vk::Buffer,
+    vk::DeviceSize,
+    vk::Buffer,
+    vk::DeviceSize,
+    u32,
+    u32,
+);
+type DrawIndirect =
+    unsafe fn(&ash::Device, vk::CommandBuffer, vk::Buffer, vk::DeviceSize, u32, u32);
+
 impl Udlod {
     /// The quadtree's levels: tile statistics from a pyramid's stored ones (start-up reads no
     /// level 0), else computed from level 0 in parallel (the same bits either way); on the
@@ -569,31 +584,23 @@ impl Udlod {
     ) {
         let d = &self.gpu.device;
         let max = UDLOD_COLLAPSE_MASKS;
-        let pulling = self.settings.vertex_pulling;
         let caps = &self.gpu.enabled;
+        // Indexed draws, or with vertex pulling their non-indexed twins (same arguments).
+        let (draw_count, draw): (DrawIndirectCount, DrawIndirect) = if self.settings.vertex_pulling
+        {
+            (
+                ash::Device::cmd_draw_indirect_count,
+                ash::Device::cmd_draw_indirect,
+            )
+        } else {
+            (
+                ash::Device::cmd_draw_indexed_indirect_count,
+                ash::Device::cmd_draw_indexed_indirect,
+            )
+        };
         unsafe {
             if caps.draw_indirect_count {
-                if pulling {
-                    d.cmd_draw_indirect_count(
-                        cmd,
-                        state,
-                        offset,
-                        state,
-                        count_offset,
-                        max,
-                        DRAW_STRIDE,
-                    );
-                } else {
-                    d.cmd_draw_indexed_indirect_count(
-                        cmd,
-                        state,
-                        offset,
-                        state,
-                        count_offset,
-                        max,
-                        DRAW_STRIDE,
-                    );
-                }
+                draw_count(d, cmd, state, offset, state, count_offset, max, DRAW_STRIDE);
                 return;
             }
             let (calls, per_call) = if caps.multi_draw_indirect {
@@ -603,11 +610,7 @@ impl Udlod {
             };
             for call in 0..calls as u64 {
                 let at = offset + call * DRAW_STRIDE as u64;
-                if pulling {
-                    d.cmd_draw_indirect(cmd, state, at, per_call, DRAW_STRIDE);
-                } else {
-                    d.cmd_draw_indexed_indirect(cmd, state, at, per_call, DRAW_STRIDE);
-                }
+                draw(d, cmd, state, at, per_call, DRAW_STRIDE);
             }
         }
     }
