@@ -1,4 +1,7 @@
-// UDLOD tiling prepass: the quadtree is refined one level per pass. Each pass is a 1-thread
+// UDLOD tiling prepass: the quadtree is refined one level per pass. The coarse levels are
+// walked on the host (src/lod/udlod/seed.rs): the first pass's parents are that walk's
+// frontier (tiles of several levels that do not split, and the last level walked), copied to
+// the front of the temporary list; the passes go on from there. Each pass is a 1-thread
 // `prepare` (turns the children of the last pass into this pass's parents and writes the
 // indirect dispatch size) and a `refine` over those parents. One temporary list is used from
 // both ends: even passes read parents from the front and write children from the back, odd
@@ -9,8 +12,9 @@
 //
 // Capacity: a pass splits only if all of its splits fit (3 more final-list entries each: a
 // split turns one would-be leaf into four, and 4 temporary slots). The splits are known
-// before the pass: whoever writes a tile (the previous pass, or `prepare` for the root)
-// decides it (`decided`: flags in `Tile.pad`) and counts it in `split_requests` when it will
+// before the pass: whoever writes a tile (the previous pass, or the host for the seed, which
+// applies this rule to the levels it walks and leaves a level that does not fit to the first
+// pass) decides it (`decided`: flags in `Tile.pad`) and counts it in `split_requests` when it will
 // want to split. Otherwise no tile of that pass
 // splits, so the whole view stops one level early: coarser, but a selection whose finest
 // level is that pass's, crack-free like any other. Refusing single tiles instead left
@@ -82,13 +86,12 @@ fn prepare() {
     var parents: u32;
     var requests: u32;
     if pass_index == 0u {
-        // First pass: the root tile, read from the front.
-        let root = decided(Tile(0u, 0u, udlod.sizes.y, 0u));
-        temp_tiles[0] = root;
-        parents = 1u;
-        requests = select(0u, 1u, root.pad == (TILE_DECIDED | TILE_SPLITS));
+        // First pass: the host's seed (the coarse levels' frontier, every tile of it a
+        // reserved leaf), copied to the front of the list.
+        parents = udlod.seed.x;
+        requests = udlod.seed.y;
         atomicStore(&state.final_count, 0u);
-        atomicStore(&state.reserved_leaves, 1u);
+        atomicStore(&state.reserved_leaves, parents);
         atomicStore(&state.overflow, 0u);
         atomicStore(&state.culled, 0u);
     } else {
@@ -266,20 +269,20 @@ fn refine(
     if parent < parents {
         // Decided when it was written (`decided`): outside the data, culled, splitting.
         t = temp_tiles[parent_slot(parent)];
-        if (t.pad & TILE_OUTSIDE) != 0u {
+        if (t.pad & UDLOD_TILE_OUTSIDE) != 0u {
             // A child of an edge tile.
-        } else if (t.pad & TILE_CULLED) != 0u {
+        } else if (t.pad & UDLOD_TILE_CULLED) != 0u {
             if k == 0u {
                 atomicAdd(&wg_culled, 1u);
             }
-        } else if (t.pad & TILE_SPLITS) != 0u && state.splits_allowed != 0u {
+        } else if (t.pad & UDLOD_TILE_SPLITS) != 0u && state.splits_allowed != 0u {
             action = ACTION_SPLIT;
             child = decided(Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u));
-            if child.pad == (TILE_DECIDED | TILE_SPLITS) {
+            if child.pad == (UDLOD_TILE_DECIDED | UDLOD_TILE_SPLITS) {
                 atomicAdd(&wg_requests, 1u);
             }
         } else {
-            if (t.pad & TILE_SPLITS) != 0u && k == 0u {
+            if (t.pad & UDLOD_TILE_SPLITS) != 0u && k == 0u {
                 atomicAdd(&wg_overflow, 1u);
             }
             action = ACTION_FINAL;
@@ -379,23 +382,18 @@ fn splits_by_distance(t: Tile) -> bool {
     return t.lod > 0u && tile_field_min(t.x, t.y, t.lod) * tile_distance(t) < udlod.split[t.lod].x;
 }
 
-// Tile flags in `Tile.pad` of the temporary list: what `refine` will do with the tile, decided
-// by whoever writes it (so the next pass's splits are counted before it, and each tile's
-// culling box is built once).
-const TILE_DECIDED: u32 = 1u;
-const TILE_OUTSIDE: u32 = 2u;
-const TILE_CULLED: u32 = 4u;
-const TILE_SPLITS: u32 = 8u;
-
-// Tile t with its flags: outside the data, else culled, else splitting (near enough).
+// Tile t with its flags (`UDLOD_TILE_*` in `Tile.pad` of the temporary list): outside the data,
+// else culled, else splitting (near enough). What `refine` will do with the tile, decided by
+// whoever writes it, so the next pass's splits are counted before it and each tile's culling
+// box is built once (mirrors `seed::decided` in src/lod/udlod/seed.rs).
 fn decided(t: Tile) -> Tile {
-    var flags = TILE_DECIDED;
+    var flags = UDLOD_TILE_DECIDED;
     if outside_data(t) {
-        flags |= TILE_OUTSIDE;
+        flags |= UDLOD_TILE_OUTSIDE;
     } else if udlod.params.w > 0.5 && tile_culled(t) {
-        flags |= TILE_CULLED;
+        flags |= UDLOD_TILE_CULLED;
     } else if splits_by_distance(t) {
-        flags |= TILE_SPLITS;
+        flags |= UDLOD_TILE_SPLITS;
     }
     return Tile(t.x, t.y, t.lod, flags);
 }

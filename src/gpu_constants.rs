@@ -68,6 +68,16 @@ shared_constants! {
     /// Collapse masks of a tile (which of its four quadrants are drawn as the parent grid:
     /// `lod::udlod::grid`), each with its own index list and indirect draw.
     UDLOD_COLLAPSE_MASKS: u32 = 16;
+    /// Most tiles the host hands the tiling prepass as its first pass's parents: the coarse
+    /// levels walked on the CPU (`lod::udlod::seed`), so those levels cost no GPU passes. 256
+    /// keeps the walk to tens of microseconds of host time per view.
+    UDLOD_SEED_TILES: u32 = 256;
+    /// Flags of a tile in the prepass's temporary list (`Tile.pad`), set by whoever writes it
+    /// (a `refine` pass, or the host's seed): decided; outside the data; culled; splitting.
+    UDLOD_TILE_DECIDED: u32 = 1;
+    UDLOD_TILE_OUTSIDE: u32 = 2;
+    UDLOD_TILE_CULLED: u32 = 4;
+    UDLOD_TILE_SPLITS: u32 = 8;
     /// Most levels a clipmap quadtree holds (per-level windows in the quadtree header).
     CLIPMAP_MAX_LEVELS: u32 = 16;
     /// A quadtree entry is `atlas_index | atlas_lod << CLIPMAP_LOD_SHIFT` (R16G16_UINT-like).

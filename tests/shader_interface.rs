@@ -166,6 +166,7 @@ fn udlod_uniforms_match_the_wgsl_struct() {
         ("counts", offset_of!(UdlodUniforms, counts)),
         ("metric", offset_of!(UdlodUniforms, metric)),
         ("masks", offset_of!(UdlodUniforms, masks)),
+        ("seed", offset_of!(UdlodUniforms, seed)),
     ];
     let shaders = composed_shaders();
     assert_struct_layout(&shaders[1..3], "Udlod", &rust, size_of::<UdlodUniforms>());

@@ -12,6 +12,7 @@ use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::interp::GridCell;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::driver::{Gpu, GpuOptions};
+use vkterrain::lod::udlod::seed;
 use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
 use vkterrain::lod::udlod::{draw_group, grid};
 use vkterrain::lod::{MethodKind, UdlodSettings};
@@ -144,6 +145,83 @@ fn gpu_selection_equals_cpu_reference() {
                 "grid {grid} pose {i}: GPU-only {only_gpu:?}, CPU-only {only_cpu:?}"
             );
         }
+    }
+}
+
+/// The coarse levels walked on the host (`seed_tiles`; docs/udlod.md, "The seed") save the
+/// prepass its passes over them and change no tile: over 40 poses at every grid size, the GPU
+/// draws the CPU reference's tiles with the default seed (256 tiles), with a seed of 16 and with
+/// the root alone (`seed_tiles = 1`, every level a pass: what the prepass did before), and it
+/// runs exactly the passes the host's walk (`seed::seed`) asks for: all of the tree's levels
+/// with the root alone (one where the root does not split), fewer with the default on every
+/// pose. Negative control by hand:
+/// recording one pass fewer than the seed's (`passes: lod` in `seed::seed`) fails it (tiles
+/// missing on the GPU).
+#[test]
+fn the_seed_saves_passes_and_keeps_the_tiles() {
+    let data = terrain(257, 30.0);
+    let cams = poses(&data, 40);
+    for grid in grids() {
+        for seed_tiles in [1, 16, UdlodSettings::default().seed_tiles] {
+            let lod = UdlodSettings {
+                seed_tiles,
+                ..settings(grid)
+            };
+            seeded_selection_at(&data, &cams, lod);
+        }
+    }
+}
+
+fn seeded_selection_at(data: &Heightmap, cams: &[Camera], lod: UdlodSettings) {
+    let gpu = common::gpu(false);
+    let levels = Levels::for_settings(data, &lod).unwrap();
+    let (grid, seed_tiles) = (lod.grid_size, lod.seed_tiles);
+    let mut passes = Vec::new();
+    {
+        let mut r = Renderer::new(&gpu, data, lod.clone(), common::options(W, H, 1)).unwrap();
+        let mut sink = CollectSink::default();
+        for (i, cam) in cams.iter().enumerate() {
+            r.render(*cam, &mut sink).unwrap();
+            r.finish(&mut sink).unwrap();
+            let gpu_tiles: HashSet<Tile> = r
+                .method()
+                .debug_tiles(ViewSlot(0))
+                .unwrap()
+                .unwrap()
+                .into_iter()
+                .map(|[x, y, lod]| Tile { x, y, lod })
+                .collect();
+            let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
+            let cpu: HashSet<Tile> = select::select_tiles(&levels, &p).into_iter().collect();
+            assert_eq!(
+                gpu_tiles, cpu,
+                "grid {grid} seed {seed_tiles} pose {i}: the GPU's tiles are not the reference's"
+            );
+            let counters: HashMap<_, _> = r.method().counters(ViewSlot(0)).into_iter().collect();
+            assert_eq!(counters["overflow"], 0);
+            // No overflow: the lists held every split, so the walk's capacity never bound.
+            let unbounded = seed::ListCapacity {
+                final_tiles: u32::MAX,
+                temp_tiles: u32::MAX,
+            };
+            let walk = seed::seed(&levels, &p, unbounded, seed_tiles);
+            assert!(walk.tiles.len() <= seed_tiles as usize);
+            assert_eq!(
+                counters["passes"], walk.passes as u64,
+                "grid {grid} seed {seed_tiles} pose {i}: passes run"
+            );
+            passes.push(walk.passes);
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    let all = levels.levels();
+    println!("grid {grid} seed {seed_tiles}: passes per pose {passes:?} of {all} levels");
+    if seed_tiles == 1 {
+        // Every level from the root, unless the root itself does not split.
+        assert!(passes.iter().all(|&n| n == all || n == 1), "{passes:?}");
+        assert!(passes.contains(&all), "{passes:?}");
+    } else if seed_tiles == UdlodSettings::default().seed_tiles {
+        assert!(passes.iter().all(|&n| n < all), "{passes:?}");
     }
 }
 

@@ -28,6 +28,9 @@ struct Udlod {
     // Per collapse mask (`grid::IndexLayout` in src/lod/udlod/grid.rs): x: its indices (with
     // vertex pulling its vertices) per tile, y: its first index in the index buffer.
     masks: array<vec4<u32>, UDLOD_COLLAPSE_MASKS>,
+    // The first pass's parents, decided on the host and copied to the front of the temporary
+    // list (`seed` in src/lod/udlod/seed.rs): x tiles, y those that split, z passes recorded.
+    seed: vec4<u32>,
 }
 
 struct Tile {

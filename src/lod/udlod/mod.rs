@@ -11,6 +11,7 @@
 pub mod grid;
 #[cfg(feature = "test-support")]
 pub mod probe;
+pub mod seed;
 pub mod select;
 pub mod settings;
 
@@ -30,7 +31,7 @@ use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use crate::error::{Error, Result};
 use crate::frame::ViewState;
-use crate::gpu_constants::{UDLOD_COLLAPSE_MASKS, UDLOD_MAX_LEVELS};
+use crate::gpu_constants::{UDLOD_COLLAPSE_MASKS, UDLOD_MAX_LEVELS, UDLOD_SEED_TILES};
 use crate::slots::ViewSlot;
 use select::{FieldKey, Levels, SelectionParams, SplitField};
 use settings::{BackFaces, LodMetric, UdlodSettings};
@@ -51,6 +52,9 @@ pub struct UdlodUniforms {
     /// Per collapse mask: its indices (vertices with vertex pulling) per tile and first index
     /// ([`grid::IndexLayout`]).
     pub masks: [[u32; 4]; UDLOD_COLLAPSE_MASKS as usize],
+    /// The first pass's parents from the host ([`seed::Seed`]): x tiles, y those that split,
+    /// z the passes recorded after them.
+    pub seed: [u32; 4],
 }
 
 /// Indirect draws per slot: static tiles per collapse mask, then morphing ones.
@@ -146,6 +150,12 @@ struct SlotBuffers {
     /// (rewritten only when that changes: a frame in flight keeps its own copy).
     field: Buffer,
     field_key: Option<FieldKey>,
+    /// The coarse levels' tiles decided on the host for this slot's next frame
+    /// ([`seed::seed`]; `UDLOD_SEED_TILES` entries), copied to the front of the temporary
+    /// list before the first pass, and the passes recorded after them.
+    seed: Buffer,
+    seed_tiles: u32,
+    passes: u32,
     set: vk::DescriptorSet,
     /// Whether a frame was recorded on this slot (its counters hold a frame's).
     drawn: bool,
@@ -174,7 +184,7 @@ impl TileLists {
             gpu,
             &format!("udlod temp tiles {i}"),
             Self::temp_capacity(capacity) as u64 * TILE_BYTES,
-            storage,
+            storage | vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuOnly,
         )?;
         let final_tiles = Buffer::new(
@@ -238,6 +248,13 @@ impl SlotBuffers {
             storage,
             MemoryLocation::CpuToGpu,
         )?;
+        let seed = Buffer::new(
+            gpu,
+            &format!("udlod seed tiles {i}"),
+            UDLOD_SEED_TILES as u64 * TILE_BYTES,
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::CpuToGpu,
+        )?;
         let slot = SlotBuffers {
             uniforms,
             state,
@@ -245,6 +262,9 @@ impl SlotBuffers {
             counters,
             field,
             field_key: None,
+            seed,
+            seed_tiles: 0,
+            passes: 0,
             set,
             drawn: false,
         };
@@ -696,7 +716,17 @@ impl LodMethod for Udlod {
         ];
         u.masks = self.masks;
         u.metric = [p.stretch[0], p.stretch[1], 0.0, 0.0];
+        let lists = seed::ListCapacity {
+            final_tiles: capacity,
+            temp_tiles: TileLists::temp_capacity(capacity),
+        };
+        let seed = seed::seed(&self.levels, &p, lists, self.settings.seed_tiles);
+        u.seed = [seed.tiles.len() as u32, seed.requests, seed.passes, 0];
         let s = &mut self.slots[slot.index()];
+        // As the field: this slot's previous frame has completed.
+        s.seed.write(bytemuck::cast_slice(&seed.tiles))?;
+        s.seed_tiles = seed.tiles.len() as u32;
+        s.passes = seed.passes;
         if s.field_key != Some(p.field.key) {
             // This slot's previous frame has completed (the renderer waits for a slot before
             // reusing it), so its copy may change.
@@ -726,6 +756,14 @@ impl LodMethod for Udlod {
                 MemoryAccess::TransferWrite,
             );
             d.cmd_fill_buffer(cmd, s.state.raw, 0, vk::WHOLE_SIZE, 0);
+            let seed = vk::BufferCopy {
+                src_offset: 0,
+                dst_offset: 0,
+                size: s.seed_tiles as u64 * TILE_BYTES,
+            };
+            if s.seed_tiles > 0 {
+                d.cmd_copy_buffer(cmd, s.seed.raw, s.lists.temp.raw, &[seed]);
+            }
             b.memory(
                 cmd,
                 MemoryAccess::TransferWrite,
@@ -759,7 +797,7 @@ impl LodMethod for Udlod {
                 d.cmd_dispatch_indirect(cmd, s.state.raw, 0);
                 b.memory(cmd, MemoryAccess::ComputeWrite, then);
             };
-            for _ in 0..self.levels.levels() {
+            for _ in 0..s.passes {
                 sized_pass(&self.prepare, &self.refine, MemoryAccess::ComputeReadWrite);
             }
             // The final tiles sorted by draw group into the list's second half.

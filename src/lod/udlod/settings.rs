@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::gpu_constants::UDLOD_SEED_TILES;
 use crate::lod::sweep::Sweep;
 
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
@@ -66,6 +67,11 @@ pub struct UdlodSettings {
     /// the least `maxComputeWorkGroupCount` a Vulkan device may have): past it a dispatch takes
     /// more rows. Lowered only to exercise the rows in tests.
     pub dispatch_row: u32,
+    /// The most tiles of the coarse levels the host walks before each frame and hands the
+    /// prepass's first pass (`seed`; 1..=`UDLOD_SEED_TILES`, default 256): those levels cost
+    /// no GPU passes. 1 hands it the root alone (every level a pass, what UDLOD did before;
+    /// kept for measurement).
+    pub seed_tiles: u32,
 }
 
 /// Which of UDLOD's tiles are drawn with back-face culling (config `back_faces`;
@@ -127,6 +133,7 @@ impl Default for UdlodSettings {
             vertex_pulling: false,
             lod_metric: LodMetric::Axis,
             dispatch_row: 65_535,
+            seed_tiles: UDLOD_SEED_TILES,
         }
     }
 }
@@ -178,6 +185,11 @@ impl UdlodSettings {
             key: "morph_levels",
             help: "levels a vertex may morph over (1 = one step, the default; 0 = all the tile allows)",
             apply: |s, v| s.morph_levels = v as u32,
+        },
+        Sweep {
+            key: "seed_tiles",
+            help: "coarse levels' tiles walked on the host before the prepass (1 = the root only)",
+            apply: |s, v| s.seed_tiles = v as u32,
         },
     ];
 
@@ -255,6 +267,12 @@ impl UdlodSettings {
             return bad(format!(
                 "dispatch_row {} must be within 1..=65535",
                 self.dispatch_row
+            ));
+        }
+        if !(1..=UDLOD_SEED_TILES).contains(&self.seed_tiles) {
+            return bad(format!(
+                "seed_tiles {} must be within 1..={UDLOD_SEED_TILES}",
+                self.seed_tiles
             ));
         }
         if !(self.error_field_max.is_finite() && (1.0..=1024.0).contains(&self.error_field_max)) {
