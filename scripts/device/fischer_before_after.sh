@@ -6,7 +6,9 @@
 # the SRTM3 tiles (it cannot read today's manifests); this build, without GDAL there, reads
 # the ones `vkterrain preprocess` wrote here (out/datasets/{franconia,pyrenees}, 27 MB each:
 # one scene per carry, `SCENES=franconia` or `SCENES=pyrenees`). The same script runs here on
-# lavapipe with `LOCAL=1 RES=640x360` (its Vulkan, not the carried loader).
+# lavapipe with `LOCAL=1 RES=640x360` (its Vulkan, not the carried loader). `EXTRA="KEY =
+# VALUE"` adds a third run per round: this build with that line in its `[method]` table (e.g.
+# `EXTRA="seed_tiles = 1"`, the prepass walking every level on the GPU).
 #
 # Here, before carrying: this build as .device-vk/vkterrain (prepare.sh, stripped), the old
 # one built from 3ab4290 (`git worktree add ../before 3ab4290`, `cargo build --release
@@ -38,17 +40,21 @@ for who in before after; do
     fi
     printf '[dataset]\nkind = "tiles"\npath = "../out/datasets/%s"\n[scenario]\npath = "scenarios/%s.toml"\n[method]\nname = "udlod"\n' \
       "$s" "${scene[$s]}" > "$work/$who/config/$s.toml"
+    if [ "$who" = after ] && [ -n "${EXTRA:-}" ]; then
+      { cat "$work/$who/config/$s.toml"; echo "$EXTRA"; } > "$work/$who/config/$s-extra.toml"
+    fi
   done
 done
 for s in ${SCENES:-franconia pyrenees}; do
   for round in 1 2; do
-    for who in before after; do
-      bin=.device-vk/vkterrain earth="--earth flat"
+    for who in before after ${EXTRA:+extra}; do
+      bin=.device-vk/vkterrain earth="--earth flat" cfg="$work/$who/config/$s.toml"
       [ "$who" = before ] && bin=.device-vk/vkterrain-before earth=""
-      r=$("$bin" bench --config "$work/$who/config/$s.toml" $earth --resolutions "$res" \
+      [ "$who" = extra ] && cfg="$work/after/config/$s-extra.toml"
+      r=$("$bin" bench --config "$cfg" $earth --resolutions "$res" \
         --compare-frames-in-flight 2 --frames 300 --warmup 20 --out "$(mktemp -d)" 2>&1 |
         grep -E "$res   2|rror")
-      echo "$s round $round $who: $r"
+      echo "$s round $round $who${EXTRA:+ (extra: $EXTRA)}: $r"
     done
   done
 done

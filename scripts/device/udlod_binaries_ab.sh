@@ -8,8 +8,9 @@
 # Here, before carrying: release builds stripped and copied there (prepare.sh for this one),
 # and the Puget Sound heights in .device-vk/data (scripts/device/udlod_before_after.sh).
 # Run there from the repository root: `bash scripts/device/udlod_binaries_ab.sh > $OUT/ab.txt`
-# (`PUGET_ONLY=1`: Puget Sound only; `VARIANTS="main new"` picks variants; `new-off`, not in
-# the default list, is this build with `collapse = false`).
+# (`PUGET_ONLY=1`: Puget Sound only; `VARIANTS="main new"` picks variants; `new-off` and
+# `new-seed1`, not in the default list, are this build with `collapse = false` and with
+# `seed_tiles = 1`: every level a GPU pass).
 set -u
 . .device-vk/env.sh
 . scripts/device/puget_config.sh
@@ -29,6 +30,7 @@ for base in "${bases[@]}"; do
           new-g16) extra="grid_size = 16" ;;
           new-g8) extra="grid_size = 8" ;;
           new-off) extra="collapse = false" ;;
+          new-seed1) extra="seed_tiles = 1" ;;
         esac
         [ -x "$bin" ] || continue
         cfg=$(udlod_config "$base" "$extra")
