@@ -309,6 +309,24 @@ mod tests {
         }
     }
 
+    /// The host's walk hands the first pass 1..=`UDLOD_SEED_TILES` tiles (the seed buffer's
+    /// size); 0 or more than that is a one-line error naming the setting.
+    #[test]
+    fn seed_tiles_is_within_1_and_the_seed_buffer() {
+        use crate::gpu_constants::UDLOD_SEED_TILES;
+        let at = |n: u32| UdlodSettings {
+            seed_tiles: n,
+            ..UdlodSettings::default()
+        };
+        for ok in [1, 16, UDLOD_SEED_TILES] {
+            assert!(at(ok).validate().is_ok(), "{ok}");
+        }
+        for bad in [0, UDLOD_SEED_TILES + 1, u32::MAX] {
+            let e = at(bad).validate().unwrap_err().to_string();
+            assert!(e.contains("seed_tiles") && !e.contains('\n'), "{e}");
+        }
+    }
+
     /// Grid sizes are powers of two in 2..=64: grid 6 drew 13,724 hole pixels with collapsed
     /// quadrants over 10 CI frames at 320x180 (a quadrant of 3 quads has no parent grid), and
     /// the split field's cell lookup shifts by the cell's span. Anything else is a one-line
