@@ -1,16 +1,18 @@
 //! Where UDLOD's triangles go: per data set and tau, the split-distance table (which term sets
 //! each level), the drawn tiles' projected-error slack, counterfactual selections and the
-//! oracle's count. CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
+//! oracle's count, and the prepass's seed (the coarse levels the host walks: its tiles, the GPU
+//! passes left, the walk's host time). CPU only (the CPU reference selection equals the GPU's;
+//! tests/udlod.rs).
 //!
 //!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
-//!     [--grid 4] [--morph-levels 0] [--field-density 2]
+//!     [--grid 4] [--morph-levels 0] [--field-density 2] [--width 640 --height 360]
 
 use std::path::PathBuf;
 
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::eval::oracle::Oracle;
-use vkterrain::lod::udlod::grid;
 use vkterrain::lod::udlod::select::{self, FieldKey, Levels, SelectionParams, SplitField, Tile};
+use vkterrain::lod::udlod::{grid, seed};
 use vkterrain::lod::{MethodConfig, UdlodSettings};
 
 fn main() -> anyhow::Result<()> {
@@ -22,6 +24,7 @@ fn main() -> anyhow::Result<()> {
     let mut grid = None;
     let mut morph_levels = None;
     let mut field_density = None;
+    let (mut width, mut height) = (None, None);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--config" => config = args.next().map(PathBuf::from),
@@ -30,6 +33,8 @@ fn main() -> anyhow::Result<()> {
             "--morph-levels" => morph_levels = Some(args.next().unwrap().parse()?),
             "--field-density" => field_density = Some(args.next().unwrap().parse()?),
             "--frames" => frames = args.next().unwrap().parse()?,
+            "--width" => width = Some(args.next().unwrap().parse()?),
+            "--height" => height = Some(args.next().unwrap().parse()?),
             "--tau" => {
                 taus = args
                     .next()
@@ -44,6 +49,8 @@ fn main() -> anyhow::Result<()> {
     let p = prepare(&RenderArgs {
         config,
         scenario,
+        width,
+        height,
         ..Default::default()
     })?;
     let data = p.data.require_grid("udlod_budget")?.clone();
@@ -122,9 +129,11 @@ fn main() -> anyhow::Result<()> {
         let (mut whole_tris, mut whole_tiles) = (0u64, 0usize);
         let (mut drawn_tris, mut collapsed_quadrants) = (0u64, 0u32);
         let mut per_level = vec![0usize; levels.levels() as usize];
+        let mut seeds = Vec::new();
         for &k in &picks {
             let cam = p.scenario.camera(k);
             let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+            seeds.push(timed_seed(&levels, &sp, s.seed_tiles));
             let tiles = select::select_tiles(&levels, &sp);
             tiles_n += tiles.len();
             for t in &tiles {
@@ -172,6 +181,16 @@ fn main() -> anyhow::Result<()> {
         println!(
             "  drawn tiles per level (0..root): {per_level:?}; whose parent meets tau exactly: {} by its pixel term, {} only by the chain (of {tiles_n})",
             over_rule, over_chain
+        );
+        let column =
+            |f: fn(&(usize, u32, f64)) -> String| -> Vec<String> { seeds.iter().map(f).collect() };
+        println!(
+            "  seed ({} tiles at most): tiles {:?}, GPU passes {:?} of {} levels, host walk {:?} us (median of 200, flat world)",
+            s.seed_tiles,
+            column(|x| x.0.to_string()),
+            column(|x| x.1.to_string()),
+            levels.levels(),
+            column(|x| format!("{:.1}", x.2)),
         );
         let g2 = 2 * (settings.grid_size as u64).pow(2);
         let keep = 1.0 - s.morph_range;
@@ -690,6 +709,25 @@ fn cell_field(
 }
 
 /// One counterfactual's line: its tiles, their triangles and the ratio to the oracle's.
+/// The prepass's seed for one frame (`seed::seed`, lists unbounded: no overflow): its tiles,
+/// the GPU passes it leaves, and the host walk's median time over 200 runs (microseconds).
+fn timed_seed(levels: &Levels, p: &SelectionParams, most: u32) -> (usize, u32, f64) {
+    let lists = seed::ListCapacity {
+        final_tiles: u32::MAX,
+        temp_tiles: u32::MAX,
+    };
+    let mut times: Vec<f64> = (0..200)
+        .map(|_| {
+            let t0 = std::time::Instant::now();
+            std::hint::black_box(seed::seed(levels, p, lists, most));
+            t0.elapsed().as_secs_f64() * 1e6
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    let walk = seed::seed(levels, p, lists, most);
+    (walk.tiles.len(), walk.passes, times[times.len() / 2])
+}
+
 fn print_cf(name: &str, tiles: usize, triangles_per_tile: u64, oracle: u64) {
     let triangles = tiles as u64 * triangles_per_tile;
     println!(

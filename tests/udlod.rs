@@ -96,14 +96,7 @@ fn gpu_and_cpu_tiles(
         for cam in cameras {
             r.render(*cam, &mut sink).unwrap();
             r.finish(&mut sink).unwrap();
-            let gpu_tiles: Vec<Tile> = r
-                .method()
-                .debug_tiles(ViewSlot(0))
-                .unwrap()
-                .unwrap()
-                .into_iter()
-                .map(|[x, y, lod]| Tile { x, y, lod })
-                .collect();
+            let gpu_tiles = gpu_tiles(&r);
             let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
             out.push((gpu_tiles, select::select_tiles(&levels, &p)));
             let counters: HashMap<_, _> = r.method().counters(ViewSlot(0)).into_iter().collect();
@@ -112,6 +105,14 @@ fn gpu_and_cpu_tiles(
     }
     common::assert_no_validation_messages(&gpu);
     out
+}
+
+/// The tiles the GPU drew in view slot 0's last completed frame.
+fn gpu_tiles(r: &Renderer) -> Vec<Tile> {
+    let list = r.method().debug_tiles(ViewSlot(0)).unwrap().unwrap();
+    list.into_iter()
+        .map(|[x, y, lod]| Tile { x, y, lod })
+        .collect()
 }
 
 /// The GPU's tiles are the CPU reference's, at every grid size, and with one workgroup per row
@@ -183,14 +184,7 @@ fn seeded_selection_at(data: &Heightmap, cams: &[Camera], lod: UdlodSettings) {
         for (i, cam) in cams.iter().enumerate() {
             r.render(*cam, &mut sink).unwrap();
             r.finish(&mut sink).unwrap();
-            let gpu_tiles: HashSet<Tile> = r
-                .method()
-                .debug_tiles(ViewSlot(0))
-                .unwrap()
-                .unwrap()
-                .into_iter()
-                .map(|[x, y, lod]| Tile { x, y, lod })
-                .collect();
+            let gpu_tiles: HashSet<Tile> = gpu_tiles(&r).into_iter().collect();
             let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
             let cpu: HashSet<Tile> = select::select_tiles(&levels, &p).into_iter().collect();
             assert_eq!(
@@ -1088,14 +1082,7 @@ fn overflowing_budget_at(data: &Heightmap, cams: &[Camera], max_tiles: u32) {
                 continue;
             }
             overflowing += 1;
-            let tiles: Vec<Tile> = r
-                .method()
-                .debug_tiles(ViewSlot(0))
-                .unwrap()
-                .unwrap()
-                .into_iter()
-                .map(|[x, y, lod]| Tile { x, y, lod })
-                .collect();
+            let tiles = gpu_tiles(&r);
             assert!(tiles.len() <= lod.max_tiles as usize);
             let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
             let covered = covers_exactly_once(&levels, &tiles);
