@@ -29,7 +29,7 @@ struct Udlod {
     // vertex pulling its vertices) per tile, y: its first index in the index buffer.
     masks: array<vec4<u32>, UDLOD_COLLAPSE_MASKS>,
     // The first pass's parents, decided on the host and copied to the front of the temporary
-    // list (`seed` in src/lod/udlod/seed.rs): x tiles, y those that split, z passes recorded.
+    // list (`seed` in src/lod/udlod/seed.rs): x tiles, y those that split.
     seed: vec4<u32>,
 }
 

@@ -1,12 +1,14 @@
 //! UDLOD (Kühnert): the quadtree is refined on the GPU in compute, one level per pass with
 //! indirect dispatches, into a final tile list drawn with indexed indirect draws (one instance
 //! per tile over a shared grid, one draw per collapse mask: [`grid`]); vertices morph between
-//! levels in the vertex shader.
+//! levels in the vertex shader. The coarse levels' few tiles are walked on the host instead
+//! ([`seed`]), and the passes start below them.
 //!
 //! CPU state ([`select::Levels`]: per-tile min/max, per-level errors) is built once; its GPU
 //! mirror is the `min_max` buffer. Per frame the host writes only [`UdlodUniforms`] (split
-//! distances from the pixel error target, frustum planes); the tile lists never come back to
-//! the host in the render path (only the tiling state's counters, for statistics).
+//! distances from the pixel error target, frustum planes) and the seed's tiles; the tile lists
+//! never come back to the host in the render path (only the tiling state's counters, for
+//! statistics).
 
 pub mod grid;
 #[cfg(feature = "test-support")]
@@ -52,8 +54,7 @@ pub struct UdlodUniforms {
     /// Per collapse mask: its indices (vertices with vertex pulling) per tile and first index
     /// ([`grid::IndexLayout`]).
     pub masks: [[u32; 4]; UDLOD_COLLAPSE_MASKS as usize],
-    /// The first pass's parents from the host ([`seed::Seed`]): x tiles, y those that split,
-    /// z the passes recorded after them.
+    /// The first pass's parents from the host ([`seed::Seed`]): x tiles, y those that split.
     pub seed: [u32; 4],
 }
 
@@ -721,7 +722,7 @@ impl LodMethod for Udlod {
             temp_tiles: TileLists::temp_capacity(capacity),
         };
         let seed = seed::seed(&self.levels, &p, lists, self.settings.seed_tiles);
-        u.seed = [seed.tiles.len() as u32, seed.requests, seed.passes, 0];
+        u.seed = [seed.tiles.len() as u32, seed.requests, 0, 0];
         let s = &mut self.slots[slot.index()];
         // As the field: this slot's previous frame has completed.
         s.seed.write(bytemuck::cast_slice(&seed.tiles))?;
@@ -756,12 +757,12 @@ impl LodMethod for Udlod {
                 MemoryAccess::TransferWrite,
             );
             d.cmd_fill_buffer(cmd, s.state.raw, 0, vk::WHOLE_SIZE, 0);
-            let seed = vk::BufferCopy {
-                src_offset: 0,
-                dst_offset: 0,
-                size: s.seed_tiles as u64 * TILE_BYTES,
-            };
             if s.seed_tiles > 0 {
+                let seed = vk::BufferCopy {
+                    src_offset: 0,
+                    dst_offset: 0,
+                    size: s.seed_tiles as u64 * TILE_BYTES,
+                };
                 d.cmd_copy_buffer(cmd, s.seed.raw, s.lists.temp.raw, &[seed]);
             }
             b.memory(
