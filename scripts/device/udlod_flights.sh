@@ -8,13 +8,16 @@
 # Here, before carrying: as in scripts/device/udlod_cascade.sh (a release build without GDAL
 # in .device-vk/vkterrain, Puget Sound's heights in .device-vk/data). Run there from the
 # repository root: `bash scripts/device/udlod_flights.sh > $OUT/flights.txt 2>&1`.
+# `BIN=.device-vk/OTHER` runs another build; `SWEEP="--sweep tau_px=0.5,1,2,4"` replaces the
+# morph_levels x tau sweep (e.g. to compare two builds at their defaults).
 set -u
 . .device-vk/env.sh
 . scripts/device/puget_config.sh
 run() {
   echo "### $1 $2"
-  .device-vk/vkterrain eval --config "$1" --scenario "config/scenarios/$2.toml" --methods udlod \
-    --sweep morph_levels=1,0 --sweep tau_px=0.5,1,2,4 --width 1920 --height 1080 --frames 30 \
+  # shellcheck disable=SC2086 # SWEEP is several words
+  "${BIN:-.device-vk/vkterrain}" eval --config "$1" --scenario "config/scenarios/$2.toml" --methods udlod \
+    ${SWEEP:---sweep morph_levels=1,0 --sweep tau_px=0.5,1,2,4} --width 1920 --height 1080 --frames 30 \
     --out "$(mktemp -d)" --force 2>&1 | tail -10
 }
 for sc in puget_low_horizon_down00 puget_edge_orbit_down12 puget_fast_pan_down15 \
