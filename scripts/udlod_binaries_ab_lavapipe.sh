@@ -11,7 +11,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 [ $# -eq 2 ] || { echo "usage: $0 OLD NEW" >&2; exit 2; }
 old=$1 new=$2
-export $(scripts/lavapipe.sh)
+# Nothing to export with the system's lavapipe (a bare `export` would list the environment).
+lvp=$(scripts/lavapipe.sh)
+# shellcheck disable=SC2086 # NAME=VALUE words
+[ -z "$lvp" ] || export $lvp
 . scripts/device/puget_config.sh
 . scripts/device/udlod_config.sh
 for round in 1 2 3; do

@@ -13,7 +13,10 @@ set -euo pipefail
 bin=$1 base=$2
 shift 2
 here=$(cd "$(dirname "$0")/.." && pwd)
-export $("$here/scripts/lavapipe.sh")
+# Nothing to export with the system's lavapipe (a bare `export` would list the environment).
+lvp=$("$here/scripts/lavapipe.sh")
+# shellcheck disable=SC2086 # NAME=VALUE words
+[ -z "$lvp" ] || export $lvp
 [ -n "${THREADS:-}" ] && export LP_NUM_THREADS=$THREADS
 . "$here/scripts/device/udlod_config.sh"
 tmp=$(udlod_config "$base" "${LINES:-}")

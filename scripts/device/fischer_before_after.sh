@@ -6,7 +6,8 @@
 # the SRTM3 tiles (it cannot read today's manifests); this build, without GDAL there, reads
 # the ones `vkterrain preprocess` wrote here (out/datasets/{franconia,pyrenees}, 27 MB each:
 # one scene per carry, `SCENES=franconia` or `SCENES=pyrenees`). The same script runs here on
-# lavapipe with `LOCAL=1 RES=640x360` (its Vulkan, not the carried loader). `EXTRA="KEY =
+# lavapipe with `LOCAL=1 RES=640x360` (the lavapipe tests and benchmarks use, Mesa 25 from
+# scripts/lavapipe.sh; `VKTERRAIN_LAVAPIPE=system` for the system's, not the carried loader). `EXTRA="KEY =
 # VALUE"` adds a third run per round: this build with that line in its `[method]` table (e.g.
 # `EXTRA="seed_tiles = 1"`, the prepass walking every level on the GPU).
 #
@@ -19,7 +20,14 @@
 # Run there from the repository root:
 #   bash scripts/device/fischer_before_after.sh > $OUT/fischer.txt 2>&1
 set -u
-[ -z "${LOCAL:-}" ] && . .device-vk/env.sh
+if [ -z "${LOCAL:-}" ]; then
+  . .device-vk/env.sh
+else
+  # Nothing to export with the system's lavapipe (a bare `export` would list the environment).
+  lvp=$(scripts/lavapipe.sh)
+  # shellcheck disable=SC2086 # NAME=VALUE words
+  [ -z "$lvp" ] || export $lvp
+fi
 res=${RES:-1920x1080}
 srtm=.device-vk/data/srtm
 work=$(mktemp -d)
