@@ -333,6 +333,24 @@ fn main() -> anyhow::Result<()> {
                 tris_o,
             );
         }
+        for sub in [1u32, 2, 4, 8] {
+            let (mut n, mut tris) = (0usize, 0u64);
+            for &k in &picks {
+                let cam = p.scenario.camera(k);
+                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                let tiles = select_generic(&levels, &sp, |t| sub_rect_splits(&levels, &sp, t, sub));
+                n += tiles.len();
+                for t in &tiles {
+                    let mask = select::tile_collapse_mask(&levels, &sp, *t);
+                    tris += grid::mask_triangles(levels.grid_size, mask);
+                }
+            }
+            println!(
+                "  cf split test per {sub}x{sub} sub-rectangles: tiles {n} triangles uncollapsed {} collapsed {tris} ratio {:.2}",
+                n as u64 * g2,
+                tris as f64 / tris_o as f64
+            );
+        }
         slack.sort_by(f64::total_cmp);
         let q = |f: f64| slack[((slack.len() - 1) as f64 * f) as usize];
         println!(
@@ -734,4 +752,32 @@ fn print_cf(name: &str, tiles: usize, triangles_per_tile: u64, oracle: u64) {
         "  cf {name:48}: tiles {tiles:6} triangles {triangles:9} ratio {:.2}",
         triangles as f64 / oracle.max(1) as f64
     );
+}
+
+/// Counterfactual split test: the tile splits when some of its `sub` x `sub` sub-rectangles has
+/// its nearest point nearer than the largest split distance at its corners (the field
+/// bilinear over the sub-rectangle); `sub` = 1 is today's test.
+fn sub_rect_splits(levels: &Levels, p: &SelectionParams, t: Tile, sub: u32) -> bool {
+    let span = (levels.grid_size << t.lod) as i32;
+    let step = span / sub as i32;
+    let d_level = p.field.split[t.lod as usize];
+    for j in 0..sub as i32 {
+        for i in 0..sub as i32 {
+            let c0 = [t.x as i32 * span + i * step, t.y as i32 * span + j * step];
+            let c1 = [c0[0] + step, c0[1] + step];
+            let m = [c0, [c1[0], c0[1]], [c0[0], c1[1]], c1]
+                .map(|c| p.field.at(levels, c, t.lod))
+                .into_iter()
+                .fold(f32::INFINITY, f32::min);
+            let lo = p.from_viewer(c0);
+            let hi = p.from_viewer(c1);
+            let dx = lo[0].max(0.0f32.min(hi[0])) * p.stretch[0];
+            let dy = lo[1].max(0.0f32.min(hi[1])) * p.stretch[1];
+            let d = (dx * dx + dy * dy + p.viewer[2] * p.viewer[2]).sqrt();
+            if m * d < d_level {
+                return true;
+            }
+        }
+    }
+    false
 }

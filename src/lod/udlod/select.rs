@@ -636,9 +636,10 @@ fn cell_requirement(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]
     let (key, zone) = (&field.key, &field.zone);
     let screen =
         key.share * levels.field_cell_error(lod, cx, cy) as f64 * key.focal_px / key.tau_px;
-    // This tile's geometry shows, blended, from the start of its morph zone on: no nearer than
-    // one level step lets it (`(1 - r)` of the pixel term), also where the zone is `W` wide.
-    let screen = screen.max((1.0 - key.morph_range) * screen + zone[lod as usize] as f64);
+    // This tile's geometry shows, blended, from the start of its morph zone on; where the zone
+    // is `W` wide it starts no nearer than what the children's own geometry allows.
+    let start = zone_start(levels, key, [cx, cy, lod], screen);
+    let screen = screen.max(start + zone[lod as usize] as f64);
     let nesting = field.largest_below(levels, [cx, cy, lod], lod - 1);
     let reach = match lod.checked_sub(key.morph_levels) {
         Some(level) if level >= 1 => {
@@ -651,6 +652,31 @@ fn cell_requirement(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]
         _ => 0.0,
     };
     screen.max(nesting.max(reach) * (1.0 + CHAIN_MARGIN))
+}
+
+/// The nearest distance at which a morph zone `W` wide of field cell `[cx, cy, lod]` may
+/// start, given its pixel term `screen`. In the zone the cell's children's vertices slide onto
+/// its grid, so the surface there is a blend `(1 - f) children + f cell` whose error is at
+/// most `(1 - f) e_c + f e` (`e_c`: the children's largest error), linear in the distance as
+/// `f` and the pixel target `tau d / (k focal)` are. It meets the target at the zone's end
+/// (`f = 1`, `s >= screen`) and at its start (`f = 0`) where that start is no nearer than the
+/// children's own pixel term: between, too. The children's term is taken where it is the
+/// nearer start; elsewhere (a child nearly as rough as the cell) `(1 - r) screen`, where one
+/// level step starts its zone, which the share was measured with (`docs/udlod.md`, "The zone's
+/// start", issue 18's fourteenth round). Level 1's children are level 0's: no error.
+fn zone_start(levels: &Levels, key: &FieldKey, [cx, cy, lod]: [u32; 3], screen: f64) -> f64 {
+    if lod < 2 {
+        return 0.0;
+    }
+    let (nx, ny) = levels.field_cells_per_side(lod - 1);
+    let children = QUAD
+        .iter()
+        .map(|&(i, j)| (2 * cx + i, 2 * cy + j))
+        .filter(|&(x, y)| x < nx && y < ny)
+        .map(|(x, y)| levels.field_cell_error(lod - 1, x, y) as f64)
+        .fold(0.0, f64::max);
+    let one_step = (1.0 - key.morph_range) * screen;
+    one_step.min(key.share * children * key.focal_px / key.tau_px)
 }
 
 /// Growth of the split distance allowed from one field corner to the next (8-neighbourhood):
@@ -1227,7 +1253,75 @@ pub fn morphed_vertex(
 
 #[cfg(test)]
 mod tests {
-    use super::worst_case_share;
+    use super::{FieldKey, Levels, QUAD, SplitField, UdlodSettings, worst_case_share};
+    use crate::dataset::procedural::{self, ProceduralParams};
+
+    /// Every field cell's morph zone (the last `max(W, r s)` of its split distance `s`) starts
+    /// no nearer than its children's pixel term or one level step's start, whichever is
+    /// nearer ([`super::zone_start`]: what keeps the blended surface in the zone within
+    /// tau), at one and two nodes per tile side, tau 1 and 4; and some cells start nearer
+    /// than one level step's start alone allowed (the rule before issue 18's fourteenth round:
+    /// `s >= (1 - r) screen + W`). Negative control by hand: a zone start of 0 fails the first.
+    #[test]
+    fn morph_zones_start_where_the_children_meet_tau() {
+        let data = procedural::generate(&ProceduralParams {
+            size: 257,
+            spacing: 60.0,
+            ..Default::default()
+        })
+        .unwrap();
+        for density in [1, 2] {
+            let settings = UdlodSettings {
+                field_density: density,
+                ..UdlodSettings::default()
+            };
+            let levels = Levels::for_settings(&data, &settings).unwrap();
+            for tau_px in [1.0, 4.0] {
+                let key = FieldKey::new(&UdlodSettings { tau_px, ..settings }, 311.8);
+                let field = SplitField::new(&levels, key);
+                let pixel = |lod: u32, x: u32, y: u32| {
+                    let (nx, ny) = levels.field_cells_per_side(lod);
+                    let e = if x < nx && y < ny && lod > 0 {
+                        levels.field_cell_error(lod, x, y) as f64
+                    } else {
+                        0.0
+                    };
+                    key.share * e * key.focal_px / key.tau_px
+                };
+                let mut nearer = 0;
+                for lod in 2..=levels.root_lod {
+                    let w = field.zone[lod as usize] as f64;
+                    let (nx, ny) = levels.field_cells_per_side(lod);
+                    for (cx, cy) in (0..ny).flat_map(|y| (0..nx).map(move |x| (x, y))) {
+                        let screen = pixel(lod, cx, cy);
+                        let children = QUAD
+                            .map(|(i, j)| pixel(lod - 1, 2 * cx + i, 2 * cy + j))
+                            .into_iter()
+                            .fold(0.0, f64::max);
+                        let largest_m = QUAD
+                            .map(|(i, j)| field.corner(&levels, lod, cx + i, cy + j))
+                            .into_iter()
+                            .fold(0.0f32, f32::max);
+                        let s = field.split[lod as usize] as f64 / largest_m as f64;
+                        let start = s - w.max(key.morph_range * s);
+                        let one_step = (1.0 - key.morph_range) * screen;
+                        let needed = children.min(one_step);
+                        assert!(
+                            start >= needed * (1.0 - 1e-5),
+                            "density {density}, tau {tau_px}, level {lod}, cell ({cx}, {cy}): \
+                             zone starts at {start} m, children need {children} m, one level \
+                             step {one_step} m"
+                        );
+                        nearer += (s < (one_step + w) * (1.0 - 1e-5)) as u32;
+                    }
+                }
+                assert!(
+                    nearer > 0,
+                    "density {density}, tau {tau_px}: no zone starts nearer than one level step's"
+                );
+            }
+        }
+    }
 
     /// The measured shares are where `docs/udlod.md` says, in (0, 1], never larger for a
     /// larger tile (the worst case overstates more), and interpolated between.
