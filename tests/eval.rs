@@ -276,9 +276,11 @@ fn an_overflowing_tile_budget_is_reported() {
 /// drew with tiles coarser than level 0 and their 99.9th percentile; brute force draws no
 /// tiles and reports none. Without morphing a level-0 tile is the data itself, so the pixels
 /// over one measure no error but f32 noise (brute force's scale, < 0.05 px), while the coarse
-/// ones at tau 4 measure tenths of a pixel: a lookup that read the tiles wrongly (x for y, or
+/// ones at tau 1.5 measure tenths of a pixel: a lookup that read the tiles wrongly (x for y, or
 /// another tile size) puts coarse pixels among the level-0 ones (negative control, by hand:
-/// `level_at` with x and y swapped fails it).
+/// `level_at` with x and y swapped fails it). Tau 1.5, not larger: at 192x108 no level-0 tile
+/// is drawn beyond it since morph zones start where the children allow (docs/udlod.md, "The
+/// zone's start"; tau 2 and 4 draw only coarse pixels there).
 #[test]
 fn coarse_pixels_are_those_over_tiles_coarser_than_level_0() {
     let tmp = tempfile::tempdir().unwrap();
@@ -302,7 +304,7 @@ fn coarse_pixels_are_those_over_tiles_coarser_than_level_0() {
         "--methods",
         "brute,udlod",
         "--sweep",
-        "tau_px=0.5,4",
+        "tau_px=0.5,1.5",
         "--frames",
         "6",
         "--warmup",
@@ -334,7 +336,7 @@ fn coarse_pixels_are_those_over_tiles_coarser_than_level_0() {
         (f("share"), f("p999_px"), f("level0_max_px"), s)
     };
     let (fine_share, _, fine_level0, s) = coarse("udlod tau_px=0.5");
-    let (share, p999, level0, s4) = coarse("udlod tau_px=4");
+    let (share, p999, level0, s4) = coarse("udlod tau_px=1.5");
     assert!(
         0.0 < fine_share && fine_share < share && share < 1.0,
         "{s}\n{s4}"
