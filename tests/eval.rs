@@ -336,13 +336,13 @@ fn coarse_pixels_are_those_over_tiles_coarser_than_level_0() {
         (f("share"), f("p999_px"), f("level0_max_px"), s)
     };
     let (fine_share, _, fine_level0, s) = coarse("udlod tau_px=0.5");
-    let (share, p999, level0, s4) = coarse("udlod tau_px=1.5");
+    let (share, p999, level0, s_coarse) = coarse("udlod tau_px=1.5");
     assert!(
         0.0 < fine_share && fine_share < share && share < 1.0,
-        "{s}\n{s4}"
+        "{s}\n{s_coarse}"
     );
-    assert!(p999 > 0.25, "{s4}");
-    assert!(fine_level0 < 0.05 && level0 < 0.05, "{s}\n{s4}");
+    assert!(p999 > 0.25, "{s_coarse}");
+    assert!(fine_level0 < 0.05 && level0 < 0.05, "{s}\n{s_coarse}");
     let frames = std::fs::read_to_string(out.join("frames.csv")).unwrap();
     let header: Vec<&str> = frames.lines().next().unwrap().split(',').collect();
     assert!(header.ends_with(&["coarse_px_p999", "coarse_share", "level0_px_max"]));
