@@ -769,12 +769,7 @@ fn sub_rect_splits(levels: &Levels, p: &SelectionParams, t: Tile, sub: u32) -> b
                 .map(|c| p.field.at(levels, c, t.lod))
                 .into_iter()
                 .fold(f32::INFINITY, f32::min);
-            let lo = p.from_viewer(c0);
-            let hi = p.from_viewer(c1);
-            let dx = lo[0].max(0.0f32.min(hi[0])) * p.stretch[0];
-            let dy = lo[1].max(0.0f32.min(hi[1])) * p.stretch[1];
-            let d = (dx * dx + dy * dy + p.viewer[2] * p.viewer[2]).sqrt();
-            if m * d < d_level {
+            if m * select::rect_distance(p, c0, c1) < d_level {
                 return true;
             }
         }

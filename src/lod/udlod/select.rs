@@ -915,8 +915,16 @@ pub fn stretch_at_viewer(
 /// height, in the LOD metric (grid-frame offsets times [`SelectionParams::stretch`]).
 pub fn tile_distance(levels: &Levels, p: &SelectionParams, t: Tile) -> f32 {
     let span = (levels.grid_size << t.lod) as i32;
-    let lo = p.from_viewer([t.x as i32 * span, t.y as i32 * span]);
-    let hi = p.from_viewer([(t.x as i32 + 1) * span, (t.y as i32 + 1) * span]);
+    let [x, y] = [t.x as i32 * span, t.y as i32 * span];
+    rect_distance(p, [x, y], [x + span, y + span])
+}
+
+/// Distance from the LOD viewer to the nearest point of the grid rectangle from sample `c0`
+/// to sample `c1` at the reference height, in the LOD metric ([`tile_distance`] for any
+/// rectangle).
+pub fn rect_distance(p: &SelectionParams, c0: [i32; 2], c1: [i32; 2]) -> f32 {
+    let lo = p.from_viewer(c0);
+    let hi = p.from_viewer(c1);
     let dx = lo[0].max(0.0f32.min(hi[0])) * p.stretch[0];
     let dy = lo[1].max(0.0f32.min(hi[1])) * p.stretch[1];
     Vec3::new(dx, dy, p.viewer[2]).length()
