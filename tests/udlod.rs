@@ -61,6 +61,15 @@ fn cascade(grid_size: u32) -> UdlodSettings {
     }
 }
 
+/// The morph cascade kept inside each tile (`morph_levels` = `select::cascade_levels`: 2 at
+/// grid 4, the default until issue 18's fifteenth round; the split field's reach term).
+fn bounded_cascade(grid_size: u32) -> UdlodSettings {
+    UdlodSettings {
+        morph_levels: select::cascade_levels(grid_size),
+        ..settings(grid_size)
+    }
+}
+
 /// [`cascade`] with a split field of two nodes per tile side (`field_density = 2`:
 /// docs/udlod.md, "A finer split field").
 fn finer_field(grid_size: u32) -> UdlodSettings {
@@ -70,11 +79,12 @@ fn finer_field(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// One level step, the morph cascade (the default) and the cascade with the finer split
-/// field, each checked by the structural tests.
-fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 3] {
+/// One level step, the cascade kept inside the tile, the morph cascade (the default) and the
+/// cascade with the finer split field, each checked by the structural tests.
+fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 4] {
     [
         ("one level step", one_step(grid_size)),
+        ("bounded cascade", bounded_cascade(grid_size)),
         ("cascade", cascade(grid_size)),
         ("finer field", finer_field(grid_size)),
     ]
@@ -707,7 +717,8 @@ fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
 /// and 8, every vertex
 /// on a tile's edge lands, after morphing, exactly on a vertex of a coarser neighbour's edge,
 /// on all four sides. With one level step (`morph_levels = 1`) neighbours differ by at most one
-/// level. With the cascade they may differ by up to `select::cascade_levels` levels, and the
+/// level; with the bounded cascade by up to `select::cascade_levels` levels; with walks past
+/// the tile by any number. With either cascade the
 /// test requires edges between tiles two or more levels apart, where a morph of one level
 /// step (the cascade cut after its first level) leaves the fine vertices on the grid in
 /// between: a T-junction.
@@ -936,6 +947,14 @@ fn culling_keeps_every_tile_a_brute_force_box_test_keeps_at(grid: u32) {
     }
 }
 
+/// How far (in the tile's quads) a morphed vertex may pass its neighbour along a grid line:
+/// a guard, not a derived bound. The cascade folds slivers where neighbouring factors differ
+/// (a vertex fully slid at its level and carried on by the next level's walk passes its
+/// neighbour that slid part-way): the largest measured is 0.094 quads within the tile
+/// (`morph_levels = 2`, grid 4), 0.175 / 0.198 with walks past the tile and the separation at
+/// grid 4 / 8, 0.26-0.28 at grid 4 without the separation (the control).
+const FOLD_GUARD_QUADS: f32 = 0.22;
+
 /// Walks past the tile (docs/udlod.md, "Walks past the tile"): over 60 poses at tau 1 and 4,
 /// every morphed vertex of every tile lies in the rectangle `select::tile_reach` gives it, and
 /// the tile whose heights bound the box holds that rectangle; enough vertices lie outside
@@ -945,14 +964,6 @@ fn culling_keeps_every_tile_a_brute_force_box_test_keeps_at(grid: u32) {
 /// Negative controls by hand: `tile_reach` without the corners' walks (the tile's own
 /// rectangle) fails the first assertion; the split field without the separation term
 /// (`select::SEPARATION_LEVELS`) fails the guard.
-/// How far (in the tile's quads) a morphed vertex may pass its neighbour along a grid line:
-/// a guard, not a derived bound. The cascade folds slivers where neighbouring factors differ
-/// (a vertex fully slid at its level and carried on by the next level's walk passes its
-/// neighbour that slid part-way): the largest measured is 0.094 quads within the tile
-/// (`morph_levels = 2`, grid 4), 0.175 / 0.198 with walks past the tile and the separation at
-/// grid 4 / 8, 0.26-0.28 at grid 4 without the separation (the control).
-const FOLD_GUARD_QUADS: f32 = 0.22;
-
 #[test]
 fn culling_boxes_hold_every_morphed_vertex() {
     for grid in grids() {
