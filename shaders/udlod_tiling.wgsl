@@ -151,22 +151,55 @@ fn tile_distance(t: Tile) -> f32 {
     return length(vec3<f32>(d, udlod.viewer.z));
 }
 
-// Box (rectangle clamped to the data x the tile's min/max height) against the frustum; on
-// the earth the curved box (mirrors `tile_culled` in src/lod/udlod/select.rs).
-fn tile_culled(t: Tile) -> bool {
+// The rectangle (samples `lo` to `hi`, both included) a tile's morphed vertices can reach:
+// from the lowest point of its corners' walks to its far corner, clamped to the data, and the
+// smallest tile (itself or an ancestor) holding it, whose heights bound it (mirrors
+// `tile_reach` in src/lod/udlod/select.rs, which says why).
+struct TileReach {
+    lo: vec2<i32>,
+    hi: vec2<i32>,
+    heights: Tile,
+}
+
+fn tile_reach(t: Tile) -> TileReach {
     let span = i32(udlod.sizes.x << t.lod);
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
+    let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);
+    var r: TileReach;
+    r.hi = min(c0 + vec2<i32>(span), last);
+    r.lo = c0;
+    for (var k = 0u; k < 4u; k++) {
+        let corner = c0 + vec2<i32>(i32(k & 1u), i32(k >> 1u)) * span;
+        r.lo = min(r.lo, walk_end(corner, t.lod));
+    }
+    r.heights = t;
+    loop {
+        let side = i32(udlod.sizes.x << r.heights.lod);
+        let origin = vec2<i32>(i32(r.heights.x), i32(r.heights.y)) * side;
+        if r.heights.lod >= udlod.sizes.y || all(r.lo >= origin) {
+            break;
+        }
+        r.heights = Tile(r.heights.x / 2u, r.heights.y / 2u, r.heights.lod + 1u, 0u);
+    }
+    return r;
+}
+
+// The box of `tile_reach` (its rectangle x the heights of the tile holding it) against the
+// frustum; on the earth the curved box over it (mirrors `tile_culled` in
+// src/lod/udlod/select.rs).
+fn tile_culled(t: Tile) -> bool {
+    let r = tile_reach(t);
+    let mm = tile_min_max(r.heights);
     if frame.lattice.x != 0u {
         // On the earth: the curved box (`earth_box`, the one every method culls with there).
-        let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);
-        let b = earth_box(c0, min(c0 + vec2<i32>(span), last), tile_min_max(t));
+        let b = earth_box(r.lo, r.hi, mm);
         return box_outside(udlod.frustum, b, cull_slack(t));
     }
-    let lo = relative_xy(vec2<i32>(i32(t.x) * span, i32(t.y) * span));
-    let hi = relative_xy(min(vec2<i32>((i32(t.x) + 1) * span, (i32(t.y) + 1) * span), last));
-    let mm = tile_min_max(t) - vec2<f32>(frame.camera_offset.z);
-    let box_lo = vec3<f32>(lo, mm.x);
-    let box_hi = vec3<f32>(hi, mm.y);
+    let lo = relative_xy(r.lo);
+    let hi = relative_xy(r.hi);
+    let z = mm - vec2<f32>(frame.camera_offset.z);
+    let box_lo = vec3<f32>(lo, z.x);
+    let box_hi = vec3<f32>(hi, z.y);
     let margin = -cull_slack(t);
     for (var i = 0u; i < 6u; i++) {
         let pl = udlod.frustum[i];

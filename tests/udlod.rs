@@ -52,11 +52,20 @@ fn one_step(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// [`settings`] with the morph cascade over every level the tile allows (`morph_levels = 0`,
-/// the default).
+/// [`settings`] with the morph cascade over every level (`morph_levels = 0`, the default:
+/// vertices walk on past their tile, docs/udlod.md, "Walks past the tile").
 fn cascade(grid_size: u32) -> UdlodSettings {
     UdlodSettings {
         morph_levels: 0,
+        ..settings(grid_size)
+    }
+}
+
+/// The morph cascade kept inside each tile (`morph_levels` = `select::cascade_levels`: 2 at
+/// grid 4, the default until issue 18's fifteenth round; the split field's reach term).
+fn bounded_cascade(grid_size: u32) -> UdlodSettings {
+    UdlodSettings {
+        morph_levels: select::cascade_levels(grid_size),
         ..settings(grid_size)
     }
 }
@@ -70,11 +79,12 @@ fn finer_field(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// One level step, the morph cascade (the default) and the cascade with the finer split
-/// field, each checked by the structural tests.
-fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 3] {
+/// One level step, the cascade kept inside the tile, the morph cascade (the default) and the
+/// cascade with the finer split field, each checked by the structural tests.
+fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 4] {
     [
         ("one level step", one_step(grid_size)),
+        ("bounded cascade", bounded_cascade(grid_size)),
         ("cascade", cascade(grid_size)),
         ("finer field", finer_field(grid_size)),
     ]
@@ -707,7 +717,8 @@ fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
 /// and 8, every vertex
 /// on a tile's edge lands, after morphing, exactly on a vertex of a coarser neighbour's edge,
 /// on all four sides. With one level step (`morph_levels = 1`) neighbours differ by at most one
-/// level. With the cascade they may differ by up to `select::cascade_levels` levels, and the
+/// level; with the bounded cascade by up to `select::cascade_levels` levels; with walks past
+/// the tile by any number. With either cascade the
 /// test requires edges between tiles two or more levels apart, where a morph of one level
 /// step (the cascade cut after its first level) leaves the fine vertices on the grid in
 /// between: a T-junction.
@@ -934,6 +945,101 @@ fn culling_keeps_every_tile_a_brute_force_box_test_keeps_at(grid: u32) {
             }
         }
     }
+}
+
+/// How far (in the tile's quads) a morphed vertex may pass its neighbour along a grid line:
+/// a guard, not a derived bound. The cascade folds slivers where neighbouring factors differ
+/// (a vertex fully slid at its level and carried on by the next level's walk passes its
+/// neighbour that slid part-way): the largest measured is 0.094 quads within the tile
+/// (`morph_levels = 2`, grid 4), 0.175 / 0.198 with walks past the tile and the separation at
+/// grid 4 / 8, 0.26-0.28 at grid 4 without the separation (the control).
+const FOLD_GUARD_QUADS: f32 = 0.22;
+
+/// Walks past the tile (docs/udlod.md, "Walks past the tile"): over 60 poses at tau 1 and 4,
+/// every morphed vertex of every tile lies in the rectangle `select::tile_reach` gives it, and
+/// the tile whose heights bound the box holds that rectangle; enough vertices lie outside
+/// their own tile that this means something; and no vertex passes its neighbour along a grid
+/// line by more than [`FOLD_GUARD_QUADS`]. (`culling_keeps_every_tile_a_brute_force_box_test_keeps`
+/// shows the box test itself conservative, and the GPU's selection equals the CPU's.)
+/// Negative controls by hand: `tile_reach` without the corners' walks (the tile's own
+/// rectangle) fails the first assertion; the split field without the separation term
+/// (`select::SEPARATION_LEVELS`) fails the guard.
+#[test]
+fn culling_boxes_hold_every_morphed_vertex() {
+    for grid in grids() {
+        for (name, lod) in [
+            ("cascade", cascade(grid)),
+            ("finer field", finer_field(grid)),
+        ] {
+            culling_boxes_hold_every_morphed_vertex_at(grid, name, lod);
+        }
+    }
+}
+
+fn culling_boxes_hold_every_morphed_vertex_at(grid: u32, name: &str, lod: UdlodSettings) {
+    let data = terrain(257, 30.0);
+    let levels = Levels::for_settings(&data, &lod).unwrap();
+    let (mut vertices, mut outside_own_tile) = (0usize, 0usize);
+    let mut least_step = f32::INFINITY;
+    for tau_px in [1.0, 4.0] {
+        let lod = UdlodSettings {
+            cull: false,
+            tau_px,
+            ..lod.clone()
+        };
+        for cam in poses(&data, 60) {
+            let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
+            for t in select::select_tiles(&levels, &p) {
+                let reach = select::tile_reach(&levels, &p, t);
+                let h = reach.heights;
+                let side = (grid << h.lod) as i32;
+                let held = (0..2).all(|i| {
+                    let origin = [h.x as i32, h.y as i32][i] * side;
+                    origin <= reach.lo[i] && reach.hi[i] <= origin + side
+                });
+                assert!(
+                    held,
+                    "grid {grid} {name} tau {tau_px} {cam:?}: {t:?}'s heights tile {h:?} does not hold {reach:?}"
+                );
+                let span = (grid << t.lod) as f32;
+                let at = |i: u32, j: u32| select::morphed_vertex(&levels, &p, t, [i, j]).grid_pos();
+                for j in 0..=grid {
+                    for i in 0..grid {
+                        // Along a row x, along a column y: never backwards (in the tile's quads).
+                        let (row, column) =
+                            (at(i + 1, j)[0] - at(i, j)[0], at(j, i + 1)[1] - at(j, i)[1]);
+                        least_step = least_step.min(row.min(column) / (1u32 << t.lod) as f32);
+                    }
+                }
+                for j in 0..=grid {
+                    for i in 0..=grid {
+                        let pos = at(i, j);
+                        let inside = (0..2)
+                            .all(|k| reach.lo[k] as f32 <= pos[k] && pos[k] <= reach.hi[k] as f32);
+                        assert!(
+                            inside,
+                            "grid {grid} {name} tau {tau_px} {cam:?}: vertex {i},{j} of {t:?} at {pos:?} outside {reach:?}"
+                        );
+                        vertices += 1;
+                        outside_own_tile +=
+                            (pos[0] < t.x as f32 * span || pos[1] < t.y as f32 * span) as usize;
+                    }
+                }
+            }
+        }
+    }
+    println!(
+        "grid {grid} {name}: {vertices} vertices, {outside_own_tile} outside their own tile, least step between neighbours {least_step} quads"
+    );
+    assert!(
+        least_step >= -FOLD_GUARD_QUADS,
+        "grid {grid} {name}: a vertex passes its neighbour by {} quads (guard {FOLD_GUARD_QUADS})",
+        -least_step
+    );
+    assert!(
+        outside_own_tile > 100,
+        "grid {grid} {name}: too few vertices walked past their tile ({outside_own_tile} of {vertices})"
+    );
 }
 
 /// Renders a terrain that fills the view with a sentinel clear colour and checks that no

@@ -10,7 +10,8 @@
 # Run there from the repository root: `bash scripts/device/udlod_binaries_ab.sh > $OUT/ab.txt`
 # (`PUGET_ONLY=1`: Puget Sound only; `VARIANTS="main new"` picks variants; `new-off` and
 # `new-seed1`, not in the default list, are this build with `collapse = false` and with
-# `seed_tiles = 1`: every level a GPU pass).
+# `seed_tiles = 1`: every level a GPU pass; `new-ml2` this build with the walk kept inside
+# each tile, `morph_levels = 2`, the default until issue 18's fifteenth round).
 set -u
 . .device-vk/env.sh
 . scripts/device/puget_config.sh
@@ -31,6 +32,7 @@ for base in "${bases[@]}"; do
           new-g8) extra="grid_size = 8" ;;
           new-off) extra="collapse = false" ;;
           new-seed1) extra="seed_tiles = 1" ;;
+          new-ml2) extra="morph_levels = 2" ;;
         esac
         [ -x "$bin" ] || continue
         cfg=$(udlod_config "$base" "$extra")

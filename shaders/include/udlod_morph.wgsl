@@ -90,6 +90,25 @@ fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
     return c;
 }
 
+// The last point of grid point `sample`'s walk in `morph_cascade` from level `lod`: the walk
+// up without the positions. Every point of the walk lies between it and `sample` (the walk
+// only moves towards lower coordinates): the prepass's culling box (`tile_reach`). Mirrored by
+// `walk_end` in select.rs.
+fn walk_end(sample: vec2<i32>, lod: u32) -> vec2<i32> {
+    var point = sample;
+    for (var j = lod; j < udlod.sizes.y; j++) {
+        let odd = odd_at(point, j);
+        if all(odd == vec2<i32>(0)) {
+            continue;
+        }
+        if morph_factor(point, j) == 0.0 {
+            break;
+        }
+        point = point - odd * i32(1u << j);
+    }
+    return point;
+}
+
 // How a grid point moved: not at all; fully onto the next level's grid at the tile's own level
 // and no further (the tile's triangles stay the parent grid's, or degenerate); anything else
 // (part-way, or on through further levels: sliver triangles possible).

@@ -13,6 +13,7 @@ use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
 
+use super::settings::MORPH_LEVELS_ALL;
 use super::settings::UdlodSettings;
 use crate::dataset::stats::{FieldStats, TileStats, level_interpolate};
 use crate::dataset::{Heightmap, Level0};
@@ -422,7 +423,8 @@ const CHAIN_MARGIN: f64 = 1e-5;
 ///    [`Self::zone`]) starts beyond `S_G + diagonal(l - q)` for each descendant `G` of level
 ///    `l - q` (`q`: `FieldKey::morph_levels`; the diagonal in the LOD metric,
 ///    [`Levels::tile_diagonal`], `sqrt(2) extent` on square grids): a tile's vertices morph
-///    over at most `q` levels and stay inside it;
+///    over at most `q` levels and stay inside it; with walks past the tile (the default) the
+///    separation instead, beyond `S_G` of level `l - 2`: no fold ([`cell_requirement`]);
 /// 4. with the morph cascade, a gentle morph: a corner's distance is at least its neighbour's
 ///    over `FIELD_STEP_RATIO` (`gentle_morph`).
 ///
@@ -631,7 +633,13 @@ impl SplitField {
 ///   children never morph at level `l - 1`: a level-`a` tile's vertices move at levels `a` to
 ///   `a + q - 1` only, which keeps them inside the tile (its culling box stays true), and
 ///   neighbours differ by at most `q` levels. With `q = 1` this is the CDLOD-style chain
-///   UDLOD had before the cascade (`(1 - r) s_Q >= S_P + diagonal(l - 1)` over the children).
+///   UDLOD had before the cascade (`(1 - r) s_Q >= S_P + diagonal(l - 1)` over the children);
+/// - or, with walks past the tile (`morph_levels = 0`, [`MORPH_LEVELS_ALL`]), separation: this
+///   tile's morph zone starts beyond `S_G` of every descendant `G` of level `l - 2`
+///   ([`SEPARATION_LEVELS`]), no diagonal: wherever level `l - 1` morphs, level `l - 3` has
+///   morphed fully, so at most two successive levels morph at a point and no walk folds
+///   (`docs/udlod.md`, "Walks past the tile"). Vertices then leave their tile; culling boxes
+///   grow with them ([`tile_reach`]).
 fn cell_requirement(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> f64 {
     let (key, zone) = (&field.key, &field.zone);
     let screen =
@@ -641,12 +649,19 @@ fn cell_requirement(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]
     let start = zone_start(levels, key, [cx, cy, lod], screen);
     let screen = screen.max(start + zone[lod as usize] as f64);
     let nesting = field.largest_below(levels, [cx, cy, lod], lod - 1);
-    let reach = match lod.checked_sub(key.morph_levels) {
+    // The reach over `q` levels, or with walks past the tile the separation over two.
+    let (back, diagonal) = match key.morph_levels {
+        MORPH_LEVELS_ALL => (SEPARATION_LEVELS, false),
+        q => (q, true),
+    };
+    let reach = match lod.checked_sub(back) {
         Some(level) if level >= 1 => {
             // Where the zone is `max(W, r s)`: `s - max(W, r s) >= beyond`. The tiles of
-            // level `lod - q` under a field cell are its cells of that level, whole.
-            let beyond =
-                field.largest_below(levels, [cx, cy, lod], level) + levels.tile_diagonal(level);
+            // level `lod - back` under a field cell are its cells of that level, whole.
+            let mut beyond = field.largest_below(levels, [cx, cy, lod], level);
+            if diagonal {
+                beyond += levels.tile_diagonal(level);
+            }
             (beyond / (1.0 - key.morph_range)).max(beyond + zone[lod as usize] as f64)
         }
         _ => 0.0,
@@ -678,6 +693,14 @@ fn zone_start(levels: &Levels, key: &FieldKey, [cx, cy, lod]: [u32; 3], screen: 
     let one_step = (1.0 - key.morph_range) * screen;
     one_step.min(key.share * children * key.focal_px / key.tau_px)
 }
+
+/// Levels below a tile whose split distances its morph zone starts beyond, with walks past
+/// the tile ([`cell_requirement`]'s separation). A vertex odd at level `i` next to a corner
+/// sliding at level `i + 2` stays on its side of it only if `1 + f_i + 2 f_i f_(i+1) >=
+/// 4 f_(i+2)`: with equal split distances at the three levels and zones doubling per level
+/// that fails everywhere in the zone (a fold); with level `i` fully morphed wherever `i + 2`
+/// moves it reduces to `f_(i+1) >= 2 f_(i+2) - 1`, which zones doubling per level give.
+const SEPARATION_LEVELS: u32 = 2;
 
 /// Growth of the split distance allowed from one field corner to the next (8-neighbourhood):
 /// see [`gentle_morph`]. 2; with 1.5 (until issue 18's fifth round) the cascade drew 0-7 %
@@ -938,25 +961,24 @@ pub fn tile_splits(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
     t.lod > 0 && field_min * tile_distance(levels, p, t) < p.field.split[t.lod as usize]
 }
 
-/// Is the tile's box (rectangle clamped to the data x min/max height) outside the frustum?
-/// On the earth the curved box ([`EarthCull::outside`], in f64: it decides as the GPU's f32
-/// `earth_box` except within the GPU's rounding of the boundary; tests/udlod.rs brackets it).
+/// Is the tile's box outside the frustum? The box is the rectangle its morphed vertices can
+/// reach ([`tile_reach`]), clamped to the data, by the heights of the tile that holds it; on
+/// the earth the curved box over it ([`EarthCull::outside`], in f64: it decides as the GPU's
+/// f32 `earth_box` except within the GPU's rounding of the boundary; tests/udlod.rs
+/// brackets it). `tile_culled` in `shaders/udlod_tiling.wgsl`.
 pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
     let span = (levels.grid_size << t.lod) as i32;
-    let (w, h) = (levels.width as i32 - 1, levels.height as i32 - 1);
-    let c0 = [t.x as i32 * span, t.y as i32 * span];
-    let c1 = [
-        ((t.x as i32 + 1) * span).min(w),
-        ((t.y as i32 + 1) * span).min(h),
-    ];
-    // A margin of 1e-3 of the box size keeps rounding from culling a touching box.
+    let reach = tile_reach(levels, p, t);
+    let (c0, c1) = (reach.lo, reach.hi);
+    let heights = levels.tile_min_max(reach.heights);
+    // A margin of 1e-3 of the tile's size keeps rounding from culling a touching box.
     let margin = 1e-3 * (span as f32 * p.spacing);
     if let Some(earth) = &p.earth {
-        return earth.outside(&p.frustum, c0, c1, levels.tile_min_max(t), margin as f64);
+        return earth.outside(&p.frustum, c0, c1, heights, margin as f64);
     }
     let lo = p.relative(c0);
     let hi = p.relative(c1);
-    let [zmin, zmax] = levels.tile_min_max(t);
+    let [zmin, zmax] = heights;
     let (zlo, zhi) = (zmin - p.camera_z, zmax - p.camera_z);
     p.frustum.iter().any(|pl| {
         let x = if pl[0] >= 0.0 { hi[0] } else { lo[0] };
@@ -964,6 +986,67 @@ pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
         let z = if pl[2] >= 0.0 { zhi } else { zlo };
         pl[0] * x + pl[1] * y + pl[2] * z + pl[3] < -margin
     })
+}
+
+/// Where a tile's morphed vertices can lie ([`tile_reach`]): the rectangle of samples from `lo`
+/// to `hi` (both included), and the tile whose statistics bound the heights there.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TileReach {
+    pub lo: [i32; 2],
+    pub hi: [i32; 2],
+    pub heights: Tile,
+}
+
+/// The rectangle a tile's morphed vertices can reach. A vertex's walk
+/// ([`morph_cascade`]) only moves towards lower coordinates, and where it stays within the
+/// tile's first `cascade_levels` levels it ends inside the tile; past them the point it has
+/// reached is one of the tile's corners, whose own walk it then follows. So every vertex
+/// (each a blend of its walk's points) lies between the lowest point of the corners' walks
+/// ([`walk_end`]) and the tile's far corner. With a bounded walk (`morph_levels` at most
+/// `cascade_levels`, the reach term of the split field) the corners never move and this is
+/// the tile itself. The heights: those of the smallest tile, the tile or an ancestor, that
+/// holds the rectangle (its samples bound every height sampled there). `tile_reach` in
+/// `shaders/udlod_tiling.wgsl`.
+pub fn tile_reach(levels: &Levels, p: &SelectionParams, t: Tile) -> TileReach {
+    let span = (levels.grid_size << t.lod) as i32;
+    let (w, h) = (levels.width as i32 - 1, levels.height as i32 - 1);
+    let c0 = [t.x as i32 * span, t.y as i32 * span];
+    let hi = [(c0[0] + span).min(w), (c0[1] + span).min(h)];
+    let lo = QUAD.iter().fold(c0, |lo, &(i, j)| {
+        let corner = [c0[0] + i as i32 * span, c0[1] + j as i32 * span];
+        let end = walk_end(levels, p, corner, t.lod);
+        [lo[0].min(end[0]), lo[1].min(end[1])]
+    });
+    let mut heights = t;
+    while heights.lod < levels.root_lod && {
+        let side = (levels.grid_size << heights.lod) as i32;
+        lo[0] < heights.x as i32 * side || lo[1] < heights.y as i32 * side
+    } {
+        heights = Tile {
+            x: heights.x / 2,
+            y: heights.y / 2,
+            lod: heights.lod + 1,
+        };
+    }
+    TileReach { lo, hi, heights }
+}
+
+/// The last point of grid point `sample`'s morph walk from level `lod`: [`morph_cascade`]'s
+/// walk up, without the positions. Every point of the walk lies between it and `sample`.
+/// `walk_end` in `shaders/include/udlod_morph.wgsl`.
+pub fn walk_end(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> [i32; 2] {
+    let mut point = sample;
+    for j in lod..levels.root_lod {
+        let odd = point.map(|v| ((v as u32 >> j) & 1) as i32);
+        if odd == [0, 0] {
+            continue;
+        }
+        if morph_factor(levels, p, point, j) == 0.0 {
+            break;
+        }
+        point = [point[0] - odd[0] * (1 << j), point[1] - odd[1] * (1 << j)];
+    }
+    point
 }
 
 /// The reference selection: the same decisions as the GPU's refine passes, without capacity

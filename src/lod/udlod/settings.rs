@@ -3,8 +3,11 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::gpu_constants::UDLOD_SEED_TILES;
+use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_SEED_TILES};
 use crate::lod::sweep::Sweep;
+
+/// `UdlodSettings::morph_levels()` for `morph_levels = 0`: every level a vertex can walk.
+pub const MORPH_LEVELS_ALL: u32 = UDLOD_MAX_LEVELS;
 
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
@@ -16,11 +19,13 @@ pub struct UdlodSettings {
     pub tau_px: f64,
     /// Fraction of each level's range over which vertices morph (0.05..=0.45).
     pub morph_range: f64,
-    /// Levels over which a tile's vertices may morph (`docs/udlod.md`, "The morph cascade"):
-    /// 0 (the default) as many as keep them inside the tile, the power of two in `grid_size`
-    /// (grid 4: 2, grid 8: 3), the morph cascade: up to 2x fewer triangles where the
-    /// crack-free chain set the distances; 1 one level step, the CDLOD-style chain, where
-    /// neighbours differ by at most one level.
+    /// Levels over which a tile's vertices may morph (`docs/udlod.md`, "The morph cascade" and
+    /// "Walks past the tile"): 0 (the default) every level, the morph cascade with vertices
+    /// walking on past their tile (culling boxes grow to the corners' walks,
+    /// `select::tile_reach`); `2..=select::cascade_levels` (grid 4: 2, grid 8: 3) at most that
+    /// many, which keeps them inside their tile (the largest was the default until issue 18's
+    /// fifteenth round); 1 one level step, the CDLOD-style chain, where neighbours differ by
+    /// at most one level.
     pub morph_levels: u32,
     /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 1 (the
     /// default) at the tiles' corners; 2 also at their edges' midpoints and centres, each cell
@@ -193,11 +198,11 @@ impl UdlodSettings {
         },
     ];
 
-    /// Levels over which a tile's vertices morph: `morph_levels`, or with 0 all that keep them
-    /// inside the tile (`select::cascade_levels`).
+    /// Levels over which a tile's vertices morph: `morph_levels`, or with 0 every level
+    /// ([`MORPH_LEVELS_ALL`]: no bound, the split field keeps no reach term).
     pub fn morph_levels(&self) -> u32 {
         match self.morph_levels {
-            0 => super::select::cascade_levels(self.grid_size),
+            0 => MORPH_LEVELS_ALL,
             n => n,
         }
     }
@@ -234,7 +239,7 @@ impl UdlodSettings {
         let most = super::select::cascade_levels(self.grid_size);
         if self.morph_levels > most {
             return bad(format!(
-                "morph_levels {} must be 0 (all) or within 1..={most} at grid_size {} (more would move vertices out of their tile)",
+                "morph_levels {} must be 0 (every level) or within 1..={most} at grid_size {} (the most that keep vertices in their tile)",
                 self.morph_levels, self.grid_size
             ));
         }
