@@ -99,19 +99,26 @@ fn main() -> anyhow::Result<()> {
         };
         println!("\n== tau {tau} px (focal {focal:.1} px)");
         let field = SplitField::new(&levels, FieldKey::new(&s, focal));
+        // Which term sets each field cell's split distance (every cell of the level, not only
+        // those in view), and the corners the gentle morph or the cap raised past them.
+        let terms = select::field_terms(&levels, &field);
         // Level 0's field is all ones and not stored.
-        for l in 1..=levels.root_lod as usize {
+        for (l, t) in terms.iter().enumerate().skip(1) {
             let screen = levels.level_error[l] * focal / tau;
             let (nx, ny) = levels.field_cells_per_side(l as u32);
             let off = field.corner_offsets[l] as usize;
             let m = &field.corners[off..off + ((nx + 1) * (ny + 1)) as usize];
             println!(
-                "  level {l}: e {:8.3} m  D {:9.1}  screen {:9.1}  extent {:8.1}  field max {:.1}",
+                "  level {l}: e {:8.3} m  D {:9.1}  screen {:9.1}  extent {:8.1}  field max {:.1}  \
+                 cells set by pixel/zone/nesting/separation {}  corners raised {} of {}",
                 levels.level_error[l],
                 field.split[l],
                 screen,
                 levels.tile_extent(l as u32),
                 m.iter().copied().fold(1.0, f32::max),
+                t.cells.map(|n| n.to_string()).join("/"),
+                t.corners_raised,
+                t.corners,
             );
         }
         let (mut tiles_n, mut tris_o, mut slack) = (0usize, 0u64, Vec::new());

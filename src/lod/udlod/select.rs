@@ -640,21 +640,55 @@ impl SplitField {
 ///   morphed fully, so at most two successive levels morph at a point and no walk folds
 ///   (`docs/udlod.md`, "Walks past the tile"). Vertices then leave their tile; culling boxes
 ///   grow with them ([`tile_reach`]).
-fn cell_requirement(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> f64 {
+fn cell_requirement(levels: &Levels, field: &SplitField, cell: [u32; 3]) -> f64 {
+    cell_terms(levels, field, cell).requirement()
+}
+
+/// The terms of [`cell_requirement`], each a split distance in metres.
+#[derive(Clone, Copy, Debug)]
+struct CellTerms {
+    /// The cell's own error at the pixel target.
+    pixel: f64,
+    /// Where its morph zone `W` wide may start ([`zone_start`]) plus `W`.
+    zone: f64,
+    nesting: f64,
+    /// The reach over `q` levels, or with walks past the tile the separation over two.
+    separation: f64,
+}
+
+impl CellTerms {
+    fn requirement(&self) -> f64 {
+        let chain = self.nesting.max(self.separation) * (1.0 + CHAIN_MARGIN);
+        self.pixel.max(self.zone).max(chain)
+    }
+
+    /// The term that sets the requirement (ties go to the earlier of pixel, zone, nesting).
+    fn setting(&self) -> FieldTerm {
+        let r = self.requirement();
+        if r == self.pixel {
+            FieldTerm::Pixel
+        } else if r == self.zone {
+            FieldTerm::Zone
+        } else if self.nesting >= self.separation {
+            FieldTerm::Nesting
+        } else {
+            FieldTerm::Separation
+        }
+    }
+}
+
+fn cell_terms(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> CellTerms {
     let (key, zone) = (&field.key, &field.zone);
-    let screen =
-        key.share * levels.field_cell_error(lod, cx, cy) as f64 * key.focal_px / key.tau_px;
+    let pixel = key.share * levels.field_cell_error(lod, cx, cy) as f64 * key.focal_px / key.tau_px;
     // This tile's geometry shows, blended, from the start of its morph zone on; where the zone
     // is `W` wide it starts no nearer than what the children's own geometry allows.
-    let start = zone_start(levels, key, [cx, cy, lod], screen);
-    let screen = screen.max(start + zone[lod as usize] as f64);
+    let start = zone_start(levels, key, [cx, cy, lod], pixel);
     let nesting = field.largest_below(levels, [cx, cy, lod], lod - 1);
-    // The reach over `q` levels, or with walks past the tile the separation over two.
     let (back, diagonal) = match key.morph_levels {
         MORPH_LEVELS_ALL => (SEPARATION_LEVELS, false),
         q => (q, true),
     };
-    let reach = match lod.checked_sub(back) {
+    let separation = match lod.checked_sub(back) {
         Some(level) if level >= 1 => {
             // Where the zone is `max(W, r s)`: `s - max(W, r s) >= beyond`. The tiles of
             // level `lod - back` under a field cell are its cells of that level, whole.
@@ -666,7 +700,75 @@ fn cell_requirement(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]
         }
         _ => 0.0,
     };
-    screen.max(nesting.max(reach) * (1.0 + CHAIN_MARGIN))
+    CellTerms {
+        pixel,
+        zone: start + zone[lod as usize] as f64,
+        nesting,
+        separation,
+    }
+}
+
+/// A term of the split field's requirement per cell (`cell_requirement`): the pixel target,
+/// the morph zone's width past its start, nesting, and the reach or separation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldTerm {
+    Pixel,
+    Zone,
+    Nesting,
+    Separation,
+}
+
+impl FieldTerm {
+    pub const ALL: [FieldTerm; 4] = [Self::Pixel, Self::Zone, Self::Nesting, Self::Separation];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Pixel => "pixel",
+            Self::Zone => "zone W",
+            Self::Nesting => "nesting",
+            Self::Separation => "reach/separation",
+        }
+    }
+}
+
+/// Per level of `field` (index = level, 0 empty): how many field cells each [`FieldTerm`]
+/// sets (indexed as [`FieldTerm::ALL`]), and how many of the level's corners the gentle
+/// morph or the field's cap raised above every adjacent cell's requirement. Where the
+/// triangles go at large tau (`examples/udlod_budget.rs`; `docs/udlod.md`, "What sets the
+/// field").
+pub fn field_terms(levels: &Levels, field: &SplitField) -> Vec<FieldTermCounts> {
+    let mut out = vec![FieldTermCounts::default(); levels.root_lod as usize + 1];
+    for lod in 1..=levels.root_lod {
+        let (nx, ny) = levels.field_cells_per_side(lod);
+        let cw = nx as usize + 1;
+        let mut corner_need = vec![0.0f64; cw * (ny as usize + 1)];
+        let counts = &mut out[lod as usize];
+        for (cx, cy) in (0..ny).flat_map(|y| (0..nx).map(move |x| (x, y))) {
+            let terms = cell_terms(levels, field, [cx, cy, lod]);
+            let i = FieldTerm::ALL.iter().position(|&t| t == terms.setting());
+            counts.cells[i.unwrap_or(0)] += 1;
+            for (i, j) in QUAD {
+                let c = &mut corner_need[(cy + j) as usize * cw + (cx + i) as usize];
+                *c = c.max(terms.requirement());
+            }
+        }
+        for (k, need) in corner_need.iter().enumerate() {
+            let (i, j) = ((k % cw) as u32, (k / cw) as u32);
+            let s = field.split[lod as usize] as f64 / field.corner(levels, lod, i, j) as f64;
+            counts.corners += 1;
+            // f32 storage and the division: a relative 1e-5 is rounding, not a raise.
+            counts.corners_raised += (s > *need * (1.0 + 1e-5) + 1e-6) as u32;
+        }
+    }
+    out
+}
+
+/// One level's line of [`field_terms`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FieldTermCounts {
+    pub cells: [u32; 4],
+    pub corners: u32,
+    pub corners_raised: u32,
 }
 
 /// The nearest distance at which a morph zone `W` wide of field cell `[cx, cy, lod]` may
@@ -1344,7 +1446,7 @@ pub fn morphed_vertex(
 
 #[cfg(test)]
 mod tests {
-    use super::{FieldKey, Levels, QUAD, SplitField, UdlodSettings, worst_case_share};
+    use super::{FieldKey, Levels, QUAD, SplitField, UdlodSettings, field_terms, worst_case_share};
     use crate::dataset::procedural::{self, ProceduralParams};
 
     /// Every field cell's morph zone (the last `max(W, r s)` of its split distance `s`) starts
@@ -1411,6 +1513,56 @@ mod tests {
                     "density {density}, tau {tau_px}: no zone starts nearer than one level step's"
                 );
             }
+        }
+    }
+
+    /// `field_terms` names the term that sets each field cell: at a pixel target so fine that
+    /// the pixel term dwarfs every zone the cells' own errors set most of them (the rest:
+    /// nesting, where a child is rougher than its parent), zone and separation none; at one so
+    /// coarse that it asks for nothing the zone `W` sets levels 1-2 and the separation every
+    /// level above (over flat needs `s_l = s_(l-2) + W_l` beats nesting's `s_(l-1)`). Negative
+    /// control by hand: `CellTerms::setting` without its zone branch fails the second part
+    /// (level 1's 1,024 cells put on nesting).
+    #[test]
+    fn field_terms_name_what_sets_each_cell() {
+        let data = procedural::generate(&ProceduralParams {
+            size: 257,
+            spacing: 60.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let settings = UdlodSettings::default();
+        let levels = Levels::for_settings(&data, &settings).unwrap();
+        let counts = |tau_px: f64| {
+            let key = FieldKey::new(
+                &UdlodSettings {
+                    tau_px,
+                    ..settings.clone()
+                },
+                311.8,
+            );
+            field_terms(&levels, &SplitField::new(&levels, key))
+        };
+        let [pixel, zone, _, separation] = [0, 1, 2, 3];
+        for (lod, c) in counts(1e-3).iter().enumerate().skip(1) {
+            let cells: u32 = c.cells.iter().sum();
+            let (nx, ny) = levels.field_cells_per_side(lod as u32);
+            assert_eq!(cells, nx * ny, "level {lod}: every cell counted once");
+            assert!(
+                c.cells[pixel] * 2 >= cells && c.cells[zone] + c.cells[separation] == 0,
+                "tau 1e-3, level {lod}: cells set by pixel/zone/nesting/separation {:?}",
+                c.cells
+            );
+            assert!(c.corners_raised <= c.corners);
+        }
+        for (lod, c) in counts(1e4).iter().enumerate().skip(1) {
+            let cells: u32 = c.cells.iter().sum();
+            let expected = if lod <= 2 { zone } else { separation };
+            assert_eq!(
+                c.cells[expected], cells,
+                "tau 1e4, level {lod}: cells set by pixel/zone/nesting/separation {:?}",
+                c.cells
+            );
         }
     }
 
