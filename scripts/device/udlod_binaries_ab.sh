@@ -11,7 +11,8 @@
 # (`PUGET_ONLY=1`: Puget Sound only; `VARIANTS="main new"` picks variants; `new-off` and
 # `new-seed1`, not in the default list, are this build with `collapse = false` and with
 # `seed_tiles = 1`: every level a GPU pass; `new-ml2` this build with the walk kept inside
-# each tile, `morph_levels = 2`, the default until issue 18's fifteenth round).
+# each tile, `morph_levels = 2`, the default until issue 18's fifteenth round; `new-g2` this
+# build at grid 2).
 set -u
 . .device-vk/env.sh
 . scripts/device/puget_config.sh
@@ -30,6 +31,7 @@ for base in "${bases[@]}"; do
           main-g16) bin=.device-vk/vkterrain-main; extra="grid_size = 16" ;;
           new-g16) extra="grid_size = 16" ;;
           new-g8) extra="grid_size = 8" ;;
+          new-g2) extra="grid_size = 2" ;;
           new-off) extra="collapse = false" ;;
           new-seed1) extra="seed_tiles = 1" ;;
           new-ml2) extra="morph_levels = 2" ;;
