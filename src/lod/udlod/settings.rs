@@ -13,7 +13,10 @@ pub const MORPH_LEVELS_ALL: u32 = UDLOD_MAX_LEVELS;
 #[serde(default, deny_unknown_fields)]
 pub struct UdlodSettings {
     /// Quads per tile side: a power of two, 2..=64 (the collapse masks' quadrants, the morph
-    /// cascade's levels and the split field's cells divide it by powers of two).
+    /// cascade's levels and the split field's cells divide it by powers of two). The crack,
+    /// fold and popping tests cover grids 4 (the default) and 8; grid 2 draws fewer triangles
+    /// but pops past the popping test's guard with the default morph (`docs/udlod.md`, "What
+    /// sets the field; grid 2 with walks past the tile").
     pub grid_size: u32,
     /// Screen-space geometric error target in pixels.
     pub tau_px: f64,
