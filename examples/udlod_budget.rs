@@ -11,7 +11,9 @@ use std::path::PathBuf;
 
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::eval::oracle::Oracle;
-use vkterrain::lod::udlod::select::{self, FieldKey, Levels, SelectionParams, SplitField, Tile};
+use vkterrain::lod::udlod::select::{
+    self, FieldKey, FieldTerm, Levels, SelectionParams, SplitField, Tile,
+};
 use vkterrain::lod::udlod::{grid, seed};
 use vkterrain::lod::{MethodConfig, UdlodSettings};
 
@@ -110,12 +112,13 @@ fn main() -> anyhow::Result<()> {
             let m = &field.corners[off..off + ((nx + 1) * (ny + 1)) as usize];
             println!(
                 "  level {l}: e {:8.3} m  D {:9.1}  screen {:9.1}  extent {:8.1}  field max {:.1}  \
-                 cells set by pixel/zone/nesting/separation {}  corners raised {} of {}",
+                 cells set by {} {}  corners raised {} of {}",
                 levels.level_error[l],
                 field.split[l],
                 screen,
                 levels.tile_extent(l as u32),
                 m.iter().copied().fold(1.0, f32::max),
+                FieldTerm::ALL.map(|f| f.name()).join("/"),
                 t.cells.map(|n| n.to_string()).join("/"),
                 t.corners_raised,
                 t.corners,

@@ -709,7 +709,8 @@ fn cell_terms(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> C
 }
 
 /// A term of the split field's requirement per cell (`cell_requirement`): the pixel target,
-/// the morph zone's width past its start, nesting, and the reach or separation.
+/// the morph zone's width past its start, nesting, and the reach (bounded walks) or separation.
+/// Its discriminant indexes [`FieldTermCounts::cells`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FieldTerm {
     Pixel,
@@ -724,9 +725,9 @@ impl FieldTerm {
     pub fn name(self) -> &'static str {
         match self {
             Self::Pixel => "pixel",
-            Self::Zone => "zone W",
+            Self::Zone => "zone",
             Self::Nesting => "nesting",
-            Self::Separation => "reach/separation",
+            Self::Separation => "separation",
         }
     }
 }
@@ -745,8 +746,7 @@ pub fn field_terms(levels: &Levels, field: &SplitField) -> Vec<FieldTermCounts> 
         let counts = &mut out[lod as usize];
         for (cx, cy) in (0..ny).flat_map(|y| (0..nx).map(move |x| (x, y))) {
             let terms = cell_terms(levels, field, [cx, cy, lod]);
-            let i = FieldTerm::ALL.iter().position(|&t| t == terms.setting());
-            counts.cells[i.unwrap_or(0)] += 1;
+            counts.cells[terms.setting() as usize] += 1;
             for (i, j) in QUAD {
                 let c = &mut corner_need[(cy + j) as usize * cw + (cx + i) as usize];
                 *c = c.max(terms.requirement());
