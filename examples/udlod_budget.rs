@@ -6,13 +6,15 @@
 //!
 //!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
 //!     [--grid 4] [--morph-levels 0] [--field-density 2] [--width 640 --height 360]
+//!     [--zone-rule width|error-scaled|free]   (how the field charges the morph zone's width:
+//!     `select::ZoneRule`; anything but `width` is a what-if the renderer does not draw)
 
 use std::path::PathBuf;
 
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::eval::oracle::Oracle;
 use vkterrain::lod::udlod::select::{
-    self, FieldKey, FieldTerm, Levels, SelectionParams, SplitField, Tile,
+    self, FieldKey, FieldTerm, Levels, SelectionParams, SplitField, Tile, ZoneRule,
 };
 use vkterrain::lod::udlod::{grid, seed};
 use vkterrain::lod::{MethodConfig, UdlodSettings};
@@ -26,6 +28,7 @@ fn main() -> anyhow::Result<()> {
     let mut grid = None;
     let mut morph_levels = None;
     let mut field_density = None;
+    let mut zone_rule = ZoneRule::Width;
     let (mut width, mut height) = (None, None);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -34,6 +37,17 @@ fn main() -> anyhow::Result<()> {
             "--grid" => grid = Some(args.next().unwrap().parse()?),
             "--morph-levels" => morph_levels = Some(args.next().unwrap().parse()?),
             "--field-density" => field_density = Some(args.next().unwrap().parse()?),
+            "--zone-rule" => {
+                zone_rule = match args.next().as_deref() {
+                    Some("width") => ZoneRule::Width,
+                    Some("error-scaled") => ZoneRule::ErrorScaled,
+                    Some("free") => ZoneRule::Free,
+                    r => anyhow::bail!(
+                        "--zone-rule {}: width, error-scaled or free",
+                        r.unwrap_or("(missing)")
+                    ),
+                }
+            }
             "--frames" => frames = args.next().unwrap().parse()?,
             "--width" => width = Some(args.next().unwrap().parse()?),
             "--height" => height = Some(args.next().unwrap().parse()?),
@@ -100,7 +114,25 @@ fn main() -> anyhow::Result<()> {
             ..settings.clone()
         };
         println!("\n== tau {tau} px (focal {focal:.1} px)");
-        let field = SplitField::new(&levels, FieldKey::new(&s, focal));
+        let key = FieldKey {
+            zone_rule,
+            ..FieldKey::new(&s, focal)
+        };
+        let field = std::sync::Arc::new(SplitField::new(&levels, key));
+        // Every selection below reads this field (with `--zone-rule` a what-if one).
+        let params = |cam: &vkterrain::scene::Camera| {
+            let z_ref = data.height_at(cam.position.x, cam.position.y);
+            SelectionParams::with_reference(
+                &levels,
+                field.clone(),
+                z_ref,
+                &s,
+                cam,
+                cam.position,
+                w,
+                h,
+            )
+        };
         // Which term sets each field cell's split distance (every cell of the level, not only
         // those in view), and the corners the gentle morph or the cap raised past them.
         let terms = select::field_terms(&levels, &field);
@@ -142,7 +174,7 @@ fn main() -> anyhow::Result<()> {
         let mut seeds = Vec::new();
         for &k in &picks {
             let cam = p.scenario.camera(k);
-            let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+            let sp = params(&cam);
             seeds.push(timed_seed(&levels, &sp, s.seed_tiles));
             let tiles = select::select_tiles(&levels, &sp);
             tiles_n += tiles.len();
@@ -263,7 +295,7 @@ fn main() -> anyhow::Result<()> {
             let mut n = 0usize;
             for &k in &picks {
                 let cam = p.scenario.camera(k);
-                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                let sp = params(&cam);
                 n += select_cf(&levels, &sp, &cam, &f, *cf).len();
             }
             print_cf(name, n, g2, tris_o);
@@ -283,7 +315,7 @@ fn main() -> anyhow::Result<()> {
             let mut n = 0usize;
             for &k in &picks {
                 let cam = p.scenario.camera(k);
-                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                let sp = params(&cam);
                 n += select_generic(&levels, &sp, |t| {
                     let l = t.lod as usize;
                     let g = levels.grid_size / ns;
@@ -312,7 +344,7 @@ fn main() -> anyhow::Result<()> {
             let mut n = 0usize;
             for &k in &picks {
                 let cam = p.scenario.camera(k);
-                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                let sp = params(&cam);
                 n += select_generic(&levels, &sp, |t| {
                     let need = kk * levels.tile_error(t) as f64 * focal / tau;
                     let d = if boxd {
@@ -330,7 +362,7 @@ fn main() -> anyhow::Result<()> {
             let mut n = 0usize;
             for &k in &picks {
                 let cam = p.scenario.camera(k);
-                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                let sp = params(&cam);
                 n += select_generic(&levels, &sp, |t| {
                     tile_exact_splits(&levels, &data, &cam, focal, tau, t)
                 })
@@ -347,7 +379,7 @@ fn main() -> anyhow::Result<()> {
             let (mut n, mut tris) = (0usize, 0u64);
             for &k in &picks {
                 let cam = p.scenario.camera(k);
-                let sp = SelectionParams::new(&levels, &data, &s, &cam, cam.position, w, h);
+                let sp = params(&cam);
                 let tiles = select_generic(&levels, &sp, |t| sub_rect_splits(&levels, &sp, t, sub));
                 n += tiles.len();
                 for t in &tiles {

@@ -1002,6 +1002,7 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
             morph_levels: 2,
             field_max,
             share: vkterrain::lod::udlod::select::worst_case_share(grid),
+            zone_rule: Default::default(),
         };
         let (fa, fb) = (SplitField::new(&a, key), SplitField::new(&b, key));
         assert_eq!(bits(&fa.corners), bits(&fb.corners), "split field");

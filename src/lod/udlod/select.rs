@@ -350,6 +350,25 @@ pub struct FieldKey {
     /// The share of a tile's worst-case projected error spent on `tau`
     /// ([`worst_case_share`] unless the settings override it).
     pub share: f64,
+    /// How each cell is charged its morph zone's width: [`ZoneRule::Width`] for the morph the
+    /// renderer draws; the others only for counting.
+    pub zone_rule: ZoneRule,
+}
+
+/// How the split field charges each cell for its morph zone's width `W` ([`zone_widths`]).
+/// The renderer's morph assumes [`ZoneRule::Width`]; the others are what-ifs that
+/// `examples/udlod_budget.rs` counts (`--zone-rule`; `docs/udlod.md`, "What sets the field"):
+/// fields built with them are not sound for the morph drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ZoneRule {
+    /// The zone is `max(W, r s)` wide and charged in full (the renderer's).
+    #[default]
+    Width,
+    /// As if the zone were `W min(1, E / s)` wide, `E` the larger of the cell's and its
+    /// children's pixel terms: a zone that narrows with the error.
+    ErrorScaled,
+    /// As if the zone cost nothing: what `W` costs at most.
+    Free,
 }
 
 impl FieldKey {
@@ -361,6 +380,7 @@ impl FieldKey {
             morph_levels: settings.morph_levels(),
             field_max: settings.error_field_max,
             share: settings.worst_case_share(),
+            zone_rule: ZoneRule::Width,
         }
     }
 }
@@ -683,6 +703,17 @@ fn cell_terms(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> C
     // This tile's geometry shows, blended, from the start of its morph zone on; where the zone
     // is `W` wide it starts no nearer than what the children's own geometry allows.
     let start = zone_start(levels, key, [cx, cy, lod], pixel);
+    // The least `s` whose zone starts at or beyond `b`: `s - width >= b`.
+    let w = zone[lod as usize] as f64;
+    let past = |b: f64| match key.zone_rule {
+        ZoneRule::Width => b + w,
+        ZoneRule::ErrorScaled => {
+            // `s - W E / s >= b` where `E < s`: `s^2 - b s - W E >= 0`.
+            let e = pixel.max(children_pixel(levels, key, [cx, cy, lod]));
+            (b + w).min((b + (b * b + 4.0 * w * e).sqrt()) / 2.0)
+        }
+        ZoneRule::Free => b,
+    };
     let nesting = field.largest_below(levels, [cx, cy, lod], lod - 1);
     let (back, diagonal) = match key.morph_levels {
         MORPH_LEVELS_ALL => (SEPARATION_LEVELS, false),
@@ -696,13 +727,13 @@ fn cell_terms(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> C
             if diagonal {
                 beyond += levels.tile_diagonal(level);
             }
-            (beyond / (1.0 - key.morph_range)).max(beyond + zone[lod as usize] as f64)
+            (beyond / (1.0 - key.morph_range)).max(past(beyond))
         }
         _ => 0.0,
     };
     CellTerms {
         pixel,
-        zone: start + zone[lod as usize] as f64,
+        zone: past(start),
         nesting,
         separation,
     }
@@ -785,6 +816,16 @@ fn zone_start(levels: &Levels, key: &FieldKey, [cx, cy, lod]: [u32; 3], screen: 
     if lod < 2 {
         return 0.0;
     }
+    let one_step = (1.0 - key.morph_range) * screen;
+    one_step.min(children_pixel(levels, key, [cx, cy, lod]))
+}
+
+/// The largest pixel term of field cell `[cx, cy, lod]`'s children (level `lod - 1`; 0 for
+/// level 1, whose children are level 0's exact samples).
+fn children_pixel(levels: &Levels, key: &FieldKey, [cx, cy, lod]: [u32; 3]) -> f64 {
+    if lod < 2 {
+        return 0.0;
+    }
     let (nx, ny) = levels.field_cells_per_side(lod - 1);
     let children = QUAD
         .iter()
@@ -792,8 +833,7 @@ fn zone_start(levels: &Levels, key: &FieldKey, [cx, cy, lod]: [u32; 3], screen: 
         .filter(|&(x, y)| x < nx && y < ny)
         .map(|(x, y)| levels.field_cell_error(lod - 1, x, y) as f64)
         .fold(0.0, f64::max);
-    let one_step = (1.0 - key.morph_range) * screen;
-    one_step.min(key.share * children * key.focal_px / key.tau_px)
+    key.share * children * key.focal_px / key.tau_px
 }
 
 /// Levels below a tile whose split distances its morph zone starts beyond, with walks past
@@ -1446,7 +1486,9 @@ pub fn morphed_vertex(
 
 #[cfg(test)]
 mod tests {
-    use super::{FieldKey, Levels, QUAD, SplitField, UdlodSettings, field_terms, worst_case_share};
+    use super::{
+        FieldKey, Levels, QUAD, SplitField, UdlodSettings, ZoneRule, field_terms, worst_case_share,
+    };
     use crate::dataset::procedural::{self, ProceduralParams};
 
     /// Every field cell's morph zone (the last `max(W, r s)` of its split distance `s`) starts
@@ -1564,6 +1606,62 @@ mod tests {
                 c.cells
             );
         }
+    }
+
+    /// The what-if zone rules only ever lower the field: at every corner of every level the
+    /// split distance with `ErrorScaled` is at most the renderer's (`Width`) and with `Free` at
+    /// most `ErrorScaled`'s, and each is lower somewhere (257² test terrain, tau 4, where the
+    /// zone sets most cells). Negative control by hand: `max` for `min` in `ErrorScaled`'s
+    /// solution (the renderer's field again) fails the last: no corner lower.
+    #[test]
+    fn what_if_zone_rules_only_lower_the_field() {
+        let data = procedural::generate(&ProceduralParams {
+            size: 257,
+            spacing: 60.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let settings = UdlodSettings {
+            tau_px: 4.0,
+            ..UdlodSettings::default()
+        };
+        let levels = Levels::for_settings(&data, &settings).unwrap();
+        let distances = |zone_rule| {
+            let key = FieldKey {
+                zone_rule,
+                ..FieldKey::new(&settings, 311.8)
+            };
+            let field = SplitField::new(&levels, key);
+            let mut out = Vec::new();
+            for lod in 1..=levels.root_lod {
+                let (nx, ny) = levels.field_cells_per_side(lod);
+                for (i, j) in (0..=ny).flat_map(|j| (0..=nx).map(move |i| (i, j))) {
+                    let corner = field.corner(&levels, lod, i, j) as f64;
+                    out.push(field.split[lod as usize] as f64 / corner);
+                }
+            }
+            out
+        };
+        let width = distances(ZoneRule::Width);
+        let scaled = distances(ZoneRule::ErrorScaled);
+        let free = distances(ZoneRule::Free);
+        let (mut lower_scaled, mut lower_free) = (0, 0);
+        for ((w, e), f) in width.iter().zip(&scaled).zip(&free) {
+            assert!(
+                *e <= w * (1.0 + 1e-5),
+                "error-scaled {e} m above width's {w} m"
+            );
+            assert!(
+                *f <= e * (1.0 + 1e-5),
+                "free {f} m above error-scaled {e} m"
+            );
+            lower_scaled += (*e < w * 0.99) as u32;
+            lower_free += (*f < e * 0.99) as u32;
+        }
+        assert!(
+            lower_scaled > 0 && lower_free > 0,
+            "{lower_scaled} / {lower_free} corners lower"
+        );
     }
 
     /// The measured shares are where `docs/udlod.md` says, in (0, 1], never larger for a
