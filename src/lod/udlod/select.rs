@@ -1491,6 +1491,16 @@ mod tests {
     };
     use crate::dataset::procedural::{self, ProceduralParams};
 
+    /// The 257² procedural terrain (60 m) the split-field tests build their levels on.
+    fn test_terrain() -> crate::dataset::Heightmap {
+        procedural::generate(&ProceduralParams {
+            size: 257,
+            spacing: 60.0,
+            ..Default::default()
+        })
+        .unwrap()
+    }
+
     /// Every field cell's morph zone (the last `max(W, r s)` of its split distance `s`) starts
     /// no nearer than its children's pixel term or one level step's start, whichever is
     /// nearer ([`super::zone_start`]: what keeps the blended surface in the zone within
@@ -1499,12 +1509,7 @@ mod tests {
     /// `s >= (1 - r) screen + W`). Negative control by hand: a zone start of 0 fails the first.
     #[test]
     fn morph_zones_start_where_the_children_meet_tau() {
-        let data = procedural::generate(&ProceduralParams {
-            size: 257,
-            spacing: 60.0,
-            ..Default::default()
-        })
-        .unwrap();
+        let data = test_terrain();
         for density in [1, 2] {
             let settings = UdlodSettings {
                 field_density: density,
@@ -1567,12 +1572,7 @@ mod tests {
     /// (level 1's 1,024 cells put on nesting).
     #[test]
     fn field_terms_name_what_sets_each_cell() {
-        let data = procedural::generate(&ProceduralParams {
-            size: 257,
-            spacing: 60.0,
-            ..Default::default()
-        })
-        .unwrap();
+        let data = test_terrain();
         let settings = UdlodSettings::default();
         let levels = Levels::for_settings(&data, &settings).unwrap();
         let counts = |tau_px: f64| {
@@ -1615,12 +1615,7 @@ mod tests {
     /// solution (the renderer's field again) fails the last: no corner lower.
     #[test]
     fn what_if_zone_rules_only_lower_the_field() {
-        let data = procedural::generate(&ProceduralParams {
-            size: 257,
-            spacing: 60.0,
-            ..Default::default()
-        })
-        .unwrap();
+        let data = test_terrain();
         let settings = UdlodSettings {
             tau_px: 4.0,
             ..UdlodSettings::default()
