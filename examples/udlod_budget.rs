@@ -1,7 +1,7 @@
-//! Where UDLOD's triangles go: per data set and tau, the split-distance table (which term sets
-//! each level), the drawn tiles' projected-error slack, counterfactual selections and the
-//! oracle's count, and the prepass's seed (the coarse levels the host walks: its tiles, the GPU
-//! passes left, the walk's host time). CPU only (the CPU reference selection equals the GPU's;
+//! Where UDLOD's triangles go: per data set the field cells' own errors per level; per tau the
+//! split-distance table (which term sets each level), the drawn tiles' projected-error slack,
+//! counterfactual selections and the oracle's count, and the prepass's seed (the coarse levels
+//! the host walks: its tiles, the GPU passes left, the walk's host time). CPU only (the CPU reference selection equals the GPU's;
 //! tests/udlod.rs).
 //!
 //!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
@@ -31,33 +31,33 @@ fn main() -> anyhow::Result<()> {
     let mut zone_rule = ZoneRule::Width;
     let (mut width, mut height) = (None, None);
     while let Some(a) = args.next() {
+        // The value after a flag, parsed, or an error naming the flag (no panics on bad input).
+        let mut value = |what: &str| {
+            args.next()
+                .ok_or_else(|| anyhow::anyhow!("{a} needs {what}"))
+        };
         match a.as_str() {
-            "--config" => config = args.next().map(PathBuf::from),
-            "--scenario" => scenario = args.next().map(PathBuf::from),
-            "--grid" => grid = Some(args.next().unwrap().parse()?),
-            "--morph-levels" => morph_levels = Some(args.next().unwrap().parse()?),
-            "--field-density" => field_density = Some(args.next().unwrap().parse()?),
+            "--config" => config = Some(PathBuf::from(value("a path")?)),
+            "--scenario" => scenario = Some(PathBuf::from(value("a path")?)),
+            "--grid" => grid = Some(parse(&a, &value("a number")?)?),
+            "--morph-levels" => morph_levels = Some(parse(&a, &value("a number")?)?),
+            "--field-density" => field_density = Some(parse(&a, &value("a number")?)?),
             "--zone-rule" => {
-                zone_rule = match args.next().as_deref() {
-                    Some("width") => ZoneRule::Width,
-                    Some("error-scaled") => ZoneRule::ErrorScaled,
-                    Some("free") => ZoneRule::Free,
-                    r => anyhow::bail!(
-                        "--zone-rule {}: width, error-scaled or free",
-                        r.unwrap_or("(missing)")
-                    ),
+                zone_rule = match value("width, error-scaled or free")?.as_str() {
+                    "width" => ZoneRule::Width,
+                    "error-scaled" => ZoneRule::ErrorScaled,
+                    "free" => ZoneRule::Free,
+                    r => anyhow::bail!("--zone-rule {r}: width, error-scaled or free"),
                 }
             }
-            "--frames" => frames = args.next().unwrap().parse()?,
-            "--width" => width = Some(args.next().unwrap().parse()?),
-            "--height" => height = Some(args.next().unwrap().parse()?),
+            "--frames" => frames = parse(&a, &value("a number")?)?,
+            "--width" => width = Some(parse(&a, &value("a number")?)?),
+            "--height" => height = Some(parse(&a, &value("a number")?)?),
             "--tau" => {
-                taus = args
-                    .next()
-                    .unwrap()
+                taus = value("taus, comma-separated")?
                     .split(',')
-                    .map(|s| s.parse().unwrap())
-                    .collect()
+                    .map(|s| parse(&a, s))
+                    .collect::<anyhow::Result<_>>()?
             }
             _ => anyhow::bail!("unknown argument {a}"),
         }
@@ -104,6 +104,7 @@ fn main() -> anyhow::Result<()> {
         h,
         p.frames
     );
+    print_cell_errors(&levels);
     let focal = p.scenario.camera(0).focal_px(h);
     let picks: Vec<u64> = (0..frames)
         .map(|i| (i as u64 * p.frames as u64) / frames as u64)
@@ -766,6 +767,41 @@ fn cell_field(
         out.push((nodes, (w1, h1)));
     }
     out
+}
+
+/// `text` parsed as the value of `flag`, or an error naming both.
+fn parse<T: std::str::FromStr>(flag: &str, text: &str) -> anyhow::Result<T>
+where
+    T::Err: std::fmt::Display,
+{
+    text.parse()
+        .map_err(|e| anyhow::anyhow!("{flag} {text:?}: {e}"))
+}
+
+/// Per level, how the field cells' own errors (`Levels::field_cell_error`, metres) spread:
+/// the share exactly 0, the share under 1 cm, and quantiles. A data set's smooth filled voids
+/// (SRTM's ocean) show as errors near, not at, 0.
+fn print_cell_errors(levels: &Levels) {
+    for lod in 1..=levels.root_lod {
+        let (nx, ny) = levels.field_cells_per_side(lod);
+        let mut e: Vec<f32> = (0..ny)
+            .flat_map(|y| (0..nx).map(move |x| (x, y)))
+            .map(|(x, y)| levels.field_cell_error(lod, x, y))
+            .collect();
+        e.sort_by(f32::total_cmp);
+        let n = e.len();
+        let share = |k: usize| 100.0 * k as f64 / n as f64;
+        let q = |f: f64| e[((n - 1) as f64 * f) as usize];
+        println!(
+            "  cell errors level {lod}: {n} cells, 0 m {:.1} %, < 1 cm {:.1} %, p25 / p50 / p90 / max {:.3} / {:.3} / {:.3} / {:.3} m",
+            share(e.iter().filter(|v| **v == 0.0).count()),
+            share(e.iter().filter(|v| **v < 0.01).count()),
+            q(0.25),
+            q(0.5),
+            q(0.9),
+            q(1.0),
+        );
+    }
 }
 
 /// One counterfactual's line: its tiles, their triangles and the ratio to the oracle's.
