@@ -1,8 +1,8 @@
 //! Where UDLOD's triangles go: per data set the field cells' own errors per level; per tau the
 //! split-distance table (which term sets each level), the drawn tiles' projected-error slack,
 //! counterfactual selections and the oracle's count, and the prepass's seed (the coarse levels
-//! the host walks: its tiles, the GPU passes left, the walk's host time). CPU only (the CPU reference selection equals the GPU's;
-//! tests/udlod.rs).
+//! the host walks: its tiles, the GPU passes left, the walk's host time). CPU only (the CPU
+//! reference selection equals the GPU's; tests/udlod.rs).
 //!
 //!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
 //!     [--grid 4] [--morph-levels 0] [--field-density 2] [--width 640 --height 360]
