@@ -1,8 +1,10 @@
 //! Where UDLOD's triangles go: per data set the field cells' own errors per level; per tau the
 //! split-distance table (which term sets each level), the drawn tiles' projected-error slack,
-//! counterfactual selections and the oracle's count, and the prepass's seed (the coarse levels
-//! the host walks: its tiles, the GPU passes left, the walk's host time). CPU only (the CPU
-//! reference selection equals the GPU's; tests/udlod.rs).
+//! counterfactual selections and the oracle's count, the least the tiles could draw (the tile
+//! oracle with quadrants collapsed wherever the parent grid is within tau) and how many drawn
+//! quadrants are within tau on the parent grid but drawn uncollapsed, and the prepass's seed
+//! (the coarse levels the host walks: its tiles, the GPU passes left, the walk's host time).
+//! CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
 //!
 //!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
 //!     [--grid 4] [--morph-levels 0] [--field-density 2] [--width 640 --height 360]
@@ -171,6 +173,9 @@ fn main() -> anyhow::Result<()> {
         // only (the tenth round's build) for comparison.
         let (mut whole_tris, mut whole_tiles) = (0u64, 0usize);
         let (mut drawn_tris, mut collapsed_quadrants) = (0u64, 0u32);
+        // Drawn quadrants whose parent grid is within tau at every sample, and of those the
+        // ones drawn uncollapsed (the morph not complete there).
+        let (mut within, mut within_uncollapsed) = (0u32, 0u32);
         let mut per_level = vec![0usize; levels.levels() as usize];
         let mut seeds = Vec::new();
         for &k in &picks {
@@ -183,6 +188,12 @@ fn main() -> anyhow::Result<()> {
                 let mask = select::tile_collapse_mask(&levels, &sp, *t);
                 drawn_tris += grid::mask_triangles(levels.grid_size, mask);
                 collapsed_quadrants += mask.count_ones();
+                for q in 0..4u32 {
+                    if quadrant_within_tau(&levels, &data, &cam, focal, tau, *t, q) {
+                        within += 1;
+                        within_uncollapsed += (mask & 1 << q == 0) as u32;
+                    }
+                }
                 let whole = (mask == grid::ALL_QUADRANTS) as u32 * mask;
                 whole_tris += grid::mask_triangles(levels.grid_size, whole);
                 whole_tiles += (whole != 0) as usize;
@@ -376,6 +387,28 @@ fn main() -> anyhow::Result<()> {
                 tris_o,
             );
         }
+        {
+            // The least UDLOD's tiles could draw: the tile oracle's tiles, each quadrant drawn
+            // as the parent's grid wherever that grid is within tau at every sample.
+            let mut tris = 0u64;
+            for &k in &picks {
+                let cam = p.scenario.camera(k);
+                let sp = params(&cam);
+                let tiles = select_generic(&levels, &sp, |t| {
+                    tile_exact_splits(&levels, &data, &cam, focal, tau, t)
+                });
+                for t in tiles {
+                    let mask = (0..4u32)
+                        .filter(|&q| quadrant_within_tau(&levels, &data, &cam, focal, tau, t, q))
+                        .fold(0u32, |m, q| m | 1 << q);
+                    tris += grid::mask_triangles(levels.grid_size, mask);
+                }
+            }
+            println!(
+                "  cf tile oracle, quadrants collapsed where the parent grid is within tau: triangles {tris} ratio {:.2}",
+                tris as f64 / tris_o as f64
+            );
+        }
         for sub in [1u32, 2, 4, 8] {
             let (mut n, mut tris) = (0usize, 0u64);
             for &k in &picks {
@@ -400,6 +433,13 @@ fn main() -> anyhow::Result<()> {
             "  drawn, collapsed quadrants as their parent's grid: {collapsed_quadrants} of {} quadrants, triangles {drawn_tris} ratio {:.2}",
             tiles_n * 4,
             drawn_tris as f64 / tris_o as f64
+        );
+        // A quadrant is a quarter of the tile's `g2` triangles, collapsed a sixteenth.
+        let if_collapsed = drawn_tris - within_uncollapsed as u64 * (g2 / 4 - g2 / 16);
+        println!(
+            "  drawn quadrants whose parent grid is within tau: {within} of {}, {within_uncollapsed} of them uncollapsed; those collapsed too: triangles {if_collapsed} ratio {:.2}",
+            tiles_n * 4,
+            if_collapsed as f64 / tris_o as f64
         );
         println!(
             "  cf collapsing whole tiles only: {whole_tiles} of {tiles_n} tiles, triangles {whole_tris} ratio {:.2}",
@@ -686,6 +726,40 @@ fn tile_exact_splits(
         }
     }
     false
+}
+
+/// Whether quadrant `q` (bit `qx + 2 qy`) of tile `t`, drawn as the parent level's grid, is
+/// within tau at every full-resolution sample it covers (exact projected error).
+fn quadrant_within_tau(
+    levels: &Levels,
+    data: &vkterrain::dataset::Heightmap,
+    cam: &vkterrain::scene::Camera,
+    focal: f64,
+    tau: f64,
+    t: Tile,
+    q: u32,
+) -> bool {
+    let span = levels.grid_size << t.lod;
+    let half = span / 2;
+    let (c0, r0) = (t.x * span + (q & 1) * half, t.y * span + (q >> 1) * half);
+    if c0 > data.width - 1 || r0 > data.height - 1 {
+        return true;
+    }
+    let (c1, r1) = (
+        (c0 + half).min(data.width - 1),
+        (r0 + half).min(data.height - 1),
+    );
+    for r in r0..=r1 {
+        for c in c0..=c1 {
+            let lh = select::level_height(data, t.lod + 1, c, r).unwrap();
+            let h = data.sample(c, r) as f64;
+            let pnt = glam::DVec3::new(c as f64 * data.spacing, r as f64 * data.spacing, h);
+            if (lh - h).abs() * focal > tau * (pnt - cam.position).length() {
+                return false;
+            }
+        }
+    }
+    true
 }
 
 /// Counterfactual split field with nodes every `ns` quads of each level (no reach, zone or
