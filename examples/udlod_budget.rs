@@ -218,10 +218,11 @@ fn main() -> anyhow::Result<()> {
                         .entry(q)
                         .or_insert_with(|| tile_exact_splits(&levels, &data, &cam, focal, tau, q));
                     if !needed {
-                        let screen = select::worst_case_share(levels.grid_size)
-                            * levels.tile_error(q) as f64
-                            * focal
-                            / tau;
+                        let screen =
+                            select::worst_case_share(levels.grid_size, levels.field_density)
+                                * levels.tile_error(q) as f64
+                                * focal
+                                / tau;
                         if (select::tile_distance(&levels, &sp, q) as f64) < screen {
                             over_rule += 1;
                         } else {
@@ -322,7 +323,7 @@ fn main() -> anyhow::Result<()> {
             if ns > levels.grid_size {
                 continue;
             }
-            let kk = select::worst_case_share(levels.grid_size);
+            let kk = select::worst_case_share(levels.grid_size, levels.field_density);
             let cf = cell_field(&levels, &data, kk * focal / tau, ns, ratio);
             let mut n = 0usize;
             for &k in &picks {
@@ -348,7 +349,7 @@ fn main() -> anyhow::Result<()> {
             ("own need k=1, ref dist", 1.0, false),
             (
                 "own need k=share, ref dist",
-                select::worst_case_share(levels.grid_size),
+                select::worst_case_share(levels.grid_size, levels.field_density),
                 false,
             ),
             ("own need k=1, box dist", 1.0, true),

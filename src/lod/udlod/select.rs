@@ -400,12 +400,40 @@ impl FieldKey {
 /// measured ones interpolate in `log2(grid_size)`; larger ones take the grid-8 share (larger
 /// tiles should overstate more, so that refines them more than needed; not measured).
 ///
+/// With a finer split field (`field_density` `d > 1`) each field cell takes the error of its
+/// own part of the tile: the field dilates less around rough spots, and the selection spends
+/// more of tau with the same share (grid 4, two nodes per side, at 0.72: p99.9 1.085 px at tau
+/// 1 on the CI flight). Those densities take their own measured shares
+/// ([`FINER_FIELD_SHARES`]); unmeasured ones the largest measured share of all (0.9, grid 2's:
+/// the most refinement, conservative).
+///
 /// The only place the share enters: [`SplitField::new`] bakes it (through [`FieldKey::share`],
 /// which `UdlodSettings::worst_case_share` may override) into the split field that the CPU
 /// reference selection and the GPU prepass both read.
-pub fn worst_case_share(grid_size: u32) -> f64 {
-    // (grid_size, share), increasing grid sizes.
-    const MEASURED: [(u32, f64); 3] = [(2, 0.9), (4, 0.72), (8, 0.7)];
+pub fn worst_case_share(grid_size: u32, field_density: u32) -> f64 {
+    if field_density > 1 {
+        return FINER_FIELD_SHARES
+            .iter()
+            .find(|&&(g, d, _)| g == grid_size && d == field_density)
+            .map_or(MEASURED_SHARES[0].1, |&(_, _, k)| k);
+    }
+    tile_share(grid_size)
+}
+
+/// `(grid_size, share)` with one field node per tile corner, increasing grid sizes
+/// ([`worst_case_share`]).
+const MEASURED_SHARES: [(u32, f64); 3] = [(2, 0.9), (4, 0.72), (8, 0.7)];
+
+/// `(grid_size, field_density, share)` measured for the finer split field: the least of 0.70 /
+/// 0.72 / 0.76 / 0.78 / 0.80 / 0.82 that keeps the CI flight's p99.9 within tau at tau 0.5,
+/// 1, 2 and 4 (640x360, `vkterrain eval --config config/ci.toml --earth flat --methods udlod
+/// --sweep grid_size=G --sweep field_density=D --sweep worst_case_share=...`; docs/udlod.md,
+/// "What the tiles could draw", eighteenth round).
+pub const FINER_FIELD_SHARES: [(u32, u32, f64); 3] = [(4, 2, 0.80), (8, 2, 0.76), (8, 4, 0.76)];
+
+/// The share with one field node per tile corner, interpolated between the measured grid sizes.
+fn tile_share(grid_size: u32) -> f64 {
+    const MEASURED: [(u32, f64); 3] = MEASURED_SHARES;
     let g = grid_size.clamp(MEASURED[0].0, MEASURED[MEASURED.len() - 1].0);
     let i = MEASURED.iter().position(|&(m, _)| m >= g).unwrap_or(0);
     if MEASURED[i].0 == g || i == 0 {
@@ -1664,17 +1692,35 @@ mod tests {
     #[test]
     fn worst_case_share_falls_with_the_tile_size() {
         assert_eq!(
-            [2, 4, 8].map(worst_case_share),
+            [2, 4, 8].map(|g| worst_case_share(g, 1)),
             [0.9, 0.72, 0.7],
             "docs/udlod.md's table"
         );
         let mut last = 1.0;
         for g in (2..=64).step_by(2) {
-            let k = worst_case_share(g);
+            let k = worst_case_share(g, 1);
             assert!(k > 0.0 && k <= last, "grid {g}: share {k} after {last}");
             last = k;
         }
-        let k6 = worst_case_share(6);
+        let k6 = worst_case_share(6, 1);
         assert!(k6 > 0.7 && k6 < 0.72, "grid 6: {k6}");
+    }
+
+    /// A finer split field spends more of tau at the same share, so its measured share is
+    /// larger than its grid's corner-field share (a smaller one let the CI flight's p99.9
+    /// exceed tau: docs/udlod.md, "What the tiles could draw"), and an unmeasured density takes
+    /// the largest share measured at all.
+    #[test]
+    fn finer_fields_take_their_own_larger_shares() {
+        assert_eq!(worst_case_share(4, 2), 0.80, "measured");
+        assert_eq!(
+            [worst_case_share(8, 2), worst_case_share(8, 4)],
+            [0.76, 0.76]
+        );
+        for (g, d, k) in super::FINER_FIELD_SHARES {
+            assert!(k > worst_case_share(g, 1), "grid {g} density {d}: {k}");
+        }
+        assert_eq!(worst_case_share(16, 2), 0.9, "unmeasured: grid 2's");
+        assert_eq!(worst_case_share(16, 1), worst_case_share(8, 1));
     }
 }

@@ -33,13 +33,15 @@ pub struct UdlodSettings {
     /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 1 (the
     /// default) at the tiles' corners; 2 also at their edges' midpoints and centres, each cell
     /// taking the error of its quarter of the tile, so a rough tile raises its neighbours'
-    /// split distances over half a tile instead of a whole one: 2-31 % fewer triangles at
-    /// grid 4, for a 3x larger peak host heap at start-up (`tests/hostmem.rs`; not the default
+    /// split distances over half a tile instead of a whole one: 7-22 % fewer triangles at
+    /// grid 4 at about the same measured error (with its own share, `select::worst_case_share`),
+    /// for 2.8x the host memory (`tests/hostmem.rs`) and grid-2 statistics (not the default
     /// for that). A power of two that leaves at least 2 quads per cell
     /// (`grid_size / field_density >= 2`).
     pub field_density: u32,
     /// The share of a tile's worst-case projected error the split rule spends on `tau`
-    /// (`select::worst_case_share`): 0 (the default) the share measured per grid size; a value
+    /// (`select::worst_case_share`): 0 (the default) the share measured per grid size and
+    /// field density; a value
     /// in (0, 1] overrides it, for measuring it again (`eval --sweep worst_case_share=...`).
     pub worst_case_share: f64,
     /// The most tiles a frame and view may draw (the lists' capacity, at most the full
@@ -211,10 +213,10 @@ impl UdlodSettings {
     }
 
     /// The share of a tile's worst-case projected error spent on `tau`: `worst_case_share`,
-    /// or with 0 the one measured for `grid_size` (`select::worst_case_share`).
+    /// or with 0 the one measured for `grid_size` and `field_density` (`select::worst_case_share`).
     pub fn worst_case_share(&self) -> f64 {
         match self.worst_case_share {
-            0.0 => super::select::worst_case_share(self.grid_size),
+            0.0 => super::select::worst_case_share(self.grid_size, self.field_density),
             k => k,
         }
     }
@@ -305,8 +307,16 @@ mod tests {
             worst_case_share: k,
             ..UdlodSettings::default()
         };
-        let measured = super::super::select::worst_case_share(4);
+        let measured = super::super::select::worst_case_share(4, 1);
         assert_eq!(at(0.0).worst_case_share(), measured);
+        let finer = UdlodSettings {
+            field_density: 2,
+            ..at(0.0)
+        };
+        assert_eq!(
+            finer.worst_case_share(),
+            super::super::select::worst_case_share(4, 2)
+        );
         assert_eq!(at(0.5).worst_case_share(), 0.5);
         for ok in [0.0, 0.3, 1.0] {
             assert!(at(ok).validate().is_ok(), "{ok}");
