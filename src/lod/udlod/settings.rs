@@ -33,7 +33,7 @@ pub struct UdlodSettings {
     /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 1 (the
     /// default) at the tiles' corners; 2 also at their edges' midpoints and centres, each cell
     /// taking the error of its quarter of the tile, so a rough tile raises its neighbours'
-    /// split distances over half a tile instead of a whole one: 7-22 % fewer triangles at
+    /// split distances over half a tile instead of a whole one: 6-22 % fewer triangles at
     /// grid 4 at about the same measured error (with its own share, `select::worst_case_share`),
     /// for 2.8x the host memory (`tests/hostmem.rs`) and grid-2 statistics (not the default
     /// for that). A power of two that leaves at least 2 quads per cell
