@@ -711,22 +711,42 @@ fn tile_exact_splits(
     t: Tile,
 ) -> bool {
     let span = levels.grid_size << t.lod;
-    let (c0, r0) = (t.x * span, t.y * span);
-    let (c1, r1) = (
-        (c0 + span).min(data.width - 1),
-        (r0 + span).min(data.height - 1),
-    );
-    for r in r0..=r1 {
-        for c in c0..=c1 {
-            let lh = select::level_height(data, t.lod, c, r).unwrap();
-            let h = data.sample(c, r) as f64;
-            let pnt = glam::DVec3::new(c as f64 * data.spacing, r as f64 * data.spacing, h);
-            if (lh - h).abs() * focal > tau * (pnt - cam.position).length() {
-                return true;
-            }
-        }
+    let view = ExactView {
+        data,
+        cam,
+        focal,
+        tau,
+    };
+    !view.within_tau(t.lod, [t.x * span, t.y * span], span)
+}
+
+/// One frame's exact projected error test over full-resolution samples.
+struct ExactView<'a> {
+    data: &'a vkterrain::dataset::Heightmap,
+    cam: &'a vkterrain::scene::Camera,
+    focal: f64,
+    tau: f64,
+}
+
+impl ExactView<'_> {
+    /// Whether level `lod`'s triangulated grid is within tau (|grid - sample| x focal /
+    /// distance) at every sample of the square of `span` quads from sample `origin` (clamped
+    /// to the data).
+    fn within_tau(&self, lod: u32, [c0, r0]: [u32; 2], span: u32) -> bool {
+        let data = self.data;
+        let (c1, r1) = (
+            (c0 + span).min(data.width - 1),
+            (r0 + span).min(data.height - 1),
+        );
+        (r0..=r1).all(|r| {
+            (c0..=c1).all(|c| {
+                let lh = select::level_height(data, lod, c, r).unwrap();
+                let h = data.sample(c, r) as f64;
+                let pnt = glam::DVec3::new(c as f64 * data.spacing, r as f64 * data.spacing, h);
+                (lh - h).abs() * self.focal <= self.tau * (pnt - self.cam.position).length()
+            })
+        })
     }
-    false
 }
 
 /// Whether quadrant `q` (bit `qx + 2 qy`) of tile `t`, drawn as the parent level's grid, is
@@ -746,21 +766,13 @@ fn quadrant_within_tau(
     if c0 > data.width - 1 || r0 > data.height - 1 {
         return true;
     }
-    let (c1, r1) = (
-        (c0 + half).min(data.width - 1),
-        (r0 + half).min(data.height - 1),
-    );
-    for r in r0..=r1 {
-        for c in c0..=c1 {
-            let lh = select::level_height(data, t.lod + 1, c, r).unwrap();
-            let h = data.sample(c, r) as f64;
-            let pnt = glam::DVec3::new(c as f64 * data.spacing, r as f64 * data.spacing, h);
-            if (lh - h).abs() * focal > tau * (pnt - cam.position).length() {
-                return false;
-            }
-        }
-    }
-    true
+    let view = ExactView {
+        data,
+        cam,
+        focal,
+        tau,
+    };
+    view.within_tau(t.lod + 1, [c0, r0], half)
 }
 
 /// Counterfactual split field with nodes every `ns` quads of each level (no reach, zone or
