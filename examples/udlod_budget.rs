@@ -184,12 +184,18 @@ fn main() -> anyhow::Result<()> {
             seeds.push(timed_seed(&levels, &sp, s.seed_tiles));
             let tiles = select::select_tiles(&levels, &sp);
             tiles_n += tiles.len();
+            let exact = ExactView {
+                data: &data,
+                cam: &cam,
+                focal,
+                tau,
+            };
             for t in &tiles {
                 let mask = select::tile_collapse_mask(&levels, &sp, *t);
                 drawn_tris += grid::mask_triangles(levels.grid_size, mask);
                 collapsed_quadrants += mask.count_ones();
                 for q in 0..4u32 {
-                    if quadrant_within_tau(&levels, &data, &cam, focal, tau, *t, q) {
+                    if quadrant_within_tau(&exact, &levels, *t, q) {
                         within += 1;
                         within_uncollapsed += (mask & 1 << q == 0) as u32;
                     }
@@ -398,9 +404,15 @@ fn main() -> anyhow::Result<()> {
                 let tiles = select_generic(&levels, &sp, |t| {
                     tile_exact_splits(&levels, &data, &cam, focal, tau, t)
                 });
+                let exact = ExactView {
+                    data: &data,
+                    cam: &cam,
+                    focal,
+                    tau,
+                };
                 for t in tiles {
                     let mask = (0..4u32)
-                        .filter(|&q| quadrant_within_tau(&levels, &data, &cam, focal, tau, t, q))
+                        .filter(|&q| quadrant_within_tau(&exact, &levels, t, q))
                         .fold(0u32, |m, q| m | 1 << q);
                     tris += grid::mask_triangles(levels.grid_size, mask);
                 }
@@ -751,27 +763,13 @@ impl ExactView<'_> {
 
 /// Whether quadrant `q` (bit `qx + 2 qy`) of tile `t`, drawn as the parent level's grid, is
 /// within tau at every full-resolution sample it covers (exact projected error).
-fn quadrant_within_tau(
-    levels: &Levels,
-    data: &vkterrain::dataset::Heightmap,
-    cam: &vkterrain::scene::Camera,
-    focal: f64,
-    tau: f64,
-    t: Tile,
-    q: u32,
-) -> bool {
+fn quadrant_within_tau(view: &ExactView, levels: &Levels, t: Tile, q: u32) -> bool {
     let span = levels.grid_size << t.lod;
     let half = span / 2;
     let (c0, r0) = (t.x * span + (q & 1) * half, t.y * span + (q >> 1) * half);
-    if c0 > data.width - 1 || r0 > data.height - 1 {
+    if c0 > view.data.width - 1 || r0 > view.data.height - 1 {
         return true;
     }
-    let view = ExactView {
-        data,
-        cam,
-        focal,
-        tau,
-    };
     view.within_tau(t.lod + 1, [c0, r0], half)
 }
 
