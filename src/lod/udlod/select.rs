@@ -435,13 +435,18 @@ pub const FINER_FIELD_SHARES: [(u32, u32, f64); 3] = [(4, 2, 0.80), (8, 2, 0.76)
 
 /// The share with one field node per tile corner, interpolated between the measured grid sizes.
 fn tile_share(grid_size: u32) -> f64 {
-    const MEASURED: [(u32, f64); 3] = MEASURED_SHARES; // a short name for the lookups below
-    let g = grid_size.clamp(MEASURED[0].0, MEASURED[MEASURED.len() - 1].0);
-    let i = MEASURED.iter().position(|&(m, _)| m >= g).unwrap_or(0);
-    if MEASURED[i].0 == g || i == 0 {
-        return MEASURED[i].1;
+    let g = grid_size.clamp(
+        MEASURED_SHARES[0].0,
+        MEASURED_SHARES[MEASURED_SHARES.len() - 1].0,
+    );
+    let i = MEASURED_SHARES
+        .iter()
+        .position(|&(m, _)| m >= g)
+        .unwrap_or(0);
+    if MEASURED_SHARES[i].0 == g || i == 0 {
+        return MEASURED_SHARES[i].1;
     }
-    let ((g0, k0), (g1, k1)) = (MEASURED[i - 1], MEASURED[i]);
+    let ((g0, k0), (g1, k1)) = (MEASURED_SHARES[i - 1], MEASURED_SHARES[i]);
     let t = (g as f64 / g0 as f64).log2() / (g1 as f64 / g0 as f64).log2();
     k0 + (k1 - k0) * t
 }
