@@ -7,7 +7,7 @@
 //! CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
 //!
 //!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
-//!     [--grid 4] [--morph-levels 0] [--field-density 2] [--width 640 --height 360]
+//!     [--grid 4] [--morph-levels 0] [--field-density 2] [--share K] [--width 640 --height 360]
 //!     [--zone-rule width|error-scaled|free]   (how the field charges the morph zone's width:
 //!     `select::ZoneRule`; anything but `width` is a what-if the renderer does not draw)
 
@@ -30,6 +30,7 @@ fn main() -> anyhow::Result<()> {
     let mut grid = None;
     let mut morph_levels = None;
     let mut field_density = None;
+    let mut share = None;
     let mut zone_rule = ZoneRule::Width;
     let (mut width, mut height) = (None, None);
     while let Some(a) = args.next() {
@@ -44,6 +45,7 @@ fn main() -> anyhow::Result<()> {
             "--grid" => grid = Some(parse(&a, &value("a number")?)?),
             "--morph-levels" => morph_levels = Some(parse(&a, &value("a number")?)?),
             "--field-density" => field_density = Some(parse(&a, &value("a number")?)?),
+            "--share" => share = Some(parse(&a, &value("a number")?)?),
             "--zone-rule" => {
                 zone_rule = match value("width, error-scaled or free")?.as_str() {
                     "width" => ZoneRule::Width,
@@ -84,6 +86,9 @@ fn main() -> anyhow::Result<()> {
     }
     if let Some(d) = field_density {
         settings.field_density = d;
+    }
+    if let Some(k) = share {
+        settings.worst_case_share = k;
     }
     settings.validate()?;
     let (w, h) = (p.config.render.width, p.config.render.height);
@@ -184,18 +189,13 @@ fn main() -> anyhow::Result<()> {
             seeds.push(timed_seed(&levels, &sp, s.seed_tiles));
             let tiles = select::select_tiles(&levels, &sp);
             tiles_n += tiles.len();
-            let exact = ExactView {
-                data: &data,
-                cam: &cam,
-                focal,
-                tau,
-            };
+            let view = ExactView::new(&data, &cam, focal, tau);
             for t in &tiles {
                 let mask = select::tile_collapse_mask(&levels, &sp, *t);
                 drawn_tris += grid::mask_triangles(levels.grid_size, mask);
                 collapsed_quadrants += mask.count_ones();
                 for q in 0..4u32 {
-                    if quadrant_within_tau(&exact, &levels, *t, q) {
+                    if view.quadrant_within_tau(&levels, *t, q) {
                         within += 1;
                         within_uncollapsed += (mask & 1 << q == 0) as u32;
                     }
@@ -222,13 +222,10 @@ fn main() -> anyhow::Result<()> {
                     };
                     let needed = *parents
                         .entry(q)
-                        .or_insert_with(|| tile_exact_splits(&levels, &data, &cam, focal, tau, q));
+                        .or_insert_with(|| view.tile_splits(&levels, q));
                     if !needed {
                         let screen =
-                            select::worst_case_share(levels.grid_size, levels.field_density)
-                                * levels.tile_error(q) as f64
-                                * focal
-                                / tau;
+                            settings.worst_case_share() * levels.tile_error(q) as f64 * focal / tau;
                         if (select::tile_distance(&levels, &sp, q) as f64) < screen {
                             over_rule += 1;
                         } else {
@@ -329,7 +326,7 @@ fn main() -> anyhow::Result<()> {
             if ns > levels.grid_size {
                 continue;
             }
-            let kk = select::worst_case_share(levels.grid_size, levels.field_density);
+            let kk = settings.worst_case_share();
             let cf = cell_field(&levels, &data, kk * focal / tau, ns, ratio);
             let mut n = 0usize;
             for &k in &picks {
@@ -355,7 +352,7 @@ fn main() -> anyhow::Result<()> {
             ("own need k=1, ref dist", 1.0, false),
             (
                 "own need k=share, ref dist",
-                select::worst_case_share(levels.grid_size, levels.field_density),
+                settings.worst_case_share(),
                 false,
             ),
             ("own need k=1, box dist", 1.0, true),
@@ -382,10 +379,8 @@ fn main() -> anyhow::Result<()> {
             for &k in &picks {
                 let cam = p.scenario.camera(k);
                 let sp = params(&cam);
-                n += select_generic(&levels, &sp, |t| {
-                    tile_exact_splits(&levels, &data, &cam, focal, tau, t)
-                })
-                .len();
+                let view = ExactView::new(&data, &cam, focal, tau);
+                n += select_generic(&levels, &sp, |t| view.tile_splits(&levels, t)).len();
             }
             print_cf(
                 "tile oracle (exact per-sample, no chain/morph)",
@@ -401,18 +396,11 @@ fn main() -> anyhow::Result<()> {
             for &k in &picks {
                 let cam = p.scenario.camera(k);
                 let sp = params(&cam);
-                let tiles = select_generic(&levels, &sp, |t| {
-                    tile_exact_splits(&levels, &data, &cam, focal, tau, t)
-                });
-                let exact = ExactView {
-                    data: &data,
-                    cam: &cam,
-                    focal,
-                    tau,
-                };
+                let view = ExactView::new(&data, &cam, focal, tau);
+                let tiles = select_generic(&levels, &sp, |t| view.tile_splits(&levels, t));
                 for t in tiles {
                     let mask = (0..4u32)
-                        .filter(|&q| quadrant_within_tau(&exact, &levels, t, q))
+                        .filter(|&q| view.quadrant_within_tau(&levels, t, q))
                         .fold(0u32, |m, q| m | 1 << q);
                     tris += grid::mask_triangles(levels.grid_size, mask);
                 }
@@ -712,27 +700,8 @@ fn select_generic(
     out
 }
 
-/// Tile granularity limit: a tile splits iff some sample's projected error of the tile's
-/// level grid exceeds tau (no chain, no morph, no restriction).
-fn tile_exact_splits(
-    levels: &Levels,
-    data: &vkterrain::dataset::Heightmap,
-    cam: &vkterrain::scene::Camera,
-    focal: f64,
-    tau: f64,
-    t: Tile,
-) -> bool {
-    let span = levels.grid_size << t.lod;
-    let view = ExactView {
-        data,
-        cam,
-        focal,
-        tau,
-    };
-    !view.within_tau(t.lod, [t.x * span, t.y * span], span)
-}
-
-/// One frame's exact projected error test over full-resolution samples.
+/// One frame's exact projected error test over full-resolution samples (the tile oracle's
+/// and the quadrant oracle's).
 struct ExactView<'a> {
     data: &'a vkterrain::dataset::Heightmap,
     cam: &'a vkterrain::scene::Camera,
@@ -740,7 +709,21 @@ struct ExactView<'a> {
     tau: f64,
 }
 
-impl ExactView<'_> {
+impl<'a> ExactView<'a> {
+    fn new(
+        data: &'a vkterrain::dataset::Heightmap,
+        cam: &'a vkterrain::scene::Camera,
+        focal: f64,
+        tau: f64,
+    ) -> Self {
+        ExactView {
+            data,
+            cam,
+            focal,
+            tau,
+        }
+    }
+
     /// Whether level `lod`'s triangulated grid is within tau (|grid - sample| x focal /
     /// distance) at every sample of the square of `span` quads from sample `origin` (clamped
     /// to the data).
@@ -759,18 +742,25 @@ impl ExactView<'_> {
             })
         })
     }
-}
 
-/// Whether quadrant `q` (bit `qx + 2 qy`) of tile `t`, drawn as the parent level's grid, is
-/// within tau at every full-resolution sample it covers (exact projected error).
-fn quadrant_within_tau(view: &ExactView, levels: &Levels, t: Tile, q: u32) -> bool {
-    let span = levels.grid_size << t.lod;
-    let half = span / 2;
-    let (c0, r0) = (t.x * span + (q & 1) * half, t.y * span + (q >> 1) * half);
-    if c0 > view.data.width - 1 || r0 > view.data.height - 1 {
-        return true;
+    /// Tile granularity limit: a tile splits iff some sample's projected error of the tile's
+    /// level grid exceeds tau (no chain, no morph, no restriction).
+    fn tile_splits(&self, levels: &Levels, t: Tile) -> bool {
+        let span = levels.grid_size << t.lod;
+        !self.within_tau(t.lod, [t.x * span, t.y * span], span)
     }
-    view.within_tau(t.lod + 1, [c0, r0], half)
+
+    /// Whether quadrant `q` (bit `qx + 2 qy`) of tile `t`, drawn as the parent level's grid,
+    /// is within tau at every full-resolution sample it covers.
+    fn quadrant_within_tau(&self, levels: &Levels, t: Tile, q: u32) -> bool {
+        let span = levels.grid_size << t.lod;
+        let half = span / 2;
+        let (c0, r0) = (t.x * span + (q & 1) * half, t.y * span + (q >> 1) * half);
+        if c0 > self.data.width - 1 || r0 > self.data.height - 1 {
+            return true;
+        }
+        self.within_tau(t.lod + 1, [c0, r0], half)
+    }
 }
 
 /// Counterfactual split field with nodes every `ns` quads of each level (no reach, zone or

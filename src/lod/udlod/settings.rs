@@ -173,7 +173,7 @@ impl UdlodSettings {
         },
         Sweep {
             key: "worst_case_share",
-            help: "share of a tile's worst-case error spent on tau (0 = measured per grid)",
+            help: "share of a tile's worst-case error spent on tau (0 = measured per grid size and field density)",
             apply: |s, v| s.worst_case_share = v,
         },
         Sweep {
@@ -258,7 +258,7 @@ impl UdlodSettings {
         let k = self.worst_case_share;
         if !(k == 0.0 || (k > 0.0 && k <= 1.0)) {
             return bad(format!(
-                "worst_case_share {k} must be 0 (measured per grid) or within (0, 1]"
+                "worst_case_share {k} must be 0 (measured per grid size and field density) or within (0, 1]"
             ));
         }
         if !(16..=1 << 22).contains(&self.max_tiles) {
