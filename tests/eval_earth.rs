@@ -246,7 +246,13 @@ fn udlod_on_the_earth_stays_within_tau() {
         (320, 180),
     );
     for (name, m) in ["brute force", "UDLOD tau 1"].iter().zip(&measured) {
-        println!("{name}: {:?}, holes {}", m.summaries(), m.holes);
+        println!(
+            "{name}: {:?}, holes {} (cracks {}), skyline {} px lower",
+            m.summaries(),
+            m.holes,
+            m.cracks,
+            m.silhouette_px
+        );
         assert_eq!(m.missing, 0, "{name}: every pixel found its reference tile");
     }
     let (_, brute_px) = measured[0].summaries();
@@ -255,7 +261,19 @@ fn udlod_on_the_earth_stays_within_tau() {
     assert!(px.count > 10_000, "{px:?}");
     assert!(px.p999 <= 1.0, "UDLOD p99.9 {} px > tau", px.p999);
     assert!(px.p999 > brute_px.p999, "UDLOD simplifies: {px:?}");
-    assert_eq!(measured[1].holes, 0);
+    // No sky seen through the surface; the far skyline may fall within what tau allows
+    // (docs/udlod.md, "Silhouette holes"), as in the per-axis test below. Measured: no hole
+    // with one field node per tile corner; 10 above a skyline 2 px lower with two per side
+    // (the default since issue 18's nineteenth round).
+    let udlod = &measured[1];
+    assert_eq!(udlod.cracks, 0, "{} crack pixels", udlod.cracks);
+    let allowed = metrics::Holes::allowed_silhouette_pixels(cameras.len(), 320);
+    assert!(udlod.holes <= allowed, "{} hole pixels", udlod.holes);
+    assert!(
+        f64::from(udlod.silhouette_px) <= metrics::Holes::allowed_fall_px(1.0),
+        "skyline {} px lower",
+        udlod.silhouette_px
+    );
     common::assert_no_validation_messages(&gpu);
 }
 
@@ -457,7 +475,7 @@ fn udlod_per_axis_metric_on_a_geographic_grid_stays_within_tau() {
             // measured 45 over 8 frames, grid 8 9). Cracks are also ruled out where the view
             // is all terrain (`tests/udlod.rs` `watertight_over_200_poses`, every grid).
             assert_eq!(m.cracks, 0, "{name}: {} crack pixels", m.cracks);
-            let allowed = metrics::Holes::allowed_silhouette_pixels(tau_px, cameras.len(), 320);
+            let allowed = metrics::Holes::allowed_silhouette_pixels(cameras.len(), 320);
             assert!(m.holes <= allowed, "{name}: {} hole pixels", m.holes);
             // The skyline's fall (measured: 0 at tau 1, 3 px per axis and 2 px smallest at
             // tau 2).
