@@ -12,7 +12,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use vkterrain::dataset::stats::{Finest, TileStats};
+use vkterrain::dataset::stats::TileStats;
 use vkterrain::dataset::{Level0, PyramidReader};
 use vkterrain::lod::udlod::select::{FieldKey, Levels, SplitField};
 use vkterrain::lod::udlod::settings::UdlodSettings;
@@ -23,9 +23,20 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// The tile size whose statistics UDLOD's default reads (stored by `vkterrain preprocess` by
-/// default).
+/// The tile size whose statistics UDLOD's default reads: its split field's cells (stored by
+/// `vkterrain preprocess` by default).
 const GRID: u32 = vkterrain::dataset::preprocess::DEFAULT_STATS_GRID_SIZES[0];
+
+/// The default's split-field nodes per tile side (its tiles are `GRID x DENSITY` quads).
+fn density() -> u32 {
+    let d = UdlodSettings::default();
+    assert_eq!(
+        d.grid_size / d.field_density(),
+        GRID,
+        "the stored grid is the default's cells"
+    );
+    d.field_density()
+}
 
 fn main() {
     let sets = std::env::var("VKT_STARTUP_DATASETS")
@@ -45,8 +56,8 @@ fn main() {
             .map(|_| {
                 let t = Instant::now();
                 let r = PyramidReader::open(&dir).expect("data set");
-                let s = r.tile_stats(GRID, Finest::Skip).expect("stats");
-                let levels = Levels::from_stats(s, r.spacing());
+                let s = r.field_stats(GRID, density()).expect("stats");
+                let levels = Levels::from_field_stats(s, r.spacing());
                 assert_eq!(r.node_loads(), 0, "start-up read level 0");
                 std::hint::black_box(levels);
                 t.elapsed().as_secs_f64()
@@ -56,7 +67,8 @@ fn main() {
             std::fs::metadata(dir.join(format!("stats-g{GRID}.bin"))).map_or(0, |m| m.len());
         let old = if before {
             let t = Instant::now();
-            let l = Levels::new(&reader.sweep(), GRID).expect("levels");
+            let l =
+                Levels::for_settings(&reader.sweep(), &UdlodSettings::default()).expect("levels");
             std::hint::black_box(l);
             format!("{:.2}", t.elapsed().as_secs_f64())
         } else {
@@ -67,7 +79,9 @@ fn main() {
                 let t = Instant::now();
                 let rows = reader.store().level0_rows().expect("disk").expect("rows");
                 let s = TileStats::compute(&rows, GRID, &|_| {}).expect("stats");
-                std::hint::black_box(Levels::from_stats(s, reader.spacing()));
+                let levels =
+                    Levels::with_field_density(s.without_finest(), density(), reader.spacing());
+                std::hint::black_box(levels.expect("levels"));
                 t.elapsed().as_secs_f64()
             })
             .collect::<Vec<_>>();

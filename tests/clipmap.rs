@@ -1132,9 +1132,11 @@ impl std::fmt::Debug for Bits {
 /// bit for bit (and the sample-by-sample definition), so start-up reads no level 0; a grid
 /// size that was not stored is computed from level 0 to the same bits, and twice a stored grid
 /// folded from it; UDLOD's finer split field reads the stored tiles as its cells keeping
-/// their errors only, to the same bits as reading them whole. Negative controls: one stored
-/// minimum moved by one ulp (still a valid file) makes the levels and the folded read differ;
-/// a NaN is a one-line error naming the file, from either read.
+/// their errors only, to the same bits as reading them whole. The stored grid 2 omits level
+/// 0's tiles (flagged in its header); a file with them reads back to the same bits. Negative
+/// controls: one stored minimum moved by one ulp (still a valid file) makes the levels and the
+/// folded read differ; a NaN is a one-line error naming the file, from either read; the
+/// header's flag cleared or unknown is a one-line error.
 #[test]
 fn stored_tile_statistics_equal_the_computed_ones() {
     use vkterrain::dataset::preprocess;
@@ -1159,11 +1161,25 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     // node read.
     let g = preprocess::DEFAULT_STATS_GRID_SIZES[0];
     let udlod = UdlodSettings::default();
-    assert_eq!(g, udlod.grid_size / udlod.field_density);
+    assert_eq!(g, udlod.grid_size / udlod.field_density());
     let file_name = format!("stats-g{g}.bin");
+    // Stored without level 0's tiles (a grid below `FINEST_STORED_FROM_GRID`; UDLOD skips
+    // them): the file's size says so, and a read that keeps level 0 finds them not stored.
+    assert!(g < preprocess::FINEST_STORED_FROM_GRID);
+    let (w, h) = (data.width, data.height);
+    let stored_len = std::fs::metadata(dataset().join(&file_name)).unwrap().len();
+    assert_eq!(stored_len, TileStats::stored_size(w, h, g, false).unwrap());
+    assert!(stored_len < TileStats::stored_size(w, h, g, true).unwrap() / 3);
+    assert!(
+        reader
+            .store()
+            .stored_stats(g, Finest::Keep)
+            .unwrap()
+            .is_none()
+    );
     let stored = reader
         .store()
-        .stored_stats(g, Finest::Keep)
+        .stored_stats(g, Finest::Skip)
         .unwrap()
         .expect("default grid stored");
     assert_eq!(reader.node_loads(), 0);
@@ -1176,12 +1192,11 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     assert_eq!(le, from_disk.level_error);
     // In parallel over the pyramid's level file: the same bits.
     let par = TileStats::compute(&data, g, &|_| {}).unwrap();
-    assert_eq!(par, stored);
-    // UDLOD's read skips level 0's tiles: the same statistics without them, and a quarter of
-    // the tiles held.
+    assert_eq!(par.clone().without_finest(), stored);
+    // UDLOD's read: the same statistics, a quarter of the tiles held.
     let coarse = reader.tile_stats(g, Finest::Skip).unwrap();
-    assert!(stored.has_finest() && !coarse.has_finest());
-    assert_eq!(coarse, stored.clone().without_finest());
+    assert!(par.has_finest() && !coarse.has_finest());
+    assert_eq!(coarse, stored);
     assert!(same(
         &Levels::from_stats(coarse, reader.spacing()),
         &from_disk
@@ -1189,7 +1204,8 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     // A split field of two nodes per tile side whose cells are the stored tiles
     // (`field_density = 2` at twice the grid): the cells' heights fold into the tiles' as they
     // are read, equal to folding them in memory, and the levels equal those computed from the
-    // settings. The default's read (one node per corner) is the stored tiles'.
+    // settings (the default's field). One node per corner at the stored grid reads the stored
+    // tiles.
     let d = 2;
     let finer = UdlodSettings {
         grid_size: d * g,
@@ -1246,9 +1262,8 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     let file = moved.join(&file_name);
     let mut bytes = std::fs::read(&file).unwrap();
     let levels = stored.levels.len();
-    // A tile of level 1 (level 0's tiles are not part of `Levels`) whose minimum is its
-    // field tile's, so the folded read must see it too: (min, max, error).
-    let (nx0, ny0) = stored.levels[0].tiles;
+    // A tile of level 1 (the first stored; level 0's tiles are not part of `Levels`) whose
+    // minimum is its field tile's, so the folded read must see it too: (min, max, error).
     let (cells, tiles) = (&stored.levels[1], &field.tiles.levels[1]);
     let pick = (0..cells.min_max.len())
         .find(|&i| {
@@ -1257,7 +1272,7 @@ fn stored_tile_statistics_equal_the_computed_ones() {
             cells.min_max[i][0] == tiles.min_max[t][0]
         })
         .unwrap();
-    let first_tile = 40 + 16 * levels + 12 * (nx0 * ny0) as usize + 12 * pick;
+    let first_tile = 40 + 16 * levels + 12 * pick;
     let v = f32::from_le_bytes(bytes[first_tile..first_tile + 4].try_into().unwrap());
     bytes[first_tile..first_tile + 4]
         .copy_from_slice(&f32::from_bits(v.to_bits() - 1).to_le_bytes());
@@ -1281,13 +1296,43 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     assert!(e.contains(&file_name) && !e.contains('\n'), "{e}");
     let e = mutated.field_stats(g, d).unwrap_err().to_string();
     assert!(e.contains(&file_name) && !e.contains('\n'), "{e}");
-    // A NaN in level 0: refused where level 0 is read; UDLOD's read never looks at it.
+    // A file with level 0's tiles (as grids from `FINEST_STORED_FROM_GRID` up are stored),
+    // written and read back: the same bits; a NaN in its level 0 is refused where level 0 is
+    // read, and UDLOD's read never looks at it.
+    let full = moved.join("full-stats.bin");
+    par.write(&full).unwrap();
+    assert_eq!(
+        std::fs::metadata(&full).unwrap().len(),
+        TileStats::stored_size(w, h, g, true).unwrap()
+    );
+    assert_eq!(TileStats::read(&full, w, h, g, Finest::Keep).unwrap(), par);
+    assert_eq!(
+        TileStats::read(&full, w, h, g, Finest::Skip).unwrap(),
+        stored
+    );
+    let mut bytes = std::fs::read(&full).unwrap();
     let level0_tile = 40 + 16 * levels + 12 * 5;
-    let mut bytes = std::fs::read(dataset().join(&file_name)).unwrap();
     bytes[level0_tile..level0_tile + 4].copy_from_slice(&f32::NAN.to_le_bytes());
-    std::fs::write(&file, &bytes).unwrap();
-    let e = mutated.tile_stats(g, Finest::Keep).unwrap_err().to_string();
+    std::fs::write(&full, &bytes).unwrap();
+    let e = TileStats::read(&full, w, h, g, Finest::Keep)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("level 0") && !e.contains('\n'), "{e}");
-    assert!(mutated.tile_stats(g, Finest::Skip).is_ok());
+    assert!(TileStats::read(&full, w, h, g, Finest::Skip).is_ok());
+    // The header's flag (byte 36) must match the file: cleared on the stored file (which
+    // has no level 0) it is a size mismatch, an unknown flag a one-line error.
+    let mut bytes = std::fs::read(dataset().join(&file_name)).unwrap();
+    assert_eq!(bytes[36], 1, "the stored file flags level 0 omitted");
+    for (flag, expect) in [(0u8, "truncated or altered"), (2, "unknown header flags")] {
+        bytes[36] = flag;
+        std::fs::write(&file, &bytes).unwrap();
+        let e = TileStats::read(&file, w, h, g, Finest::Skip)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(expect) && e.contains(&file_name) && !e.contains('\n'),
+            "{e}"
+        );
+    }
     std::fs::remove_dir_all(&moved).ok();
 }

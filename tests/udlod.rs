@@ -71,7 +71,7 @@ fn bounded_cascade(grid_size: u32) -> UdlodSettings {
 }
 
 /// [`cascade`] with a split field of two nodes per tile side (`field_density = 2`:
-/// docs/udlod.md, "A finer split field").
+/// docs/udlod.md, "A finer split field"; the default's at grid 4 and 8).
 fn finer_field(grid_size: u32) -> UdlodSettings {
     UdlodSettings {
         field_density: 2,
@@ -79,14 +79,24 @@ fn finer_field(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// One level step, the cascade kept inside the tile, the morph cascade (the default) and the
-/// cascade with the finer split field, each checked by the structural tests.
+/// [`cascade`] with one split-field node per tile corner (`field_density = 1`: the default
+/// until issue 18's nineteenth round).
+fn corner_field(grid_size: u32) -> UdlodSettings {
+    UdlodSettings {
+        field_density: 1,
+        ..cascade(grid_size)
+    }
+}
+
+/// One level step, the cascade kept inside the tile and the morph cascade, each with the
+/// default split field (two nodes per tile side at grid 4 and 8), and the cascade with one node
+/// per tile corner, each checked by the structural tests.
 fn morph_variants(grid_size: u32) -> [(&'static str, UdlodSettings); 4] {
     [
         ("one level step", one_step(grid_size)),
         ("bounded cascade", bounded_cascade(grid_size)),
         ("cascade", cascade(grid_size)),
-        ("finer field", finer_field(grid_size)),
+        ("corner field", corner_field(grid_size)),
     ]
 }
 
@@ -635,14 +645,15 @@ fn gpu_vertex_morph_equals_the_cpu_mirror() {
     for grid in grids() {
         morph_equals_the_cpu_mirror(&data, &cameras, grid);
     }
-    // The finer split field's bilinear cells (negative control by hand: cells as large as the
-    // tiles on the GPU, `span = quads << lod`, fails here).
-    let finer = compare_morph(&data, &cameras, &finer_field(4));
-    println!("grid 4, finer field: {finer:?}");
-    finer.assert_agrees(4);
+    // The cascade above has the default's finer split field with its bilinear cells (negative
+    // control by hand: cells as large as the tiles on the GPU, `span = quads << lod`, fails
+    // there); here one node per tile corner.
+    let corners = compare_morph(&data, &cameras, &corner_field(4));
+    println!("grid 4, corner field: {corners:?}");
+    corners.assert_agrees(4);
     assert!(
-        finer.mid_morph >= 2000 && finer.cascaded >= 100,
-        "{finer:?}"
+        corners.mid_morph >= 2000 && corners.cascaded >= 100,
+        "{corners:?}"
     );
 }
 
@@ -969,7 +980,7 @@ fn culling_boxes_hold_every_morphed_vertex() {
     for grid in grids() {
         for (name, lod) in [
             ("cascade", cascade(grid)),
-            ("finer field", finer_field(grid)),
+            ("corner field", corner_field(grid)),
         ] {
             culling_boxes_hold_every_morphed_vertex_at(grid, name, lod);
         }

@@ -59,9 +59,17 @@ pub struct Options {
     pub memory_budget: Option<u64>,
 }
 
-/// The tile size whose statistics are stored unless told otherwise (UDLOD's default; other
-/// sizes are computed from level 0 at start-up, or stored with `--stats-grid-sizes`).
-pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [4];
+/// The tile size whose statistics are stored unless told otherwise (the cells of UDLOD's
+/// default split field, grid 4 with two nodes per side; grid 4 with one node per corner folds
+/// them too; other sizes are computed from level 0 at start-up, or stored with
+/// `--stats-grid-sizes`).
+pub const DEFAULT_STATS_GRID_SIZES: [u32; 1] = [2];
+
+/// The smallest stored grid size whose file keeps level 0's tiles. UDLOD never reads them (it
+/// skips level 0), chunked LOD reads its own chunks' (`chunk_quads`, 16 by default, computed
+/// from level 0 where not stored); at grid 2 they would be three quarters of the file, about 3
+/// bytes per level-0 sample (docs/dataset-format.md).
+pub const FINEST_STORED_FROM_GRID: u32 = 4;
 
 impl Default for Options {
     fn default() -> Self {
@@ -547,6 +555,7 @@ pub fn estimate_bytes(layout: &Layout, layers: LayerSet, grid_sizes: &[u32]) -> 
             layout.width.min(u32::MAX as u64) as u32,
             layout.height.min(u32::MAX as u64) as u32,
             g,
+            g >= FINEST_STORED_FROM_GRID,
         )?);
     }
     Ok(total)
@@ -710,8 +719,11 @@ fn write_tile_stats(
     )?;
     for &g in grid_sizes {
         progress.level(&format!("stats g{g:>2}"), layout.height);
-        let stats = TileStats::compute(&rows, g, &|n| progress.advance(n))?;
+        let mut stats = TileStats::compute(&rows, g, &|n| progress.advance(n))?;
         progress.level_done();
+        if g < FINEST_STORED_FROM_GRID {
+            stats = stats.without_finest();
+        }
         let file = manifest::stats_file(g);
         let n = stats.write(&tmp.join(&file))?;
         bytes += n;

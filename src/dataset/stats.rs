@@ -29,6 +29,9 @@ pub const STATS_MAGIC: &[u8; 8] = b"VKTSTATS";
 /// Version of the statistics file layout.
 pub const STATS_VERSION: u32 = 1;
 const HEADER: usize = 40;
+/// Header flag (the u32 at byte 36, 0 before it existed): the finest level's tiles are not
+/// stored ([`TileStats::without_finest`]; its level entry is).
+const FINEST_OMITTED: u32 = 1;
 const LEVEL_ENTRY: usize = 16;
 const TILE_ENTRY: usize = 12;
 /// Tiles read per buffer fill: reading a level needs no buffer of the level's size.
@@ -363,12 +366,20 @@ impl TileStats {
         self.levels.len() as u32 - 1
     }
 
-    /// Bytes of the stored form for a `width x height` grid.
-    pub fn stored_size(width: u32, height: u32, grid_size: u32) -> Result<u64> {
+    /// Bytes of the stored form for a `width x height` grid, with or without the finest
+    /// level's tiles (`finest_stored`; always with them where it is the only level).
+    pub fn stored_size(
+        width: u32,
+        height: u32,
+        grid_size: u32,
+        finest_stored: bool,
+    ) -> Result<u64> {
         let shape = Shape::new(width, height, grid_size)?;
+        let omitted = !finest_stored && shape.levels.len() > 1;
         let tiles: u64 = shape
             .levels
             .iter()
+            .skip(omitted as usize)
             .map(|&(nx, ny, _)| nx as u64 * ny as u64)
             .sum();
         Ok(HEADER as u64
@@ -377,8 +388,10 @@ impl TileStats {
     }
 
     /// The stored form: header, per level `(nx, ny, max_error)`, per tile `(min, max, error)`,
-    /// little-endian.
+    /// little-endian; without the finest level's tiles where these statistics do not hold
+    /// them (flagged in the header).
     pub fn to_bytes(&self) -> Vec<u8> {
+        let flags = if self.has_finest() { 0 } else { FINEST_OMITTED };
         let tiles: usize = self.levels.iter().map(|l| l.error.len()).sum();
         let mut b =
             Vec::with_capacity(HEADER + self.levels.len() * LEVEL_ENTRY + tiles * TILE_ENTRY);
@@ -390,7 +403,7 @@ impl TileStats {
             b.extend_from_slice(&v.to_le_bytes());
         }
         b.extend_from_slice(&(self.levels.len() as u32).to_le_bytes());
-        b.extend_from_slice(&0u32.to_le_bytes());
+        b.extend_from_slice(&flags.to_le_bytes());
         for l in &self.levels {
             b.extend_from_slice(&l.tiles.0.to_le_bytes());
             b.extend_from_slice(&l.tiles.1.to_le_bytes());
@@ -408,7 +421,8 @@ impl TileStats {
 
     /// Parses and checks the stored form against the grid it must describe: sizes, tile
     /// counts, finite values, `min <= max`, errors `>= 0` and each level's maximum equal to
-    /// its largest tile error. `what` names the file in errors.
+    /// its largest tile error; the finest level's tiles where the file holds them. `what`
+    /// names the file in errors.
     pub fn from_bytes(
         bytes: &[u8],
         what: &str,
@@ -416,7 +430,11 @@ impl TileStats {
         height: u32,
         grid_size: u32,
     ) -> Result<Self> {
-        let want = Self::stored_size(width, height, grid_size)?;
+        let finest_stored = bytes
+            .get(..HEADER)
+            .map_or(Ok(true), finest_stored)
+            .map_err(|m| Error::invalid(what, m))?;
+        let want = Self::stored_size(width, height, grid_size, finest_stored)?;
         if bytes.len() as u64 != want {
             return Err(Error::invalid(
                 what,
@@ -433,7 +451,11 @@ impl TileStats {
             width,
             height,
             grid_size,
-            Finest::Keep,
+            if finest_stored {
+                Finest::Keep
+            } else {
+                Finest::Skip
+            },
             None,
         )
     }
@@ -455,6 +477,10 @@ impl TileStats {
         let bad = |m: String| Error::invalid(what, m);
         let shape = Shape::new(width, height, grid_size)?;
         let head = read_header(r, &shape).map_err(bad)?;
+        let omitted = !finest_stored(&head).map_err(bad)?;
+        if omitted && finest == Finest::Keep {
+            return Err(bad("level 0's tiles are not stored".into()));
+        }
         let u32_at =
             |b: &[u8], o: usize| u32::from_le_bytes(b[o..o + 4].try_into().expect("4 bytes"));
         let folding = coarse.is_some();
@@ -469,6 +495,9 @@ impl TileStats {
                     "level {lod} has {tiles:?} tiles, expected {:?}",
                     level.tiles
                 )));
+            }
+            if lod == 0 && omitted {
+                continue;
             }
             if lod == 0 && skip_finest {
                 let stored = level.tiles.0 as usize * level.tiles.1 as usize;
@@ -612,9 +641,11 @@ impl TileStats {
         finest: Finest,
         coarse: Option<&mut TileStats>,
     ) -> Result<Self> {
+        use std::io::Seek;
         let what = path.display().to_string();
-        let want = Self::stored_size(width, height, grid_size)?;
         let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let finest_stored = read_finest_stored(&mut file, &what)?;
+        let want = Self::stored_size(width, height, grid_size, finest_stored)?;
         let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
         if len != want {
             return Err(Error::invalid(
@@ -622,9 +653,42 @@ impl TileStats {
                 format!("{len} bytes, expected {want}: truncated or altered"),
             ));
         }
+        file.rewind().map_err(|e| Error::io(path, e))?;
         let mut r = std::io::BufReader::new(&mut file);
         Self::parse(&mut r, &what, width, height, grid_size, finest, coarse)
     }
+}
+
+/// Whether a stored file at `path` holds its finest level's tiles (its header's flag),
+/// read from its first bytes.
+pub fn stored_with_finest(path: &std::path::Path) -> Result<bool> {
+    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    read_finest_stored(&mut file, &path.display().to_string())
+}
+
+/// The flags of the header at the start of `file` ([`finest_stored`]); `what` names it.
+fn read_finest_stored(file: &mut std::fs::File, what: &str) -> Result<bool> {
+    use std::io::Read;
+    let mut head = [0u8; HEADER];
+    file.read_exact(&mut head)
+        .map_err(|e| Error::invalid(what, format!("unreadable header (truncated?): {e}")))?;
+    finest_stored(&head).map_err(|m| Error::invalid(what, m))
+}
+
+/// Whether a header (at least [`HEADER`] bytes) says the finest level's tiles are stored:
+/// its flags word, where [`FINEST_OMITTED`] is the only flag, and only with a coarser level.
+fn finest_stored(head: &[u8]) -> std::result::Result<bool, String> {
+    let u32_at = |o: usize| u32::from_le_bytes(head[o..o + 4].try_into().expect("4 bytes"));
+    let (levels, flags) = (u32_at(32), u32_at(36));
+    if flags & !FINEST_OMITTED != 0 {
+        return Err(format!("unknown header flags {flags:#x}"));
+    }
+    if flags == FINEST_OMITTED && levels < 2 {
+        return Err(
+            "the finest level's tiles are flagged omitted, but it is the only level".into(),
+        );
+    }
+    Ok(flags == 0)
 }
 
 /// Reads the stored form's header and level entries from `r` and checks them against the

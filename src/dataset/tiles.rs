@@ -8,7 +8,7 @@ use super::manifest::{self, Manifest};
 use super::pyramid::{
     LEVEL_HEADER, LEVEL_MAGIC, LayerSet, Layout, Node, level_header, read_node_from,
 };
-use super::stats::{FieldStats, Finest, TileStats};
+use super::stats::{self, FieldStats, Finest, TileStats};
 use super::{Albedo, Heightmap};
 use crate::error::{Error, Result};
 
@@ -77,6 +77,9 @@ impl Dataset {
         let Some(path) = self.stats_file(grid_size) else {
             return Ok(None);
         };
+        if finest == Finest::Keep && !stats::stored_with_finest(&path)? {
+            return Ok(None);
+        }
         let (width, height) = self.level0_size();
         TileStats::read(&path, width, height, grid_size, finest).map(Some)
     }

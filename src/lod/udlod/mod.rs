@@ -350,7 +350,7 @@ impl Udlod {
         // With a finer split field the statistics of its cells (tiles of `grid_size /
         // field_density` quads), from which the tiles' own follow bit for bit; a pyramid's
         // stored ones are read without holding the cells' heights.
-        let density = settings.field_density;
+        let density = settings.field_density();
         let cell_quads = settings.grid_size / density;
         // Without level 0's tiles: the tiling shader bounds them by their parents.
         let mut levels = match ctx.data {

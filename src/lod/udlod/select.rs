@@ -91,7 +91,7 @@ impl Levels {
     /// `field_density` nodes per tile side ([`Levels::with_field_density`]), computed on this
     /// thread.
     pub fn for_settings<D: Level0 + ?Sized>(data: &D, settings: &UdlodSettings) -> Result<Self> {
-        let d = settings.field_density;
+        let d = settings.field_density();
         let stats = TileStats::compute_serial(data, settings.grid_size / d.max(1))?;
         Self::with_field_density(stats.without_finest(), d, data.spacing())
     }
@@ -432,6 +432,22 @@ const MEASURED_SHARES: [(u32, f64); 3] = [(2, 0.9), (4, 0.72), (8, 0.7)];
 /// (1.010 px at tau 1), 0.78 reached 0.997 tau at tau 2, so 0.80 (at most 0.973 tau); grid 8,
 /// two or four per side: 0.70 exceeded it, 0.76 held (0.70 / 0.76 / 0.82 swept).
 pub const FINER_FIELD_SHARES: [(u32, u32, f64); 3] = [(4, 2, 0.80), (8, 2, 0.76), (8, 4, 0.76)];
+
+/// The split field's nodes per tile side where `UdlodSettings::field_density` is 0: two at the
+/// grid sizes whose share was measured with two ([`FINER_FIELD_SHARES`]: grid 4 and 8), one
+/// elsewhere (grid 2 leaves no room for two cells of 2 quads; larger grids are not measured).
+/// Two per side draws 6-22 % fewer triangles than one at grid 4 at about equal measured error
+/// (docs/udlod.md, "The finer field as the default").
+pub fn field_density(grid_size: u32) -> u32 {
+    if FINER_FIELD_SHARES
+        .iter()
+        .any(|&(g, d, _)| g == grid_size && d == 2)
+    {
+        2
+    } else {
+        1
+    }
+}
 
 /// The share with one field node per tile corner, interpolated between the measured grid sizes.
 fn tile_share(grid_size: u32) -> f64 {
@@ -1608,7 +1624,12 @@ mod tests {
     #[test]
     fn field_terms_name_what_sets_each_cell() {
         let data = test_terrain();
-        let settings = UdlodSettings::default();
+        // One node per tile corner: with two per side (the default) the separation term sets
+        // one of level 3's cells even at tau 1e-3 (a rough cell beside smooth ones).
+        let settings = UdlodSettings {
+            field_density: 1,
+            ..UdlodSettings::default()
+        };
         let levels = Levels::for_settings(&data, &settings).unwrap();
         let counts = |tau_px: f64| {
             let key = FieldKey::new(
@@ -1729,5 +1750,36 @@ mod tests {
         }
         assert_eq!(worst_case_share(16, 2), 0.9, "unmeasured: grid 2's");
         assert_eq!(worst_case_share(16, 1), worst_case_share(8, 1));
+    }
+
+    /// The measured field density (`field_density = 0`) is two nodes per side exactly where a
+    /// share was measured for two, one elsewhere; and it is valid at every grid size, so a sweep
+    /// over grid sizes never meets an invalid default (grid 2 has no room for two cells).
+    /// Negative control: two per side at grid 2 fails `validate`.
+    #[test]
+    fn the_measured_field_density_is_two_where_its_share_was_measured() {
+        use crate::lod::udlod::settings::UdlodSettings;
+        let densities = [2, 4, 8, 16, 32, 64].map(super::field_density);
+        assert_eq!(densities, [1, 2, 2, 1, 1, 1]);
+        for g in [2, 4, 8, 16, 32, 64] {
+            let s = UdlodSettings {
+                grid_size: g,
+                ..UdlodSettings::default()
+            };
+            assert_eq!(s.field_density(), super::field_density(g));
+            assert!(s.validate().is_ok(), "grid {g}");
+            let d = s.field_density();
+            assert!(
+                d == 1 || super::FINER_FIELD_SHARES.contains(&(g, d, s.worst_case_share())),
+                "grid {g}: density {d} without its measured share"
+            );
+        }
+        let two_at_grid_2 = UdlodSettings {
+            grid_size: 2,
+            field_density: 2,
+            ..UdlodSettings::default()
+        };
+        let e = two_at_grid_2.validate().unwrap_err().to_string();
+        assert!(e.contains("field_density 2") && !e.contains('\n'), "{e}");
     }
 }

@@ -30,14 +30,15 @@ pub struct UdlodSettings {
     /// fifteenth round); 1 one level step, the CDLOD-style chain, where neighbours differ by
     /// at most one level.
     pub morph_levels: u32,
-    /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 1 (the
-    /// default) at the tiles' corners; 2 also at their edges' midpoints and centres, each cell
-    /// taking the error of its quarter of the tile, so a rough tile raises its neighbours'
-    /// split distances over half a tile instead of a whole one: 6-22 % fewer triangles at
-    /// grid 4 at about the same measured error (with its own share, `select::worst_case_share`),
-    /// for 2.8x the host memory (`tests/hostmem.rs`) and grid-2 statistics (not the default
-    /// for that). A power of two that leaves at least 2 quads per cell
-    /// (`grid_size / field_density >= 2`).
+    /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 0 (the
+    /// default) the density measured for the grid size (`select::field_density`: 2 at grid 4
+    /// and 8, else 1); 1 at the tiles' corners; 2 also at their edges' midpoints and centres,
+    /// each cell taking the error of its quarter of the tile, so a rough tile raises its
+    /// neighbours' split distances over half a tile instead of a whole one: 6-22 % fewer
+    /// triangles at grid 4 at about the same measured error (with its own share,
+    /// `select::worst_case_share`), for 2.8x the host memory (`tests/hostmem.rs`) and
+    /// statistics of `grid_size / 2` (`preprocess` stores grid 2's and 4's). Otherwise a power
+    /// of two that leaves at least 2 quads per cell (`grid_size / field_density >= 2`).
     pub field_density: u32,
     /// The share of a tile's worst-case projected error the split rule spends on `tau`
     /// (`select::worst_case_share`): 0 (the default) the share measured per grid size and
@@ -129,7 +130,10 @@ impl Default for UdlodSettings {
             // 640x360, -0.6 to -15 % at 1080p on the H200 (docs/udlod.md, "The morph
             // cascade").
             morph_levels: 0,
-            field_density: 1,
+            // Two nodes per tile side at grid 4 (issue 18, nineteenth round): 6-22 % fewer
+            // triangles at about equal measured error (docs/udlod.md, "The finer field as the
+            // default").
+            field_density: 0,
             worst_case_share: 0.0,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
             // needs 8.7 M and overflowed 262,144 tiles in every frame (docs/udlod.md).
@@ -168,7 +172,7 @@ impl UdlodSettings {
         },
         Sweep {
             key: "field_density",
-            help: "split-field nodes per tile side (1, 2, ...)",
+            help: "split-field nodes per tile side (0 = measured per grid size; 1, 2, ...)",
             apply: |s, v| s.field_density = v as u32,
         },
         Sweep {
@@ -212,11 +216,20 @@ impl UdlodSettings {
         }
     }
 
+    /// Split-field nodes per tile side: `field_density`, or with 0 the density measured for
+    /// `grid_size` (`select::field_density`).
+    pub fn field_density(&self) -> u32 {
+        match self.field_density {
+            0 => super::select::field_density(self.grid_size),
+            d => d,
+        }
+    }
+
     /// The share of a tile's worst-case projected error spent on `tau`: `worst_case_share`,
-    /// or with 0 the one measured for `grid_size` and `field_density` (`select::worst_case_share`).
+    /// or with 0 the one measured for `grid_size` and the field density (`select::worst_case_share`).
     pub fn worst_case_share(&self) -> f64 {
         match self.worst_case_share {
-            0.0 => super::select::worst_case_share(self.grid_size, self.field_density),
+            0.0 => super::select::worst_case_share(self.grid_size, self.field_density()),
             k => k,
         }
     }
@@ -248,10 +261,10 @@ impl UdlodSettings {
                 self.morph_levels, self.grid_size
             ));
         }
-        let d = self.field_density;
+        let d = self.field_density();
         if !d.is_power_of_two() || self.grid_size % d != 0 || self.grid_size / d < 2 {
             return bad(format!(
-                "field_density {d} must be a power of two with at least 2 quads per cell (grid_size {} / field_density >= 2)",
+                "field_density {d} must be 0 (measured per grid size) or a power of two with at least 2 quads per cell (grid_size {} / field_density >= 2)",
                 self.grid_size
             ));
         }
@@ -307,15 +320,15 @@ mod tests {
             worst_case_share: k,
             ..UdlodSettings::default()
         };
-        let measured = super::super::select::worst_case_share(4, 1);
-        assert_eq!(at(0.0).worst_case_share(), measured);
-        let finer = UdlodSettings {
-            field_density: 2,
+        let measured = super::super::select::worst_case_share(4, 2);
+        assert_eq!(at(0.0).worst_case_share(), measured, "the default's field");
+        let corners = UdlodSettings {
+            field_density: 1,
             ..at(0.0)
         };
         assert_eq!(
-            finer.worst_case_share(),
-            super::super::select::worst_case_share(4, 2)
+            corners.worst_case_share(),
+            super::super::select::worst_case_share(4, 1)
         );
         assert_eq!(at(0.5).worst_case_share(), 0.5);
         for ok in [0.0, 0.3, 1.0] {
