@@ -80,7 +80,8 @@ pub struct PreprocessArgs {
     /// Duplicated border texels per side (>= 2).
     #[arg(long, default_value_t = 2)]
     pub border: u32,
-    /// UDLOD tile sizes (grid_size) whose statistics are stored, comma-separated.
+    /// Tile sizes whose statistics are stored, comma-separated (default 2: the cells of UDLOD's
+    /// default split field, grid 4 with two nodes per side; below 4 without level 0's tiles).
     #[arg(long, value_delimiter = ',', default_values_t = preprocess::DEFAULT_STATS_GRID_SIZES)]
     pub stats_grid_sizes: Vec<u32>,
     /// Worker threads (default: all cores).
