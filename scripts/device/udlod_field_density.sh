@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# UDLOD's split field with one node per tile corner (`field_density = 1`, the default) against
-# two per tile side (2: docs/udlod.md, "A finer split field") on the GPU machine, one binary,
+# UDLOD's split field with one node per tile corner (`field_density = 1`, the default until issue
+# 18's nineteenth round) against two per tile side (2, the default's at grid 4 since: docs/udlod.md,
+# "A finer split field") on the GPU machine, one binary,
 # 1920x1080, the CI terrain and Puget Sound (its heights carried in .device-vk/data).
 # `PART=bench` (default): `bench` frame times (2 in flight, 300 frames after 20 of warm-up),
 # tau 1 and 4, the densities alternated, two rounds. `PART=eval`: one `eval` per data set
