@@ -92,7 +92,7 @@ impl Levels {
     /// thread.
     pub fn for_settings<D: Level0 + ?Sized>(data: &D, settings: &UdlodSettings) -> Result<Self> {
         let d = settings.field_density();
-        let stats = TileStats::compute_serial(data, settings.grid_size / d.max(1))?;
+        let stats = TileStats::compute_serial(data, settings.grid_size / d)?;
         Self::with_field_density(stats.without_finest(), d, data.spacing())
     }
 

@@ -37,7 +37,7 @@ pub struct UdlodSettings {
     /// neighbours' split distances over half a tile instead of a whole one: 6-22 % fewer
     /// triangles at grid 4 at about the same measured error (with its own share,
     /// `select::worst_case_share`), for 2.8x the host memory (`tests/hostmem.rs`) and
-    /// statistics of `grid_size / 2` (`preprocess` stores grid 2's and 4's). Otherwise a power
+    /// statistics of `grid_size / 2` (`preprocess` stores grid 2's by default). Otherwise a power
     /// of two that leaves at least 2 quads per cell (`grid_size / field_density >= 2`).
     pub field_density: u32,
     /// The share of a tile's worst-case projected error the split rule spends on `tau`
@@ -130,7 +130,7 @@ impl Default for UdlodSettings {
             // 640x360, -0.6 to -15 % at 1080p on the H200 (docs/udlod.md, "The morph
             // cascade").
             morph_levels: 0,
-            // Two nodes per tile side at grid 4 (issue 18, nineteenth round): 6-22 % fewer
+            // Two nodes per tile side at grid 4 and 8 (issue 18, nineteenth round): 6-22 % fewer
             // triangles at about equal measured error (docs/udlod.md, "The finer field as the
             // default").
             field_density: 0,
