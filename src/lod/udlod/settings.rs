@@ -197,7 +197,7 @@ impl UdlodSettings {
         },
         Sweep {
             key: "morph_levels",
-            help: "levels a vertex may morph over (1 = one step, the default; 0 = all the tile allows)",
+            help: "levels a vertex may morph over (0 = every level, the default; 1 = one step; up to log2(grid_size) = within its tile)",
             apply: |s, v| s.morph_levels = v as u32,
         },
         Sweep {
