@@ -10,7 +10,11 @@
 //!
 //!   cargo run --release --example udlod_mesh -- --config config/ci.toml [--frames 60] [--tau 0.5,1,2,4]
 //!     [--grid 8] [--field-density 4] [--share 0.76] [--width 640 --height 360]
-//!     [--pixel 217,114 --frame 7]
+//!     [--pixel 217,114 --frame 7] [--split main]
+//!
+//! `--split main` is a what-if the renderer does not draw: each quad split along its diagonal
+//! from (0, 0) to (1, 1) instead of the drawn one from (1, 0) to (0, 1) (the positions
+//! unchanged), to count the triangles that split would invert.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -62,7 +66,7 @@ fn main() -> anyhow::Result<()> {
         };
         if let Some((px, py)) = args.pixel {
             let cam = p.scenario.camera(args.frame);
-            let mesh = Mesh::of_view(&levels, &data, &s, &cam, view);
+            let mesh = Mesh::of_view(&levels, &data, &s, &cam, view, args.split);
             print_pixel(&mesh, &cam, view, [px as f64 + 0.5, py as f64 + 0.5]);
             continue;
         }
@@ -70,14 +74,14 @@ fn main() -> anyhow::Result<()> {
         let mut total = Counts::default();
         for frame in 0..frames {
             let cam = p.scenario.camera(frame);
-            let c = Mesh::of_view(&levels, &data, &s, &cam, view).counts(&levels);
+            let c = Mesh::of_view(&levels, &data, &s, &cam, view, args.split).counts(&levels);
             if c.open_edges > 0 {
                 println!("  tau {tau} frame {frame}: {} open edges", c.open_edges);
             }
             total.add(&c);
         }
         println!(
-            "tau {tau}: {frames} frames, {} triangles, {} inverted in the grid ({:.2} %), {} open edges",
+            "tau {tau}: {frames} frames, {} triangles, {} inverted in the grid ({:.3} %), {} open edges",
             total.triangles,
             total.inverted,
             100.0 * total.inverted as f64 / total.triangles.max(1) as f64,
@@ -98,6 +102,17 @@ struct Args {
     height: Option<u32>,
     pixel: Option<(u32, u32)>,
     frame: u64,
+    split: Split,
+}
+
+/// Which diagonal splits each quad.
+#[derive(Clone, Copy, PartialEq)]
+enum Split {
+    /// From (1, 0) to (0, 1): what UDLOD draws (the index grid, `grid::IndexLayout`), the
+    /// statistics and the reference surface assume (`interp::triangulated`).
+    Anti,
+    /// From (0, 0) to (1, 1): a what-if.
+    Main,
 }
 
 impl Args {
@@ -113,6 +128,7 @@ impl Args {
             height: None,
             pixel: None,
             frame: 0,
+            split: Split::Anti,
         };
         let mut it = std::env::args().skip(1);
         while let Some(flag) = it.next() {
@@ -140,6 +156,13 @@ impl Args {
                         .ok_or_else(|| anyhow::anyhow!("--pixel {value:?}: X,Y"))?;
                     a.pixel = Some((parse(&flag, x)?, parse(&flag, y)?));
                 }
+                "--split" => {
+                    a.split = match value.as_str() {
+                        "anti" => Split::Anti,
+                        "main" => Split::Main,
+                        _ => anyhow::bail!("--split {value:?}: anti or main"),
+                    }
+                }
                 _ => anyhow::bail!("unknown argument {flag}"),
             }
         }
@@ -165,7 +188,8 @@ struct View {
 }
 
 /// One triangle of a tile's full grid: its tile, quad `(i, j)` and half `k` (0: the
-/// `(0,0) (1,0) (0,1)` half, 1: `(1,0) (1,1) (0,1)`, the index grid's order), its morphed
+/// `(0,0) (1,0) (0,1)` half, 1: `(1,0) (1,1) (0,1)`, the index grid's order; with
+/// [`Split::Main`] `(0,0) (1,0) (1,1)` and `(0,0) (1,1) (0,1)`), its morphed
 /// positions in samples, and the same in metres with the data's height there.
 struct Triangle {
     tile: Tile,
@@ -201,6 +225,7 @@ impl Mesh {
         s: &UdlodSettings,
         cam: &Camera,
         view: View,
+        split: Split,
     ) -> Self {
         let p = SelectionParams::new(levels, data, s, cam, cam.position, view.width, view.height);
         let n = levels.grid_size;
@@ -212,10 +237,16 @@ impl Mesh {
                 .map(|j| (0..=n).map(|i| vertex(i, j)).collect())
                 .collect();
             for (j, i) in (0..n as usize).flat_map(|j| (0..n as usize).map(move |i| (j, i))) {
-                let halves = [
-                    [grid[j][i], grid[j][i + 1], grid[j + 1][i]],
-                    [grid[j][i + 1], grid[j + 1][i + 1], grid[j + 1][i]],
+                let [c00, c10, c01, c11] = [
+                    grid[j][i],
+                    grid[j][i + 1],
+                    grid[j + 1][i],
+                    grid[j + 1][i + 1],
                 ];
+                let halves = match split {
+                    Split::Anti => [[c00, c10, c01], [c10, c11, c01]],
+                    Split::Main => [[c00, c10, c11], [c00, c11, c01]],
+                };
                 for (half, g) in halves.into_iter().enumerate() {
                     triangles.push(Triangle {
                         tile,
