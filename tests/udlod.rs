@@ -169,6 +169,49 @@ fn gpu_selection_equals_cpu_reference() {
     }
 }
 
+/// The renderer holds its split field's cells' errors only while it builds a field
+/// (`Levels::release_field_errors`) and reads them again for another key: with the default
+/// (two field nodes per tile side) and the focal length changing every frame (60 and 35 deg
+/// fields of view alternating), the GPU draws the CPU reference's tiles, built from levels that
+/// keep their errors, on every frame, and the two fields of view draw different tiles (the key
+/// matters). Negative control by hand: errors restored as zeros differ at frame 1, the first new
+/// key.
+#[test]
+fn a_new_field_key_reads_the_cells_again() {
+    let data = terrain(257, 30.0);
+    let lod = UdlodSettings::default();
+    assert!(
+        lod.field_density() > 1,
+        "the default's cells are not its tiles"
+    );
+    let cams: Vec<Camera> = (poses(&data, 12).into_iter().enumerate())
+        .map(|(i, c)| Camera {
+            vfov_deg: if i % 2 == 0 { 60.0 } else { 35.0 },
+            ..c
+        })
+        .collect();
+    let frames = gpu_and_cpu_tiles(&data, &cams, lod.clone());
+    for (i, (gpu, cpu)) in frames.iter().enumerate() {
+        let g: HashSet<_> = gpu.iter().collect();
+        let c: HashSet<_> = cpu.iter().collect();
+        assert_eq!(g, c, "frame {i} (vfov {}): GPU != CPU", cams[i].vfov_deg);
+    }
+    // The same poses at one field of view: the key changed what was drawn.
+    let levels = Levels::for_settings(&data, &lod).unwrap();
+    let other_fov = (cams.iter().zip(&frames)).filter(|(cam, (_, cpu))| {
+        let cam = Camera {
+            vfov_deg: 60.0,
+            ..**cam
+        };
+        let p = SelectionParams::new(&levels, &data, &lod, &cam, cam.position, W, H);
+        select::select_tiles(&levels, &p).len() != cpu.len()
+    });
+    assert!(
+        other_fov.count() >= 3,
+        "the field of view changed too few frames"
+    );
+}
+
 /// The coarse levels walked on the host (`seed_tiles`; docs/udlod.md, "The seed") save the
 /// prepass its passes over them and change no tile: over 40 poses at every grid size, the GPU
 /// draws the CPU reference's tiles with the default seed (256 tiles), with a seed of 16 and with

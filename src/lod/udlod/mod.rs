@@ -23,7 +23,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use super::{DrawnTiles, LodMethod, MethodContext};
-use crate::dataset::stats::TileStats;
+use crate::dataset::stats::{FieldStats, TileStats};
 use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::barrier::{Barriers, MemoryAccess};
@@ -347,22 +347,9 @@ impl Udlod {
     /// earth with `lod_metric = "axis"` the per-axis metric; a one-line error for a tree deeper
     /// than the shaders hold.
     fn build_levels(ctx: &MethodContext<'_>, settings: &UdlodSettings) -> Result<Levels> {
-        // With a finer split field the statistics of its cells (tiles of `grid_size /
-        // field_density` quads), from which the tiles' own follow bit for bit; a pyramid's
-        // stored ones are read without holding the cells' heights.
-        let density = settings.field_density();
-        let cell_quads = settings.grid_size / density;
         // Without level 0's tiles: the tiling shader bounds them by their parents.
-        let mut levels = match ctx.data {
-            Terrain::Grid(h) => Levels::with_field_density(
-                TileStats::compute(&**h, cell_quads, &|_| {})?,
-                density,
-                h.spacing,
-            )?,
-            Terrain::Pyramid(p) => {
-                Levels::from_field_stats(p.field_stats(cell_quads, density)?, p.spacing())
-            }
-        };
+        let mut levels =
+            Levels::from_field_stats(Self::field_stats(ctx.data, settings)?, ctx.data.spacing());
         debug_assert!(!levels.finest_held || levels.root_lod == 0);
         if let (Some(lattice), LodMetric::Axis) = (ctx.lattice, settings.lod_metric) {
             levels = levels.on_lattice(ctx.data.axis_spacing(), lattice);
@@ -379,6 +366,20 @@ impl Udlod {
             ));
         }
         Ok(levels)
+    }
+
+    /// The statistics of the split field's cells (tiles of `grid_size / field_density` quads),
+    /// from which the tiles' own follow bit for bit: a pyramid's stored ones, read without
+    /// holding the cells' heights, else computed from level 0 in parallel.
+    fn field_stats(data: &Terrain, settings: &UdlodSettings) -> Result<FieldStats> {
+        let density = settings.field_density();
+        let cell_quads = settings.grid_size / density;
+        match data {
+            Terrain::Grid(h) => {
+                FieldStats::from_cells(TileStats::compute(&**h, cell_quads, &|_| {})?, density)
+            }
+            Terrain::Pyramid(p) => p.field_stats(cell_quads, density),
+        }
     }
 
     /// The index buffer of every collapse mask's triangles, and the masks' uniforms (with
@@ -507,23 +508,29 @@ impl Udlod {
     }
 
     /// The split field for `key`, built when the key changes (once per renderer and view
-    /// size in practice).
-    fn split_field(&mut self, key: FieldKey) -> Arc<SplitField> {
-        match &self.field {
-            Some(f) if f.key == key => f.clone(),
-            _ => {
-                let f = Arc::new(SplitField::new(&self.levels, key));
-                self.field = Some(f.clone());
-                f
-            }
+    /// size in practice). The field's cells' errors are held only while it is built: another
+    /// key reads (or computes) them again, as at start-up (docs/udlod.md, "The finer field as
+    /// the default").
+    fn split_field(&mut self, key: FieldKey) -> Result<Arc<SplitField>> {
+        if let Some(f) = self.field.as_ref().filter(|f| f.key == key) {
+            return Ok(f.clone());
         }
+        if !self.levels.holds_field_errors() {
+            tracing::info!("udlod: a new split-field key; reading its cells' statistics again");
+            let stats = Self::field_stats(&self.heights, &self.settings)?;
+            self.levels.restore_field_errors(stats)?;
+        }
+        let f = Arc::new(SplitField::new(&self.levels, key));
+        self.levels.release_field_errors();
+        self.field = Some(f.clone());
+        Ok(f)
     }
 
     /// The selection inputs for a view, exactly as uploaded (tests use them for the CPU
     /// reference).
     pub fn selection_params(&mut self, view: &ViewState) -> Result<SelectionParams> {
         let key = FieldKey::new(&self.settings, view.camera.focal_px(view.height));
-        let field = self.split_field(key);
+        let field = self.split_field(key)?;
         let z_ref = match view.ground_m {
             Some(z) => z,
             None => self

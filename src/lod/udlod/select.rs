@@ -17,7 +17,7 @@ use super::settings::MORPH_LEVELS_ALL;
 use super::settings::UdlodSettings;
 use crate::dataset::stats::{FieldStats, TileStats, level_interpolate};
 use crate::dataset::{Heightmap, Level0};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::geo::{EarthCull, Lattice};
 use crate::gpu_constants::{UDLOD_COLLAPSE_MARGIN, UDLOD_MAX_LEVELS, UDLOD_NO_SPLIT};
 use crate::scene::Camera;
@@ -70,7 +70,8 @@ pub struct Levels {
     pub field_density: u32,
     /// With `field_density > 1`: the geometric error of every field cell (a tile of
     /// `grid_size / field_density` quads), per level from level 1 at `field_offsets`, row-major
-    /// over `field_tiles_per_side`. Empty with one node per tile corner (the tiles' own).
+    /// over `field_tiles_per_side`. Empty with one node per tile corner (the tiles' own), and
+    /// between [`Levels::release_field_errors`] and [`Levels::restore_field_errors`].
     pub field_error: Vec<f32>,
     pub field_offsets: Vec<u32>,
     pub field_tiles_per_side: Vec<(u32, u32)>,
@@ -164,26 +165,79 @@ impl Levels {
     /// whose cells take the errors of `stats.cells`.
     pub fn from_field_stats(stats: FieldStats, spacing: f64) -> Self {
         let mut levels = Self::from_stats(stats.tiles, spacing);
-        let Some(cells) = stats.cells else {
-            return levels;
-        };
-        levels.field_density = stats.density;
-        let held: usize = cells.levels[1..=levels.root_lod as usize]
+        if let Some(cells) = stats.cells {
+            levels.field_density = stats.density;
+            levels.hold_field_errors(cells);
+        }
+        levels
+    }
+
+    /// Takes the errors of the field's cells from their statistics (levels 1 to the root).
+    fn hold_field_errors(&mut self, cells: TileStats) {
+        let held: usize = cells.levels[1..=self.root_lod as usize]
             .iter()
             .map(|l| l.error.len())
             .sum();
-        levels.field_error.reserve_exact(held);
+        self.field_error = Vec::with_capacity(held);
+        self.field_offsets.clear();
+        self.field_tiles_per_side.clear();
         for (lod, level) in cells.levels.into_iter().enumerate() {
-            if lod > levels.root_lod as usize {
+            if lod > self.root_lod as usize {
                 break;
             }
-            levels.field_offsets.push(levels.field_error.len() as u32);
-            levels.field_tiles_per_side.push(level.tiles);
+            self.field_offsets.push(self.field_error.len() as u32);
+            self.field_tiles_per_side.push(level.tiles);
             if lod > 0 {
-                levels.field_error.extend(level.error);
+                self.field_error.extend(level.error);
             }
         }
-        levels
+    }
+
+    /// Whether [`SplitField::new`] can build a field from these levels: the field's cells'
+    /// errors are held (always with one node per tile corner, whose cells are the tiles).
+    pub fn holds_field_errors(&self) -> bool {
+        self.field_density == 1 || self.field_error.len() == self.field_cells_held()
+    }
+
+    /// Field cells with an error held, levels 1 and up (`field_tiles_per_side`).
+    fn field_cells_held(&self) -> usize {
+        (self.field_tiles_per_side.iter().skip(1))
+            .map(|&(nx, ny)| nx as usize * ny as usize)
+            .sum()
+    }
+
+    /// Frees the field's cells' errors (with two nodes per tile side 0.33 bytes per level-0
+    /// sample at grid 4, a third of what UDLOD holds): a split field built from them needs
+    /// them again only for another key ([`Levels::restore_field_errors`]).
+    pub fn release_field_errors(&mut self) {
+        if self.field_density > 1 {
+            self.field_error = Vec::new();
+        }
+    }
+
+    /// Takes the field's cells' errors back from `stats`, the statistics these levels were built
+    /// from read again (bit for bit the same when the data is): a one-line error if they do
+    /// not describe these levels' cells.
+    pub fn restore_field_errors(&mut self, stats: FieldStats) -> Result<()> {
+        let tiles_per_side = self.field_tiles_per_side.clone();
+        let fits = stats.density == self.field_density
+            && stats.cells.as_ref().is_some_and(|c| {
+                c.levels.len() > self.root_lod as usize
+                    && (c.levels.iter().zip(&tiles_per_side)).all(|(l, &t)| l.tiles == t)
+            });
+        match stats.cells {
+            Some(cells) if fits => {
+                self.hold_field_errors(cells);
+                Ok(())
+            }
+            _ => Err(Error::invalid(
+                "udlod",
+                format!(
+                    "the split field's cell statistics read again do not match the levels' ({} nodes per tile side)",
+                    self.field_density
+                ),
+            )),
+        }
     }
 
     /// Quads per split-field cell side (`grid_size / field_density`).
@@ -528,7 +582,13 @@ pub struct SplitField {
 const QUAD: [(u32, u32); 4] = [(0, 0), (1, 0), (0, 1), (1, 1)];
 
 impl SplitField {
+    /// The field for `key` from `levels`, which must hold their field cells' errors
+    /// ([`Levels::holds_field_errors`]; a renderer restores them before a new key).
     pub fn new(levels: &Levels, key: FieldKey) -> Self {
+        assert!(
+            levels.holds_field_errors(),
+            "SplitField::new: the levels' field cell errors were released"
+        );
         let cap = key.field_max.max(1.0);
         let zone = zone_widths(levels, &key);
         let mut field = SplitField {
@@ -1750,6 +1810,47 @@ mod tests {
         }
         assert_eq!(worst_case_share(16, 2), 0.9, "unmeasured: grid 2's");
         assert_eq!(worst_case_share(16, 1), worst_case_share(8, 1));
+    }
+
+    /// Released field cell errors come back bit for bit from the same statistics read again
+    /// (the renderer's path for a new field key): the field built after the restore equals the
+    /// one built before. Controls: released, the levels cannot build a field; another grid's
+    /// cells are refused with a one-line error naming the nodes per tile side.
+    #[test]
+    fn released_field_errors_come_back_bit_for_bit() {
+        let data = test_terrain();
+        let settings = UdlodSettings::default();
+        let d = settings.field_density();
+        assert!(d > 1);
+        let cells = |grid: u32| {
+            let stats = crate::dataset::stats::TileStats::compute_serial(&data, grid).unwrap();
+            crate::dataset::stats::FieldStats::from_cells(stats, d).unwrap()
+        };
+        let mut levels = Levels::from_field_stats(cells(settings.grid_size / d), data.spacing);
+        let key = FieldKey::new(&settings, 311.8);
+        let before = SplitField::new(&levels, key);
+        levels.release_field_errors();
+        assert!(!levels.holds_field_errors() && levels.field_error.is_empty());
+        assert!(std::panic::catch_unwind(|| SplitField::new(&levels, key)).is_err());
+        let wrong = levels
+            .restore_field_errors(cells(settings.grid_size))
+            .unwrap_err();
+        assert!(
+            wrong
+                .to_string()
+                .contains(&format!("({d} nodes per tile side)")),
+            "{wrong}"
+        );
+        assert!(!levels.holds_field_errors());
+        levels
+            .restore_field_errors(cells(settings.grid_size / d))
+            .unwrap();
+        assert!(levels.holds_field_errors());
+        let after = SplitField::new(&levels, key);
+        assert_eq!(
+            (before.split, before.zone, before.corners),
+            (after.split, after.zone, after.corners)
+        );
     }
 
     /// The measured field density (`field_density = 0`) is two nodes per side exactly where a
