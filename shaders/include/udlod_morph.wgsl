@@ -11,7 +11,23 @@
 // last `morph_range` of it; with the morph cascade (`split[l].y`, the zone's least width, > 0)
 // over the last `max(zone, morph_range s)` metres of the point's split distance `s`.
 fn morph_factor(sample: vec2<i32>, lod: u32) -> f32 {
-    return clamp(morph_ramp(sample, lod), 0.0, 1.0) * udlod.params.z;
+    return factor_of_ramp(morph_ramp(sample, lod), sample, lod);
+}
+
+// `morph_factor` from the point's `morph_ramp`.
+fn factor_of_ramp(ramp: f32, sample: vec2<i32>, lod: u32) -> f32 {
+    var f = clamp(ramp, 0.0, 1.0);
+    // A point odd along both axes slides along its block's diagonal from (1, 1) to (0, 0),
+    // across the quad's split from (1, 0) to (0, 1): past `(1 + b) / 2`, `b` the smaller factor
+    // of those two neighbours (each odd along one axis), the triangle between the three turns
+    // over (docs/udlod.md, "Folds at the quads' diagonal").
+    if all(odd_at(sample, lod) == vec2<i32>(1)) {
+        let step = i32(1u << lod);
+        let along_x = clamp(morph_ramp(sample - vec2<i32>(0, step), lod), 0.0, 1.0);
+        let along_y = clamp(morph_ramp(sample - vec2<i32>(step, 0), lod), 0.0, 1.0);
+        f = min(f, 0.5 * (1.0 + min(along_x, along_y)));
+    }
+    return f * udlod.params.z;
 }
 
 // `morph_factor` before its clamp and the on/off switch: at least 1 where the point lies fully
@@ -136,9 +152,8 @@ fn morph_moved(sample: vec2<i32>, lod: u32) -> Moved {
         if all(odd == vec2<i32>(0)) {
             continue;
         }
-        // `morph_factor`, its ramp kept.
         let ramp = morph_ramp(point, j);
-        let f = clamp(ramp, 0.0, 1.0) * udlod.params.z;
+        let f = factor_of_ramp(ramp, point, j);
         if j == lod {
             m.first_ramp = ramp;
         }

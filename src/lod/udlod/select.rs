@@ -1402,7 +1402,17 @@ pub fn level_splits_bound(levels: &Levels, field: &SplitField, stretch: [f32; 2]
 /// `shaders/include/udlod_morph.wgsl`, operation for operation.
 pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
     let on = if p.morph { 1.0 } else { 0.0 };
-    morph_ramp(levels, p, sample, lod).clamp(0.0, 1.0) * on
+    let mut f = morph_ramp(levels, p, sample, lod).clamp(0.0, 1.0);
+    // A point odd along both axes stays within `(1 + b) / 2`, `b` the smaller factor of its
+    // neighbours at (1, 0) and (0, 1) of its block, or the triangle between the three turns
+    // over (docs/udlod.md, "Folds at the quads' diagonal").
+    if sample.map(|v| (v as u32 >> lod) & 1) == [1, 1] {
+        let step = 1 << lod;
+        let along_x = morph_ramp(levels, p, [sample[0], sample[1] - step], lod).clamp(0.0, 1.0);
+        let along_y = morph_ramp(levels, p, [sample[0] - step, sample[1]], lod).clamp(0.0, 1.0);
+        f = f.min(0.5 * (1.0 + along_x.min(along_y)));
+    }
+    f * on
 }
 
 /// [`morph_factor`] before its clamp to `[0, 1]` and the on/off switch (`morph_ramp` in
