@@ -844,10 +844,12 @@ impl std::ops::AddAssign for EdgeCount {
 /// above), degenerate ones included, over a low flight and 30 poses with culling off, at every
 /// grid size and morph variant: every directed edge off the data's border is matched, bit for
 /// bit, by its reverse. Stronger than `check_edges` (edges between levels): same-level
-/// neighbours and collapsed quadrants' edges too. Negative controls: the same surface with one
-/// vertex on one tile's edge moved by one ulp has open edges; by hand, level 3's vertices left
-/// with whole samples in their fraction (`morphed_vertex` not folding them) fail it with 112
-/// open edges at grid 4.
+/// neighbours and collapsed quadrants' edges too. And no triangle turns over in the grid with
+/// one level step, at most one in 10,000 with walks over several levels (0-6 measured). Negative
+/// controls: the same surface with one vertex on one tile's edge moved by one ulp has open
+/// edges; by hand, level 3's vertices left with whole samples in their fraction
+/// (`morphed_vertex` not folding them) fail it with 112 open edges at grid 4, and without the
+/// clamp of a point odd along both axes 572-1,031 triangles turn over at grid 4 (654-818 at 8).
 #[test]
 fn the_drawn_surface_is_closed() {
     let data = terrain(257, 30.0);
@@ -879,6 +881,16 @@ fn the_drawn_surface_is_closed() {
             println!(
                 "grid {grid} {name}: {triangles} triangles drawn, closed; {inverted} inverted in the grid"
             );
+            // No triangle turns over at one level (docs/udlod.md, "Folds at the quads'
+            // diagonal"); walks over several levels turn over a few.
+            if lod.morph_levels() == 1 {
+                assert_eq!(inverted, 0, "grid {grid} {name}: inverted triangles");
+            } else {
+                assert!(
+                    inverted * 10_000 <= triangles,
+                    "grid {grid} {name}: {inverted} of {triangles} triangles inverted"
+                );
+            }
         }
     }
 }

@@ -21,7 +21,8 @@ fn factor_of_ramp(ramp: f32, sample: vec2<i32>, lod: u32) -> f32 {
     // across the quad's split from (1, 0) to (0, 1): past `(1 + b) / 2`, `b` the smaller factor
     // of those two neighbours (each odd along one axis), the triangle between the three turns
     // over (docs/udlod.md, "Folds at the quads' diagonal").
-    if all(odd_at(sample, lod) == vec2<i32>(1)) {
+    // (Never binding at or below 1/2: the neighbours are read only past it.)
+    if f > 0.5 && all(odd_at(sample, lod) == vec2<i32>(1)) {
         let step = i32(1u << lod);
         let along_x = clamp(morph_ramp(sample - vec2<i32>(0, step), lod), 0.0, 1.0);
         let along_y = clamp(morph_ramp(sample - vec2<i32>(step, 0), lod), 0.0, 1.0);

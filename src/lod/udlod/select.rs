@@ -1406,7 +1406,7 @@ pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod:
     // A point odd along both axes stays within `(1 + b) / 2`, `b` the smaller factor of its
     // neighbours at (1, 0) and (0, 1) of its block, or the triangle between the three turns
     // over (docs/udlod.md, "Folds at the quads' diagonal").
-    if sample.map(|v| (v as u32 >> lod) & 1) == [1, 1] {
+    if f > 0.5 && sample.map(|v| (v as u32 >> lod) & 1) == [1, 1] {
         let step = 1 << lod;
         let along_x = morph_ramp(levels, p, [sample[0], sample[1] - step], lod).clamp(0.0, 1.0);
         let along_y = morph_ramp(levels, p, [sample[0] - step, sample[1]], lod).clamp(0.0, 1.0);
