@@ -219,11 +219,10 @@ impl Levels {
     /// from read again (bit for bit the same when the data is): a one-line error if they do
     /// not describe these levels' cells.
     pub fn restore_field_errors(&mut self, stats: FieldStats) -> Result<()> {
-        let tiles_per_side = self.field_tiles_per_side.clone();
         let fits = stats.density == self.field_density
             && stats.cells.as_ref().is_some_and(|c| {
                 c.levels.len() > self.root_lod as usize
-                    && (c.levels.iter().zip(&tiles_per_side)).all(|(l, &t)| l.tiles == t)
+                    && (c.levels.iter().zip(&self.field_tiles_per_side)).all(|(l, &t)| l.tiles == t)
             });
         match stats.cells {
             Some(cells) if fits => {
