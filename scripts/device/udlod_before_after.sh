@@ -14,6 +14,7 @@
 #   mkdir -p .device-vk/data && cp ../shared/data/puget_sound/ps_height_1k.png .device-vk/data/
 # Run there from the repository root:
 #   DATA=ci bash scripts/device/udlod_before_after.sh > $OUT/ba.txt 2>&1
+# Without .device-vk/vkterrain-before (every part) only this build runs: the "after" side.
 # `PART=bench` instead times each binary's `bench` (frames back to back, 2 in flight, 300
 # frames after 20 of warm-up) per tau on both data sets: the old evaluator's GPU times come
 # from frames seconds apart, when the GPU's clocks may have fallen, so they do not time the
@@ -33,8 +34,10 @@ log() { echo "### $*"; }
 srtm_configs() {
   local work
   work=$(mktemp -d)
-  .device-vk/vkterrain-before preprocess .device-vk/data/srtm/N48W125.hgt.zip \
-    --out "$work/before" > /dev/null || exit 1
+  if [ -x .device-vk/vkterrain-before ]; then
+    .device-vk/vkterrain-before preprocess .device-vk/data/srtm/N48W125.hgt.zip \
+      --out "$work/before" > /dev/null || exit 1
+  fi
   xz -dc .device-vk/data/n48w125.tar.xz | tar xf - -C "$work" || exit 1
   for side in before after; do
     dir="$work/before"
@@ -51,6 +54,7 @@ if [ "${PART:-eval}" = bench ]; then
       for side in before after; do
         bin=.device-vk/vkterrain cfg=$SRTM_AFTER earth="--earth flat"
         [ "$side" = before ] && bin=.device-vk/vkterrain-before cfg=$SRTM_BEFORE earth=""
+        [ -x "$bin" ] || continue
         log "$bin bench srtm udlod tau $tau 1920x1080"
         # shellcheck disable=SC2086 # no flag for the old binary
         "$bin" bench --config "$cfg" $earth --method udlod --tau-px "$tau" --resolutions 1920x1080 \
@@ -63,6 +67,7 @@ if [ "${PART:-eval}" = bench ]; then
   for cfg in config/ci.toml "$PUGET"; do
     for tau in 0.5 1 2 4; do
       for bin in .device-vk/vkterrain-before .device-vk/vkterrain; do
+        [ -x "$bin" ] || continue
         log "$bin bench $cfg udlod tau $tau 1920x1080"
         "$bin" bench --config "$cfg" --method udlod --tau-px "$tau" --resolutions 1920x1080 \
           --compare-frames-in-flight 2 --frames 300 --warmup 20 --out "$(mktemp -d)" 2>&1 | tail -12
