@@ -40,7 +40,8 @@ struct Tile {
     pad: u32,
 }
 
-@group(1) @binding(0) var<uniform> udlod: Udlod;
+// Read-only storage, not uniform, for the reason `frame` is (include/terrain_common.wgsl).
+@group(1) @binding(0) var<storage, read> udlod: Udlod;
 // The split field: per level, values m >= 1 at the corners of the level's tiles; a point's
 // split distance is split[lod] / m (see `SplitField` in src/lod/udlod/select.rs).
 @group(1) @binding(5) var<storage, read> split_field: array<f32>;
