@@ -24,8 +24,8 @@ struct Frame {
 
 // A read-only storage buffer, not a uniform one: Debian 12's lavapipe (Mesa 22.3) inlines
 // uniform values that steer branches and loops into each shader and recompiles it whenever its
-// descriptors are rebound, every frame (docs/architecture.md, "Which lavapipe"); the layout is
-// the same (vec4 members only).
+// descriptors are bound again, every frame (docs/architecture.md, "Uniform buffers on Mesa
+// 22.3"); the layout is the same (vec4 members only).
 @group(0) @binding(0) var<storage, read> frame: Frame;
 // Heights in metres, one texel per sample, read with textureLoad (exact values, no filtering).
 @group(0) @binding(1) var height_tex: texture_2d<f32>;

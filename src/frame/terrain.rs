@@ -209,7 +209,7 @@ impl TerrainGpu {
         let descriptors = DescriptorSets::new(gpu, table, slots)?;
         let mut uniforms = Vec::with_capacity(slots);
         for slot in 0..slots {
-            let ubo = Buffer::new(
+            let block = Buffer::new(
                 gpu,
                 &format!("frame uniforms {slot}"),
                 size_of::<FrameUniforms>() as u64,
@@ -219,7 +219,7 @@ impl TerrainGpu {
             descriptors.write(
                 slot,
                 &[
-                    ("frame", Resource::Buffer(ubo.raw)),
+                    ("frame", Resource::Buffer(block.raw)),
                     ("height_tex", Resource::Image(height.view)),
                     ("normal_tex", Resource::Image(normal.view)),
                     ("albedo_tex", Resource::Image(albedo.view)),
@@ -231,7 +231,7 @@ impl TerrainGpu {
                     ("geo_lattice", Resource::Buffer(lattice.raw)),
                 ],
             )?;
-            uniforms.push(ubo);
+            uniforms.push(block);
         }
         Ok((descriptors, uniforms))
     }
