@@ -123,7 +123,7 @@ pub const UDLOD_SET: &[Binding] = {
     const CV: vk::ShaderStageFlags =
         stages(vk::ShaderStageFlags::COMPUTE, vk::ShaderStageFlags::VERTEX);
     &[
-        Binding::new(0, T::STORAGE_BUFFER, CV, "udlod"),
+        Binding::new(0, T::UNIFORM_BUFFER, CV, "udlod"),
         Binding::new(1, T::STORAGE_BUFFER, CV, "state"),
         Binding::new(2, T::STORAGE_BUFFER, CV, "temp_tiles"),
         Binding::new(3, T::STORAGE_BUFFER, CV, "final_tiles"),
@@ -222,7 +222,7 @@ impl SlotBuffers {
             gpu,
             &format!("udlod uniforms {i}"),
             size_of::<UdlodUniforms>() as u64,
-            vk::BufferUsageFlags::STORAGE_BUFFER,
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
             MemoryLocation::CpuToGpu,
         )?;
         let state = Buffer::new(
