@@ -40,7 +40,6 @@ struct Tile {
     pad: u32,
 }
 
-// Read-only storage, not uniform, for the reason `frame` is (include/terrain_common.wgsl).
 // Uniform, unlike `frame` (include/terrain_common.wgsl): as a read-only storage buffer it
 // spared Mesa 22.3 a little more shader rebuilding on small scenes but slowed the prepass's
 // compute passes there by a quarter on the main job (docs/architecture.md, "Uniform buffers
