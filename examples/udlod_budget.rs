@@ -2,12 +2,14 @@
 //! split-distance table (which term sets each level), the drawn tiles' projected-error slack,
 //! counterfactual selections and the oracle's count, the least the tiles could draw (the tile
 //! oracle with quadrants collapsed wherever the parent grid is within tau) and how many drawn
-//! quadrants are within tau on the parent grid but drawn uncollapsed, and the prepass's seed
+//! quadrants are within tau on the parent grid but drawn uncollapsed, the drawn triangles
+//! without the quadrants whose box lies outside the frustum, and the prepass's seed
 //! (the coarse levels the host walks: its tiles, the GPU passes left, the walk's host time).
 //! CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
 //!
 //!   cargo run --release --example udlod_budget -- --config config/ci.toml [--frames 6] [--tau 1,2,4]
 //!     [--grid 4] [--morph-levels 0] [--field-density 2] [--share K] [--width 640 --height 360]
+//!     [--earth flat|ellipsoid]   (the scenario's geometry: Fischer S1/S3 fly `--earth flat`)
 //!     [--zone-rule width|error-scaled|free]   (how the field charges the morph zone's width:
 //!     `select::ZoneRule`; anything but `width` is a what-if the renderer does not draw)
 
@@ -20,6 +22,7 @@ use vkterrain::lod::udlod::select::{
 };
 use vkterrain::lod::udlod::{grid, seed};
 use vkterrain::lod::{MethodConfig, UdlodSettings};
+use vkterrain::render::EarthGeometry;
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
@@ -33,6 +36,7 @@ fn main() -> anyhow::Result<()> {
     let mut share = None;
     let mut zone_rule = ZoneRule::Width;
     let (mut width, mut height) = (None, None);
+    let mut earth = None;
     while let Some(a) = args.next() {
         // The value after a flag, parsed, or an error naming the flag (no panics on bad input).
         let mut value = |what: &str| {
@@ -54,6 +58,13 @@ fn main() -> anyhow::Result<()> {
                     r => anyhow::bail!("--zone-rule {r}: width, error-scaled or free"),
                 }
             }
+            "--earth" => {
+                earth = Some(match value("ellipsoid or flat")?.as_str() {
+                    "ellipsoid" => EarthGeometry::Ellipsoid,
+                    "flat" => EarthGeometry::Flat,
+                    e => anyhow::bail!("--earth {e}: ellipsoid or flat"),
+                })
+            }
             "--frames" => frames = parse(&a, &value("a number")?)?,
             "--width" => width = Some(parse(&a, &value("a number")?)?),
             "--height" => height = Some(parse(&a, &value("a number")?)?),
@@ -71,6 +82,7 @@ fn main() -> anyhow::Result<()> {
         scenario,
         width,
         height,
+        earth,
         ..Default::default()
     })?;
     let data = p.data.require_grid("udlod_budget")?.clone();
@@ -182,6 +194,9 @@ fn main() -> anyhow::Result<()> {
         // ones drawn uncollapsed (the morph not complete there).
         let (mut within, mut within_uncollapsed) = (0u32, 0u32);
         let mut per_level = vec![0usize; levels.levels() as usize];
+        // Triangles if quadrants whose box lies outside the frustum were not drawn (flat
+        // world only): what per-quadrant culling would save where the view holds few quads.
+        let mut in_frustum_tris = [0u64; 2];
         let mut seeds = Vec::new();
         for &k in &picks {
             let cam = p.scenario.camera(k);
@@ -200,6 +215,9 @@ fn main() -> anyhow::Result<()> {
                         within_uncollapsed += (mask & 1 << q == 0) as u32;
                     }
                 }
+                let [dropped, collapsed] = quadrants_in_frustum(&levels, &sp, *t, mask);
+                in_frustum_tris[0] += dropped;
+                in_frustum_tris[1] += collapsed;
                 let whole = (mask == grid::ALL_QUADRANTS) as u32 * mask;
                 whole_tris += grid::mask_triangles(levels.grid_size, whole);
                 whole_tiles += (whole != 0) as usize;
@@ -428,6 +446,12 @@ fn main() -> anyhow::Result<()> {
                 tris as f64 / tris_o as f64
             );
         }
+        if tiles_n == 0 {
+            // Nothing in view (e.g. the scenario's cameras are in the other earth geometry's
+            // frame): no ratio or quantile to print.
+            println!("  no tile drawn in frames {picks:?} (is `--earth` the scenario's?)");
+            continue;
+        }
         slack.sort_by(f64::total_cmp);
         let q = |f: f64| slack[((slack.len() - 1) as f64 * f) as usize];
         println!(
@@ -441,6 +465,13 @@ fn main() -> anyhow::Result<()> {
             "  drawn quadrants whose parent grid is within tau: {within} of {}, {within_uncollapsed} of them uncollapsed; those collapsed too: triangles {if_collapsed} ratio {:.2}",
             tiles_n * 4,
             if_collapsed as f64 / tris_o as f64
+        );
+        println!(
+            "  cf quadrants outside the frustum not drawn: triangles {} ratio {:.2}; drawn collapsed instead: triangles {} ratio {:.2}",
+            in_frustum_tris[0],
+            in_frustum_tris[0] as f64 / tris_o as f64,
+            in_frustum_tris[1],
+            in_frustum_tris[1] as f64 / tris_o as f64
         );
         println!(
             "  cf collapsing whole tiles only: {whole_tiles} of {tiles_n} tiles, triangles {whole_tris} ratio {:.2}",
@@ -479,6 +510,58 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The triangles of drawn tile `t` (collapse mask `mask`) in quadrants whose box is not
+/// outside the frustum (flat world, as every count here): the rectangle from the lowest
+/// point of its grid vertices' morph walks ([`select::walk_end`]) to its far corner, by the
+/// heights of the tile that holds the tile's reach ([`select::tile_reach`]); the plane test
+/// of [`select::tile_culled`] without its margin. And the triangles with those quadrants
+/// drawn collapsed instead (the masks as they are: a gap at a collapsed quadrant's edge lies
+/// inside its box, outside the view).
+fn quadrants_in_frustum(levels: &Levels, p: &SelectionParams, t: Tile, mask: u32) -> [u64; 2] {
+    let step = 1i32 << t.lod;
+    let half = levels.grid_size as i32 / 2;
+    let origin = [t.x as i32 * 2 * half * step, t.y as i32 * 2 * half * step];
+    let [zmin, zmax] = levels.tile_min_max(select::tile_reach(levels, p, t).heights);
+    let (zlo, zhi) = (zmin - p.camera_z, zmax - p.camera_z);
+    let g2 = 2 * (levels.grid_size as u64).pow(2);
+    let mut tris = [0, 0];
+    for q in 0..4i32 {
+        let q0 = [
+            origin[0] + (q & 1) * half * step,
+            origin[1] + (q >> 1) * half * step,
+        ];
+        let mut lo = q0;
+        for j in 0..=half {
+            for i in 0..=half {
+                let end = select::walk_end(levels, p, [q0[0] + i * step, q0[1] + j * step], t.lod);
+                lo = [lo[0].min(end[0]), lo[1].min(end[1])];
+            }
+        }
+        let (lo, hi) = (
+            p.relative(lo),
+            p.relative([q0[0] + half * step, q0[1] + half * step]),
+        );
+        let outside = p.frustum.iter().any(|pl| {
+            let x = if pl[0] >= 0.0 { hi[0] } else { lo[0] };
+            let y = if pl[1] >= 0.0 { hi[1] } else { lo[1] };
+            let z = if pl[2] >= 0.0 { zhi } else { zlo };
+            pl[0] * x + pl[1] * y + pl[2] * z + pl[3] < 0.0
+        });
+        let collapsed = mask & 1 << q != 0;
+        tris[0] += match (outside, collapsed) {
+            (true, _) => 0,
+            (false, true) => g2 / 16,
+            (false, false) => g2 / 4,
+        };
+        tris[1] += if outside || collapsed {
+            g2 / 16
+        } else {
+            g2 / 4
+        };
+    }
+    tris
 }
 
 /// A drawn tile's largest exact projected error (px: |level grid - sample| x focal / distance
