@@ -40,10 +40,9 @@ struct Tile {
     pad: u32,
 }
 
-// Uniform, unlike `frame` (include/terrain_common.wgsl): as a read-only storage buffer it
-// spared Mesa 22.3 a little more shader rebuilding on small scenes but slowed the prepass's
-// compute passes there by a quarter on the main job (docs/architecture.md, "Uniform buffers
-// on Mesa 22.3").
+// Uniform, as `frame` (include/terrain_common.wgsl): as a read-only storage buffer it spared
+// Mesa 22.3 some shader rebuilding on small scenes but slowed the prepass's compute passes
+// there by a quarter on the main job (docs/architecture.md, "Uniform buffers on Mesa 22.3").
 @group(1) @binding(0) var<uniform> udlod: Udlod;
 // The split field: per level, values m >= 1 at the corners of the level's tiles; a point's
 // split distance is split[lod] / m (see `SplitField` in src/lod/udlod/select.rs).

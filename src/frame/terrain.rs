@@ -36,7 +36,7 @@ const fn terrain_set(extra: vk::ShaderStageFlags) -> [Binding; 10] {
     );
     let all = stages(GRAPHICS, extra);
     [
-        Binding::new(0, T::STORAGE_BUFFER, all, "frame"),
+        Binding::new(0, T::UNIFORM_BUFFER, all, "frame"),
         Binding::new(1, T::SAMPLED_IMAGE, all, "height_tex"),
         Binding::new(2, T::SAMPLED_IMAGE, all, "normal_tex"),
         Binding::new(3, T::SAMPLED_IMAGE, all, "albedo_tex"),
@@ -213,7 +213,7 @@ impl TerrainGpu {
                 gpu,
                 &format!("frame uniforms {slot}"),
                 size_of::<FrameUniforms>() as u64,
-                vk::BufferUsageFlags::STORAGE_BUFFER,
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
                 MemoryLocation::CpuToGpu,
             )?;
             descriptors.write(

@@ -10,8 +10,8 @@
 
 #extension GL_EXT_samplerless_texture_functions : require
 
-// A read-only storage buffer as in the WGSL (why: there).
-layout(set = 0, binding = 0, std430) readonly buffer Frame {
+// A uniform buffer as in the WGSL (why: there).
+layout(set = 0, binding = 0, std140) uniform Frame {
     // Rotation-only view times reversed-Z projection: positions are camera-relative.
     mat4 view_proj;
     // xy: the sample cell the camera is in (floor(camera_xy / spacing)).
