@@ -515,16 +515,15 @@ fn main() -> anyhow::Result<()> {
 /// The triangles of drawn tile `t` (collapse mask `mask`) in quadrants whose box is not
 /// outside the frustum (flat world, as every count here): the rectangle from the lowest
 /// point of its grid vertices' morph walks ([`select::walk_end`]) to its far corner, by the
-/// heights of the tile that holds the tile's reach ([`select::tile_reach`]); the plane test
-/// of [`select::tile_culled`] without its margin. And the triangles with those quadrants
+/// heights of the tile that holds the tile's reach ([`select::tile_reach`]), against the
+/// frustum without a margin ([`select::flat_box_outside`]). And the triangles with those quadrants
 /// drawn collapsed instead (the masks as they are: a gap at a collapsed quadrant's edge lies
 /// inside its box, outside the view).
 fn quadrants_in_frustum(levels: &Levels, p: &SelectionParams, t: Tile, mask: u32) -> [u64; 2] {
     let step = 1i32 << t.lod;
     let half = levels.grid_size as i32 / 2;
     let origin = [t.x as i32 * 2 * half * step, t.y as i32 * 2 * half * step];
-    let [zmin, zmax] = levels.tile_min_max(select::tile_reach(levels, p, t).heights);
-    let (zlo, zhi) = (zmin - p.camera_z, zmax - p.camera_z);
+    let heights = levels.tile_min_max(select::tile_reach(levels, p, t).heights);
     let g2 = 2 * (levels.grid_size as u64).pow(2);
     let mut tris = [0, 0];
     for q in 0..4i32 {
@@ -539,16 +538,8 @@ fn quadrants_in_frustum(levels: &Levels, p: &SelectionParams, t: Tile, mask: u32
                 lo = [lo[0].min(end[0]), lo[1].min(end[1])];
             }
         }
-        let (lo, hi) = (
-            p.relative(lo),
-            p.relative([q0[0] + half * step, q0[1] + half * step]),
-        );
-        let outside = p.frustum.iter().any(|pl| {
-            let x = if pl[0] >= 0.0 { hi[0] } else { lo[0] };
-            let y = if pl[1] >= 0.0 { hi[1] } else { lo[1] };
-            let z = if pl[2] >= 0.0 { zhi } else { zlo };
-            pl[0] * x + pl[1] * y + pl[2] * z + pl[3] < 0.0
-        });
+        let hi = [q0[0] + half * step, q0[1] + half * step];
+        let outside = select::flat_box_outside(p, lo, hi, heights, 0.0);
         let collapsed = mask & 1 << q != 0;
         tris[0] += match (outside, collapsed) {
             (true, _) => 0,

@@ -1228,9 +1228,21 @@ pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
     if let Some(earth) = &p.earth {
         return earth.outside(&p.frustum, c0, c1, heights, margin as f64);
     }
+    flat_box_outside(p, c0, c1, heights, margin)
+}
+
+/// Is the box over the grid rectangle from sample `c0` to `c1`, `heights` (min, max) high, more
+/// than `margin` metres outside a plane of the frustum? The flat world's test of
+/// [`tile_culled`].
+pub fn flat_box_outside(
+    p: &SelectionParams,
+    c0: [i32; 2],
+    c1: [i32; 2],
+    [zmin, zmax]: [f32; 2],
+    margin: f32,
+) -> bool {
     let lo = p.relative(c0);
     let hi = p.relative(c1);
-    let [zmin, zmax] = heights;
     let (zlo, zhi) = (zmin - p.camera_z, zmax - p.camera_z);
     p.frustum.iter().any(|pl| {
         let x = if pl[0] >= 0.0 { hi[0] } else { lo[0] };
