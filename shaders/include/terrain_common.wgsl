@@ -23,8 +23,9 @@ struct Frame {
 }
 
 // A uniform buffer: NVIDIA's driver reads it faster than a read-only storage buffer (3-5 % of
-// UDLOD's GPU time at 1080p on an H100 and an H200), which would spare Debian 12's lavapipe (Mesa 22.3)
-// a shader rebuild per frame (docs/architecture.md, "Uniform buffers on Mesa 22.3").
+// UDLOD's GPU time at 1080p on an H100 and an H200). A storage buffer would spare Debian 12's
+// lavapipe (Mesa 22.3) a shader rebuild per frame (docs/architecture.md, "Uniform buffers on
+// Mesa 22.3").
 @group(0) @binding(0) var<uniform> frame: Frame;
 // Heights in metres, one texel per sample, read with textureLoad (exact values, no filtering).
 @group(0) @binding(1) var height_tex: texture_2d<f32>;
