@@ -3,7 +3,7 @@
 //! counterfactual selections and the oracle's count, the least the tiles could draw (the tile
 //! oracle with quadrants collapsed wherever the parent grid is within tau) and how many drawn
 //! quadrants are within tau on the parent grid but drawn uncollapsed, the drawn triangles
-//! without the quadrants whose box lies outside the frustum, and the prepass's seed
+//! with every quadrant drawn (no quadrant culled outside the frustum), and the prepass's seed
 //! (the coarse levels the host walks: its tiles, the GPU passes left, the walk's host time).
 //! CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
 //!
@@ -17,6 +17,7 @@ use std::path::PathBuf;
 
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::eval::oracle::Oracle;
+use vkterrain::lod::udlod::grid::{QuadrantDraw, TileMask};
 use vkterrain::lod::udlod::select::{
     self, FieldKey, FieldTerm, Levels, SelectionParams, SplitField, Tile, ZoneRule,
 };
@@ -186,17 +187,16 @@ fn main() -> anyhow::Result<()> {
         // only by the crack-free chain.
         let (mut over_rule, mut over_chain) = (0usize, 0usize);
         // What the renderer draws (quadrants whose odd vertices all lie fully on the parent's
-        // grid drawn as that grid: `select::tile_collapse_mask`), and collapsing whole tiles
-        // only (the tenth round's build) for comparison.
+        // grid drawn as that grid, those outside the frustum not at all: `select::tile_mask`),
+        // and collapsing whole tiles only (the tenth round's build) for comparison.
         let (mut whole_tris, mut whole_tiles) = (0u64, 0usize);
         let (mut drawn_tris, mut collapsed_quadrants) = (0u64, 0u32);
         // Drawn quadrants whose parent grid is within tau at every sample, and of those the
         // ones drawn uncollapsed (the morph not complete there).
         let (mut within, mut within_uncollapsed) = (0u32, 0u32);
         let mut per_level = vec![0usize; levels.levels() as usize];
-        // Triangles if quadrants whose box lies outside the frustum were not drawn (flat
-        // world only): what per-quadrant culling would save where the view holds few quads.
-        let mut in_frustum_tris = [0u64; 2];
+        // Triangles with every quadrant of the drawn tiles drawn (`cull_quadrants = false`).
+        let mut all_quadrant_tris = 0u64;
         let mut seeds = Vec::new();
         for &k in &picks {
             let cam = p.scenario.camera(k);
@@ -206,20 +206,21 @@ fn main() -> anyhow::Result<()> {
             tiles_n += tiles.len();
             let view = ExactView::new(&data, &cam, focal, tau);
             for t in &tiles {
-                let mask = select::tile_collapse_mask(&levels, &sp, *t);
-                drawn_tris += grid::mask_triangles(levels.grid_size, mask);
-                collapsed_quadrants += mask.count_ones();
+                let g = levels.grid_size;
+                let mask = select::tile_mask(&levels, &sp, *t);
+                drawn_tris += grid::mask_triangles(g, mask);
+                collapsed_quadrants += mask.quadrants(QuadrantDraw::Collapsed).count_ones();
+                let own = mask.quadrants(QuadrantDraw::Own);
                 for q in 0..4u32 {
                     if view.quadrant_within_tau(&levels, *t, q) {
                         within += 1;
-                        within_uncollapsed += (mask & 1 << q == 0) as u32;
+                        within_uncollapsed += (own & 1 << q != 0) as u32;
                     }
                 }
-                let [dropped, collapsed] = quadrants_in_frustum(&levels, &sp, *t, mask);
-                in_frustum_tris[0] += dropped;
-                in_frustum_tris[1] += collapsed;
-                let whole = (mask == grid::ALL_QUADRANTS) as u32 * mask;
-                whole_tris += grid::mask_triangles(levels.grid_size, whole);
+                let collapsing = select::tile_collapse_mask(&levels, &sp, *t);
+                all_quadrant_tris += grid::mask_triangles(g, TileMask::new(g, collapsing, 0));
+                let whole = (collapsing == grid::ALL_QUADRANTS) as u32 * collapsing;
+                whole_tris += grid::mask_triangles(g, TileMask::new(g, whole, 0));
                 whole_tiles += (whole != 0) as usize;
             }
             let mut parents = std::collections::HashMap::new();
@@ -417,9 +418,10 @@ fn main() -> anyhow::Result<()> {
                 let view = ExactView::new(&data, &cam, focal, tau);
                 let tiles = select_generic(&levels, &sp, |t| view.tile_splits(&levels, t));
                 for t in tiles {
-                    let mask = (0..4u32)
+                    let bits = (0..4u32)
                         .filter(|&q| view.quadrant_within_tau(&levels, t, q))
                         .fold(0u32, |m, q| m | 1 << q);
+                    let mask = TileMask::new(levels.grid_size, bits, 0);
                     tris += grid::mask_triangles(levels.grid_size, mask);
                 }
             }
@@ -436,7 +438,7 @@ fn main() -> anyhow::Result<()> {
                 let tiles = select_generic(&levels, &sp, |t| sub_rect_splits(&levels, &sp, t, sub));
                 n += tiles.len();
                 for t in &tiles {
-                    let mask = select::tile_collapse_mask(&levels, &sp, *t);
+                    let mask = select::tile_mask(&levels, &sp, *t);
                     tris += grid::mask_triangles(levels.grid_size, mask);
                 }
             }
@@ -467,11 +469,8 @@ fn main() -> anyhow::Result<()> {
             if_collapsed as f64 / tris_o as f64
         );
         println!(
-            "  cf quadrants outside the frustum not drawn: triangles {} ratio {:.2}; drawn collapsed instead: triangles {} ratio {:.2}",
-            in_frustum_tris[0],
-            in_frustum_tris[0] as f64 / tris_o as f64,
-            in_frustum_tris[1],
-            in_frustum_tris[1] as f64 / tris_o as f64
+            "  cf every quadrant of the drawn tiles drawn (cull_quadrants = false): triangles {all_quadrant_tris} ratio {:.2}",
+            all_quadrant_tris as f64 / tris_o as f64
         );
         println!(
             "  cf collapsing whole tiles only: {whole_tiles} of {tiles_n} tiles, triangles {whole_tris} ratio {:.2}",
@@ -510,49 +509,6 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
-}
-
-/// The triangles of drawn tile `t` (collapse mask `mask`) in quadrants whose box is not
-/// outside the frustum (flat world, as every count here): the rectangle from the lowest
-/// point of its grid vertices' morph walks ([`select::walk_end`]) to its far corner, by the
-/// heights of the tile that holds the tile's reach ([`select::tile_reach`]), against the
-/// frustum without a margin ([`select::flat_box_outside`]). And the triangles with those quadrants
-/// drawn collapsed instead (the masks as they are: a gap at a collapsed quadrant's edge lies
-/// inside its box, outside the view).
-fn quadrants_in_frustum(levels: &Levels, p: &SelectionParams, t: Tile, mask: u32) -> [u64; 2] {
-    let step = 1i32 << t.lod;
-    let half = levels.grid_size as i32 / 2;
-    let origin = [t.x as i32 * 2 * half * step, t.y as i32 * 2 * half * step];
-    let heights = levels.tile_min_max(select::tile_reach(levels, p, t).heights);
-    let g2 = 2 * (levels.grid_size as u64).pow(2);
-    let mut tris = [0, 0];
-    for q in 0..4i32 {
-        let q0 = [
-            origin[0] + (q & 1) * half * step,
-            origin[1] + (q >> 1) * half * step,
-        ];
-        let mut lo = q0;
-        for j in 0..=half {
-            for i in 0..=half {
-                let end = select::walk_end(levels, p, [q0[0] + i * step, q0[1] + j * step], t.lod);
-                lo = [lo[0].min(end[0]), lo[1].min(end[1])];
-            }
-        }
-        let hi = [q0[0] + half * step, q0[1] + half * step];
-        let outside = select::flat_box_outside(p, lo, hi, heights, 0.0);
-        let collapsed = mask & 1 << q != 0;
-        tris[0] += match (outside, collapsed) {
-            (true, _) => 0,
-            (false, true) => g2 / 16,
-            (false, false) => g2 / 4,
-        };
-        tris[1] += if outside || collapsed {
-            g2 / 16
-        } else {
-            g2 / 4
-        };
-    }
-    tris
 }
 
 /// A drawn tile's largest exact projected error (px: |level grid - sample| x focal / distance

@@ -1,5 +1,5 @@
 // UDLOD drawing: one instance per final tile over a shared grid of `quads` x `quads` (per
-// collapse mask: quadrants drawn as the parent grid, `grid::IndexLayout`).
+// draw mask: quadrants drawn as the parent grid or not at all, `grid::IndexLayout`).
 // Vertices morph towards the parent level's grid (CDLOD-style) so that a tile is fully on its
 // parent's grid where it meets a coarser neighbour: crack-free and pop-free without
 // tessellation. The morph itself lives in include/udlod_morph.wgsl (shared with the test probe).
@@ -17,7 +17,7 @@ fn drawn_tile(instance: u32) -> Tile {
     return final_tiles[udlod.sizes.z + instance];
 }
 
-// Indexed drawing: the index buffer holds one list per collapse mask (`grid::IndexLayout` in
+// Indexed drawing: the index buffer holds one list per draw mask (`grid::IndexLayout` in
 // src/lod/udlod/grid.rs), naming grid vertices `row * (quads + 1) + column`.
 fn indexed_local(vertex: u32) -> vec2<u32> {
     let quads = udlod.sizes.x;
@@ -39,26 +39,32 @@ fn grid_pulled_local(vertex: u32, quads: u32) -> vec2<u32> {
     return vec2<u32>(quad % quads + dx, quad / quads + dy);
 }
 
-// The triangles of a tile drawn with collapse mask `mask`, in the order of its index list
-// (`grid::mask_vertices`): per quadrant (bit `qx + 2 qy`, in bit order) its own grid of
-// `quads / 2` per side, or collapsed the parent grid's `quads / 4` over its even vertices; at
-// grid 2 a collapsed tile is the parent's one quad.
+// The triangles of a tile drawn with mask `mask`, in the order of its index list
+// (`grid::mask_vertices`): per quadrant q (digit q of the mask in base 3, quadrant origin
+// `(qx, qy) * quads / 2`) its own grid of `quads / 2` per side (0), collapsed the parent grid's
+// `quads / 4` over its even vertices (1), or none (2); at grid 2 a collapsed tile is the
+// parent's one quad and a partly collapsed one its own grid (`grid::TileMask::new`).
 fn pulled_local(vertex: u32, mask: u32) -> vec2<u32> {
     let quads = udlod.sizes.x;
-    if quads == 2u && mask != 0u {
+    let all_collapsed = 1u + 3u + 9u + 27u;
+    if quads == 2u && mask == all_collapsed {
         return 2u * grid_pulled_local(vertex, 1u);
     }
     let h = quads / 2u;
     var j = vertex;
+    var rest = mask;
     var q = 0u;
-    for (; q < 3u; q++) {
-        let n = select(h, h / 2u, (mask & (1u << q)) != 0u);
+    var collapsed = false;
+    for (; q < 4u; q++) {
+        let state = rest % 3u;
+        rest /= 3u;
+        collapsed = state == 1u && quads > 2u;
+        let n = select(select(h, h / 2u, collapsed), 0u, state == 2u);
         if j < 6u * n * n {
             break;
         }
         j -= 6u * n * n;
     }
-    let collapsed = (mask & (1u << q)) != 0u;
     let origin = h * vec2<u32>(q & 1u, q >> 1u);
     return origin + select(1u, 2u, collapsed) * grid_pulled_local(j, select(h, h / 2u, collapsed));
 }
@@ -66,7 +72,7 @@ fn pulled_local(vertex: u32, mask: u32) -> vec2<u32> {
 @vertex
 fn vs_pulled(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> TerrainVertex {
     let tile = drawn_tile(instance);
-    return tile_vertex(tile, pulled_local(vertex, tile.pad % UDLOD_COLLAPSE_MASKS));
+    return tile_vertex(tile, pulled_local(vertex, tile.pad % UDLOD_TILE_MASKS));
 }
 
 // The morphed vertex (`morphed_vertex`, shared with the test probe) projected.

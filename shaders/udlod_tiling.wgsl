@@ -7,7 +7,7 @@
 // both ends: even passes read parents from the front and write children from the back, odd
 // passes the other way round. Tiles that do not split go to the final list's first half,
 // unsorted, each with its draw group (static or morphing, and which quadrants collapse onto
-// the parent's grid); `finish` writes one indirect draw per group (one instance per tile)
+// the parent's grid or lie outside the view); `finish` writes one indirect draw per group (one instance per tile)
 // and `scatter` sorts the tiles by group into the list's second half, which the draws read.
 //
 // Capacity: a pass splits only if all of its splits fit (3 more final-list entries each: a
@@ -37,8 +37,8 @@ struct IndirectDraw {
     first_instance: u32,
 }
 
-// Draw groups: static tiles per collapse mask, then morphing ones (`draw_group`).
-const DRAW_GROUPS: u32 = 2u * UDLOD_COLLAPSE_MASKS;
+// Draw groups: static tiles per draw mask (`tile_mask`), then morphing ones (`draw_group`).
+const DRAW_GROUPS: u32 = 2u * UDLOD_TILE_MASKS;
 
 struct TilingState {
     // vkCmdDispatchIndirect arguments of the next refine pass (after `finish`: of `scatter`).
@@ -60,7 +60,7 @@ struct TilingState {
     // Tiles written for the next pass that will want to split there.
     split_requests: atomic<u32>,
     // Draws with tiles (`finish`): the static groups' first in `draws`, the morphing ones'
-    // from entry `UDLOD_COLLAPSE_MASKS` (read by `vkCmdDraw*IndirectCount`).
+    // from entry `UDLOD_TILE_MASKS` (read by `vkCmdDraw*IndirectCount`).
     static_draws: u32,
     morphing_draws: u32,
     // Final tiles per draw group, and (`finish`) where each group starts in the sorted half.
@@ -68,7 +68,7 @@ struct TilingState {
     group_first: array<u32, DRAW_GROUPS>,
     // The draws of the groups with tiles (`finish`), the static ones' (drawn with back-face
     // culling by default) from entry 0 and the morphing ones' (without: docs/udlod.md,
-    // "Pinholes far away and back faces") from entry `UDLOD_COLLAPSE_MASKS`, each run followed
+    // "Pinholes far away and back faces") from entry `UDLOD_TILE_MASKS`, each run followed
     // by draws of no instance.
     draws: array<IndirectDraw, DRAW_GROUPS>,
 }
@@ -163,16 +163,24 @@ struct TileReach {
 
 fn tile_reach(t: Tile) -> TileReach {
     let span = i32(udlod.sizes.x << t.lod);
+    return rect_reach(vec2<i32>(i32(t.x), i32(t.y)) * span, span, t.lod, t);
+}
+
+// The reach of the square of `span` samples from `c0` whose grid points walk from level `lod`,
+// with the heights of the smallest tile from `heights` up that holds it (mirrors `rect_reach`
+// in src/lod/udlod/select.rs).
+fn rect_reach(c0: vec2<i32>, span: i32, lod: u32, heights: Tile) -> TileReach {
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
-    let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);
     var r: TileReach;
     r.hi = min(c0 + vec2<i32>(span), last);
     r.lo = c0;
     for (var k = 0u; k < 4u; k++) {
         let corner = c0 + vec2<i32>(i32(k & 1u), i32(k >> 1u)) * span;
-        r.lo = min(r.lo, walk_end(corner, t.lod));
+        r.lo = min(r.lo, walk_end(corner, lod));
     }
-    r.heights = t;
+    // A quadrant past the data's edge: its vertices are clamped onto the edge.
+    r.lo = min(r.lo, r.hi);
+    r.heights = heights;
     loop {
         let side = i32(udlod.sizes.x << r.heights.lod);
         let origin = vec2<i32>(i32(r.heights.x), i32(r.heights.y)) * side;
@@ -188,32 +196,49 @@ fn tile_reach(t: Tile) -> TileReach {
 // frustum; on the earth the curved box over it (mirrors `tile_culled` in
 // src/lod/udlod/select.rs).
 fn tile_culled(t: Tile) -> bool {
-    let r = tile_reach(t);
+    return reach_culled(tile_reach(t), i32(udlod.sizes.x << t.lod));
+}
+
+// Quadrant `q` of final tile `t` (bit `qx + 2 qy`): its rectangle's reach, with the heights of
+// the tile one level down that covers it (the tile itself at level 0 or past the data's
+// edge), against the frustum (mirrors `quadrant_reach` and `quadrants_culled` in
+// src/lod/udlod/select.rs).
+fn quadrant_culled(t: Tile, q: u32) -> bool {
+    let half = i32(udlod.sizes.x << t.lod) / 2;
+    let qxy = vec2<u32>(q & 1u, q >> 1u);
+    let c0 = vec2<i32>(i32(t.x), i32(t.y)) * (2 * half) + vec2<i32>(qxy) * half;
+    var heights = t;
+    if t.lod > 0u {
+        let below = Tile(2u * t.x + qxy.x, 2u * t.y + qxy.y, t.lod - 1u, 0u);
+        if !outside_data(below) {
+            heights = below;
+        }
+    }
+    return reach_culled(rect_reach(c0, half, t.lod, heights), half);
+}
+
+// The box of `r` against the frustum, more than 1e-3 of `span` samples outside a plane.
+fn reach_culled(r: TileReach, span: i32) -> bool {
     let mm = tile_min_max(r.heights);
+    let slack = 1e-3 * (f32(span) * frame.camera_offset.w);
     if frame.lattice.x != 0u {
         // On the earth: the curved box (`earth_box`, the one every method culls with there).
         let b = earth_box(r.lo, r.hi, mm);
-        return box_outside(udlod.frustum, b, cull_slack(t));
+        return box_outside(udlod.frustum, b, slack);
     }
     let lo = relative_xy(r.lo);
     let hi = relative_xy(r.hi);
     let z = mm - vec2<f32>(frame.camera_offset.z);
     let box_lo = vec3<f32>(lo, z.x);
     let box_hi = vec3<f32>(hi, z.y);
-    let margin = -cull_slack(t);
     for (var i = 0u; i < 6u; i++) {
         let pl = udlod.frustum[i];
         let p = vec3<f32>(select(box_lo.x, box_hi.x, pl.x >= 0.0), select(box_lo.y, box_hi.y, pl.y >= 0.0), select(box_lo.z, box_hi.z, pl.z >= 0.0));
-        if pl.x * p.x + pl.y * p.y + pl.z * p.z + pl.w < margin {
+        if pl.x * p.x + pl.y * p.y + pl.z * p.z + pl.w < -slack {
             return true;
         }
     }
     return false;
-}
-
-// How far (metres) a tile's box must lie outside a plane to be culled: 1e-3 of its side.
-fn cull_slack(t: Tile) -> f32 {
-    return 1e-3 * (f32(udlod.sizes.x << t.lod) * frame.camera_offset.w);
 }
 
 // Per workgroup of `refine`: its splits' child slots, final tiles, next-pass split requests and
@@ -242,24 +267,46 @@ var<workgroup> wg_slivers: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 // found a vertex odd at its level that is not fully on the grid above (`final_tile_checks`):
 // they keep their own grid.
 var<workgroup> wg_keeps_grid: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
+// Per parent: the quadrants (bits) of the (final) parent whose boxes lie outside the frustum,
+// one invocation each (`quadrant_culled`): not drawn.
+var<workgroup> wg_dropped: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 
 const_assert UDLOD_WORKGROUP % 4u == 0u;
-const_assert UDLOD_WORKGROUP >= DRAW_GROUPS;
 
 const ACTION_NONE: u32 = 0u;
 const ACTION_FINAL: u32 = 1u;
 const ACTION_SPLIT: u32 = 2u;
 
-// A final tile's draw group: its collapse mask (which quadrants are drawn as the parent grid;
-// at grid 2 all or none: `grid::drawn_mask` in src/lod/udlod/grid.rs), plus
-// `UDLOD_COLLAPSE_MASKS` when a vertex may make slivers.
-fn draw_group(keeps_grid: u32, slivers: bool) -> u32 {
-    let all = UDLOD_COLLAPSE_MASKS - 1u;
-    var mask = all & ~keeps_grid;
-    if udlod.sizes.x == 2u && mask != all {
-        mask = 0u;
+// A final tile's draw group: its draw mask (`tile_mask`), plus `UDLOD_TILE_MASKS` when a
+// vertex may make slivers.
+fn draw_group(keeps_grid: u32, dropped: u32, slivers: bool) -> u32 {
+    return tile_mask(ALL_QUADRANTS & ~keeps_grid, dropped) + select(0u, UDLOD_TILE_MASKS, slivers);
+}
+
+const ALL_QUADRANTS: u32 = 15u;
+
+// The draw mask of a tile whose quadrants `collapsing` (bits) lie fully on the parent grid and
+// `dropped` outside the frustum: quadrant q's digit (base 3) 0 its own grid, 1 collapsed, 2 not
+// drawn; at grid 2 the tile collapses whole (then drawn whole unless all four are dropped) or
+// not at all (mirrors `grid::TileMask::new` in src/lod/udlod/grid.rs).
+fn tile_mask(collapsing_in: u32, dropped_in: u32) -> u32 {
+    var collapsing = collapsing_in;
+    var dropped = dropped_in;
+    if udlod.sizes.x == 2u && dropped != ALL_QUADRANTS {
+        if collapsing == ALL_QUADRANTS {
+            dropped = 0u;
+        } else {
+            collapsing = 0u;
+        }
     }
-    return mask + select(0u, UDLOD_COLLAPSE_MASKS, slivers);
+    var mask = 0u;
+    var digit = 1u;
+    for (var q = 0u; q < 4u; q++) {
+        let bit = 1u << q;
+        mask += digit * select(select(0u, 1u, (collapsing & bit) != 0u), 2u, (dropped & bit) != 0u);
+        digit *= 3u;
+    }
+    return mask;
 }
 
 // Refines this pass's parents, four invocations per parent, one per child (a pass waits on its
@@ -283,12 +330,13 @@ fn refine(
         atomicStore(&wg_culled, 0u);
         atomicStore(&wg_overflow, 0u);
     }
-    if li < DRAW_GROUPS {
-        atomicStore(&wg_groups[li], 0u);
+    for (var g = li; g < DRAW_GROUPS; g += UDLOD_WORKGROUP) {
+        atomicStore(&wg_groups[g], 0u);
     }
     if (li & 3u) == 0u {
         atomicStore(&wg_slivers[li / 4u], 0u);
         atomicStore(&wg_keeps_grid[li / 4u], 0u);
+        atomicStore(&wg_dropped[li / 4u], 0u);
     }
     workgroupBarrier();
     let invocation = (group.y * groups.x + group.x) * UDLOD_WORKGROUP + li;
@@ -331,6 +379,10 @@ fn refine(
         if checks.keeps_grid != 0u {
             atomicOr(&wg_keeps_grid[li / 4u], checks.keeps_grid);
         }
+        // Invocation k: quadrant k's box (`udlod.counts.x`: `cull_quadrants` with culling).
+        if udlod.counts.x != 0u && quadrant_culled(t, k) {
+            atomicOr(&wg_dropped[li / 4u], 1u << k);
+        }
     }
     workgroupBarrier();
     if k == 0u {
@@ -338,7 +390,8 @@ fn refine(
             wg_parent_local[li / 4u] = atomicAdd(&wg_children, 4u);
         } else if action == ACTION_FINAL {
             let slivers = atomicLoad(&wg_slivers[li / 4u]) != 0u;
-            draw = draw_group(atomicLoad(&wg_keeps_grid[li / 4u]), slivers);
+            let dropped = atomicLoad(&wg_dropped[li / 4u]);
+            draw = draw_group(atomicLoad(&wg_keeps_grid[li / 4u]), dropped, slivers);
             wg_parent_local[li / 4u] = atomicAdd(&wg_finals, 1u);
             wg_parent_rank[li / 4u] = atomicAdd(&wg_groups[draw], 1u);
         }
@@ -347,10 +400,10 @@ fn refine(
     if li == 0u {
         reserve_in_lists();
     }
-    if li < DRAW_GROUPS {
-        let n = atomicLoad(&wg_groups[li]);
+    for (var g = li; g < DRAW_GROUPS; g += UDLOD_WORKGROUP) {
+        let n = atomicLoad(&wg_groups[g]);
         if n > 0u {
-            wg_group_base[li] = atomicAdd(&state.group_count[li], n);
+            wg_group_base[g] = atomicAdd(&state.group_count[g], n);
         }
     }
     workgroupBarrier();
@@ -375,7 +428,7 @@ fn refine(
 }
 
 // An unsorted final tile's `pad`: its draw group in the low bits, its rank in the group above.
-const DRAW_GROUP_BITS: u32 = 5u;
+const DRAW_GROUP_BITS: u32 = 8u;
 const_assert DRAW_GROUPS <= (1u << DRAW_GROUP_BITS);
 
 // `refine`'s one invocation per workgroup: reserves the workgroup's children and final tiles
@@ -449,7 +502,7 @@ struct TileChecks {
 }
 
 fn final_tile_checks(t: Tile, k: u32) -> TileChecks {
-    let all = UDLOD_COLLAPSE_MASKS - 1u;
+    let all = ALL_QUADRANTS;
     var slivers = false;
     var keeps_grid = select(0u, all, udlod.params.x < 0.5 || udlod.params.z < 0.5);
     let quads = udlod.sizes.x;
@@ -518,9 +571,9 @@ fn finish() {
         let count = select(0u, atomicLoad(&state.group_count[g]), fits);
         state.group_first[g] = first;
         if count > 0u {
-            let mask = udlod.masks[g % UDLOD_COLLAPSE_MASKS];
-            let pipeline = g / UDLOD_COLLAPSE_MASKS;
-            let slot = pipeline * UDLOD_COLLAPSE_MASKS + drawn[pipeline];
+            let mask = udlod.masks[g % UDLOD_TILE_MASKS];
+            let pipeline = g / UDLOD_TILE_MASKS;
+            let slot = pipeline * UDLOD_TILE_MASKS + drawn[pipeline];
             drawn[pipeline] += 1u;
             if pulling {
                 state.draws[slot] = IndirectDraw(mask.x, count, 0u, first, 0u);

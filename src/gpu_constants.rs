@@ -65,9 +65,10 @@ shared_constants! {
     /// recomputes the factor, then clamps it to exactly 1 even where a device rounds the two
     /// stages' arithmetic differently (Vulkan allows it; the H200 does).
     UDLOD_COLLAPSE_MARGIN: f32 = 1e-3;
-    /// Collapse masks of a tile (which of its four quadrants are drawn as the parent grid:
-    /// `lod::udlod::grid`), each with its own index list and indirect draw.
-    UDLOD_COLLAPSE_MASKS: u32 = 16;
+    /// Draw masks of a tile: per quadrant its own grid, its parent's grid (collapsed) or
+    /// nothing (outside the frustum), 3^4 (`lod::udlod::grid::TileMask`), each with its own
+    /// index list and indirect draw.
+    UDLOD_TILE_MASKS: u32 = 81;
     /// Most tiles the host hands the tiling prepass as its first pass's parents: the coarse
     /// levels walked on the CPU (`lod::udlod::seed`), so those levels cost no GPU passes. 256
     /// keeps the walk to tens of microseconds of host time per view.

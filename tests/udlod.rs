@@ -12,11 +12,12 @@ use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::interp::GridCell;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::driver::{Gpu, GpuOptions};
+use vkterrain::lod::udlod::grid::{QuadrantDraw, TileMask};
 use vkterrain::lod::udlod::seed;
 use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
 use vkterrain::lod::udlod::{draw_group, grid};
 use vkterrain::lod::{MethodKind, UdlodSettings};
-use vkterrain::readback::CollectSink;
+use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer};
 use vkterrain::scene::Camera;
 use vkterrain::slots::ViewSlot;
@@ -306,8 +307,103 @@ fn collapsed_tiles_draw_the_same_surface() {
     collapsed_tiles_draw_the_same_surface_at(&data, &cams, 2, "default", cascade(2));
 }
 
-/// Per pose: each drawn tile's collapse mask, and how many collapsing tiles morph.
-type DrawnMasks = (HashMap<Tile, u32>, u64);
+/// Quadrants outside the view (docs/udlod.md, "Quadrants outside the view"): the quadrants of a
+/// drawn tile whose boxes lie outside the frustum are not drawn, and that changes no pixel.
+/// Over a low flight and 30 poses at grids 2, 4 and 8: the GPU gives every tile the mask the
+/// CPU mirror (`select::tile_mask`) does, the frames with and without `cull_quadrants` are
+/// identical, colour and depth, bit for bit, and differ by exactly the dropped quadrants'
+/// triangles (`grid::mask_triangles`). Negative control by hand: `refine` dropping quadrant
+/// `k ^ 1` instead of quadrant `k` fails the mirror at the first pose.
+#[test]
+fn quadrants_outside_the_view_change_no_pixel() {
+    let data = terrain(257, 30.0);
+    let mut cams = low_flight(&data, 20);
+    cams.extend(poses(&data, 30));
+    for grid in [2, 4, 8] {
+        let lod = settings(grid);
+        let levels = Levels::for_settings(&data, &lod).unwrap();
+        let (on, on_masks) = frames_and_masks(&data, &cams, &lod);
+        let all_drawn = UdlodSettings {
+            cull_quadrants: false,
+            ..lod.clone()
+        };
+        let (off, _) = frames_and_masks(&data, &cams, &all_drawn);
+        let (mut tiles, mut dropped, mut saved_all) = (0usize, 0u32, 0u64);
+        for (i, cam) in cams.iter().enumerate() {
+            let p = SelectionParams::new(&levels, &data, &lod, cam, cam.position, W, H);
+            let cpu: HashMap<Tile, TileMask> = select::select_tiles(&levels, &p)
+                .into_iter()
+                .map(|t| (t, select::tile_mask(&levels, &p, t)))
+                .collect();
+            assert_eq!(
+                on_masks[i].0, cpu,
+                "grid {grid} pose {i}: the GPU's masks are not the CPU mirror's"
+            );
+            let (a, b) = (&on[i], &off[i]);
+            assert_eq!(a.rgba, b.rgba, "grid {grid} pose {i}: colour differs");
+            assert_eq!(a.depth, b.depth, "grid {grid} pose {i}: depth differs");
+            let saved: u64 = (cpu.iter())
+                .map(|(&t, &m)| {
+                    let whole = TileMask::new(grid, select::tile_collapse_mask(&levels, &p, t), 0);
+                    grid::mask_triangles(grid, whole) - grid::mask_triangles(grid, m)
+                })
+                .sum();
+            assert_eq!(b.triangles - a.triangles, saved, "grid {grid} pose {i}");
+            tiles += cpu.len();
+            saved_all += saved;
+            dropped += (cpu.values())
+                .map(|m| m.quadrants(QuadrantDraw::Dropped).count_ones())
+                .sum::<u32>();
+        }
+        println!(
+            "grid {grid}: {dropped} quadrants of {tiles} tiles not drawn, {saved_all} triangles, frames identical"
+        );
+        // Enough dropped quadrants for the comparison to mean something.
+        assert!(dropped as usize * 20 >= tiles, "{dropped} of {tiles}");
+    }
+}
+
+/// Per pose: each drawn tile's draw mask, and how many tiles with collapsed quadrants morph.
+type DrawnMasks = (HashMap<Tile, TileMask>, u64);
+
+/// `cams` drawn with `lod` at `W` x `H` with depth: the frames and, per pose, the GPU's masks.
+fn frames_and_masks(
+    data: &Heightmap,
+    cams: &[Camera],
+    lod: &UdlodSettings,
+) -> (Vec<OwnedFrame>, Vec<DrawnMasks>) {
+    let gpu = common::gpu(false);
+    let mut options = common::options(W, H, 1);
+    options.readback_depth = true;
+    let mut sink = CollectSink::default();
+    let mut drawn: Vec<DrawnMasks> = Vec::new();
+    {
+        let mut r = Renderer::new(&gpu, data, lod.clone(), options).unwrap();
+        for cam in cams {
+            r.render(*cam, &mut sink).unwrap();
+            r.finish(&mut sink).unwrap();
+            let tiles = r.method().debug_tiles(ViewSlot(0)).unwrap().unwrap();
+            let draws = r.method().debug_tile_draws(ViewSlot(0)).unwrap().unwrap();
+            let masks: HashMap<Tile, TileMask> = tiles
+                .iter()
+                .zip(&draws)
+                .map(|(&[x, y, lod], &g)| (Tile { x, y, lod }, draw_group(g as usize).0))
+                .collect();
+            assert_eq!(masks.len(), tiles.len(), "a tile drawn twice");
+            let collapsing_morphing = (draws.iter())
+                .map(|&g| draw_group(g as usize))
+                .filter(|&(m, morphing)| morphing && collapsed(m) != 0)
+                .count();
+            drawn.push((masks, collapsing_morphing as u64));
+        }
+    }
+    common::assert_no_validation_messages(&gpu);
+    (sink.frames, drawn)
+}
+
+fn collapsed(m: TileMask) -> u32 {
+    m.quadrants(QuadrantDraw::Collapsed)
+}
 
 fn collapsed_tiles_draw_the_same_surface_at(
     data: &Heightmap,
@@ -316,57 +412,46 @@ fn collapsed_tiles_draw_the_same_surface_at(
     name: &str,
     lod: UdlodSettings,
 ) {
+    // Every quadrant drawn, so that the masks are the collapse alone.
+    let lod = UdlodSettings {
+        cull_quadrants: false,
+        ..lod
+    };
     let levels = Levels::for_settings(data, &lod).unwrap();
     let render = |collapse: bool| {
-        let gpu = common::gpu(false);
-        let mut options = common::options(W, H, 1);
-        options.readback_depth = true;
-        let lod = UdlodSettings {
-            collapse,
-            ..lod.clone()
-        };
-        let mut sink = CollectSink::default();
-        let mut drawn: Vec<DrawnMasks> = Vec::new();
-        {
-            let mut r = Renderer::new(&gpu, data, lod.clone(), options).unwrap();
-            for cam in cams {
-                r.render(*cam, &mut sink).unwrap();
-                r.finish(&mut sink).unwrap();
-                let tiles = r.method().debug_tiles(ViewSlot(0)).unwrap().unwrap();
-                let draws = r.method().debug_tile_draws(ViewSlot(0)).unwrap().unwrap();
-                let masks: HashMap<Tile, u32> = tiles
-                    .iter()
-                    .zip(&draws)
-                    .map(|(&[x, y, lod], &g)| (Tile { x, y, lod }, draw_group(g as usize).0))
-                    .collect();
-                assert_eq!(masks.len(), tiles.len(), "a tile drawn twice");
-                let collapsing_morphing = (draws.iter())
-                    .filter(|&&g| draw_group(g as usize).1 && draw_group(g as usize).0 != 0)
-                    .count();
-                drawn.push((masks, collapsing_morphing as u64));
-            }
-        }
-        common::assert_no_validation_messages(&gpu);
-        (sink.frames, drawn)
+        frames_and_masks(
+            data,
+            cams,
+            &UdlodSettings {
+                collapse,
+                ..lod.clone()
+            },
+        )
     };
     let (on, on_masks) = render(true);
     let (off, off_masks) = render(false);
-    let full = grid::mask_triangles(grid, 0);
+    let full = grid::mask_triangles(grid, TileMask::FULL);
     let (mut tiles, mut collapsing, mut partial, mut quadrants) = (0usize, 0usize, 0usize, 0u32);
     let mut collapsing_morphing = 0u64;
     for (i, cam) in cams.iter().enumerate() {
         let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
-        let cpu: HashMap<Tile, u32> = select::select_tiles(&levels, &p)
+        let cpu: HashMap<Tile, TileMask> = select::select_tiles(&levels, &p)
             .into_iter()
-            .map(|t| (t, select::tile_collapse_mask(&levels, &p, t)))
+            .map(|t| (t, select::tile_mask(&levels, &p, t)))
             .collect();
         assert_eq!(
             on_masks[i].0, cpu,
             "grid {grid} {name} pose {i}: the GPU's collapse masks are not the CPU mirror's"
         );
         assert!(
-            off_masks[i].0.values().all(|&m| m == 0),
-            "grid {grid} {name}: collapse off"
+            off_masks[i].0.values().all(|&m| m == TileMask::FULL),
+            "grid {grid} {name}: collapse off: {:?}",
+            off_masks[i]
+                .0
+                .values()
+                .filter(|&&m| m != TileMask::FULL)
+                .take(5)
+                .collect::<Vec<_>>()
         );
         let (a, b) = (&on[i], &off[i]);
         assert_eq!(
@@ -388,12 +473,15 @@ fn collapsed_tiles_draw_the_same_surface_at(
         );
         assert_eq!(b.triangles, full * cpu.len() as u64);
         tiles += cpu.len();
-        collapsing += cpu.values().filter(|&&m| m != 0).count();
+        collapsing += cpu.values().filter(|&&m| collapsed(m) != 0).count();
         partial += cpu
             .values()
-            .filter(|&&m| m != 0 && m != grid::ALL_QUADRANTS)
+            .filter(|&&m| collapsed(m) != 0 && collapsed(m) != grid::ALL_QUADRANTS)
             .count();
-        quadrants += cpu.values().map(|m| m.count_ones()).sum::<u32>();
+        quadrants += cpu
+            .values()
+            .map(|&m| collapsed(m).count_ones())
+            .sum::<u32>();
         collapsing_morphing += on_masks[i].1;
     }
     println!(
@@ -909,7 +997,7 @@ fn drawn_surface(
     let g = levels.grid_size;
     let mut out = Vec::new();
     for &t in tiles {
-        let mask = select::tile_collapse_mask(levels, p, t);
+        let mask = TileMask::new(g, select::tile_collapse_mask(levels, p, t), 0);
         let vertex = |local: [u32; 2]| {
             let v = select::morphed_vertex(levels, p, t, local);
             let mut frac = v.frac.map(f32::to_bits);

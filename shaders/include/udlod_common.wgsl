@@ -18,16 +18,17 @@ struct Udlod {
     // The LOD viewer (distances for levels and morphs are measured from it): x/y relative to
     // the camera (m), z: reference height (terrain under the LOD viewer) minus its height.
     viewer: vec4<f32>,
-    // x: unused, y: workgroups per row of a `refine` or `scatter` dispatch, z: split-field
+    // x: 1 = quadrants of final tiles outside the frustum are not drawn (`cull_quadrants` with
+    // culling), y: workgroups per row of a `refine` or `scatter` dispatch, z: split-field
     // nodes per tile side (`field_density`: 1 = the tiles' corners), w: 1 = vertex pulling.
     counts: vec4<u32>,
     // xy: the LOD metric's stretch of the grid frame per axis (metres per sample along x and
     // y, each a lower bound on the drawn surface, over the grid frame's spacing): exactly
     // (1, 1) on square grids (`Levels::stretch` in src/lod/udlod/select.rs).
     metric: vec4<f32>,
-    // Per collapse mask (`grid::IndexLayout` in src/lod/udlod/grid.rs): x: its indices (with
+    // Per draw mask (`grid::IndexLayout` in src/lod/udlod/grid.rs): x: its indices (with
     // vertex pulling its vertices) per tile, y: its first index in the index buffer.
-    masks: array<vec4<u32>, UDLOD_COLLAPSE_MASKS>,
+    masks: array<vec4<u32>, UDLOD_TILE_MASKS>,
     // The first pass's parents, decided on the host and copied to the front of the temporary
     // list (`seed` in src/lod/udlod/seed.rs): x tiles, y those that split.
     seed: vec4<u32>,

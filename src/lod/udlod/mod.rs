@@ -33,14 +33,15 @@ use crate::driver::memory::Buffer;
 use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
 use crate::error::{Error, Result};
 use crate::frame::ViewState;
-use crate::gpu_constants::{UDLOD_COLLAPSE_MASKS, UDLOD_MAX_LEVELS, UDLOD_SEED_TILES};
+use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_SEED_TILES, UDLOD_TILE_MASKS};
 use crate::slots::ViewSlot;
+use grid::{QuadrantDraw, TileMask};
 use select::{FieldKey, Levels, SelectionParams, SplitField};
 use settings::{BackFaces, LodMetric, UdlodSettings};
 
 /// Per-frame uniforms of set 1 (`Udlod` in `shaders/include/udlod_common.wgsl`).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct UdlodUniforms {
     pub frustum: [[f32; 4]; 6],
     pub split: [[f32; 4]; UDLOD_MAX_LEVELS as usize],
@@ -51,15 +52,21 @@ pub struct UdlodUniforms {
     pub counts: [u32; 4],
     /// xy: the LOD metric's stretch per axis ([`select::Levels::stretch`]).
     pub metric: [f32; 4],
-    /// Per collapse mask: its indices (vertices with vertex pulling) per tile and first index
-    /// ([`grid::IndexLayout`]).
-    pub masks: [[u32; 4]; UDLOD_COLLAPSE_MASKS as usize],
+    /// Per draw mask ([`grid::TileMask`]): its indices (vertices with vertex pulling) per tile
+    /// and first index ([`grid::IndexLayout`]).
+    pub masks: [[u32; 4]; UDLOD_TILE_MASKS as usize],
     /// The first pass's parents from the host ([`seed::Seed`]): x tiles, y those that split.
     pub seed: [u32; 4],
 }
 
-/// Indirect draws per slot: static tiles per collapse mask, then morphing ones.
-pub const DRAW_GROUPS: usize = 2 * UDLOD_COLLAPSE_MASKS as usize;
+impl Default for UdlodUniforms {
+    fn default() -> Self {
+        bytemuck::Zeroable::zeroed()
+    }
+}
+
+/// Indirect draws per slot: static tiles per draw mask, then morphing ones.
+pub const DRAW_GROUPS: usize = 2 * UDLOD_TILE_MASKS as usize;
 
 /// The tiling state the GPU keeps per slot (`TilingState` in `shaders/udlod_tiling.wgsl`).
 #[repr(C)]
@@ -78,7 +85,7 @@ pub struct TilingState {
     pub splits_allowed: u32,
     pub split_requests: u32,
     /// Draws with tiles: the static groups' from `draws[0]`, the morphing groups' from
-    /// `draws[UDLOD_COLLAPSE_MASKS]`.
+    /// `draws[UDLOD_TILE_MASKS]`.
     pub static_draws: u32,
     pub morphing_draws: u32,
     /// Final tiles per draw group (static per collapse mask, then morphing), and where each
@@ -109,11 +116,11 @@ impl TilingState {
     }
 }
 
-/// A draw group's collapse mask and whether its tiles morph (drawn without back-face culling
-/// by default).
-pub fn draw_group(group: usize) -> (u32, bool) {
-    let masks = UDLOD_COLLAPSE_MASKS as usize;
-    ((group % masks) as u32, group >= masks)
+/// A draw group's mask and whether its tiles morph (drawn without back-face culling by
+/// default).
+pub fn draw_group(group: usize) -> (TileMask, bool) {
+    let masks = UDLOD_TILE_MASKS as usize;
+    (TileMask::from_index((group % masks) as u32), group >= masks)
 }
 
 /// Descriptor set 1 (`shaders/include/udlod_common.wgsl`, `shaders/udlod_tiling.wgsl`,
@@ -302,10 +309,10 @@ pub struct Udlod {
     /// GPU mirror of `levels.min_max` (bound in every slot's set, written again when a slot's
     /// lists grow).
     min_max: Buffer,
-    /// Every collapse mask's index list ([`grid::IndexLayout`]).
+    /// Every draw mask's index list ([`grid::IndexLayout`]).
     indices: Buffer,
     /// `UdlodUniforms::masks`.
-    masks: [[u32; 4]; UDLOD_COLLAPSE_MASKS as usize],
+    masks: [[u32; 4]; UDLOD_TILE_MASKS as usize],
     slots: Vec<SlotBuffers>,
     /// Set 1 of every slot (`SlotBuffers::set`).
     #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
@@ -382,12 +389,12 @@ impl Udlod {
         }
     }
 
-    /// The index buffer of every collapse mask's triangles, and the masks' uniforms (with
+    /// The index buffer of every draw mask's triangles, and the masks' uniforms (with
     /// vertex pulling their vertex counts; the indices are not read).
     fn grid_indices(
         gpu: &Arc<Gpu>,
         grid_size: u32,
-    ) -> Result<(Buffer, [[u32; 4]; UDLOD_COLLAPSE_MASKS as usize])> {
+    ) -> Result<(Buffer, [[u32; 4]; UDLOD_TILE_MASKS as usize])> {
         let layout = grid::IndexLayout::new(grid_size);
         let index_bytes: &[u8] = bytemuck::cast_slice(&layout.indices);
         let mut indices = Buffer::new(
@@ -599,8 +606,8 @@ impl Udlod {
             .unwrap_or_default()
     }
 
-    /// One pipeline's run of draws in `state` from `offset` (16 entries, the first
-    /// `count_offset`'s count with tiles): with `drawIndirectCount` only those, else all 16
+    /// One pipeline's run of draws in `state` from `offset` (`UDLOD_TILE_MASKS` entries, the
+    /// first `count_offset`'s count with tiles): with `drawIndirectCount` only those, else all
     /// in one call (`multiDrawIndirect`) or one call each. With vertex pulling `finish` wrote
     /// `VkDrawIndirectCommand`s in the same stride.
     fn record_draws(
@@ -611,7 +618,7 @@ impl Udlod {
         count_offset: u64,
     ) {
         let d = &self.gpu.device;
-        let max = UDLOD_COLLAPSE_MASKS;
+        let max = UDLOD_TILE_MASKS;
         let caps = &self.gpu.enabled;
         // Indexed draws, or with vertex pulling their non-indexed twins (same arguments).
         let (draw_count, draw): (DrawIndirectCount, DrawIndirect) = if self.settings.vertex_pulling
@@ -717,7 +724,7 @@ impl LodMethod for Udlod {
             if p.cull { 1.0 } else { 0.0 },
         ];
         u.counts = [
-            0,
+            (p.cull && p.cull_quadrants) as u32,
             self.settings.dispatch_row,
             self.levels.field_density,
             self.settings.vertex_pulling as u32,
@@ -829,7 +836,7 @@ impl LodMethod for Udlod {
     ) {
         let d = &self.gpu.device;
         let s = &self.slots[slot.index()];
-        let masks = UDLOD_COLLAPSE_MASKS;
+        let masks = UDLOD_TILE_MASKS;
         let group_bytes = masks as u64 * DRAW_STRIDE as u64;
         let runs = [
             (&self.draw, DRAWS_OFFSET, STATIC_DRAWS_OFFSET),
@@ -873,7 +880,7 @@ impl LodMethod for Udlod {
     fn counters(&self, slot: ViewSlot) -> Vec<(&'static str, u64)> {
         let c = self.read_counters(slot);
         let drawn = c.drawn();
-        let sum = |f: &dyn Fn(u32, bool) -> u64| -> u64 {
+        let sum = |f: &dyn Fn(TileMask, bool) -> u64| -> u64 {
             (drawn.iter().enumerate())
                 .map(|(g, n)| {
                     let (mask, morphing) = draw_group(g);
@@ -882,15 +889,22 @@ impl LodMethod for Udlod {
                 .sum()
         };
         let all = grid::ALL_QUADRANTS;
+        let collapsed = |m: TileMask| m.quadrants(QuadrantDraw::Collapsed);
+        let dropped = |m: TileMask| m.quadrants(QuadrantDraw::Dropped);
         vec![
             ("tiles", sum(&|_, _| 1)),
             ("morphing", sum(&|_, morphing| morphing as u64)),
             // Tiles with a quadrant drawn as the parent grid, whole tiles drawn so, quadrants.
-            ("collapsing", sum(&|mask, _| (mask != 0) as u64)),
-            ("collapsed", sum(&|mask, _| (mask == all) as u64)),
+            ("collapsing", sum(&|m, _| (collapsed(m) != 0) as u64)),
+            ("collapsed", sum(&|m, _| (collapsed(m) == all) as u64)),
             (
                 "collapsed_quadrants",
-                sum(&|mask, _| mask.count_ones() as u64),
+                sum(&|m, _| collapsed(m).count_ones() as u64),
+            ),
+            // Quadrants of drawn tiles left out, outside the frustum.
+            (
+                "culled_quadrants",
+                sum(&|m, _| dropped(m).count_ones() as u64),
             ),
             ("overflow", c.overflow as u64),
             ("culled", c.culled as u64),

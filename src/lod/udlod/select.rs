@@ -13,6 +13,7 @@ use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
 
+use super::grid::TileMask;
 use super::settings::MORPH_LEVELS_ALL;
 use super::settings::UdlodSettings;
 use crate::dataset::stats::{FieldStats, TileStats, level_interpolate};
@@ -1067,6 +1068,9 @@ pub struct SelectionParams {
     pub field: Arc<SplitField>,
     pub frustum: [[f32; 4]; 6],
     pub cull: bool,
+    /// With `cull`: quadrants of drawn tiles outside the frustum are not drawn
+    /// ([`quadrants_culled`]).
+    pub cull_quadrants: bool,
     /// On the earth: the lattice and the camera's world position, for the curved boxes
     /// (None: the flat world's boxes).
     pub earth: Option<EarthCull>,
@@ -1132,6 +1136,7 @@ impl SelectionParams {
             field,
             frustum: frustum_planes(camera, width as f64 / height as f64),
             cull: settings.cull,
+            cull_quadrants: settings.cull_quadrants,
             earth: None,
             morph_range: settings.morph_range as f32,
             morph: settings.morph,
@@ -1220,10 +1225,30 @@ pub fn tile_splits(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
 /// brackets it). `tile_culled` in `shaders/udlod_tiling.wgsl`.
 pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
     let span = (levels.grid_size << t.lod) as i32;
-    let reach = tile_reach(levels, p, t);
+    let reach = rect_reach(levels, p, tile_origin(levels, t), span, t.lod, t);
+    rect_culled(levels, p, reach, span)
+}
+
+/// The quadrants (bits `1 << q`, [`super::grid`]) of final tile `t` whose box lies outside the
+/// frustum: drawn as nothing (docs/udlod.md, "Quadrants outside the view"). Each box is
+/// [`tile_culled`]'s for the quadrant's rectangle ([`quadrant_reach`]); none without culling
+/// or with `cull_quadrants` off. `quadrant_culled` in `shaders/udlod_tiling.wgsl`.
+pub fn quadrants_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
+    if !(p.cull && p.cull_quadrants) {
+        return 0;
+    }
+    let half = (levels.grid_size << t.lod) as i32 / 2;
+    (0..4)
+        .filter(|&q| rect_culled(levels, p, quadrant_reach(levels, p, t, q), half))
+        .fold(0, |bits, q| bits | 1 << q)
+}
+
+/// The box of `reach` (its rectangle x the heights of the tile holding it) against the
+/// frustum, with a margin of 1e-3 of `span` samples (the rectangle's side before its walks)
+/// that keeps rounding from culling a touching box.
+fn rect_culled(levels: &Levels, p: &SelectionParams, reach: TileReach, span: i32) -> bool {
     let (c0, c1) = (reach.lo, reach.hi);
     let heights = levels.tile_min_max(reach.heights);
-    // A margin of 1e-3 of the tile's size keeps rounding from culling a touching box.
     let margin = 1e-3 * (span as f32 * p.spacing);
     if let Some(earth) = &p.earth {
         return earth.outside(&p.frustum, c0, c1, heights, margin as f64);
@@ -1273,26 +1298,78 @@ pub struct TileReach {
 /// `shaders/udlod_tiling.wgsl`.
 pub fn tile_reach(levels: &Levels, p: &SelectionParams, t: Tile) -> TileReach {
     let span = (levels.grid_size << t.lod) as i32;
+    rect_reach(levels, p, tile_origin(levels, t), span, t.lod, t)
+}
+
+/// The rectangle quadrant `q` of tile `t`'s morphed vertices can reach. A quadrant is a square
+/// of `grid / 2 << lod` samples aligned to its side, so [`tile_reach`]'s argument holds for it
+/// as for a tile: a walk inside it ends inside it or at one of its corners. Its heights: from
+/// the tile of the level below that covers it (for a level-0 tile the tile itself). `rect_reach`
+/// in `shaders/udlod_tiling.wgsl`.
+pub fn quadrant_reach(levels: &Levels, p: &SelectionParams, t: Tile, q: u32) -> TileReach {
+    let half = (levels.grid_size << t.lod) as i32 / 2;
+    let o = tile_origin(levels, t);
+    let (qx, qy) = (q & 1, q >> 1);
+    let c0 = [o[0] + qx as i32 * half, o[1] + qy as i32 * half];
+    // The quadrant's tile one level down, unless the tile is level 0 or that tile lies past
+    // the data's edge (the quadrant's vertices are then clamped onto the edge).
+    let below = Tile {
+        x: 2 * t.x + qx,
+        y: 2 * t.y + qy,
+        lod: t.lod.saturating_sub(1),
+    };
+    let heights = if t.lod > 0 && levels.inside(below) {
+        below
+    } else {
+        t
+    };
+    rect_reach(levels, p, c0, half, t.lod, heights)
+}
+
+fn tile_origin(levels: &Levels, t: Tile) -> [i32; 2] {
+    let span = (levels.grid_size << t.lod) as i32;
+    [t.x as i32 * span, t.y as i32 * span]
+}
+
+/// The reach of the square of `span` samples from `c0` whose grid points walk from level
+/// `lod`, with the heights of the smallest tile from `heights` up that holds it.
+fn rect_reach(
+    levels: &Levels,
+    p: &SelectionParams,
+    c0: [i32; 2],
+    span: i32,
+    lod: u32,
+    heights: Tile,
+) -> TileReach {
     let (w, h) = (levels.width as i32 - 1, levels.height as i32 - 1);
-    let c0 = [t.x as i32 * span, t.y as i32 * span];
     let hi = [(c0[0] + span).min(w), (c0[1] + span).min(h)];
     let lo = QUAD.iter().fold(c0, |lo, &(i, j)| {
         let corner = [c0[0] + i as i32 * span, c0[1] + j as i32 * span];
-        let end = walk_end(levels, p, corner, t.lod);
+        let end = walk_end(levels, p, corner, lod);
         [lo[0].min(end[0]), lo[1].min(end[1])]
     });
-    let mut heights = t;
-    while heights.lod < levels.root_lod && {
-        let side = (levels.grid_size << heights.lod) as i32;
-        lo[0] < heights.x as i32 * side || lo[1] < heights.y as i32 * side
-    } {
-        heights = Tile {
-            x: heights.x / 2,
-            y: heights.y / 2,
-            lod: heights.lod + 1,
-        };
+    // A quadrant past the data's edge: its vertices are clamped onto the edge.
+    let lo = [lo[0].min(hi[0]), lo[1].min(hi[1])];
+    TileReach { lo, hi, heights }.with_heights_from(levels, heights)
+}
+
+impl TileReach {
+    /// `heights`: `start` or the smallest of its ancestors whose rectangle holds `lo`.
+    fn with_heights_from(mut self, levels: &Levels, start: Tile) -> Self {
+        let mut heights = start;
+        while heights.lod < levels.root_lod && {
+            let side = (levels.grid_size << heights.lod) as i32;
+            self.lo[0] < heights.x as i32 * side || self.lo[1] < heights.y as i32 * side
+        } {
+            heights = Tile {
+                x: heights.x / 2,
+                y: heights.y / 2,
+                lod: heights.lod + 1,
+            };
+        }
+        self.heights = heights;
+        self
     }
-    TileReach { lo, hi, heights }
 }
 
 /// The last point of grid point `sample`'s morph walk from level `lod`: [`morph_cascade`]'s
@@ -1449,7 +1526,8 @@ fn morph_ramp(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) 
 /// parent's grid (`final_tile_checks` in `shaders/udlod_tiling.wgsl`; `grid_size` must be
 /// even). Their odd vertices coincide with even ones, so the quadrant's triangles are the
 /// parent grid's over its even vertices (each parent quad's two, the same diagonal) and
-/// degenerate ones (`docs/udlod.md`, "Collapsed quadrants"). At grid 2 all or none.
+/// degenerate ones (`docs/udlod.md`, "Collapsed quadrants"). At grid 2 a tile is drawn so only
+/// when all four are ([`TileMask::new`]).
 pub fn tile_collapse_mask(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
     let g = levels.grid_size;
     if !p.morph {
@@ -1467,7 +1545,15 @@ pub fn tile_collapse_mask(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 
             }
         }
     }
-    super::grid::drawn_mask(g, super::grid::ALL_QUADRANTS & !keeps)
+    super::grid::ALL_QUADRANTS & !keeps
+}
+
+/// How final tile `t` is drawn: its quadrants on the parent grid ([`tile_collapse_mask`]) and
+/// those outside the frustum ([`quadrants_culled`]) as one mask (`tile_mask` in
+/// `shaders/udlod_tiling.wgsl`).
+pub fn tile_mask(levels: &Levels, p: &SelectionParams, t: Tile) -> TileMask {
+    let collapsing = tile_collapse_mask(levels, p, t);
+    TileMask::new(levels.grid_size, collapsing, quadrants_culled(levels, p, t))
 }
 
 /// How a grid point moved in [`morph_cascade`] (`MORPH_*` and `morph_moved` in

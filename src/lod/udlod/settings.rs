@@ -57,6 +57,10 @@ pub struct UdlodSettings {
     pub morph: bool,
     /// Frustum culling of tiles.
     pub cull: bool,
+    /// With `cull`, the quadrants of drawn tiles whose boxes lie outside the frustum are not
+    /// drawn (`docs/udlod.md`, "Quadrants outside the view": the same image, fewer triangles
+    /// where the view's edge cuts coarse tiles). Off only to measure it.
+    pub cull_quadrants: bool,
     /// Which tiles are drawn with back-face culling.
     pub back_faces: BackFaces,
     /// Largest ratio between a level's largest split distance and a tile's own (the split
@@ -141,6 +145,7 @@ impl Default for UdlodSettings {
             initial_tiles: 0,
             morph: true,
             cull: true,
+            cull_quadrants: true,
             back_faces: BackFaces::Static,
             error_field_max: 1024.0,
             collapse: true,
@@ -189,6 +194,11 @@ impl UdlodSettings {
             key: "collapse",
             help: "draw fully morphed tiles as their parent's grid (1, the default; 0 = off)",
             apply: |s, v| s.collapse = v != 0.0,
+        },
+        Sweep {
+            key: "cull_quadrants",
+            help: "leave out drawn tiles' quadrants outside the frustum (1, the default; 0 = off)",
+            apply: |s, v| s.cull_quadrants = v != 0.0,
         },
         Sweep {
             key: "morph_range",
