@@ -1797,6 +1797,60 @@ fn gpu_selection_equals_cpu_reference_on_the_earth() {
     }
 }
 
+/// Quadrants outside the view on the earth (curved boxes, `quadrant_culled`'s `earth_box`):
+/// over the anchored CI terrain's 78 earth poses (`earth_poses`) at grid 4, frames with and without
+/// `cull_quadrants` are identical, colour and depth, bit for bit, while quadrants were
+/// dropped (the counter `culled_quadrants`) and the triangles fell.
+#[test]
+fn quadrants_outside_the_view_change_no_pixel_on_the_earth() {
+    let (data, lattice) = common::poses::anchored_ci(513, 60.0);
+    let cams = common::poses::earth_poses(&data, &lattice, 60);
+    let render = |cull_quadrants: bool| {
+        let gpu = common::gpu(false);
+        let mut options = common::options(W, H, 1);
+        options.readback_depth = true;
+        let lod = UdlodSettings {
+            cull_quadrants,
+            ..settings(4)
+        };
+        let mut sink = CollectSink::default();
+        let mut dropped = 0;
+        {
+            let mut r =
+                Renderer::with_world(&gpu, &data, lod, options, None, Some(&lattice)).unwrap();
+            for cam in &cams {
+                r.render(*cam, &mut sink).unwrap();
+                r.finish(&mut sink).unwrap();
+                let counters: HashMap<_, _> =
+                    r.method().counters(ViewSlot(0)).into_iter().collect();
+                dropped += counters["culled_quadrants"];
+            }
+        }
+        common::assert_no_validation_messages(&gpu);
+        (sink.frames, dropped)
+    };
+    let (on, dropped) = render(true);
+    let (off, none) = render(false);
+    assert_eq!(none, 0);
+    for (i, (a, b)) in on.iter().zip(&off).enumerate() {
+        assert_eq!(a.rgba, b.rgba, "pose {i}: colour differs");
+        assert_eq!(a.depth, b.depth, "pose {i}: depth differs");
+        assert!(a.triangles <= b.triangles, "pose {i}");
+    }
+    let (t_on, t_off): (u64, u64) = (
+        on.iter().map(|f| f.triangles).sum(),
+        off.iter().map(|f| f.triangles).sum(),
+    );
+    println!(
+        "earth: {dropped} quadrants not drawn over {} poses, triangles {t_off} -> {t_on}, frames identical",
+        cams.len()
+    );
+    assert!(
+        dropped > 0 && t_on < t_off,
+        "no quadrant dropped on the earth"
+    );
+}
+
 /// The tile lists hold at most the full tree's leaves (4^root_lod tiles), whatever `max_tiles`
 /// says: on a 129² data set (16 x 16 tiles of 8 quads, root level 4: 256 leaves) lists asked
 /// to start at a budget of 65,536 tiles (`initial_tiles`) allocate what a budget of 256 does,

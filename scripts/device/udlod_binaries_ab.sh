@@ -12,7 +12,8 @@
 # `new-seed1`, not in the default list, are this build with `collapse = false` and with
 # `seed_tiles = 1`: every level a GPU pass; `new-ml2` this build with the walk kept inside
 # each tile, `morph_levels = 2`, the default until issue 18's fifteenth round; `new-g2` this
-# build at grid 2).
+# build at grid 2; `new-noq` this build with `cull_quadrants = false`: every quadrant of a
+# drawn tile drawn).
 set -u
 . .device-vk/env.sh
 . scripts/device/puget_config.sh
@@ -35,6 +36,7 @@ for base in "${bases[@]}"; do
           new-off) extra="collapse = false" ;;
           new-seed1) extra="seed_tiles = 1" ;;
           new-ml2) extra="morph_levels = 2" ;;
+          new-noq) extra="cull_quadrants = false" ;;
         esac
         [ -x "$bin" ] || continue
         cfg=$(udlod_config "$base" "$extra")
