@@ -286,8 +286,9 @@ fn seeded_selection_at(data: &Heightmap, cams: &[Camera], lod: UdlodSettings) {
 /// Collapsed quadrants (docs/udlod.md, "Collapsed quadrants"): the prepass draws each quadrant
 /// of a tile whose odd vertices all lie fully on its parent's grid as that grid, and that is
 /// the same surface. Over a low flight (most tiles in their morph zones) and 30 poses, at every
-/// grid size and morph variant, and at grid 2: the GPU gives every tile the collapse mask the
-/// CPU mirror (`select::tile_collapse_mask`) does, and the frames with and without collapsing are
+/// grid size and morph variant, and at grid 2, every quadrant drawn (`cull_quadrants = false`):
+/// the GPU gives every tile the mask the CPU mirror (`select::tile_mask`, here the collapse of
+/// `select::tile_collapse_mask` alone) does, and the frames with and without collapsing are
 /// identical, colour and depth, bit for bit, while they draw exactly the triangles the masks
 /// save (`grid::mask_triangles`). Negative control by hand: a threshold of 0.5 instead of
 /// `1 + margin` in the prepass's `final_tile_checks` changes the GPU's masks at the first pose.

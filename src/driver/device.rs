@@ -68,7 +68,7 @@ pub enum Feature {
     /// `VkPhysicalDeviceMeshShaderFeaturesEXT::meshShader` with `taskShader`
     /// (`VK_EXT_mesh_shader`).
     MeshShader,
-    /// `VkPhysicalDeviceFeatures::multiDrawIndirect` (UDLOD draws its 16 collapse masks in one
+    /// `VkPhysicalDeviceFeatures::multiDrawIndirect` (UDLOD draws its 81 draw masks in one
     /// call with it, else one call each).
     MultiDrawIndirect,
     /// `VkPhysicalDeviceVulkan12Features::drawIndirectCount` (UDLOD draws only the masks with

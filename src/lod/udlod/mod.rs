@@ -1,6 +1,6 @@
 //! UDLOD (Kühnert): the quadtree is refined on the GPU in compute, one level per pass with
 //! indirect dispatches, into a final tile list drawn with indexed indirect draws (one instance
-//! per tile over a shared grid, one draw per collapse mask: [`grid`]); vertices morph between
+//! per tile over a shared grid, one draw per draw mask: [`grid`]); vertices morph between
 //! levels in the vertex shader. The coarse levels' few tiles are walked on the host instead
 //! ([`seed`]), and the passes start below them.
 //!
@@ -88,7 +88,7 @@ pub struct TilingState {
     /// `draws[UDLOD_TILE_MASKS]`.
     pub static_draws: u32,
     pub morphing_draws: u32,
-    /// Final tiles per draw group (static per collapse mask, then morphing), and where each
+    /// Final tiles per draw group (static per draw mask, then morphing), and where each
     /// group starts in the final list's sorted half.
     pub group_count: [u32; DRAW_GROUPS],
     pub group_first: [u32; DRAW_GROUPS],

@@ -12,7 +12,7 @@ pub const MORPH_LEVELS_ALL: u32 = UDLOD_MAX_LEVELS;
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct UdlodSettings {
-    /// Quads per tile side: a power of two, 2..=64 (the collapse masks' quadrants, the morph
+    /// Quads per tile side: a power of two, 2..=64 (the draw masks' quadrants, the morph
     /// cascade's levels and the split field's cells divide it by powers of two). The crack,
     /// fold and popping tests cover grids 4 (the default) and 8; grid 2 draws fewer triangles
     /// but pops past the popping test's guard with the default morph (`docs/udlod.md`, "What
