@@ -74,11 +74,14 @@ shared_constants! {
     /// keeps the walk to tens of microseconds of host time per view.
     UDLOD_SEED_TILES: u32 = 256;
     /// Flags of a tile in the prepass's temporary list (`Tile.pad`), set by whoever writes it
-    /// (a `refine` pass, or the host's seed): decided; outside the data; culled; splitting.
+    /// (a `refine` pass, or the host's seed): decided; outside the data; culled; splitting;
+    /// inside the frustum (flat world only: no quadrant of it needs a test,
+    /// `select::tile_inside`).
     UDLOD_TILE_DECIDED: u32 = 1;
     UDLOD_TILE_OUTSIDE: u32 = 2;
     UDLOD_TILE_CULLED: u32 = 4;
     UDLOD_TILE_SPLITS: u32 = 8;
+    UDLOD_TILE_INSIDE: u32 = 16;
     /// Most levels a clipmap quadtree holds (per-level windows in the quadtree header).
     CLIPMAP_MAX_LEVELS: u32 = 16;
     /// A quadtree entry is `atlas_index | atlas_lod << CLIPMAP_LOD_SHIFT` (R16G16_UINT-like).

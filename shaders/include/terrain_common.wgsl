@@ -171,6 +171,19 @@ fn box_outside(planes: array<vec4<f32>, 6>, b: Box3, slack: f32) -> bool {
     return false;
 }
 
+// Whether box `b` lies inside every plane (its corner nearest each plane's back side on or
+// in front of it).
+fn box_inside(planes: array<vec4<f32>, 6>, b: Box3) -> bool {
+    for (var i = 0u; i < 6u; i++) {
+        let pl = planes[i];
+        let p = select(b.hi, b.lo, pl.xyz >= vec3<f32>(0.0));
+        if pl.x * p.x + pl.y * p.y + pl.z * p.z + pl.w < 0.0 {
+            return false;
+        }
+    }
+    return true;
+}
+
 // Clip position of a surface point given in sample units (integer cell + fraction) and metres.
 fn project(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec4<f32> {
     return frame.view_proj * vec4<f32>(relative_position(cell, frac, height_m), 1.0);

@@ -797,7 +797,7 @@ impl LodMethod for Udlod {
                 &sets,
                 &[],
             );
-            // One invocation sizes the next dispatch in the state (`prepare`, `finish`), then
+            // One workgroup sizes the next dispatch in the state (`prepare`, `finish`), then
             // that indirect dispatch runs (`refine`, `scatter`), its writes read by `then`.
             let sized_pass = |sizing: &Pipeline, sized: &Pipeline, then: MemoryAccess| {
                 d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, sizing.raw);

@@ -16,7 +16,7 @@
 
 use super::select::{self, Levels, SelectionParams, Tile};
 use crate::gpu_constants::{
-    UDLOD_TILE_CULLED, UDLOD_TILE_DECIDED, UDLOD_TILE_OUTSIDE, UDLOD_TILE_SPLITS,
+    UDLOD_TILE_CULLED, UDLOD_TILE_DECIDED, UDLOD_TILE_INSIDE, UDLOD_TILE_OUTSIDE, UDLOD_TILE_SPLITS,
 };
 
 /// The first pass's parents, as the host uploads them.
@@ -41,21 +41,27 @@ pub struct ListCapacity {
 }
 
 /// Tile `t` with the flags the GPU's `decided` gives it: outside the data, else culled (when
-/// culling is on), else splitting.
+/// culling is on), else splitting, and with culling in the flat world whether its box lies
+/// inside the frustum ([`select::tile_inside`]).
 pub fn decided(levels: &Levels, p: &SelectionParams, t: Tile) -> [u32; 4] {
     let mut flags = UDLOD_TILE_DECIDED;
     if !levels.inside(t) {
         flags |= UDLOD_TILE_OUTSIDE;
     } else if p.cull && select::tile_culled(levels, p, t) {
         flags |= UDLOD_TILE_CULLED;
-    } else if select::tile_splits(levels, p, t) {
-        flags |= UDLOD_TILE_SPLITS;
+    } else {
+        if p.cull && select::tile_inside(levels, p, t) {
+            flags |= UDLOD_TILE_INSIDE;
+        }
+        if select::tile_splits(levels, p, t) {
+            flags |= UDLOD_TILE_SPLITS;
+        }
     }
     [t.x, t.y, t.lod, flags]
 }
 
 fn splits(tile: &[u32; 4]) -> bool {
-    tile[3] == UDLOD_TILE_DECIDED | UDLOD_TILE_SPLITS
+    tile[3] & !UDLOD_TILE_INSIDE == UDLOD_TILE_DECIDED | UDLOD_TILE_SPLITS
 }
 
 /// The walk from the root: levels are walked while the frontier stays within `most` tiles and

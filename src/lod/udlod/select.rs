@@ -1234,7 +1234,7 @@ pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
 /// [`tile_culled`]'s for the quadrant's rectangle ([`quadrant_reach`]); none without culling
 /// or with `cull_quadrants` off. `quadrant_culled` in `shaders/udlod_tiling.wgsl`.
 pub fn quadrants_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
-    if !(p.cull && p.cull_quadrants) {
+    if !(p.cull && p.cull_quadrants) || tile_inside(levels, p, t) {
         return 0;
     }
     let half = (levels.grid_size << t.lod) as i32 / 2;
@@ -1254,6 +1254,39 @@ fn rect_culled(levels: &Levels, p: &SelectionParams, reach: TileReach, span: i32
         return earth.outside(&p.frustum, c0, c1, heights, margin as f64);
     }
     flat_box_outside(p, c0, c1, heights, margin)
+}
+
+/// Does tile `t`'s box ([`tile_culled`]'s) lie inside every plane of the frustum, in the flat
+/// world? Then no quadrant of it is culled (each quadrant's box lies within it), so
+/// [`quadrants_culled`] tests none, as the prepass does (`UDLOD_TILE_INSIDE`, set by
+/// `decided` in `shaders/udlod_tiling.wgsl` and [`super::seed::decided`]). Always false on the
+/// earth, whose quadrants are always tested.
+pub fn tile_inside(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
+    if p.earth.is_some() {
+        return false;
+    }
+    let r = tile_reach(levels, p, t);
+    flat_box_inside(p, r.lo, r.hi, levels.tile_min_max(r.heights))
+}
+
+/// Is the box over the grid rectangle from sample `c0` to `c1`, `heights` (min, max) high,
+/// inside every plane of the frustum (its corner nearest each plane's back side on or in front
+/// of it)? `box_inside` in `shaders/include/terrain_common.wgsl`.
+pub fn flat_box_inside(
+    p: &SelectionParams,
+    c0: [i32; 2],
+    c1: [i32; 2],
+    [zmin, zmax]: [f32; 2],
+) -> bool {
+    let lo = p.relative(c0);
+    let hi = p.relative(c1);
+    let (zlo, zhi) = (zmin - p.camera_z, zmax - p.camera_z);
+    p.frustum.iter().all(|pl| {
+        let x = if pl[0] >= 0.0 { lo[0] } else { hi[0] };
+        let y = if pl[1] >= 0.0 { lo[1] } else { hi[1] };
+        let z = if pl[2] >= 0.0 { zlo } else { zhi };
+        pl[0] * x + pl[1] * y + pl[2] * z + pl[3] >= 0.0
+    })
 }
 
 /// Is the box over the grid rectangle from sample `c0` to `c1`, `heights` (min, max) high, more
