@@ -13,6 +13,7 @@
 //!     [--zone-rule width|error-scaled|free]   (how the field charges the morph zone's width:
 //!     `select::ZoneRule`; anything but `width` is a what-if the renderer does not draw)
 
+use std::collections::HashSet;
 use std::path::PathBuf;
 
 use vkterrain::cli::render::{RenderArgs, prepare};
@@ -197,6 +198,9 @@ fn main() -> anyhow::Result<()> {
         let mut per_level = vec![0usize; levels.levels() as usize];
         // Triangles with every quadrant of the drawn tiles drawn (`cull_quadrants = false`).
         let mut all_quadrant_tris = 0u64;
+        // Draw masks in use per frame (each an indirect draw per pipeline that has such
+        // tiles), with and without the quadrants outside the frustum dropped.
+        let (mut masks_used, mut masks_used_all) = (0usize, 0usize);
         let mut seeds = Vec::new();
         for &k in &picks {
             let cam = p.scenario.camera(k);
@@ -205,6 +209,7 @@ fn main() -> anyhow::Result<()> {
             let tiles = select::select_tiles(&levels, &sp);
             tiles_n += tiles.len();
             let view = ExactView::new(&data, &cam, focal, tau);
+            let (mut used, mut used_all) = (HashSet::new(), HashSet::new());
             for t in &tiles {
                 let g = levels.grid_size;
                 let mask = select::tile_mask(&levels, &sp, *t);
@@ -219,10 +224,14 @@ fn main() -> anyhow::Result<()> {
                 }
                 let collapsing = select::tile_collapse_mask(&levels, &sp, *t);
                 all_quadrant_tris += grid::mask_triangles(g, TileMask::new(g, collapsing, 0));
+                used.insert(mask);
+                used_all.insert(TileMask::new(g, collapsing, 0));
                 let whole = (collapsing == grid::ALL_QUADRANTS) as u32 * collapsing;
                 whole_tris += grid::mask_triangles(g, TileMask::new(g, whole, 0));
                 whole_tiles += (whole != 0) as usize;
             }
+            masks_used += used.len();
+            masks_used_all += used_all.len();
             let mut parents = std::collections::HashMap::new();
             for t in &tiles {
                 let bound = tile_slack(&levels, &data, &cam, focal, tau, *t);
@@ -469,7 +478,7 @@ fn main() -> anyhow::Result<()> {
             if_collapsed as f64 / tris_o as f64
         );
         println!(
-            "  cf every quadrant of the drawn tiles drawn (cull_quadrants = false): triangles {all_quadrant_tris} ratio {:.2}",
+            "  cf every quadrant of the drawn tiles drawn (cull_quadrants = false): triangles {all_quadrant_tris} ratio {:.2}; draw masks in use over the frames {masks_used} ({masks_used_all} with every quadrant drawn)",
             all_quadrant_tris as f64 / tris_o as f64
         );
         println!(
