@@ -3,7 +3,8 @@
 //! counterfactual selections and the oracle's count, the least the tiles could draw (the tile
 //! oracle with quadrants collapsed wherever the parent grid is within tau) and how many drawn
 //! quadrants are within tau on the parent grid but drawn uncollapsed, the drawn triangles
-//! with every quadrant drawn (no quadrant culled outside the frustum), and the prepass's seed
+//! with every quadrant drawn (no quadrant culled outside the frustum) and the draw masks in
+//! use, and the prepass's seed
 //! (the coarse levels the host walks: its tiles, the GPU passes left, the walk's host time).
 //! CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
 //!
