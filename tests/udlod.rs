@@ -332,10 +332,7 @@ fn quadrants_outside_the_view_change_no_pixel() {
         let (mut tiles, mut dropped, mut saved_all) = (0usize, 0u32, 0u64);
         for (i, cam) in cams.iter().enumerate() {
             let p = SelectionParams::new(&levels, &data, &lod, cam, cam.position, W, H);
-            let cpu: HashMap<Tile, TileMask> = select::select_tiles(&levels, &p)
-                .into_iter()
-                .map(|t| (t, select::tile_mask(&levels, &p, t)))
-                .collect();
+            let cpu = cpu_masks(&levels, &p);
             assert_eq!(
                 on_masks[i].0, cpu,
                 "grid {grid} pose {i}: the GPU's masks are not the CPU mirror's"
@@ -402,6 +399,14 @@ fn frames_and_masks(
     (sink.frames, drawn)
 }
 
+/// The CPU reference's tiles, each with the mask its mirror gives it (`select::tile_mask`).
+fn cpu_masks(levels: &Levels, p: &SelectionParams) -> HashMap<Tile, TileMask> {
+    select::select_tiles(levels, p)
+        .into_iter()
+        .map(|t| (t, select::tile_mask(levels, p, t)))
+        .collect()
+}
+
 fn collapsed(m: TileMask) -> u32 {
     m.quadrants(QuadrantDraw::Collapsed)
 }
@@ -436,10 +441,7 @@ fn collapsed_tiles_draw_the_same_surface_at(
     let mut collapsing_morphing = 0u64;
     for (i, cam) in cams.iter().enumerate() {
         let p = SelectionParams::new(&levels, data, &lod, cam, cam.position, W, H);
-        let cpu: HashMap<Tile, TileMask> = select::select_tiles(&levels, &p)
-            .into_iter()
-            .map(|t| (t, select::tile_mask(&levels, &p, t)))
-            .collect();
+        let cpu = cpu_masks(&levels, &p);
         assert_eq!(
             on_masks[i].0, cpu,
             "grid {grid} {name} pose {i}: the GPU's collapse masks are not the CPU mirror's"

@@ -1272,21 +1272,8 @@ pub fn tile_inside(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
 /// Is the box over the grid rectangle from sample `c0` to `c1`, `heights` (min, max) high,
 /// inside every plane of the frustum (its corner nearest each plane's back side on or in front
 /// of it)? `box_inside` in `shaders/include/terrain_common.wgsl`.
-pub fn flat_box_inside(
-    p: &SelectionParams,
-    c0: [i32; 2],
-    c1: [i32; 2],
-    [zmin, zmax]: [f32; 2],
-) -> bool {
-    let lo = p.relative(c0);
-    let hi = p.relative(c1);
-    let (zlo, zhi) = (zmin - p.camera_z, zmax - p.camera_z);
-    p.frustum.iter().all(|pl| {
-        let x = if pl[0] >= 0.0 { lo[0] } else { hi[0] };
-        let y = if pl[1] >= 0.0 { lo[1] } else { hi[1] };
-        let z = if pl[2] >= 0.0 { zlo } else { zhi };
-        pl[0] * x + pl[1] * y + pl[2] * z + pl[3] >= 0.0
-    })
+pub fn flat_box_inside(p: &SelectionParams, c0: [i32; 2], c1: [i32; 2], heights: [f32; 2]) -> bool {
+    plane_distances(p, c0, c1, heights, Corner::Back).all(|d| d >= 0.0)
 }
 
 /// Is the box over the grid rectangle from sample `c0` to `c1`, `heights` (min, max) high, more
@@ -1296,17 +1283,46 @@ pub fn flat_box_outside(
     p: &SelectionParams,
     c0: [i32; 2],
     c1: [i32; 2],
-    [zmin, zmax]: [f32; 2],
+    heights: [f32; 2],
     margin: f32,
 ) -> bool {
+    plane_distances(p, c0, c1, heights, Corner::Front).any(|d| d < -margin)
+}
+
+/// Which corner of a box [`plane_distances`] measures: the one furthest along each plane's
+/// normal, or the one furthest against it.
+#[derive(Clone, Copy, PartialEq)]
+enum Corner {
+    Front,
+    Back,
+}
+
+/// Per frustum plane, the signed distance of the flat box's `corner` (the arithmetic of
+/// `box_outside` and `box_inside` in `shaders/include/terrain_common.wgsl`).
+fn plane_distances(
+    p: &SelectionParams,
+    c0: [i32; 2],
+    c1: [i32; 2],
+    [zmin, zmax]: [f32; 2],
+    corner: Corner,
+) -> impl Iterator<Item = f32> + '_ {
     let lo = p.relative(c0);
     let hi = p.relative(c1);
     let (zlo, zhi) = (zmin - p.camera_z, zmax - p.camera_z);
-    p.frustum.iter().any(|pl| {
-        let x = if pl[0] >= 0.0 { hi[0] } else { lo[0] };
-        let y = if pl[1] >= 0.0 { hi[1] } else { lo[1] };
-        let z = if pl[2] >= 0.0 { zhi } else { zlo };
-        pl[0] * x + pl[1] * y + pl[2] * z + pl[3] < -margin
+    p.frustum.iter().map(move |pl| {
+        let pick = |n: f32, low: f32, high: f32| {
+            if (n >= 0.0) == (corner == Corner::Front) {
+                high
+            } else {
+                low
+            }
+        };
+        let (x, y, z) = (
+            pick(pl[0], lo[0], hi[0]),
+            pick(pl[1], lo[1], hi[1]),
+            pick(pl[2], zlo, zhi),
+        );
+        pl[0] * x + pl[1] * y + pl[2] * z + pl[3]
     })
 }
 
