@@ -7,8 +7,9 @@
 // both ends: even passes read parents from the front and write children from the back, odd
 // passes the other way round. Tiles that do not split go to the final list's first half,
 // unsorted, each with its draw group (static or morphing, and which quadrants collapse onto
-// the parent's grid or lie outside the view); `finish` writes one indirect draw per group (one instance per tile)
-// and `scatter` sorts the tiles by group into the list's second half, which the draws read.
+// the parent's grid or lie outside the view); `finish` writes one indirect draw per group
+// (one instance per tile) and `scatter` sorts the tiles by group into the list's second
+// half, which the draws read.
 //
 // Capacity: a pass splits only if all of its splits fit (3 more final-list entries each: a
 // split turns one would-be leaf into four, and 4 temporary slots). The splits are known
