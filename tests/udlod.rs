@@ -302,7 +302,7 @@ fn collapsed_tiles_draw_the_same_surface() {
             collapsed_tiles_draw_the_same_surface_at(&data, &cams, grid, name, lod);
         }
     }
-    // Grid 2 (not among `grids()`): a tile collapses whole or not at all (`grid::drawn_mask`,
+    // Grid 2 (not among `grids()`): a tile collapses whole or not at all (`grid::TileMask::new`,
     // `pulled_local`'s one-quad branch). Its cascade is one level step, and a finer field needs
     // grid 4.
     collapsed_tiles_draw_the_same_surface_at(&data, &cams, 2, "default", cascade(2));

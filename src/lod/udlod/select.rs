@@ -1222,11 +1222,10 @@ pub fn tile_splits(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
 /// reach ([`tile_reach`]), clamped to the data, by the heights of the tile that holds it; on
 /// the earth the curved box over it ([`EarthCull::outside`], in f64: it decides as the GPU's
 /// f32 `earth_box` except within the GPU's rounding of the boundary; tests/udlod.rs
-/// brackets it). `tile_culled` in `shaders/udlod_tiling.wgsl`.
+/// brackets it). `decided` (`reach_box`, `box_outside`) in `shaders/udlod_tiling.wgsl`.
 pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
     let span = (levels.grid_size << t.lod) as i32;
-    let reach = rect_reach(levels, p, tile_origin(levels, t), span, t.lod, t);
-    rect_culled(levels, p, reach, span)
+    rect_culled(levels, p, tile_reach(levels, p, t), span)
 }
 
 /// The quadrants (bits `1 << q`, [`super::grid`]) of final tile `t` whose box lies outside the
