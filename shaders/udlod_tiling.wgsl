@@ -155,33 +155,85 @@ fn tile_distance(t: Tile) -> f32 {
 // The rectangle (samples `lo` to `hi`, both included) a tile's morphed vertices can reach:
 // from the lowest point of its corners' walks to its far corner, clamped to the data, and the
 // smallest tile (itself or an ancestor) holding it, whose heights bound it (mirrors
-// `tile_reach` in src/lod/udlod/select.rs, which says why).
+// `tile_reach` in src/lod/udlod/select.rs, which says why), with those heights.
 struct TileReach {
     lo: vec2<i32>,
     hi: vec2<i32>,
     heights: Tile,
+    min_max: vec2<f32>,
+}
+
+// A square of `span` samples from `c0` whose grid points walk from level `lod`, and the
+// tile from which the heights bounding its reach are looked for (`rect_reach`).
+struct ReachSquare {
+    c0: vec2<i32>,
+    span: i32,
+    lod: u32,
+    heights: Tile,
+}
+
+// What a reach reads first, all at once (the prepass waits on memory: on the H200 a pass
+// lasts as long as its slowest invocation's chain of reads): the corners' first walk steps
+// (`walk_end`; most walks end there) and the heights of the square's own tile (re-read only
+// when the reach leaves it).
+struct ReachReads {
+    first: vec4<u32>,
+    factor: vec4<f32>,
+    min_max: vec2<f32>,
+}
+
+fn tile_square(t: Tile) -> ReachSquare {
+    let span = i32(udlod.sizes.x << t.lod);
+    return ReachSquare(vec2<i32>(i32(t.x), i32(t.y)) * span, span, t.lod, t);
 }
 
 fn tile_reach(t: Tile) -> TileReach {
-    let span = i32(udlod.sizes.x << t.lod);
-    return rect_reach(vec2<i32>(i32(t.x), i32(t.y)) * span, span, t.lod, t);
+    return rect_reach(tile_square(t));
 }
 
-// The reach of the square of `span` samples from `c0` whose grid points walk from level `lod`,
-// with the heights of the smallest tile from `heights` up that holds it (mirrors `rect_reach`
-// in src/lod/udlod/select.rs).
-fn rect_reach(c0: vec2<i32>, span: i32, lod: u32, heights: Tile) -> TileReach {
+// The reach of a square, with the heights of the smallest tile from `heights` up that holds
+// it (mirrors `rect_reach` in src/lod/udlod/select.rs).
+fn rect_reach(s: ReachSquare) -> TileReach {
+    return reach_of(s, reach_reads(s));
+}
+
+fn square_corner(s: ReachSquare, k: u32) -> vec2<i32> {
+    return s.c0 + vec2<i32>(i32(k & 1u), i32(k >> 1u)) * s.span;
+}
+
+fn reach_reads(s: ReachSquare) -> ReachReads {
+    let first = vec4<u32>(
+        next_odd_level(square_corner(s, 0u), s.lod),
+        next_odd_level(square_corner(s, 1u), s.lod),
+        next_odd_level(square_corner(s, 2u), s.lod),
+        next_odd_level(square_corner(s, 3u), s.lod),
+    );
+    // Read at a level of the walk even for a corner with none (its result unused).
+    let top = vec4<u32>(udlod.sizes.y);
+    let at = min(first, max(top, vec4<u32>(1u)) - vec4<u32>(1u));
+    let factor = vec4<f32>(
+        morph_factor(square_corner(s, 0u), at.x),
+        morph_factor(square_corner(s, 1u), at.y),
+        morph_factor(square_corner(s, 2u), at.z),
+        morph_factor(square_corner(s, 3u), at.w),
+    );
+    return ReachReads(first, factor, tile_min_max(s.heights));
+}
+
+// The reach from its first reads: the walks that move go on one by one.
+fn reach_of(s: ReachSquare, reads: ReachReads) -> TileReach {
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
     var r: TileReach;
-    r.hi = min(c0 + vec2<i32>(span), last);
-    r.lo = c0;
-    for (var k = 0u; k < 4u; k++) {
-        let corner = c0 + vec2<i32>(i32(k & 1u), i32(k >> 1u)) * span;
-        r.lo = min(r.lo, walk_end(corner, lod));
-    }
+    r.hi = min(s.c0 + vec2<i32>(s.span), last);
+    let moves = (reads.first < vec4<u32>(udlod.sizes.y)) & (reads.factor != vec4<f32>(0.0));
+    let f = reads.first;
+    r.lo = min(
+        min(walk_past(square_corner(s, 0u), f.x, moves.x), walk_past(square_corner(s, 1u), f.y, moves.y)),
+        min(walk_past(square_corner(s, 2u), f.z, moves.z), walk_past(square_corner(s, 3u), f.w, moves.w)),
+    );
     // A quadrant past the data's edge: its vertices are clamped onto the edge.
     r.lo = min(r.lo, r.hi);
-    r.heights = heights;
+    r.heights = s.heights;
     loop {
         let side = i32(udlod.sizes.x << r.heights.lod);
         let origin = vec2<i32>(i32(r.heights.x), i32(r.heights.y)) * side;
@@ -190,13 +242,17 @@ fn rect_reach(c0: vec2<i32>, span: i32, lod: u32, heights: Tile) -> TileReach {
         }
         r.heights = Tile(r.heights.x / 2u, r.heights.y / 2u, r.heights.lod + 1u, 0u);
     }
+    r.min_max = reads.min_max;
+    if r.heights.lod != s.heights.lod {
+        r.min_max = tile_min_max(r.heights);
+    }
     return r;
 }
 
 // The box of a reach: its rectangle x the heights of the tile holding it, camera-relative; on
 // the earth the curved box over it (`earth_box`, the one every method culls with there).
 fn reach_box(r: TileReach) -> Box3 {
-    let mm = tile_min_max(r.heights);
+    let mm = r.min_max;
     if frame.lattice.x != 0u {
         return earth_box(r.lo, r.hi, mm);
     }
@@ -210,11 +266,11 @@ fn cull_slack(span: i32) -> f32 {
     return 1e-3 * (f32(span) * frame.camera_offset.w);
 }
 
-// Quadrant `q` of final tile `t` (bit `qx + 2 qy`): its rectangle's reach, with the heights of
-// the tile one level down that covers it (the tile itself at level 0 or past the data's
-// edge), against the frustum (mirrors `quadrant_reach` and `quadrants_culled` in
-// src/lod/udlod/select.rs).
-fn quadrant_culled(t: Tile, q: u32) -> bool {
+// Quadrant `q` of final tile `t` (bit `qx + 2 qy`): its square, with the heights of the tile
+// one level down that covers it (the tile itself at level 0 or past the data's edge); its
+// reach is tested against the frustum (`reach_culled`; mirrors `quadrant_reach` and
+// `quadrants_culled` in src/lod/udlod/select.rs).
+fn quadrant_square(t: Tile, q: u32) -> ReachSquare {
     let half = i32(udlod.sizes.x << t.lod) / 2;
     let qxy = vec2<u32>(q & 1u, q >> 1u);
     let c0 = vec2<i32>(i32(t.x), i32(t.y)) * (2 * half) + vec2<i32>(qxy) * half;
@@ -225,7 +281,7 @@ fn quadrant_culled(t: Tile, q: u32) -> bool {
             heights = below;
         }
     }
-    return reach_culled(rect_reach(c0, half, t.lod, heights), half);
+    return ReachSquare(c0, half, t.lod, heights);
 }
 
 // The box of `r` against the frustum (mirrors `tile_culled`, `quadrants_culled` and
@@ -261,7 +317,7 @@ var<workgroup> wg_slivers: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 // they keep their own grid.
 var<workgroup> wg_keeps_grid: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 // Per parent: the quadrants (bits) of the (final) parent whose boxes lie outside the frustum,
-// one invocation each (`quadrant_culled`): not drawn.
+// one invocation each (`quadrant_square`, `reach_culled`): not drawn.
 var<workgroup> wg_dropped: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 
 const_assert UDLOD_WORKGROUP % 4u == 0u;
@@ -365,6 +421,15 @@ fn refine(
     // A final tile's vertices are checked by all four of its invocations (one checking them
     // all was the prepass's slowest path on the H200 at 1080p).
     if action == ACTION_FINAL {
+        // Invocation k: quadrant k's box (`udlod.counts.x`: `cull_quadrants` with culling),
+        // unless the tile's box lies inside the frustum. Its reads go out before the vertex
+        // checks and are waited on after them.
+        let test_quadrant = udlod.counts.x != 0u && (t.pad & UDLOD_TILE_INSIDE) == 0u;
+        let square = quadrant_square(t, k);
+        var reads: ReachReads;
+        if test_quadrant {
+            reads = reach_reads(square);
+        }
         let checks = final_tile_checks(t, k);
         if checks.slivers {
             atomicOr(&wg_slivers[li / 4u], 1u);
@@ -372,10 +437,7 @@ fn refine(
         if checks.keeps_grid != 0u {
             atomicOr(&wg_keeps_grid[li / 4u], checks.keeps_grid);
         }
-        // Invocation k: quadrant k's box (`udlod.counts.x`: `cull_quadrants` with culling),
-        // unless the tile's box lies inside the frustum.
-        let inside = (t.pad & UDLOD_TILE_INSIDE) != 0u;
-        if udlod.counts.x != 0u && !inside && quadrant_culled(t, k) {
+        if test_quadrant && reach_culled(reach_of(square, reads), square.span) {
             atomicOr(&wg_dropped[li / 4u], 1u << k);
         }
     }
@@ -474,6 +536,8 @@ fn decided(t: Tile) -> Tile {
     if outside_data(t) {
         return Tile(t.x, t.y, t.lod, flags | UDLOD_TILE_OUTSIDE);
     }
+    // Asked first: its reads of the split field go out beside the culling box's.
+    let splits = splits_by_distance(t);
     if udlod.params.w > 0.5 {
         let b = reach_box(tile_reach(t));
         if box_outside(udlod.frustum, b, cull_slack(i32(udlod.sizes.x << t.lod))) {
@@ -483,7 +547,7 @@ fn decided(t: Tile) -> Tile {
             flags |= UDLOD_TILE_INSIDE;
         }
     }
-    if splits_by_distance(t) {
+    if splits {
         flags |= UDLOD_TILE_SPLITS;
     }
     return Tile(t.x, t.y, t.lod, flags);

@@ -1800,7 +1800,7 @@ fn gpu_selection_equals_cpu_reference_on_the_earth() {
     }
 }
 
-/// Quadrants outside the view on the earth (curved boxes, `quadrant_culled`'s `earth_box`):
+/// Quadrants outside the view on the earth (curved boxes, `reach_box`'s `earth_box`):
 /// over the anchored CI terrain's 78 earth poses (`earth_poses`) at grid 4, frames with and without
 /// `cull_quadrants` are identical, colour and depth, bit for bit, while quadrants were
 /// dropped (the counter `culled_quadrants`) and the triangles fell.

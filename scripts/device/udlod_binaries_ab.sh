@@ -4,6 +4,8 @@
 # two rounds, the binaries alternated within each. Binaries (each skipped when absent):
 #   .device-vk/vkterrain-before  main before issue 18 (3ab4290: grid 16, its own defaults)
 #   .device-vk/vkterrain-main    an earlier build of today's main, at its default and grid 16
+#   .device-vk/vkterrain-cur     another build of today's main (variants `cur`, `cur-noq`)
+#   .device-vk/vkterrain-mid     a build between that one and this (variant `mid`)
 #   .device-vk/vkterrain         this build, at its default (grid 4) and grid 16 and 8
 # Here, before carrying: release builds stripped and copied there (prepare.sh for this one),
 # and the Puget Sound heights in .device-vk/data (scripts/device/udlod_before_after.sh).
@@ -30,6 +32,9 @@ for base in "${bases[@]}"; do
           before) bin=.device-vk/vkterrain-before ;;
           main) bin=.device-vk/vkterrain-main ;;
           main-g16) bin=.device-vk/vkterrain-main; extra="grid_size = 16" ;;
+          cur) bin=.device-vk/vkterrain-cur ;;
+          cur-noq) bin=.device-vk/vkterrain-cur; extra="cull_quadrants = false" ;;
+          mid) bin=.device-vk/vkterrain-mid ;;
           new-g16) extra="grid_size = 16" ;;
           new-g8) extra="grid_size = 8" ;;
           new-g2) extra="grid_size = 2" ;;

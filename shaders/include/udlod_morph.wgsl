@@ -109,21 +109,41 @@ fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
 
 // The last point of grid point `sample`'s walk in `morph_cascade` from level `lod`: the walk
 // up without the positions. Every point of the walk lies between it and `sample` (the walk
-// only moves towards lower coordinates): the prepass's culling box (`tile_reach`). Mirrored by
+// only moves towards lower coordinates): the prepass's culling box (`rect_reach`). Mirrored by
 // `walk_end` in select.rs.
 fn walk_end(sample: vec2<i32>, lod: u32) -> vec2<i32> {
+    return walk_on(sample, next_odd_level(sample, lod));
+}
+
+// The first level from `lod` up at which `point` is odd, where its walk can next move
+// (`udlod.sizes.y` when there is none below it). Grid points are never negative.
+fn next_odd_level(point: vec2<i32>, lod: u32) -> u32 {
+    let bits = (u32(point.x) | u32(point.y)) >> lod;
+    return min(lod + countTrailingZeros(bits), udlod.sizes.y);
+}
+
+// `walk_end` of a point from its first odd level `first` (`next_odd_level`).
+fn walk_on(sample: vec2<i32>, first: u32) -> vec2<i32> {
     var point = sample;
-    for (var j = lod; j < udlod.sizes.y; j++) {
-        let odd = odd_at(point, j);
-        if all(odd == vec2<i32>(0)) {
-            continue;
-        }
-        if morph_factor(point, j) == 0.0 {
+    var j = first;
+    loop {
+        if j >= udlod.sizes.y || morph_factor(point, j) == 0.0 {
             break;
         }
-        point = point - odd * i32(1u << j);
+        point = point - odd_at(point, j) * i32(1u << j);
+        j = next_odd_level(point, j + 1u);
     }
     return point;
+}
+
+// `walk_end` of a point whose factor at its first odd level `first` was read already
+// (`moves`: it is not 0 and `first` is a level of the walk).
+fn walk_past(sample: vec2<i32>, first: u32, moves: bool) -> vec2<i32> {
+    if !moves {
+        return sample;
+    }
+    let next = sample - odd_at(sample, first) * i32(1u << first);
+    return walk_on(next, next_odd_level(next, first + 1u));
 }
 
 // How a grid point moved: not at all; fully onto the next level's grid at the tile's own level

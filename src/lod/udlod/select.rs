@@ -1231,7 +1231,7 @@ pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
 /// The quadrants (bits `1 << q`, [`super::grid`]) of final tile `t` whose box lies outside the
 /// frustum: drawn as nothing (docs/udlod.md, "Quadrants outside the view"). Each box is
 /// [`tile_culled`]'s for the quadrant's rectangle ([`quadrant_reach`]); none without culling
-/// or with `cull_quadrants` off. `quadrant_culled` in `shaders/udlod_tiling.wgsl`.
+/// or with `cull_quadrants` off. `quadrant_square` and `reach_culled` in `shaders/udlod_tiling.wgsl`.
 pub fn quadrants_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
     if !(p.cull && p.cull_quadrants) || tile_inside(levels, p, t) {
         return 0;
