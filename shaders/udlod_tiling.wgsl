@@ -208,9 +208,12 @@ fn reach_reads(s: ReachSquare) -> ReachReads {
         next_odd_level(square_corner(s, 2u), s.lod),
         next_odd_level(square_corner(s, 3u), s.lod),
     );
-    // Read at a level of the walk even for a corner with none (its result unused).
-    let top = vec4<u32>(udlod.sizes.y);
-    let at = min(first, max(top, vec4<u32>(1u)) - vec4<u32>(1u));
+    let at = vec4<u32>(
+        first_read_level(first.x),
+        first_read_level(first.y),
+        first_read_level(first.z),
+        first_read_level(first.w),
+    );
     let factor = vec4<f32>(
         morph_factor(square_corner(s, 0u), at.x),
         morph_factor(square_corner(s, 1u), at.y),
@@ -570,6 +573,11 @@ struct TileChecks {
     keeps_grid: u32,
 }
 
+// Vertices whose first reads `final_tile_checks` sends out together: the checks wait on memory
+// once per batch, not once per vertex (on the H200 a pass of `refine` lasts as long as its
+// slowest invocation's chain of reads). Grid 4's tiles give each invocation 6 or 7 vertices.
+const CHECK_BATCH: u32 = 8u;
+
 fn final_tile_checks(t: Tile, k: u32) -> TileChecks {
     let all = ALL_QUADRANTS;
     var slivers = false;
@@ -580,30 +588,47 @@ fn final_tile_checks(t: Tile, k: u32) -> TileChecks {
     // Vertex v = k, k + 4, ... at (v mod row, v / row), stepped without dividing.
     let row = quads + 1u;
     var local = vec2<u32>(k, 0u);
-    for (; local.y < row; local.x += 4u) {
-        while local.x >= row {
-            local.x -= row;
-            local.y += 1u;
+    loop {
+        var locals: array<vec2<u32>, CHECK_BATCH>;
+        var firsts: array<u32, CHECK_BATCH>;
+        var ramps: array<f32, CHECK_BATCH>;
+        var n = 0u;
+        for (var i = 0u; i < CHECK_BATCH; i++) {
+            while local.x >= row {
+                local.x -= row;
+                local.y += 1u;
+            }
+            if local.y < row {
+                let sample = vec2<i32>(origin + local * step);
+                locals[i] = local;
+                firsts[i] = next_odd_level(sample, t.lod);
+                ramps[i] = morph_ramp(sample, first_read_level(firsts[i]));
+                n = i + 1u;
+                local.x += 4u;
+            }
         }
-        if local.y >= row {
-            break;
+        for (var i = 0u; i < CHECK_BATCH; i++) {
+            if i >= n || (slivers && keeps_grid == all) {
+                break;
+            }
+            let sample = vec2<i32>(origin + locals[i] * step);
+            let odd = ((locals[i].x | locals[i].y) & 1u) == 1u;
+            let quadrants = select(0u, quadrants_of(locals[i], quads), odd);
+            let open = (quadrants & ~keeps_grid) != 0u;
+            var ramp = 0.0;
+            if !slivers {
+                let m = morph_moved(sample, t.lod, firsts[i], ramps[i]);
+                slivers = m.moved == MORPH_SLIVERS;
+                ramp = m.first_ramp;
+            } else if open {
+                // Odd at the tile's level: its first read is `morph_ramp` there.
+                ramp = ramps[i];
+            }
+            if open && ramp < 1.0 + UDLOD_COLLAPSE_MARGIN {
+                keeps_grid |= quadrants;
+            }
         }
-        let sample = vec2<i32>(origin + local * step);
-        let odd = ((local.x | local.y) & 1u) == 1u;
-        let quadrants = select(0u, quadrants_of(local, quads), odd);
-        let open = (quadrants & ~keeps_grid) != 0u;
-        var ramp = 0.0;
-        if !slivers {
-            let m = morph_moved(sample, t.lod);
-            slivers = m.moved == MORPH_SLIVERS;
-            ramp = m.first_ramp;
-        } else if open {
-            ramp = morph_ramp(sample, t.lod);
-        }
-        if open && ramp < 1.0 + UDLOD_COLLAPSE_MARGIN {
-            keeps_grid |= quadrants;
-        }
-        if slivers && keeps_grid == all {
+        if n < CHECK_BATCH || (slivers && keeps_grid == all) {
             break;
         }
     }

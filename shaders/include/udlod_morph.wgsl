@@ -165,30 +165,39 @@ struct Moved {
     first_ramp: f32,
 }
 
-fn morph_moved(sample: vec2<i32>, lod: u32) -> Moved {
+// The first step is read by the caller: `first`, the point's first odd level from `lod` up
+// (`next_odd_level`), and `ramp`, its `morph_ramp` there (anything when `first` is past the
+// levels), so that `final_tile_checks` can read a batch of vertices' at once. The walk on
+// past the first step needs one more factor: any movement there is a sliver.
+fn morph_moved(sample: vec2<i32>, lod: u32, first: u32, ramp: f32) -> Moved {
     var m = Moved(MORPH_STILL, 0.0);
-    var point = sample;
-    for (var j = lod; j < udlod.sizes.y; j++) {
-        let odd = odd_at(point, j);
-        if all(odd == vec2<i32>(0)) {
-            continue;
-        }
-        let ramp = morph_ramp(point, j);
-        let f = factor_of_ramp(ramp, point, j);
-        if j == lod {
-            m.first_ramp = ramp;
-        }
-        if f == 0.0 {
-            break;
-        }
-        if !(m.moved == MORPH_STILL && j == lod && f == 1.0) {
-            m.moved = MORPH_SLIVERS;
-            return m;
-        }
-        m.moved = MORPH_ONE_LEVEL;
-        point = point - odd * i32(1u << j);
+    if first >= udlod.sizes.y {
+        return m;
+    }
+    if first == lod {
+        m.first_ramp = ramp;
+    }
+    let f = factor_of_ramp(ramp, sample, first);
+    if f == 0.0 {
+        return m;
+    }
+    if first != lod || f != 1.0 {
+        m.moved = MORPH_SLIVERS;
+        return m;
+    }
+    m.moved = MORPH_ONE_LEVEL;
+    let next = sample - odd_at(sample, first) * i32(1u << first);
+    let j = next_odd_level(next, first + 1u);
+    if j < udlod.sizes.y && morph_factor(next, j) != 0.0 {
+        m.moved = MORPH_SLIVERS;
     }
     return m;
+}
+
+// The level at which a walk's first step is read in a batch: `first`, or for a point with no
+// odd level left (`first` past the levels) the last level, whose read is not used.
+fn first_read_level(first: u32) -> u32 {
+    return min(first, max(udlod.sizes.y, 1u) - 1u);
 }
 
 // A tile's grid vertex after morphing: the position in samples as an integer cell and a
