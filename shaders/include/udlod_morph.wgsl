@@ -107,22 +107,18 @@ fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
     return c;
 }
 
-// The last point of grid point `sample`'s walk in `morph_cascade` from level `lod`: the walk
-// up without the positions. Every point of the walk lies between it and `sample` (the walk
-// only moves towards lower coordinates): the prepass's culling box (`rect_reach`). Mirrored by
-// `walk_end` in select.rs.
-fn walk_end(sample: vec2<i32>, lod: u32) -> vec2<i32> {
-    return walk_on(sample, next_odd_level(sample, lod));
-}
-
-// The first level from `lod` up at which `point` is odd, where its walk can next move
-// (`udlod.sizes.y` when there is none below it). Grid points are never negative.
+// The first level from `lod` up at which `point` is odd, where its walk in `morph_cascade` can
+// next move (`udlod.sizes.y` when there is none below it). Grid points are never negative.
 fn next_odd_level(point: vec2<i32>, lod: u32) -> u32 {
     let bits = (u32(point.x) | u32(point.y)) >> lod;
     return min(lod + countTrailingZeros(bits), udlod.sizes.y);
 }
 
-// `walk_end` of a point from its first odd level `first` (`next_odd_level`).
+// The last point of a grid point's walk in `morph_cascade` from its first odd level `first`
+// (`next_odd_level`): the walk up without the positions. Every point of the walk lies between
+// it and `sample` (the walk only moves towards lower coordinates): the prepass's culling box
+// (`rect_reach`, which reads every corner's first step at once, `walk_past`). Mirrored by
+// `walk_end` in select.rs.
 fn walk_on(sample: vec2<i32>, first: u32) -> vec2<i32> {
     var point = sample;
     var j = first;
@@ -136,7 +132,7 @@ fn walk_on(sample: vec2<i32>, first: u32) -> vec2<i32> {
     return point;
 }
 
-// `walk_end` of a point whose factor at its first odd level `first` was read already
+// `walk_on` of a point whose factor at its first odd level `first` was read already
 // (`moves`: it is not 0 and `first` is a level of the walk).
 fn walk_past(sample: vec2<i32>, first: u32, moves: bool) -> vec2<i32> {
     if !moves {

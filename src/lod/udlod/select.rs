@@ -1422,7 +1422,7 @@ impl TileReach {
 
 /// The last point of grid point `sample`'s morph walk from level `lod`: [`morph_cascade`]'s
 /// walk up, without the positions. Every point of the walk lies between it and `sample`.
-/// `walk_end` in `shaders/include/udlod_morph.wgsl`.
+/// `walk_on` in `shaders/include/udlod_morph.wgsl` (from the point's first odd level).
 pub fn walk_end(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> [i32; 2] {
     let mut point = sample;
     for j in lod..levels.root_lod {
