@@ -5,6 +5,12 @@
 //! first, then each `//!include NAME.wgsl` line is replaced by `shaders/include/NAME.wgsl`.
 //! A line map turns naga's error position back into the original file and line.
 //!
+//! Every shader that reads the frame's block (set 0, binding 0) is compiled twice: as the
+//! uniform buffer it is written as, and with that one declaration a read-only storage buffer
+//! ([`FRAME_UNIFORM`] -> [`FRAME_STORAGE`]; GLSL: `VKTERRAIN_FRAME_STORAGE` defined). The
+//! device picks one (`driver::shaders::FrameBlock`, docs/architecture.md, "Uniform buffers on
+//! Mesa 22.3").
+//!
 //! The stages naga cannot compile (tessellation, task, mesh) are GLSL under `shaders/glsl/`,
 //! composed the same way (a `#define` per shared constant) and compiled by glslangValidator:
 //! see `build/glsl.rs`.
@@ -19,6 +25,13 @@ mod glsl;
 mod gpu_constants {
     include!("src/gpu_constants.rs");
 }
+
+/// The frame block's declaration in `shaders/include/terrain_common.wgsl`, and what the storage
+/// variant of every shader that includes it declares instead (the same layout: vec4 members).
+const FRAME_UNIFORM: &str = "@group(0) @binding(0) var<uniform> frame: Frame;";
+const FRAME_STORAGE: &str = "@group(0) @binding(0) var<storage, read> frame: Frame;";
+/// Defined in the GLSL storage variant (`shaders/glsl/include/terrain_common.glsl`).
+const GLSL_FRAME_STORAGE: &str = "VKTERRAIN_FRAME_STORAGE";
 
 /// Where each line of a composed shader came from.
 struct LineOrigin {
@@ -48,9 +61,8 @@ fn compose(path: &Path, out: &mut String, map: &mut Vec<LineOrigin>, depth: usiz
     }
 }
 
-/// Composes `path` after `prelude` and compiles it to SPIR-V with naga (validator on); fails
-/// the build with the file and line of an error. Returns the SPIR-V and the composed source.
-fn compile_wgsl(path: &Path, prelude: &str) -> (Vec<u8>, String) {
+/// `path` composed after `prelude`, with the origin of every line.
+fn compose_wgsl(path: &Path, prelude: &str) -> (String, Vec<LineOrigin>) {
     let mut source = String::new();
     let mut map = Vec::new();
     for line in prelude.lines() {
@@ -62,7 +74,12 @@ fn compile_wgsl(path: &Path, prelude: &str) -> (Vec<u8>, String) {
         });
     }
     compose(path, &mut source, &mut map, 0);
+    (source, map)
+}
 
+/// Compiles composed WGSL (`compose_wgsl` of `path`) to SPIR-V with naga (validator on); fails
+/// the build with the file and line of an error.
+fn compile_wgsl(path: &Path, source: &str, map: &[LineOrigin]) -> Vec<u8> {
     let locate = |offset: Option<usize>| -> String {
         let Some(offset) = offset else {
             return path.display().to_string();
@@ -75,15 +92,15 @@ fn compile_wgsl(path: &Path, prelude: &str) -> (Vec<u8>, String) {
         }
     };
 
-    let module = match naga::front::wgsl::parse_str(&source) {
+    let module = match naga::front::wgsl::parse_str(source) {
         Ok(m) => m,
         Err(e) => {
-            let offset = e.location(&source).map(|l| l.offset as usize);
+            let offset = e.location(source).map(|l| l.offset as usize);
             fail(&format!(
                 "{}: {}\n{}",
                 locate(offset),
                 e.message(),
-                e.emit_to_string_with_path(&source, &path.display().to_string())
+                e.emit_to_string_with_path(source, &path.display().to_string())
             ));
         }
     };
@@ -93,12 +110,12 @@ fn compile_wgsl(path: &Path, prelude: &str) -> (Vec<u8>, String) {
     )
     .validate(&module)
     .unwrap_or_else(|e| {
-        let offset = e.location(&source).map(|l| l.offset as usize);
+        let offset = e.location(source).map(|l| l.offset as usize);
         fail(&format!(
             "{}: {}\n{}",
             locate(offset),
             e.as_inner(),
-            e.emit_to_string_with_path(&source, &path.display().to_string())
+            e.emit_to_string_with_path(source, &path.display().to_string())
         ))
     });
     let options = naga::back::spv::Options {
@@ -116,8 +133,22 @@ fn compile_wgsl(path: &Path, prelude: &str) -> (Vec<u8>, String) {
             path.display()
         ))
     });
-    let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-    (bytes, source)
+    words.iter().flat_map(|w| w.to_le_bytes()).collect()
+}
+
+/// The Rust item for one shader's SPIR-V: `Spirv { frame_uniform, frame_storage }` from the
+/// files `{file}.spv` and, for a shader that reads the frame's block, `{file}.frame_storage.spv`.
+fn spirv_item(doc: &str, upper: &str, file: &str, has_storage: bool) -> String {
+    let bytes = |name: String| format!("include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{name}\"))");
+    let storage = if has_storage {
+        format!("Some({})", bytes(format!("{file}.frame_storage.spv")))
+    } else {
+        "None".to_string()
+    };
+    format!(
+        "/// SPIR-V of {doc}.\npub static {upper}_SPV: Spirv = Spirv {{\n    frame_uniform: {},\n    frame_storage: {storage},\n}};",
+        bytes(format!("{file}.spv"))
+    )
 }
 
 fn fail(message: &str) -> ! {
@@ -149,13 +180,26 @@ fn main() {
         String::from("// Generated by build.rs: SPIR-V and composed WGSL per shader.\n");
     for path in &shader_files {
         let stem = path.file_stem().unwrap().to_string_lossy().to_string();
-        let (bytes, source) = compile_wgsl(path, &prelude);
+        let (source, map) = compose_wgsl(path, &prelude);
+        let bytes = compile_wgsl(path, &source, &map);
         std::fs::write(out_dir.join(format!("{stem}.composed.wgsl")), &source).unwrap();
         std::fs::write(out_dir.join(format!("{stem}.spv")), bytes).unwrap();
+        let has_storage = source.lines().any(|l| l.trim() == FRAME_UNIFORM);
+        if has_storage {
+            let storage = source.replace(FRAME_UNIFORM, FRAME_STORAGE);
+            let bytes = compile_wgsl(path, &storage, &map);
+            std::fs::write(out_dir.join(format!("{stem}.frame_storage.spv")), bytes).unwrap();
+        } else if source.contains("frame: Frame;") {
+            fail(&format!(
+                "{}: declares the frame block otherwise than `{FRAME_UNIFORM}`, so no storage variant can be built",
+                path.display()
+            ));
+        }
         let upper = stem.to_uppercase();
         writeln!(
             generated,
-            "/// `shaders/{stem}.wgsl` as compiled (constants and includes expanded).\npub static {upper}_WGSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.composed.wgsl\"));\n/// SPIR-V of `shaders/{stem}.wgsl`.\npub static {upper}_SPV: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.spv\"));"
+            "/// `shaders/{stem}.wgsl` as compiled (constants and includes expanded).\npub static {upper}_WGSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.composed.wgsl\"));\n{}",
+            spirv_item(&format!("`shaders/{stem}.wgsl`"), &upper, &stem, has_storage)
         )
         .unwrap();
     }
@@ -186,8 +230,11 @@ fn compile_glsl(out_dir: &Path, generated: &mut String) {
             .iter()
             .map(|(name, value)| (*name, value.wgsl().1)),
     );
+    let mut storage_prelude = prelude.clone();
+    storage_prelude.push(format!("#define {GLSL_FRAME_STORAGE} 1"));
     let work = out_dir.join("glsl");
-    std::fs::create_dir_all(&work).unwrap();
+    let storage_work = work.join("frame_storage");
+    std::fs::create_dir_all(&storage_work).unwrap();
     let (major, minor, patch) = glslang.version;
     writeln!(
         generated,
@@ -198,6 +245,17 @@ fn compile_glsl(out_dir: &Path, generated: &mut String) {
     for path in &files {
         let compiled = glsl::compile(&glslang, path, &include_dir, &prelude, &work)
             .unwrap_or_else(|e| fail(&e));
+        let has_storage = compiled.composed.contains(GLSL_FRAME_STORAGE);
+        let storage = has_storage.then(|| {
+            glsl::compile(
+                &glslang,
+                path,
+                &include_dir,
+                &storage_prelude,
+                &storage_work,
+            )
+            .unwrap_or_else(|e| fail(&e))
+        });
         for source in &compiled.sources {
             println!("cargo:rerun-if-changed={}", source.display());
         }
@@ -210,12 +268,20 @@ fn compile_glsl(out_dir: &Path, generated: &mut String) {
             .to_string_lossy()
             .replace('.', "_");
         std::fs::write(out_dir.join(format!("{name}.spv")), &compiled.spv).unwrap();
+        if let Some(storage) = &storage {
+            std::fs::write(
+                out_dir.join(format!("{name}.frame_storage.spv")),
+                &storage.spv,
+            )
+            .unwrap();
+        }
         std::fs::write(out_dir.join(format!("{name}.glsl")), &compiled.composed).unwrap();
         let upper = name.to_uppercase();
         let file = path.display();
         writeln!(
             generated,
-            "/// SPIR-V of `{file}` (glslangValidator).\npub static {upper}_SPV: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{name}.spv\"));\n/// `{file}` as compiled (constants and includes expanded).\npub static {upper}_GLSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{name}.glsl\"));"
+            "{}\n/// `{file}` as compiled (constants and includes expanded).\npub static {upper}_GLSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{name}.glsl\"));",
+            spirv_item(&format!("`{file}` (glslangValidator)"), &upper, &name, has_storage)
         )
         .unwrap();
     }

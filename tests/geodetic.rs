@@ -13,7 +13,7 @@ use std::sync::Arc;
 use glam::{DVec2, DVec3};
 use vkterrain::dataset::Heightmap;
 use vkterrain::driver::Gpu;
-use vkterrain::driver::shaders::{TERRAIN_PROBE_COMP_SPV, TERRAIN_PROBE_SPV};
+use vkterrain::driver::shaders::{Spirv, TERRAIN_PROBE_COMP_SPV, TERRAIN_PROBE_SPV};
 use vkterrain::geo::Lattice;
 use vkterrain::lod::{MethodConfig, MethodKind, PgmSettings, UdlodSettings};
 use vkterrain::readback::{CollectSink, OwnedFrame};
@@ -189,7 +189,7 @@ fn render(
 
 fn probe(
     r: &Renderer,
-    spv: &[u8],
+    spv: Spirv,
     entry: &std::ffi::CStr,
     pts: &[([i32; 2], [f32; 2])],
 ) -> Vec<TerrainProbePoint> {

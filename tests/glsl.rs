@@ -19,7 +19,7 @@ use vkterrain::clipmap::{Clipmap, ClipmapSettings, DatasetSource, Geometry};
 use vkterrain::dataset::procedural::ProceduralParams;
 use vkterrain::dataset::{Heightmap, tiles};
 use vkterrain::driver::shaders::{
-    TERRAIN_PROBE_COMP_GLSL, TERRAIN_PROBE_COMP_SPV, TERRAIN_PROBE_SPV,
+    Spirv, TERRAIN_PROBE_COMP_GLSL, TERRAIN_PROBE_COMP_SPV, TERRAIN_PROBE_SPV,
 };
 use vkterrain::gpu_constants::WGSL_CONSTANTS;
 use vkterrain::lod::MethodKind;
@@ -239,7 +239,7 @@ fn rendered(
 fn both(
     r: &Renderer,
     points: &[TerrainProbePoint],
-    glsl_spv: &[u8],
+    glsl_spv: Spirv,
 ) -> [Vec<TerrainProbePoint>; 2] {
     [
         r.probe_terrain_helpers(0, TERRAIN_PROBE_SPV, c"probe_main", points)
@@ -250,7 +250,9 @@ fn both(
 }
 
 /// The GLSL probe compiled from the port with `mutation` (needle, replacement) applied.
-fn mutated_probe(name: &str, (needle, replacement): (&str, &str)) -> Vec<u8> {
+/// The GLSL probe with one mutation in the port, in both frame-block variants as build.rs
+/// builds them (leaked: embedded shaders are `'static`).
+fn mutated_probe(name: &str, (needle, replacement): (&str, &str)) -> Spirv {
     let dir = scratch(name);
     let port = std::fs::read_to_string("shaders/glsl/include/terrain_common.glsl").unwrap();
     assert!(
@@ -264,9 +266,26 @@ fn mutated_probe(name: &str, (needle, replacement): (&str, &str)) -> Vec<u8> {
     );
     let probe = std::fs::read_to_string("shaders/glsl/terrain_probe.comp").unwrap();
     let main = write(&dir, "terrain_probe.comp", &probe);
-    let spv = compile(&dir, &main).unwrap().spv;
+    let uniform = compile(&dir, &main).unwrap().spv;
+    let mut storage_prelude = prelude();
+    storage_prelude.push("#define VKTERRAIN_FRAME_STORAGE 1".into());
+    let storage_dir = dir.join("frame_storage");
+    std::fs::create_dir_all(&storage_dir).unwrap();
+    let glslang = glsl::Glslang::find().expect("glslangValidator (make deps)");
+    let storage = glsl::compile(
+        &glslang,
+        &main,
+        &dir.join("include"),
+        &storage_prelude,
+        &storage_dir,
+    )
+    .unwrap()
+    .spv;
     let _ = std::fs::remove_dir_all(&dir);
-    spv
+    Spirv {
+        frame_uniform: Vec::leak(uniform),
+        frame_storage: Some(Vec::leak(storage)),
+    }
 }
 
 #[test]
@@ -297,7 +316,7 @@ fn glsl_port_equals_the_wgsl_helpers_on_the_single_texture_path() {
             "ivec2 c = clamp(s, ivec2(0), hi - ivec2(1));",
         ),
     );
-    let [_, mutated] = both(&r, &points, &wrong);
+    let [_, mutated] = both(&r, &points, wrong);
     assert!(
         differing(&wgsl, &mutated) > 0,
         "a wrong clamp went unnoticed"
@@ -339,7 +358,7 @@ fn glsl_port_equals_the_wgsl_helpers_through_the_clipmap() {
             "clamp(d * blend_inv * 0.5, 0.0, 1.0)",
         ),
     );
-    let [_, mutated] = both(&r, &points, &wrong);
+    let [_, mutated] = both(&r, &points, wrong);
     assert!(
         differing(&wgsl, &mutated) > 0,
         "a wrong blend band went unnoticed"

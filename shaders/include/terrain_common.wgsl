@@ -23,9 +23,10 @@ struct Frame {
 }
 
 // A uniform buffer: NVIDIA's driver reads it faster than a read-only storage buffer (3-5 % of
-// UDLOD's GPU time at 1080p on an H100 and an H200). A storage buffer would spare Debian 12's
-// lavapipe (Mesa 22.3) a shader rebuild per frame (docs/architecture.md, "Uniform buffers on
-// Mesa 22.3").
+// UDLOD's GPU time at 1080p on an H100 and an H200). build.rs also compiles every shader with
+// this line as `var<storage, read>`, which Debian 12's lavapipe (Mesa 22.3) gets: it spares
+// that driver a shader rebuild per frame (`driver::shaders::FrameBlock`, docs/architecture.md,
+// "Uniform buffers on Mesa 22.3"). Keep the line as it is: build.rs finds it by its text.
 @group(0) @binding(0) var<uniform> frame: Frame;
 // Heights in metres, one texel per sample, read with textureLoad (exact values, no filtering).
 @group(0) @binding(1) var height_tex: texture_2d<f32>;

@@ -4,6 +4,7 @@ use std::fmt::Write;
 use std::path::Path;
 
 use crate::config::Config;
+use crate::driver::shaders::{FRAME_BLOCK_ENV, FrameBlock};
 use crate::driver::{Capabilities, DeviceInfo, Gpu};
 
 pub fn run(config: Option<&Path>, device: Option<String>) -> anyhow::Result<()> {
@@ -44,6 +45,15 @@ fn write_device(s: &mut String, gpu: &Gpu) {
     let _ = writeln!(s, "vulkan:        {}", i.api_version_string());
     let _ = writeln!(
         s,
+        "frame block:   {} ({})",
+        match gpu.frame_block {
+            FrameBlock::Uniform => "uniform buffer",
+            FrameBlock::Storage => "read-only storage buffer",
+        },
+        frame_block_reason(gpu)
+    );
+    let _ = writeln!(
+        s,
         "queue:         family {} (graphics+compute), 1 queue; dedicated transfer family: {}",
         gpu.queue_family,
         match i.dedicated_transfer_family() {
@@ -52,6 +62,17 @@ fn write_device(s: &mut String, gpu: &Gpu) {
             None => "none".into(),
         }
     );
+}
+
+/// Why the device reads the frame's block as it does.
+fn frame_block_reason(gpu: &Gpu) -> String {
+    if gpu.frame_block != FrameBlock::for_device(&gpu.info) {
+        format!("set by {FRAME_BLOCK_ENV}")
+    } else if gpu.frame_block == FrameBlock::Storage {
+        "lavapipe before Mesa 24 rebuilds shaders whose uniforms steer branches".into()
+    } else {
+        "the driver's default".into()
+    }
 }
 
 /// The memory heaps and types, and where readback copies land.

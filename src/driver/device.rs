@@ -21,6 +21,11 @@ pub struct DeviceInfo {
     pub device_type: vk::PhysicalDeviceType,
     pub api_version: u32,
     pub driver: String,
+    /// `VkPhysicalDeviceDriverProperties::driverID`.
+    pub driver_id: vk::DriverId,
+    /// `VkPhysicalDeviceDriverProperties::driverInfo` (Mesa's drivers: `Mesa 22.3.6 ...`;
+    /// lavapipe's `driverVersion` does not carry the release).
+    pub driver_info: String,
     pub limits: vk::PhysicalDeviceLimits,
     pub memory: vk::PhysicalDeviceMemoryProperties,
     pub queue_families: Vec<vk::QueueFamilyProperties>,
@@ -297,6 +302,11 @@ pub(crate) fn describe(
             device_type: props.device_type,
             api_version: props.api_version,
             driver: driver.trim().to_string(),
+            driver_id: driver_props.driver_id,
+            driver_info: driver_props
+                .driver_info_as_c_str()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
             limits: props.limits,
             memory,
             queue_families,

@@ -48,6 +48,10 @@ pub struct GpuOptions {
     /// [`MASK_FEATURES_ENV`]; set from the environment only).
     #[serde(skip)]
     pub mask_features: Vec<String>,
+    /// The frame block's variant (tests and measurements); None: `VKTERRAIN_FRAME_BLOCK`, else
+    /// [`shaders::FrameBlock::for_device`].
+    #[serde(skip)]
+    pub frame_block: Option<shaders::FrameBlock>,
 }
 
 impl GpuOptions {
@@ -88,6 +92,8 @@ pub struct Gpu {
     pub enabled: Capabilities,
     /// Features the device offers but [`GpuOptions::mask_features`] left disabled.
     pub masked: Vec<Feature>,
+    /// How every shader reads the frame's block (set 0 binding 0), for this device.
+    pub frame_block: shaders::FrameBlock,
 }
 
 impl Gpu {
@@ -100,6 +106,13 @@ impl Gpu {
         let instance = instance::Instance::new(options.validation)?;
         let candidates = device::enumerate(&instance.raw)?;
         let (physical, info) = device::choose(&candidates, options.select.as_deref())?;
+        let frame_block = match options.frame_block {
+            Some(block) => block,
+            None => match std::env::var(shaders::FRAME_BLOCK_ENV) {
+                Ok(v) if !v.trim().is_empty() => shaders::FrameBlock::parse(&v)?,
+                _ => shaders::FrameBlock::for_device(&info),
+            },
+        };
         let queue_family = info.universal_queue_family().expect("checked by choose");
         let mut offered = info.caps;
         let masked: Vec<Feature> = mask.into_iter().filter(|f| f.get(&offered)).collect();
@@ -194,6 +207,7 @@ impl Gpu {
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             enabled,
             masked,
+            frame_block,
         }))
     }
 

@@ -5,6 +5,7 @@ use std::sync::Arc;
 use ash::vk;
 
 use crate::driver::Gpu;
+use crate::driver::shaders::Spirv;
 use crate::error::{Result, VkResultExt};
 
 /// Formats of the frame targets, and the render pass used where dynamic rendering is absent.
@@ -84,7 +85,7 @@ impl Drop for Pipeline {
 
 /// What differs between terrain pipelines.
 pub struct TerrainPipelineDesc<'a> {
-    pub spv: &'a [u8],
+    pub spv: Spirv,
     pub vertex_entry: &'a std::ffi::CStr,
     pub fragment_entry: &'a std::ffi::CStr,
     pub set_layouts: &'a [vk::DescriptorSetLayout],
@@ -96,9 +97,9 @@ pub struct TerrainPipelineDesc<'a> {
 
 /// The tessellation stages of a terrain pipeline (GLSL: `shaders/glsl/`), between the vertex
 /// and fragment stages of [`TerrainPipelineDesc::spv`]; the topology must be a patch list.
-pub struct TessellationStages<'a> {
-    pub control_spv: &'a [u8],
-    pub evaluation_spv: &'a [u8],
+pub struct TessellationStages {
+    pub control_spv: Spirv,
+    pub evaluation_spv: Spirv,
     /// Control points per patch.
     pub control_points: u32,
 }
@@ -119,7 +120,7 @@ pub fn tessellated_terrain_pipeline(
     gpu: &Arc<Gpu>,
     formats: &TargetFormats,
     desc: &TerrainPipelineDesc<'_>,
-    tessellation: &TessellationStages<'_>,
+    tessellation: &TessellationStages,
 ) -> Result<Pipeline> {
     build_terrain_pipeline(gpu, formats, desc, Some(tessellation))
 }
@@ -131,8 +132,8 @@ pub fn mesh_terrain_pipeline(
     gpu: &Arc<Gpu>,
     formats: &TargetFormats,
     desc: &TerrainPipelineDesc<'_>,
-    task_spv: &[u8],
-    mesh_spv: &[u8],
+    task_spv: Spirv,
+    mesh_spv: Spirv,
 ) -> Result<Pipeline> {
     let mut modules = Modules {
         gpu,
@@ -168,7 +169,7 @@ struct Modules<'a> {
 }
 
 impl Modules<'_> {
-    fn add(&mut self, spv: &[u8]) -> Result<vk::ShaderModule> {
+    fn add(&mut self, spv: Spirv) -> Result<vk::ShaderModule> {
         let m = crate::driver::shaders::module(self.gpu, spv)?;
         self.raw.push(m);
         Ok(m)
@@ -187,7 +188,7 @@ fn build_terrain_pipeline(
     gpu: &Arc<Gpu>,
     formats: &TargetFormats,
     desc: &TerrainPipelineDesc<'_>,
-    tessellation: Option<&TessellationStages<'_>>,
+    tessellation: Option<&TessellationStages>,
 ) -> Result<Pipeline> {
     let mut modules = Modules {
         gpu,
@@ -339,7 +340,7 @@ fn create_graphics(
 /// Builds a compute pipeline for entry point `entry` of a SPIR-V module.
 pub fn compute_pipeline(
     gpu: &Arc<Gpu>,
-    spv: &[u8],
+    spv: Spirv,
     entry: &std::ffi::CStr,
     set_layouts: &[vk::DescriptorSetLayout],
 ) -> Result<Pipeline> {

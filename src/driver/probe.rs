@@ -13,6 +13,7 @@ use super::barrier::{Barriers, MemoryAccess};
 use super::descriptors::{DescriptorSets, PROBE_SET, Resource};
 use super::memory::Buffer;
 use super::pipeline::compute_pipeline;
+use super::shaders::Spirv;
 use crate::error::{Error, Result};
 
 /// Dispatches `groups` workgroups of `entry` in `spv` with `bound` (layout, set) as sets
@@ -20,7 +21,7 @@ use crate::error::{Error, Result};
 /// afterwards.
 pub fn run(
     gpu: &Arc<Gpu>,
-    spv: &[u8],
+    spv: Spirv,
     entry: &CStr,
     bound: &[(vk::DescriptorSetLayout, vk::DescriptorSet)],
     io: &[u8],

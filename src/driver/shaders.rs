@@ -1,14 +1,107 @@
-//! SPIR-V compiled from `shaders/*.wgsl` by `build.rs`, and shader-module creation.
+//! SPIR-V compiled from `shaders/*.wgsl` (and `shaders/glsl/`) by `build.rs`, the choice of the
+//! frame block's variant per device, and shader-module creation.
 
 use ash::vk;
 
 use super::Gpu;
+use super::device::DeviceInfo;
 use crate::error::{Error, Result, VkResultExt};
 
 include!(concat!(env!("OUT_DIR"), "/shaders.rs"));
 
-/// Creates a shader module from SPIR-V bytes embedded by the build script.
-pub fn module(gpu: &Gpu, spv: &[u8]) -> Result<vk::ShaderModule> {
+/// Environment variable that overrides [`FrameBlock::for_device`]: `uniform` or `storage`.
+pub const FRAME_BLOCK_ENV: &str = "VKTERRAIN_FRAME_BLOCK";
+
+/// How the shaders read the frame's block (`frame`, set 0 binding 0,
+/// `shaders/include/terrain_common.wgsl`). Every shader that reads it is built both ways.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameBlock {
+    /// A uniform buffer: what NVIDIA's driver reads fastest (a storage buffer cost UDLOD 3-5 %
+    /// of its GPU time at 1080p on an H100 and an H200).
+    Uniform,
+    /// A read-only storage buffer: Mesa's lavapipe before 24 inlines uniform values that steer
+    /// branches and rebuilds the shaders whenever their descriptors are bound again, every
+    /// frame (docs/architecture.md, "Uniform buffers on Mesa 22.3").
+    Storage,
+}
+
+impl FrameBlock {
+    /// The variant for a device: [`FrameBlock::Storage`] on lavapipe (llvmpipe) of a Mesa
+    /// release before 24, [`FrameBlock::Uniform`] everywhere else (Mesa 25's lavapipe draws
+    /// alike with both; measured, docs/architecture.md).
+    pub fn for_device(info: &DeviceInfo) -> FrameBlock {
+        Self::for_driver(info.driver_id, &info.driver_info)
+    }
+
+    /// [`FrameBlock::for_device`] from the driver's ID and `driverInfo` (`Mesa 22.3.6 (LLVM
+    /// 15.0.6)` on lavapipe; without a Mesa release in it, a uniform buffer).
+    pub fn for_driver(id: vk::DriverId, driver_info: &str) -> FrameBlock {
+        match mesa_major(driver_info) {
+            Some(major) if id == vk::DriverId::MESA_LLVMPIPE && major < 24 => FrameBlock::Storage,
+            _ => FrameBlock::Uniform,
+        }
+    }
+
+    /// `uniform` or `storage` (as [`FRAME_BLOCK_ENV`] takes it).
+    pub fn parse(name: &str) -> Result<FrameBlock> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "uniform" => Ok(FrameBlock::Uniform),
+            "storage" => Ok(FrameBlock::Storage),
+            other => Err(Error::invalid(
+                FRAME_BLOCK_ENV,
+                format!("unknown frame block {other:?} (uniform or storage)"),
+            )),
+        }
+    }
+
+    pub const fn descriptor_type(self) -> vk::DescriptorType {
+        match self {
+            FrameBlock::Uniform => vk::DescriptorType::UNIFORM_BUFFER,
+            FrameBlock::Storage => vk::DescriptorType::STORAGE_BUFFER,
+        }
+    }
+
+    pub fn buffer_usage(self) -> vk::BufferUsageFlags {
+        match self {
+            FrameBlock::Uniform => vk::BufferUsageFlags::UNIFORM_BUFFER,
+            FrameBlock::Storage => vk::BufferUsageFlags::STORAGE_BUFFER,
+        }
+    }
+}
+
+/// The major release in a Mesa driver's `driverInfo` (`Mesa 22.3.6 (LLVM 15.0.6)` -> 22).
+fn mesa_major(driver_info: &str) -> Option<u32> {
+    let mut words = driver_info.split_whitespace();
+    words.find(|w| *w == "Mesa")?;
+    words.next()?.split('.').next()?.parse().ok()
+}
+
+/// One shader's SPIR-V as `build.rs` embeds it: as written, and for a shader that reads the
+/// frame's block, with that block a read-only storage buffer.
+#[derive(Clone, Copy, Debug)]
+pub struct Spirv {
+    pub frame_uniform: &'static [u8],
+    pub frame_storage: Option<&'static [u8]>,
+}
+
+impl Spirv {
+    /// The bytes for a device whose frame block is `block` (the only variant of a shader that
+    /// does not read the block).
+    pub fn bytes(self, block: FrameBlock) -> &'static [u8] {
+        match (block, self.frame_storage) {
+            (FrameBlock::Storage, Some(storage)) => storage,
+            _ => self.frame_uniform,
+        }
+    }
+}
+
+/// Creates a shader module from the variant of `spv` for `gpu`'s frame block.
+pub fn module(gpu: &Gpu, spv: Spirv) -> Result<vk::ShaderModule> {
+    module_from_bytes(gpu, spv.bytes(gpu.frame_block))
+}
+
+/// Creates a shader module from SPIR-V bytes (tests: mutated or hand-built modules).
+pub fn module_from_bytes(gpu: &Gpu, spv: &[u8]) -> Result<vk::ShaderModule> {
     let words = ash::util::read_spv(&mut std::io::Cursor::new(spv))
         .map_err(|e| Error::invalid("SPIR-V", e.to_string()))?;
     unsafe {
@@ -16,4 +109,31 @@ pub fn module(gpu: &Gpu, spv: &[u8]) -> Result<vk::ShaderModule> {
             .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
     }
     .vk("vkCreateShaderModule")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_shader_that_reads_the_frame_block_has_a_storage_variant() {
+        // The probe and the methods' shaders read `frame`; the evaluator's metrics do not.
+        for spv in [
+            BRUTE_SPV,
+            UDLOD_SPV,
+            UDLOD_TILING_SPV,
+            TESS_EQUAL_TESE_SPV,
+            TERRAIN_PROBE_COMP_SPV,
+        ] {
+            let storage = spv.frame_storage.expect("a storage variant");
+            assert_ne!(storage, spv.frame_uniform);
+            assert_eq!(spv.bytes(FrameBlock::Storage), storage);
+            assert_eq!(spv.bytes(FrameBlock::Uniform), spv.frame_uniform);
+        }
+        assert!(EVAL_METRICS_SPV.frame_storage.is_none());
+        assert_eq!(
+            EVAL_METRICS_SPV.bytes(FrameBlock::Storage),
+            EVAL_METRICS_SPV.frame_uniform
+        );
+    }
 }

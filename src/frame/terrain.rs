@@ -12,22 +12,45 @@ use crate::dataset::{Heightmap, Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::{Buffer, Image};
+use crate::driver::shaders::FrameBlock;
 use crate::error::{Error, Result, VkResultExt};
 use crate::slots::ViewSlot;
 
 /// Descriptor set 0, shared by every terrain shader (`shaders/include/terrain_common.wgsl` and
-/// `shaders/include/clipmap.wgsl`); every stage may read every binding.
-pub const TERRAIN_SET: &[Binding] = &terrain_set(vk::ShaderStageFlags::empty());
+/// `shaders/include/clipmap.wgsl`); every stage may read every binding. The frame's block is a
+/// uniform buffer here ([`FrameBlock::Uniform`]); [`terrain_set_for`] picks a device's table.
+pub const TERRAIN_SET: &[Binding] =
+    &terrain_set(vk::ShaderStageFlags::empty(), FrameBlock::Uniform);
 
 /// [`TERRAIN_SET`] readable by task and mesh stages too: the set 0 of a device with
 /// `VK_EXT_mesh_shader` enabled (those stage bits are not valid without it).
-pub const TERRAIN_SET_MESH: &[Binding] = &terrain_set(stages(
+pub const TERRAIN_SET_MESH: &[Binding] = &terrain_set(MESH_STAGES, FrameBlock::Uniform);
+
+/// [`TERRAIN_SET`] with the frame's block a read-only storage buffer ([`FrameBlock::Storage`]).
+pub const TERRAIN_SET_STORAGE: &[Binding] =
+    &terrain_set(vk::ShaderStageFlags::empty(), FrameBlock::Storage);
+
+/// [`TERRAIN_SET_MESH`] with the frame's block a read-only storage buffer.
+pub const TERRAIN_SET_MESH_STORAGE: &[Binding] = &terrain_set(MESH_STAGES, FrameBlock::Storage);
+
+const MESH_STAGES: vk::ShaderStageFlags = stages(
     vk::ShaderStageFlags::TASK_EXT,
     vk::ShaderStageFlags::MESH_EXT,
-));
+);
+
+/// Set 0's table for `gpu`: with the mesh stages where they are enabled, the frame's block as
+/// the device reads it (`Gpu::frame_block`).
+pub fn terrain_set_for(gpu: &Gpu) -> &'static [Binding] {
+    match (gpu.enabled.mesh_shader, gpu.frame_block) {
+        (false, FrameBlock::Uniform) => TERRAIN_SET,
+        (true, FrameBlock::Uniform) => TERRAIN_SET_MESH,
+        (false, FrameBlock::Storage) => TERRAIN_SET_STORAGE,
+        (true, FrameBlock::Storage) => TERRAIN_SET_MESH_STORAGE,
+    }
+}
 
 /// The set 0 table; `extra` stages on top of every graphics stage and compute.
-const fn terrain_set(extra: vk::ShaderStageFlags) -> [Binding; 10] {
+const fn terrain_set(extra: vk::ShaderStageFlags, frame: FrameBlock) -> [Binding; 10] {
     use vk::DescriptorType as T;
     // Tessellation stages too (hardware tessellation's GLSL stages read the heights).
     const GRAPHICS: vk::ShaderStageFlags = stages(
@@ -36,7 +59,7 @@ const fn terrain_set(extra: vk::ShaderStageFlags) -> [Binding; 10] {
     );
     let all = stages(GRAPHICS, extra);
     [
-        Binding::new(0, T::UNIFORM_BUFFER, all, "frame"),
+        Binding::new(0, frame.descriptor_type(), all, "frame"),
         Binding::new(1, T::SAMPLED_IMAGE, all, "height_tex"),
         Binding::new(2, T::SAMPLED_IMAGE, all, "normal_tex"),
         Binding::new(3, T::SAMPLED_IMAGE, all, "albedo_tex"),
@@ -201,19 +224,14 @@ impl TerrainGpu {
         clipmap: &crate::clipmap::gpu::ClipmapGpu,
         lattice: &Buffer,
     ) -> Result<(DescriptorSets, Vec<Buffer>)> {
-        let table = if gpu.enabled.mesh_shader {
-            TERRAIN_SET_MESH
-        } else {
-            TERRAIN_SET
-        };
-        let descriptors = DescriptorSets::new(gpu, table, slots)?;
+        let descriptors = DescriptorSets::new(gpu, terrain_set_for(gpu), slots)?;
         let mut uniforms = Vec::with_capacity(slots);
         for slot in 0..slots {
             let block = Buffer::new(
                 gpu,
                 &format!("frame uniforms {slot}"),
                 size_of::<FrameUniforms>() as u64,
-                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                gpu.frame_block.buffer_usage(),
                 MemoryLocation::CpuToGpu,
             )?;
             descriptors.write(

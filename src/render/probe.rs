@@ -5,6 +5,7 @@ use std::ffi::CStr;
 
 use super::Renderer;
 use crate::clipmap::probe::ProbeKind;
+use crate::driver::shaders::Spirv;
 use crate::error::{Error, Result};
 use crate::lod::udlod::probe::ProbedVertex;
 use crate::lod::udlod::select::Tile;
@@ -32,7 +33,7 @@ impl Renderer {
     pub fn probe_terrain_helpers(
         &self,
         view: usize,
-        spv: &[u8],
+        spv: Spirv,
         entry: &CStr,
         points: &[TerrainProbePoint],
     ) -> Result<Vec<TerrainProbePoint>> {

@@ -10,8 +10,13 @@
 
 #extension GL_EXT_samplerless_texture_functions : require
 
-// A uniform buffer as in the WGSL (why: there).
+// A uniform buffer as in the WGSL, or in the build's second variant (VKTERRAIN_FRAME_STORAGE
+// defined) a read-only storage buffer with the same layout (why: there).
+#ifdef VKTERRAIN_FRAME_STORAGE
+layout(set = 0, binding = 0, std430) readonly buffer Frame {
+#else
 layout(set = 0, binding = 0, std140) uniform Frame {
+#endif
     // Rotation-only view times reversed-Z projection: positions are camera-relative.
     mat4 view_proj;
     // xy: the sample cell the camera is in (floor(camera_xy / spacing)).

@@ -36,7 +36,7 @@ pub enum Port {
 }
 
 impl Port {
-    fn shader(self) -> (&'static [u8], &'static CStr) {
+    fn shader(self) -> (crate::driver::shaders::Spirv, &'static CStr) {
         match self {
             Port::Wgsl => (crate::driver::shaders::CHUNKED_PROBE_SPV, c"probe_samples"),
             Port::Glsl => (crate::driver::shaders::CHUNKED_PROBE_COMP_SPV, c"main"),
