@@ -529,8 +529,9 @@ fn splits_by_distance(t: Tile) -> bool {
 }
 
 // Tile t with its flags (`UDLOD_TILE_*` in `Tile.pad` of the temporary list): outside the data,
-// else culled, else splitting (near enough), and in the flat world whether its box lies inside
-// the frustum (then `refine` tests none of its quadrants should it be final). What `refine`
+// else culled, else splitting (near enough), and whether its box lies inside the frustum (then
+// `refine` tests none of its quadrants should it be final: none would be culled, `tile_inside`
+// in select.rs says why). What `refine`
 // will do with the tile, decided by whoever writes it, so the next pass's splits are counted
 // before it and each tile's culling box is built once (mirrors `seed::decided` in
 // src/lod/udlod/seed.rs).
@@ -546,7 +547,7 @@ fn decided(t: Tile) -> Tile {
         if box_outside(udlod.frustum, b, cull_slack(i32(udlod.sizes.x << t.lod))) {
             return Tile(t.x, t.y, t.lod, flags | UDLOD_TILE_CULLED);
         }
-        if frame.lattice.x == 0u && box_inside(udlod.frustum, b) {
+        if box_inside(udlod.frustum, b) {
             flags |= UDLOD_TILE_INSIDE;
         }
     }

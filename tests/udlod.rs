@@ -1854,6 +1854,56 @@ fn quadrants_outside_the_view_change_no_pixel_on_the_earth() {
     );
 }
 
+/// A final tile whose box lies inside the frustum has no quadrant outside it, on the earth as
+/// in the flat world (`select::tile_inside`: every vertex lies in both boxes), so the prepass
+/// and the reference skip those tiles' quadrant tests (`UDLOD_TILE_INSIDE`). Over the anchored
+/// CI terrain's 78 earth poses and the 60 N grid's, grids of `grids()`, every such tile of the
+/// CPU reference is tested quadrant by quadrant anyway: none culled; and the shortcut fires
+/// (the control: some tiles inside, some quadrants of others culled).
+#[test]
+fn tiles_inside_the_view_have_no_culled_quadrant_on_the_earth() {
+    for (name, (data, lattice)) in [
+        ("anchored CI terrain", common::poses::anchored_ci(513, 60.0)),
+        ("60 N geographic grid", common::poses::geographic_60n(257)),
+    ] {
+        let cams = common::poses::earth_poses(&data, &lattice, 60);
+        let (mut inside, mut finals, mut culled) = (0, 0, 0);
+        for grid in grids() {
+            let lod = settings(grid);
+            let levels = Levels::for_settings(&data, &lod)
+                .unwrap()
+                .on_lattice(data.axis_spacing, &lattice);
+            for (i, cam) in cams.iter().enumerate() {
+                let viewer = common::poses::grid_viewer(&lattice, data.spacing, cam.position);
+                let p = SelectionParams::new(&levels, &data, &lod, cam, viewer, W, H).on_earth(
+                    &levels,
+                    lattice.clone(),
+                    cam.position,
+                );
+                for t in select::select_tiles(&levels, &p) {
+                    finals += 1;
+                    let tested = (0..4).filter(|&q| select::quadrant_culled(&levels, &p, t, q));
+                    if select::tile_inside(&levels, &p, t) {
+                        inside += 1;
+                        assert_eq!(
+                            tested.count(),
+                            0,
+                            "{name} grid {grid} pose {i}: tile {t:?} inside with a culled quadrant"
+                        );
+                    } else {
+                        culled += tested.count();
+                    }
+                }
+            }
+        }
+        println!(
+            "{name}: {inside} of {finals} final tiles inside the view (quadrants not tested), \
+             {culled} quadrants of the others culled"
+        );
+        assert!(inside > 0 && culled > 0, "{name}");
+    }
+}
+
 /// The tile lists hold at most the full tree's leaves (4^root_lod tiles), whatever `max_tiles`
 /// says: on a 129² data set (16 x 16 tiles of 8 quads, root level 4: 256 leaves) lists asked
 /// to start at a budget of 65,536 tiles (`initial_tiles`) allocate what a budget of 256 does,

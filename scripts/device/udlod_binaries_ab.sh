@@ -15,13 +15,16 @@
 # `seed_tiles = 1`: every level a GPU pass; `new-ml2` this build with the walk kept inside
 # each tile, `morph_levels = 2`, the default until issue 18's fifteenth round; `new-g2` this
 # build at grid 2; `new-noq` this build with `cull_quadrants = false`: every quadrant of a
-# drawn tile drawn).
+# drawn tile drawn; `BASES="config/ci_earth.toml"` other configs than the CI terrain and
+# Puget Sound, e.g. the CI terrain anchored on the earth).
 set -u
 . .device-vk/env.sh
 . scripts/device/puget_config.sh
 . scripts/device/udlod_config.sh
 bases=(config/ci.toml "$PUGET")
 [ -n "${PUGET_ONLY:-}" ] && bases=("$PUGET")
+# shellcheck disable=SC2206 # a list of paths without spaces
+[ -n "${BASES:-}" ] && bases=($BASES)
 for base in "${bases[@]}"; do
   for tau in 1 4; do
     for round in 1 2; do

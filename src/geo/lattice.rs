@@ -105,6 +105,17 @@ impl WorldBox {
         })
     }
 
+    /// Does the box lie inside every one of `planes` by at least `margin` metres? The box
+    /// corner nearest each plane's back side decides (`box_inside` in
+    /// `shaders/include/terrain_common.wgsl`).
+    pub fn inside(&self, planes: &[[f32; 4]; 6], margin: f64) -> bool {
+        planes.iter().all(|p| {
+            let n = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let v = DVec3::select(n.cmpge(DVec3::ZERO), self.lo, self.hi);
+            n.dot(v) + (p[3] as f64) >= margin
+        })
+    }
+
     /// The box moved by `-origin` (camera-relative boxes).
     pub fn relative_to(&self, origin: DVec3) -> WorldBox {
         WorldBox {
@@ -147,12 +158,26 @@ impl EarthCull {
         heights: [f32; 2],
         slack: f64,
     ) -> bool {
+        self.visibility(planes, c0, c1, heights, slack).0
+    }
+
+    /// [`Self::outside`], and whether the same box lies inside every plane (`box_inside` on
+    /// the GPU), from one box.
+    pub fn visibility(
+        &self,
+        planes: &[[f32; 4]; 6],
+        c0: [i32; 2],
+        c1: [i32; 2],
+        heights: [f32; 2],
+        slack: f64,
+    ) -> (bool, bool) {
         let b = self
             .lattice
             .rect_box(c0, c1, [heights[0] as f64, heights[1] as f64])
             .relative_to(self.camera);
         let far = b.lo.abs().max(b.hi.abs()).length();
-        b.outside(planes, slack - self.rounding * far)
+        let outside = b.outside(planes, slack - self.rounding * far);
+        (outside, !outside && b.inside(planes, self.rounding * far))
     }
 }
 

@@ -14,7 +14,7 @@
 //! to the GPU's first pass, which refuses it by the same rule: the selection is the one the
 //! GPU would have made from the root.
 
-use super::select::{self, Levels, SelectionParams, Tile};
+use super::select::{self, Levels, SelectionParams, Tile, Visibility};
 use crate::gpu_constants::{
     UDLOD_TILE_CULLED, UDLOD_TILE_DECIDED, UDLOD_TILE_INSIDE, UDLOD_TILE_OUTSIDE, UDLOD_TILE_SPLITS,
 };
@@ -41,21 +41,20 @@ pub struct ListCapacity {
 }
 
 /// Tile `t` with the flags the GPU's `decided` gives it: outside the data, else culled (when
-/// culling is on), else splitting, and with culling in the flat world whether its box lies
-/// inside the frustum ([`select::tile_inside`]).
+/// culling is on), else splitting, and with culling whether its box lies inside the frustum
+/// ([`select::tile_inside`]).
 pub fn decided(levels: &Levels, p: &SelectionParams, t: Tile) -> [u32; 4] {
     let mut flags = UDLOD_TILE_DECIDED;
     if !levels.inside(t) {
-        flags |= UDLOD_TILE_OUTSIDE;
-    } else if p.cull && select::tile_culled(levels, p, t) {
-        flags |= UDLOD_TILE_CULLED;
-    } else {
-        if p.cull && select::tile_inside(levels, p, t) {
-            flags |= UDLOD_TILE_INSIDE;
-        }
-        if select::tile_splits(levels, p, t) {
-            flags |= UDLOD_TILE_SPLITS;
-        }
+        return [t.x, t.y, t.lod, flags | UDLOD_TILE_OUTSIDE];
+    }
+    match p.cull.then(|| select::tile_visibility(levels, p, t)) {
+        Some(Visibility::Culled) => return [t.x, t.y, t.lod, flags | UDLOD_TILE_CULLED],
+        Some(Visibility::Inside) => flags |= UDLOD_TILE_INSIDE,
+        Some(Visibility::Crossing) | None => {}
+    }
+    if select::tile_splits(levels, p, t) {
+        flags |= UDLOD_TILE_SPLITS;
     }
     [t.x, t.y, t.lod, flags]
 }

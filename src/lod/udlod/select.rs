@@ -1224,8 +1224,39 @@ pub fn tile_splits(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
 /// f32 `earth_box` except within the GPU's rounding of the boundary; tests/udlod.rs
 /// brackets it). `decided` (`reach_box`, `box_outside`) in `shaders/udlod_tiling.wgsl`.
 pub fn tile_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
+    tile_visibility(levels, p, t) == Visibility::Culled
+}
+
+/// Where a tile's box lies against the frustum.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Visibility {
+    /// Outside a plane by more than the margin ([`tile_culled`]).
+    Culled,
+    /// Across a plane.
+    Crossing,
+    /// Inside every plane ([`tile_inside`]).
+    Inside,
+}
+
+/// [`tile_culled`] and [`tile_inside`] from one box (`decided` in `udlod_tiling.wgsl` builds
+/// it once too).
+pub fn tile_visibility(levels: &Levels, p: &SelectionParams, t: Tile) -> Visibility {
+    let r = tile_reach(levels, p, t);
     let span = (levels.grid_size << t.lod) as i32;
-    rect_culled(levels, p, tile_reach(levels, p, t), span)
+    let heights = levels.tile_min_max(r.heights);
+    let margin = 1e-3 * (span as f32 * p.spacing);
+    let (outside, inside) = match &p.earth {
+        Some(earth) => earth.visibility(&p.frustum, r.lo, r.hi, heights, margin as f64),
+        None => {
+            let outside = flat_box_outside(p, r.lo, r.hi, heights, margin);
+            (outside, !outside && flat_box_inside(p, r.lo, r.hi, heights))
+        }
+    };
+    match (outside, inside) {
+        (true, _) => Visibility::Culled,
+        (false, true) => Visibility::Inside,
+        (false, false) => Visibility::Crossing,
+    }
 }
 
 /// The quadrants (bits `1 << q`, [`super::grid`]) of final tile `t` whose box lies outside the
@@ -1236,10 +1267,16 @@ pub fn quadrants_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
     if !(p.cull && p.cull_quadrants) || tile_inside(levels, p, t) {
         return 0;
     }
-    let half = (levels.grid_size << t.lod) as i32 / 2;
     (0..4)
-        .filter(|&q| rect_culled(levels, p, quadrant_reach(levels, p, t, q), half))
+        .filter(|&q| quadrant_culled(levels, p, t, q))
         .fold(0, |bits, q| bits | 1 << q)
+}
+
+/// Quadrant `q` of final tile `t` tested on its own ([`quadrants_culled`] without the
+/// shortcut of [`tile_inside`]).
+pub fn quadrant_culled(levels: &Levels, p: &SelectionParams, t: Tile, q: u32) -> bool {
+    let half = (levels.grid_size << t.lod) as i32 / 2;
+    rect_culled(levels, p, quadrant_reach(levels, p, t, q), half)
 }
 
 /// The box of `reach` (its rectangle x the heights of the tile holding it) against the
@@ -1255,17 +1292,15 @@ fn rect_culled(levels: &Levels, p: &SelectionParams, reach: TileReach, span: i32
     flat_box_outside(p, c0, c1, heights, margin)
 }
 
-/// Does tile `t`'s box ([`tile_culled`]'s) lie inside every plane of the frustum, in the flat
-/// world? Then no quadrant of it is culled (each quadrant's box lies within it), so
-/// [`quadrants_culled`] tests none, as the prepass does (`UDLOD_TILE_INSIDE`, set by
-/// `decided` in `shaders/udlod_tiling.wgsl` and [`super::seed::decided`]). Always false on the
-/// earth, whose quadrants are always tested.
+/// Does tile `t`'s box ([`tile_culled`]'s) lie inside every plane of the frustum? Then no
+/// quadrant of it is culled, so [`quadrants_culled`] tests none, as the prepass does
+/// (`UDLOD_TILE_INSIDE`, set by `decided` in `shaders/udlod_tiling.wgsl` and
+/// [`super::seed::decided`]). Why none is: every morphed vertex of a quadrant lies in the
+/// quadrant's box (what makes its test sound) and in the tile's, so inside the frustum; a box
+/// holding a point inside every plane is outside none. (The flat world's quadrant boxes also
+/// lie within the tile's; the earth's need not, each being grown by its own curvature.)
 pub fn tile_inside(levels: &Levels, p: &SelectionParams, t: Tile) -> bool {
-    if p.earth.is_some() {
-        return false;
-    }
-    let r = tile_reach(levels, p, t);
-    flat_box_inside(p, r.lo, r.hi, levels.tile_min_max(r.heights))
+    tile_visibility(levels, p, t) == Visibility::Inside
 }
 
 /// Is the box over the grid rectangle from sample `c0` to `c1`, `heights` (min, max) high,
