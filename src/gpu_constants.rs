@@ -75,8 +75,7 @@ shared_constants! {
     UDLOD_SEED_TILES: u32 = 256;
     /// Flags of a tile in the prepass's temporary list (`Tile.pad`), set by whoever writes it
     /// (a `refine` pass, or the host's seed): decided; outside the data; culled; splitting;
-    /// inside the frustum (flat world only: no quadrant of it needs a test,
-    /// `select::tile_inside`).
+    /// inside the frustum (no quadrant of it needs a test, `select::tile_inside`).
     UDLOD_TILE_DECIDED: u32 = 1;
     UDLOD_TILE_OUTSIDE: u32 = 2;
     UDLOD_TILE_CULLED: u32 = 4;
