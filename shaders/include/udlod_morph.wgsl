@@ -55,6 +55,12 @@ fn odd_at(point: vec2<i32>, j: u32) -> vec2<i32> {
     return vec2<i32>((vec2<u32>(point) >> vec2<u32>(j)) & vec2<u32>(1u));
 }
 
+// One step of every morph walk: where a grid point slides at level `j`, its lower even
+// neighbour there (itself where it is even at `j`). Mirrored by `slid_at` in select.rs.
+fn slid_at(point: vec2<i32>, j: u32) -> vec2<i32> {
+    return point - odd_at(point, j) * i32(1u << j);
+}
+
 // Where grid point `sample` of a level-`lod` tile ends up after the morph cascade (docs/udlod.md,
 // "The morph cascade"). Up: at every level `j` from `lod` on at which the point reached is
 // odd, it has the factor `f_j` (`morph_factor` there) and slides towards its lower even
@@ -95,7 +101,7 @@ fn morph_cascade(sample: vec2<i32>, lod: u32) -> Cascade {
         points[n] = point;
         factors[n] = f;
         n++;
-        point = point - odd * i32(1u << j);
+        point = slid_at(point, j);
     }
     c.cell = point;
     for (var k = n; k > 0u; k--) {
@@ -126,7 +132,7 @@ fn walk_on(sample: vec2<i32>, first: u32) -> vec2<i32> {
         if j >= udlod.sizes.y || morph_factor(point, j) == 0.0 {
             break;
         }
-        point = point - odd_at(point, j) * i32(1u << j);
+        point = slid_at(point, j);
         j = next_odd_level(point, j + 1u);
     }
     return point;
@@ -138,7 +144,7 @@ fn walk_past(sample: vec2<i32>, first: u32, moves: bool) -> vec2<i32> {
     if !moves {
         return sample;
     }
-    let next = sample - odd_at(sample, first) * i32(1u << first);
+    let next = slid_at(sample, first);
     return walk_on(next, next_odd_level(next, first + 1u));
 }
 
@@ -182,7 +188,7 @@ fn morph_moved(sample: vec2<i32>, lod: u32, first: u32, ramp: f32) -> Moved {
         return m;
     }
     m.moved = MORPH_ONE_LEVEL;
-    let next = sample - odd_at(sample, first) * i32(1u << first);
+    let next = slid_at(sample, first);
     let j = next_odd_level(next, first + 1u);
     if j < udlod.sizes.y && morph_factor(next, j) != 0.0 {
         m.moved = MORPH_SLIVERS;

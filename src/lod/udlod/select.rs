@@ -1455,6 +1455,13 @@ impl TileReach {
     }
 }
 
+/// One step of every morph walk: where grid point `point` slides at level `j`, its lower even
+/// neighbour there (itself where it is even at `j`). `slid_at` in
+/// `shaders/include/udlod_morph.wgsl`.
+fn slid_at(point: [i32; 2], j: u32) -> [i32; 2] {
+    point.map(|v| v - (((v as u32 >> j) & 1) as i32) * (1 << j))
+}
+
 /// The last point of grid point `sample`'s morph walk from level `lod`: [`morph_cascade`]'s
 /// walk up, without the positions. Every point of the walk lies between it and `sample`.
 /// `walk_on` in `shaders/include/udlod_morph.wgsl` (from the point's first odd level).
@@ -1468,7 +1475,7 @@ pub fn walk_end(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32
         if morph_factor(levels, p, point, j) == 0.0 {
             break;
         }
-        point = [point[0] - odd[0] * (1 << j), point[1] - odd[1] * (1 << j)];
+        point = slid_at(point, j);
     }
     point
 }
@@ -1704,7 +1711,7 @@ pub fn morph_cascade(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod
             Moved::Slivers
         };
         walk.push((point, f));
-        point = [point[0] - odd[0] * (1 << j), point[1] - odd[1] * (1 << j)];
+        point = slid_at(point, j);
     }
     c.levels = walk.len() as u32;
     c.cell = point;
