@@ -97,12 +97,8 @@ impl Spirv {
 
 /// Creates a shader module from the variant of `spv` for `gpu`'s frame block.
 pub fn module(gpu: &Gpu, spv: Spirv) -> Result<vk::ShaderModule> {
-    module_from_bytes(gpu, spv.bytes(gpu.frame_block))
-}
-
-/// Creates a shader module from SPIR-V bytes (tests: mutated or hand-built modules).
-pub fn module_from_bytes(gpu: &Gpu, spv: &[u8]) -> Result<vk::ShaderModule> {
-    let words = ash::util::read_spv(&mut std::io::Cursor::new(spv))
+    let bytes = spv.bytes(gpu.frame_block);
+    let words = ash::util::read_spv(&mut std::io::Cursor::new(bytes))
         .map_err(|e| Error::invalid("SPIR-V", e.to_string()))?;
     unsafe {
         gpu.device
