@@ -217,6 +217,25 @@ impl DeviceInfo {
     }
 }
 
+/// A memory type both DEVICE_LOCAL and HOST_VISIBLE on an integrated or CPU device
+/// ([`Capabilities::unified_memory`]).
+fn unified_memory(
+    memory: &vk::PhysicalDeviceMemoryProperties,
+    kind: vk::PhysicalDeviceType,
+) -> bool {
+    memory.memory_types[..memory.memory_type_count as usize]
+        .iter()
+        .any(|t| {
+            t.property_flags.contains(
+                vk::MemoryPropertyFlags::DEVICE_LOCAL | vk::MemoryPropertyFlags::HOST_VISIBLE,
+            )
+        })
+        && matches!(
+            kind,
+            vk::PhysicalDeviceType::INTEGRATED_GPU | vk::PhysicalDeviceType::CPU
+        )
+}
+
 pub(crate) fn describe(
     instance: &ash::Instance,
     index: usize,
@@ -274,28 +293,16 @@ pub(crate) fn describe(
             .device_name_as_c_str()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|_| "(unnamed)".into());
-        let driver = format!(
-            "{} {}",
-            driver_props
-                .driver_name_as_c_str()
-                .map(|s| s.to_string_lossy())
-                .unwrap_or_default(),
-            driver_props
-                .driver_info_as_c_str()
-                .map(|s| s.to_string_lossy())
+        let text = |s: std::result::Result<&CStr, _>| {
+            s.map(|s: &CStr| s.to_string_lossy().into_owned())
                 .unwrap_or_default()
+        };
+        let driver_info = text(driver_props.driver_info_as_c_str());
+        let driver = format!(
+            "{} {driver_info}",
+            text(driver_props.driver_name_as_c_str())
         );
-        let unified_memory = memory.memory_types[..memory.memory_type_count as usize]
-            .iter()
-            .any(|t| {
-                t.property_flags.contains(
-                    vk::MemoryPropertyFlags::DEVICE_LOCAL | vk::MemoryPropertyFlags::HOST_VISIBLE,
-                )
-            })
-            && matches!(
-                props.device_type,
-                vk::PhysicalDeviceType::INTEGRATED_GPU | vk::PhysicalDeviceType::CPU
-            );
+        let unified_memory = unified_memory(&memory, props.device_type);
         let mut info = DeviceInfo {
             index,
             name,
@@ -303,10 +310,7 @@ pub(crate) fn describe(
             api_version: props.api_version,
             driver: driver.trim().to_string(),
             driver_id: driver_props.driver_id,
-            driver_info: driver_props
-                .driver_info_as_c_str()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            driver_info,
             limits: props.limits,
             memory,
             queue_families,
