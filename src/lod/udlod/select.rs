@@ -1241,22 +1241,8 @@ pub enum Visibility {
 /// [`tile_culled`] and [`tile_inside`] from one box (`decided` in `udlod_tiling.wgsl` builds
 /// it once too).
 pub fn tile_visibility(levels: &Levels, p: &SelectionParams, t: Tile) -> Visibility {
-    let r = tile_reach(levels, p, t);
     let span = (levels.grid_size << t.lod) as i32;
-    let heights = levels.tile_min_max(r.heights);
-    let margin = 1e-3 * (span as f32 * p.spacing);
-    let (outside, inside) = match &p.earth {
-        Some(earth) => earth.visibility(&p.frustum, r.lo, r.hi, heights, margin as f64),
-        None => {
-            let outside = flat_box_outside(p, r.lo, r.hi, heights, margin);
-            (outside, !outside && flat_box_inside(p, r.lo, r.hi, heights))
-        }
-    };
-    match (outside, inside) {
-        (true, _) => Visibility::Culled,
-        (false, true) => Visibility::Inside,
-        (false, false) => Visibility::Crossing,
-    }
+    rect_visibility(levels, p, tile_reach(levels, p, t), span)
 }
 
 /// The quadrants (bits `1 << q`, [`super::grid`]) of final tile `t` whose box lies outside the
@@ -1276,20 +1262,34 @@ pub fn quadrants_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
 /// shortcut of [`tile_inside`]).
 pub fn quadrant_culled(levels: &Levels, p: &SelectionParams, t: Tile, q: u32) -> bool {
     let half = (levels.grid_size << t.lod) as i32 / 2;
-    rect_culled(levels, p, quadrant_reach(levels, p, t, q), half)
+    rect_visibility(levels, p, quadrant_reach(levels, p, t, q), half) == Visibility::Culled
 }
 
 /// The box of `reach` (its rectangle x the heights of the tile holding it) against the
-/// frustum, with a margin of 1e-3 of `span` samples (the rectangle's side before its walks)
-/// that keeps rounding from culling a touching box.
-fn rect_culled(levels: &Levels, p: &SelectionParams, reach: TileReach, span: i32) -> bool {
+/// frustum: culled when outside a plane by more than a margin of 1e-3 of `span` samples (the
+/// rectangle's side before its walks; it keeps rounding from culling a touching box), else
+/// inside or crossing.
+fn rect_visibility(
+    levels: &Levels,
+    p: &SelectionParams,
+    reach: TileReach,
+    span: i32,
+) -> Visibility {
     let (c0, c1) = (reach.lo, reach.hi);
     let heights = levels.tile_min_max(reach.heights);
     let margin = 1e-3 * (span as f32 * p.spacing);
-    if let Some(earth) = &p.earth {
-        return earth.outside(&p.frustum, c0, c1, heights, margin as f64);
+    let (outside, inside) = match &p.earth {
+        Some(earth) => earth.visibility(&p.frustum, c0, c1, heights, margin as f64),
+        None => {
+            let outside = flat_box_outside(p, c0, c1, heights, margin);
+            (outside, !outside && flat_box_inside(p, c0, c1, heights))
+        }
+    };
+    match (outside, inside) {
+        (true, _) => Visibility::Culled,
+        (false, true) => Visibility::Inside,
+        (false, false) => Visibility::Crossing,
     }
-    flat_box_outside(p, c0, c1, heights, margin)
 }
 
 /// Does tile `t`'s box ([`tile_culled`]'s) lie inside every plane of the frustum? Then no
