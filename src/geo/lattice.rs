@@ -158,7 +158,8 @@ impl EarthCull {
         heights: [f32; 2],
         slack: f64,
     ) -> bool {
-        self.visibility(planes, c0, c1, heights, slack).0
+        let (b, shift) = self.relative_box(c0, c1, heights);
+        b.outside(planes, slack - shift)
     }
 
     /// [`Self::outside`], and whether the same box lies inside every plane (`box_inside` on
@@ -171,13 +172,20 @@ impl EarthCull {
         heights: [f32; 2],
         slack: f64,
     ) -> (bool, bool) {
+        let (b, shift) = self.relative_box(c0, c1, heights);
+        let outside = b.outside(planes, slack - shift);
+        (outside, !outside && b.inside(planes, shift))
+    }
+
+    /// The camera-relative box over the rectangle, and how far [`Self::rounding`] moves the
+    /// decision there (metres: that fraction of the box's distance from the camera).
+    fn relative_box(&self, c0: [i32; 2], c1: [i32; 2], heights: [f32; 2]) -> (WorldBox, f64) {
         let b = self
             .lattice
             .rect_box(c0, c1, [heights[0] as f64, heights[1] as f64])
             .relative_to(self.camera);
         let far = b.lo.abs().max(b.hi.abs()).length();
-        let outside = b.outside(planes, slack - self.rounding * far);
-        (outside, !outside && b.inside(planes, self.rounding * far))
+        (b, self.rounding * far)
     }
 }
 
