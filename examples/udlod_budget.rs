@@ -4,7 +4,8 @@
 //! oracle with quadrants collapsed wherever the parent grid is within tau) and how many drawn
 //! quadrants are within tau on the parent grid but drawn uncollapsed, the drawn triangles
 //! with every quadrant drawn (no quadrant culled outside the frustum) and the draw masks in
-//! use, and the prepass's seed
+//! use, the drawn triangles were the morph to complete at a field below the split field
+//! (`udlod::completion`, a what-if), and the prepass's seed
 //! (the coarse levels the host walks: its tiles, the GPU passes left, the walk's host time).
 //! CPU only (the CPU reference selection equals the GPU's; tests/udlod.rs).
 //!
@@ -19,6 +20,7 @@ use std::path::PathBuf;
 
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::eval::oracle::Oracle;
+use vkterrain::lod::udlod::completion::{CompletionField, CompletionTerms};
 use vkterrain::lod::udlod::grid::{QuadrantDraw, TileMask};
 use vkterrain::lod::udlod::select::{
     self, FieldKey, FieldTerm, Levels, SelectionParams, SplitField, Tile, ZoneRule,
@@ -478,6 +480,13 @@ fn main() -> anyhow::Result<()> {
             tiles_n * 4,
             if_collapsed as f64 / tris_o as f64
         );
+        let cams: Vec<_> = picks.iter().map(|&k| p.scenario.camera(k)).collect();
+        print_completion_counts(
+            &levels,
+            &field,
+            &cams.iter().map(params).collect::<Vec<_>>(),
+            tris_o,
+        );
         println!(
             "  cf every quadrant of the drawn tiles drawn (cull_quadrants = false): triangles {all_quadrant_tris} ratio {:.2}; draw masks in use over the frames {masks_used} ({masks_used_all} with every quadrant drawn)",
             all_quadrant_tris as f64 / tris_o as f64
@@ -896,6 +905,42 @@ where
 /// Per level, how the field cells' own errors (`Levels::field_cell_error`, metres) spread:
 /// the share exactly 0, the share under 1 cm, and quantiles. A data set's smooth filled voids
 /// (SRTM's ocean) show as errors near, not at, 0.
+/// Triangles drawn, per [`CompletionTerms`], with the morph completing at a field below the
+/// split field (`vkterrain::lod::udlod::completion`), over the frames' selections `views`
+/// (the same tiles and quadrants outside the view as drawn today).
+fn print_completion_counts(
+    levels: &Levels,
+    field: &SplitField,
+    views: &[SelectionParams],
+    tris_o: u64,
+) {
+    for terms in CompletionTerms::ALL {
+        let completion = CompletionField::new(levels, field, terms);
+        let tris: u64 = views
+            .iter()
+            .flat_map(|sp| {
+                select::select_tiles(levels, sp)
+                    .into_iter()
+                    .map(move |t| (sp, t))
+            })
+            .map(|(sp, t)| {
+                let collapsing = completion.tile_collapse_mask(levels, sp, t);
+                let mask = TileMask::new(
+                    levels.grid_size,
+                    collapsing,
+                    select::quadrants_culled(levels, sp, t),
+                );
+                grid::mask_triangles(levels.grid_size, mask)
+            })
+            .sum();
+        println!(
+            "  cf morph completing below the split field, {}: triangles {tris} ratio {:.2}",
+            terms.name(),
+            tris as f64 / tris_o as f64
+        );
+    }
+}
+
 fn print_cell_errors(levels: &Levels) {
     for lod in 1..=levels.root_lod {
         let (nx, ny) = levels.field_cells_per_side(lod);

@@ -10,6 +10,7 @@
 //! never come back to the host in the render path (only the tiling state's counters, for
 //! statistics).
 
+pub mod completion;
 pub mod grid;
 #[cfg(feature = "test-support")]
 pub mod probe;

@@ -523,7 +523,7 @@ fn tile_share(grid_size: u32) -> f64 {
 
 /// Relative margin on the split field's nesting and reach terms: covers the f32 rounding of
 /// `m`, `D` and the `m * d < D` test on the GPU (~1e-7 each).
-const CHAIN_MARGIN: f64 = 1e-5;
+pub(super) const CHAIN_MARGIN: f64 = 1e-5;
 
 /// Per-tile split distances: how near the LOD viewer may come to each tile before it splits,
 /// derived per tile from its own geometric error and the pixel target, and tied between
@@ -579,7 +579,7 @@ pub struct SplitField {
     pub split_ranks: Vec<Vec<(u32, f32)>>,
 }
 
-const QUAD: [(u32, u32); 4] = [(0, 0), (1, 0), (0, 1), (1, 1)];
+pub(super) const QUAD: [(u32, u32); 4] = [(0, 0), (1, 0), (0, 1), (1, 1)];
 
 impl SplitField {
     /// The field for `key` from `levels`, which must hold their field cells' errors
@@ -680,16 +680,6 @@ impl SplitField {
         self.corners[(self.corner_offsets[lod as usize] + j * (nx + 1) + i) as usize]
     }
 
-    /// (min, max) of the field over field cell `(i, j)` of level `lod`: its corners (bilinear
-    /// interpolation).
-    fn cell_range(&self, levels: &Levels, lod: u32, i: u32, j: u32) -> [f32; 2] {
-        let c = QUAD.map(|(a, b)| self.corner(levels, lod, i + a, j + b));
-        [
-            c[0].min(c[1]).min(c[2].min(c[3])),
-            c[0].max(c[1]).max(c[2].max(c[3])),
-        ]
-    }
-
     /// (min, max) of the field over a tile: its `(field_density + 1)^2` nodes (mirrors
     /// `tile_field_min` in `udlod_common.wgsl`).
     pub fn tile_range(&self, levels: &Levels, t: Tile) -> [f32; 2] {
@@ -735,20 +725,33 @@ impl SplitField {
         if lod > levels.root_lod {
             return 1.0;
         }
-        let span = (levels.field_cell_quads() << lod) as i32;
-        let (nx, ny) = levels.field_cells_per_side(lod);
-        let cx = (sample[0] / span).clamp(0, nx as i32 - 1);
-        let cy = (sample[1] / span).clamp(0, ny as i32 - 1);
-        let fx = (sample[0] - cx * span) as f32 / span as f32;
-        let fy = (sample[1] - cy * span) as f32 / span as f32;
-        let (i, j) = (cx as u32, cy as u32);
-        let c = QUAD.map(|(a, b)| self.corner(levels, lod, i + a, j + b));
-        let south = c[0] * (1.0 - fx) + c[1] * fx;
-        let north = c[2] * (1.0 - fx) + c[3] * fx;
-        let v = south * (1.0 - fy) + north * fy;
-        let [lo, hi] = self.cell_range(levels, lod, i, j);
-        v.clamp(lo, hi)
+        let ([i, j], f) = field_cell_of(levels, sample, lod);
+        bilinear_in_range(QUAD.map(|(a, b)| self.corner(levels, lod, i + a, j + b)), f)
     }
+}
+
+/// The field cell of level `lod` holding integer sample `sample` (clamped to the level's
+/// cells) and the sample's fraction across it.
+pub(super) fn field_cell_of(levels: &Levels, sample: [i32; 2], lod: u32) -> ([u32; 2], [f32; 2]) {
+    let span = (levels.field_cell_quads() << lod) as i32;
+    let (nx, ny) = levels.field_cells_per_side(lod);
+    let cx = (sample[0] / span).clamp(0, nx as i32 - 1);
+    let cy = (sample[1] / span).clamp(0, ny as i32 - 1);
+    let fx = (sample[0] - cx * span) as f32 / span as f32;
+    let fy = (sample[1] - cy * span) as f32 / span as f32;
+    ([cx as u32, cy as u32], [fx, fy])
+}
+
+/// Bilinear in a cell's corners `c` (ordered as [`QUAD`]) at fraction `f`, clamped to the
+/// corners' range so rounding never leaves it.
+pub(super) fn bilinear_in_range(c: [f32; 4], [fx, fy]: [f32; 2]) -> f32 {
+    let south = c[0] * (1.0 - fx) + c[1] * fx;
+    let north = c[2] * (1.0 - fx) + c[3] * fx;
+    let v = south * (1.0 - fy) + north * fy;
+    v.clamp(
+        c[0].min(c[1]).min(c[2].min(c[3])),
+        c[0].max(c[1]).max(c[2].max(c[3])),
+    )
 }
 
 /// The smallest split distance field cell `[x, y, level]` (level >= 1; the tile with one
@@ -777,14 +780,14 @@ fn cell_requirement(levels: &Levels, field: &SplitField, cell: [u32; 3]) -> f64 
 
 /// The terms of [`cell_requirement`], each a split distance in metres.
 #[derive(Clone, Copy, Debug)]
-struct CellTerms {
+pub(super) struct CellTerms {
     /// The cell's own error at the pixel target.
-    pixel: f64,
+    pub(super) pixel: f64,
     /// Where its morph zone `W` wide may start ([`zone_start`]) plus `W`.
-    zone: f64,
-    nesting: f64,
+    pub(super) zone: f64,
+    pub(super) nesting: f64,
     /// The reach over `q` levels, or with walks past the tile the separation over two.
-    separation: f64,
+    pub(super) separation: f64,
 }
 
 impl CellTerms {
@@ -808,7 +811,11 @@ impl CellTerms {
     }
 }
 
-fn cell_terms(levels: &Levels, field: &SplitField, [cx, cy, lod]: [u32; 3]) -> CellTerms {
+pub(super) fn cell_terms(
+    levels: &Levels,
+    field: &SplitField,
+    [cx, cy, lod]: [u32; 3],
+) -> CellTerms {
     let (key, zone) = (&field.key, &field.zone);
     let pixel = key.share * levels.field_cell_error(lod, cx, cy) as f64 * key.focal_px / key.tau_px;
     // This tile's geometry shows, blended, from the start of its morph zone on; where the zone
@@ -989,7 +996,7 @@ fn zone_widths(levels: &Levels, key: &FieldKey) -> Vec<f32> {
 /// `(ratio - 1) s` against a zone of at least `r s`: with the distance's `1 / ZONE_STEPS`,
 /// at most `0.25 + 1 / (2 grid_size r)` (0.875 at grid 4) per step, under the full slide.
 /// Applied only with `morph_levels > 1`, so one level step keeps the selection it had.
-fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f32]) {
+pub(super) fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f32]) {
     let (nx, ny) = levels.field_cells_per_side(lod);
     // The same growth per grid step wherever the nodes are: `d` nodes per tile side share
     // the tile's growth.
@@ -1597,18 +1604,29 @@ pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod:
 /// `shaders/include/udlod_morph.wgsl`): at least 1 where the point lies fully on the next
 /// level's grid.
 fn morph_ramp(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {
-    let rel = p.from_viewer(sample);
-    let d = Vec3::new(rel[0] * p.stretch[0], rel[1] * p.stretch[1], p.viewer[2]).length();
+    let d = viewer_distance(p, sample);
     let field = p.field.at(levels, sample, lod + 1);
     let parent_split = p.field.split[lod as usize + 1];
     let zone = p.field.zone[lod as usize + 1];
     if zone > 0.0 {
-        let s = parent_split / field;
-        let width = zone.max(p.morph_range * s);
-        return 1.0 - (s - d) / width;
+        return cascade_ramp(p, d, parent_split / field, zone);
     }
     let scaled = d * field;
     1.0 - (1.0 - scaled / parent_split) / p.morph_range
+}
+
+/// The LOD viewer's distance to integer sample `sample` in the LOD metric (at the reference
+/// height), as the morph measures it.
+pub(super) fn viewer_distance(p: &SelectionParams, sample: [i32; 2]) -> f32 {
+    let rel = p.from_viewer(sample);
+    Vec3::new(rel[0] * p.stretch[0], rel[1] * p.stretch[1], p.viewer[2]).length()
+}
+
+/// The morph cascade's ramp at distance `d` for a morph completing at `s` over a zone at
+/// least `zone` wide: 1 at `s`, falling over the last `max(zone, morph_range s)`.
+pub(super) fn cascade_ramp(p: &SelectionParams, d: f32, s: f32, zone: f32) -> f32 {
+    let width = zone.max(p.morph_range * s);
+    1.0 - (s - d) / width
 }
 
 /// Which quadrants of tile `t` are drawn as the parent's grid (bit `qx + 2 qy`,
@@ -1619,17 +1637,21 @@ fn morph_ramp(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) 
 /// degenerate ones (`docs/udlod.md`, "Collapsed quadrants"). At grid 2 a tile is drawn so only
 /// when all four are ([`TileMask::new`]).
 pub fn tile_collapse_mask(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
-    let g = levels.grid_size;
     if !p.morph {
         return 0;
     }
+    collapse_mask_by(levels, t, |sample| morph_ramp(levels, p, sample, t.lod))
+}
+
+/// [`tile_collapse_mask`] with the odd vertices' morph ramp given (`ramp` of a sample).
+pub(super) fn collapse_mask_by(levels: &Levels, t: Tile, ramp: impl Fn([i32; 2]) -> f32) -> u32 {
+    let g = levels.grid_size;
     let mut keeps = 0;
     for j in 0..=g {
         for i in (0..=g).filter(|i| (i | j) & 1 == 1) {
             let quadrants = super::grid::quadrants_of(g, [i, j]);
             if quadrants & !keeps != 0
-                && morph_ramp(levels, p, tile_sample(levels, t, [i, j]), t.lod)
-                    < 1.0 + UDLOD_COLLAPSE_MARGIN
+                && ramp(tile_sample(levels, t, [i, j])) < 1.0 + UDLOD_COLLAPSE_MARGIN
             {
                 keeps |= quadrants;
             }
