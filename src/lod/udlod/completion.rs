@@ -111,6 +111,7 @@ impl CompletionField {
 mod tests {
     use glam::DVec3;
 
+    use super::super::select;
     use super::*;
     use crate::dataset::procedural::{self, ProceduralParams};
     use crate::lod::UdlodSettings;
@@ -140,14 +141,14 @@ mod tests {
                 ..Camera::default()
             };
             let p = SelectionParams::new(&levels, &data, &settings, &cam, cam.position, 640, 360);
-            let tiles = super::super::select::select_tiles(&levels, &p);
+            let tiles = select::select_tiles(&levels, &p);
             for t in &tiles {
-                today += super::super::select::tile_collapse_mask(&levels, &p, *t).count_ones();
+                today += select::tile_collapse_mask(&levels, &p, *t).count_ones();
             }
             for (n, terms) in CompletionTerms::ALL.into_iter().enumerate() {
                 let completion = CompletionField::new(&levels, &p.field, terms);
                 for &t in &tiles {
-                    let now = super::super::select::tile_collapse_mask(&levels, &p, t);
+                    let now = select::tile_collapse_mask(&levels, &p, t);
                     let then = completion.tile_collapse_mask(&levels, &p, t);
                     assert_eq!(
                         now & !then,

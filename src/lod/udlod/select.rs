@@ -785,7 +785,7 @@ pub(super) struct CellTerms {
     pub(super) pixel: f64,
     /// Where its morph zone `W` wide may start ([`zone_start`]) plus `W`.
     pub(super) zone: f64,
-    pub(super) nesting: f64,
+    nesting: f64,
     /// The reach over `q` levels, or with walks past the tile the separation over two.
     pub(super) separation: f64,
 }
