@@ -11,6 +11,11 @@
 //! device picks one (`driver::shaders::FrameBlock`, docs/architecture.md, "Uniform buffers on
 //! Mesa 22.3").
 //!
+//! Workgroup memory is zero-filled at the start of every compute entry point (WGSL's rule,
+//! naga's polyfill) unless the shader's own file has the line [`WORKGROUP_WRITTEN_FIRST`]: it
+//! then promises to write every workgroup variable before reading it, and the fill is left out
+//! (docs/architecture.md, "Workgroup memory written first").
+//!
 //! The stages naga cannot compile (tessellation, task, mesh) are GLSL under `shaders/glsl/`,
 //! composed the same way (a `#define` per shared constant) and compiled by glslangValidator:
 //! see `build/glsl.rs`.
@@ -30,6 +35,13 @@ mod gpu_constants {
 /// variant of every shader that includes it declares instead (the same layout: vec4 members).
 const FRAME_UNIFORM: &str = "@group(0) @binding(0) var<uniform> frame: Frame;";
 const FRAME_STORAGE: &str = "@group(0) @binding(0) var<storage, read> frame: Frame;";
+/// A line in a shader's own file (not an include): each of its compute entry points writes every
+/// workgroup variable it reads before reading it, so naga's zero-fill is left out. The fill is
+/// one invocation storing every word of workgroup memory behind a branch; Mesa 22.3's llvmpipe
+/// turns each word's store into a loop over the SIMD lanes and runs them all for every 8
+/// invocations (a fifth of UDLOD's prepass there; docs/architecture.md, "Workgroup memory
+/// written first").
+const WORKGROUP_WRITTEN_FIRST: &str = "//!workgroup-memory written-first";
 /// Defined in the GLSL storage variant (`shaders/glsl/include/terrain_common.glsl`).
 const GLSL_FRAME_STORAGE: &str = "VKTERRAIN_FRAME_STORAGE";
 
@@ -75,6 +87,19 @@ fn compose_wgsl(path: &Path, prelude: &str) -> (String, Vec<LineOrigin>) {
     }
     compose(path, &mut source, &mut map, 0);
     (source, map)
+}
+
+/// How naga initializes the workgroup memory of `path`'s compute entry points: not at all when
+/// the file itself has the line [`WORKGROUP_WRITTEN_FIRST`], else zero-filled as WGSL requires.
+fn workgroup_memory_init(path: &Path) -> naga::back::spv::ZeroInitializeWorkgroupMemoryMode {
+    use naga::back::spv::ZeroInitializeWorkgroupMemoryMode as Mode;
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| fail(&format!("{}: cannot read: {e}", path.display())));
+    if text.lines().any(|l| l.trim() == WORKGROUP_WRITTEN_FIRST) {
+        Mode::None
+    } else {
+        Mode::Polyfill
+    }
 }
 
 /// Compiles composed WGSL (`compose_wgsl` of `path`) to SPIR-V with naga (validator on); fails
@@ -125,6 +150,7 @@ fn compile_wgsl(path: &Path, source: &str, map: &[LineOrigin]) -> Vec<u8> {
             | naga::back::spv::WriterFlags::LABEL_VARYINGS,
         // No binding map: naga then writes each resource's own @group/@binding.
         fake_missing_bindings: true,
+        zero_initialize_workgroup_memory: workgroup_memory_init(path),
         ..Default::default()
     };
     let words = naga::back::spv::write_vec(&module, &info, &options, None).unwrap_or_else(|e| {

@@ -14,7 +14,10 @@
 
 // The tile's side with its halo.
 const HALO_SIDE: u32 = PGM_EARTH_TILE + 2u;
+// Every point is written (the loop below) before the barrier and any read: no zero-fill
+// (build.rs, docs/architecture.md "Workgroup memory written first").
 var<workgroup> sphere_points: array<vec3<f32>, HALO_SIDE * HALO_SIDE>;
+//!workgroup-memory written-first
 
 @compute @workgroup_size(PGM_EARTH_TILE, PGM_EARTH_TILE)
 fn prepare_earth(

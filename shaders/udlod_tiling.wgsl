@@ -27,6 +27,12 @@
 //!include udlod_common.wgsl
 //!include udlod_morph.wgsl
 
+// Every entry point writes each workgroup variable before reading it (`refine` zeroes its
+// counters and per-parent flags itself, and reads a base or rank only where it wrote one;
+// `finish` writes all three tables before its barrier), so naga's zero-fill of workgroup memory is
+// left out: on Mesa 22.3 it was a fifth of the prepass (build.rs, docs/architecture.md).
+//!workgroup-memory written-first
+
 // One indirect draw: `VkDrawIndexedIndirectCommand`, or with vertex pulling
 // `VkDrawIndirectCommand` in its first four words (vertex count, instances, first vertex,
 // first instance) and the fifth unused.
