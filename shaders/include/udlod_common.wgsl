@@ -90,7 +90,10 @@ fn field_at(sample: vec2<i32>, lod: u32) -> f32 {
     // 0.5 ms of Puget Sound's prepass at 640x360). The same cell and fraction as the
     // divisions of `SplitField::at` for every sample (a negative one clamps to cell 0 either
     // way).
-    let shift = countTrailingZeros(udlod.sizes.x / d) + lod;
+    // Quads per tile side and field nodes per side are both powers of two
+    // (`UdlodSettings::validate`): the cell's quads as a difference of exponents, not a
+    // division (Mesa 22.3 divides once per lane in every one of this function's inlined copies).
+    let shift = countTrailingZeros(udlod.sizes.x) - countTrailingZeros(d) + lod;
     let span = 1i << shift;
     let level = udlod.levels[lod];
     let cell = clamp(sample >> vec2<u32>(shift), vec2<i32>(0), vec2<i32>(i32(level.y * d) - 1, i32(level.z * d) - 1));
