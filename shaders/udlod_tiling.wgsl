@@ -29,8 +29,9 @@
 
 // Every entry point writes each workgroup variable before reading it (`refine` zeroes its
 // counters and per-parent flags itself, and reads a base or rank only where it wrote one;
-// `finish` writes all three tables before its barrier), so naga's zero-fill of workgroup memory is
-// left out: on Mesa 22.3 it was a fifth of the prepass (build.rs, docs/architecture.md).
+// `finish` writes all three tables before its barrier), so naga's zero-fill of workgroup
+// memory is left out: on Mesa 22.3 it was a fifth of the prepass (build.rs,
+// docs/architecture.md "Workgroup memory written first").
 //!workgroup-memory written-first
 
 // One indirect draw: `VkDrawIndexedIndirectCommand`, or with vertex pulling

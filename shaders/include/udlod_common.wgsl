@@ -92,7 +92,7 @@ fn field_at(sample: vec2<i32>, lod: u32) -> f32 {
     // way).
     // Quads per tile side and field nodes per side are both powers of two
     // (`UdlodSettings::validate`): the cell's quads as a difference of exponents, not a
-    // division (Mesa 22.3 divides once per lane in every one of this function's inlined copies).
+    // division (llvmpipe divides once per lane, in every inlined copy of this function).
     let shift = countTrailingZeros(udlod.sizes.x) - countTrailingZeros(d) + lod;
     let span = 1i << shift;
     let level = udlod.levels[lod];
