@@ -171,7 +171,8 @@ struct TileReach {
 }
 
 // A square of `span` samples from `c0` whose grid points walk from level `lod`, and the
-// tile from which the heights bounding its reach are looked for (`rect_reach`).
+// tile from which the heights bounding its reach are looked for (`reach_of`): a tile
+// (`tile_square`) or a final tile's quadrant (`quadrant_square`).
 struct ReachSquare {
     c0: vec2<i32>,
     span: i32,
@@ -185,7 +186,7 @@ struct ReachSquare {
 // when the reach leaves it).
 struct ReachReads {
     first: vec4<u32>,
-    factor: vec4<f32>,
+    moves: vec4<bool>,
     min_max: vec2<f32>,
 }
 
@@ -194,15 +195,6 @@ fn tile_square(t: Tile) -> ReachSquare {
     return ReachSquare(vec2<i32>(i32(t.x), i32(t.y)) * span, span, t.lod, t);
 }
 
-fn tile_reach(t: Tile) -> TileReach {
-    return rect_reach(tile_square(t));
-}
-
-// The reach of a square, with the heights of the smallest tile from `heights` up that holds
-// it (mirrors `rect_reach` in src/lod/udlod/select.rs).
-fn rect_reach(s: ReachSquare) -> TileReach {
-    return reach_of(s, reach_reads(s));
-}
 
 fn square_corner(s: ReachSquare, k: u32) -> vec2<i32> {
     return s.c0 + vec2<i32>(i32(k & 1u), i32(k >> 1u)) * s.span;
@@ -221,21 +213,23 @@ fn reach_reads(s: ReachSquare) -> ReachReads {
         first_read_level(first.z),
         first_read_level(first.w),
     );
-    let factor = vec4<f32>(
-        morph_factor(square_corner(s, 0u), at.x),
-        morph_factor(square_corner(s, 1u), at.y),
-        morph_factor(square_corner(s, 2u), at.z),
-        morph_factor(square_corner(s, 3u), at.w),
+    let moves = vec4<bool>(
+        morph_moves(square_corner(s, 0u), at.x),
+        morph_moves(square_corner(s, 1u), at.y),
+        morph_moves(square_corner(s, 2u), at.z),
+        morph_moves(square_corner(s, 3u), at.w),
     );
-    return ReachReads(first, factor, tile_min_max(s.heights));
+    return ReachReads(first, moves, tile_min_max(s.heights));
 }
 
-// The reach from its first reads: the walks that move go on one by one.
+// The reach of a square from its first reads (`reach_reads`), with the heights of the smallest
+// tile from `heights` up that holds it (mirrors `rect_reach` in src/lod/udlod/select.rs): the
+// walks that move go on one by one.
 fn reach_of(s: ReachSquare, reads: ReachReads) -> TileReach {
     let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
     var r: TileReach;
     r.hi = min(s.c0 + vec2<i32>(s.span), last);
-    let moves = (reads.first < vec4<u32>(udlod.sizes.y)) & (reads.factor != vec4<f32>(0.0));
+    let moves = (reads.first < vec4<u32>(udlod.sizes.y)) & reads.moves;
     let f = reads.first;
     r.lo = min(
         min(walk_past(square_corner(s, 0u), f.x, moves.x), walk_past(square_corner(s, 1u), f.y, moves.y)),
@@ -278,7 +272,7 @@ fn cull_slack(span: i32) -> f32 {
 
 // Quadrant `q` of final tile `t` (bit `qx + 2 qy`): its square, with the heights of the tile
 // one level down that covers it (the tile itself at level 0 or past the data's edge); its
-// reach is tested against the frustum (`reach_culled`; mirrors `quadrant_reach` and
+// reach is tested against the frustum (`refine`; mirrors `quadrant_reach` and
 // `quadrants_culled` in src/lod/udlod/select.rs).
 fn quadrant_square(t: Tile, q: u32) -> ReachSquare {
     let half = i32(udlod.sizes.x << t.lod) / 2;
@@ -292,12 +286,6 @@ fn quadrant_square(t: Tile, q: u32) -> ReachSquare {
         }
     }
     return ReachSquare(c0, half, t.lod, heights);
-}
-
-// The box of `r` against the frustum (mirrors `tile_culled`, `quadrants_culled` and
-// `flat_box_outside` in src/lod/udlod/select.rs).
-fn reach_culled(r: TileReach, span: i32) -> bool {
-    return box_outside(udlod.frustum, reach_box(r), cull_slack(span));
 }
 
 // Per workgroup of `refine`: its splits' child slots, final tiles, next-pass split requests and
@@ -327,7 +315,7 @@ var<workgroup> wg_slivers: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 // they keep their own grid.
 var<workgroup> wg_keeps_grid: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 // Per parent: the quadrants (bits) of the (final) parent whose boxes lie outside the frustum,
-// one invocation each (`quadrant_square`, `reach_culled`): not drawn.
+// one invocation each (`quadrant_square`, `refine`): not drawn.
 var<workgroup> wg_dropped: array<atomic<u32>, UDLOD_WORKGROUP / 4u>;
 
 const_assert UDLOD_WORKGROUP % 4u == 0u;
@@ -417,10 +405,6 @@ fn refine(
             }
         } else if (t.pad & UDLOD_TILE_SPLITS) != 0u && state.splits_allowed != 0u {
             action = ACTION_SPLIT;
-            child = decided(Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u));
-            if (child.pad & ~UDLOD_TILE_INSIDE) == (UDLOD_TILE_DECIDED | UDLOD_TILE_SPLITS) {
-                atomicAdd(&wg_requests, 1u);
-            }
         } else {
             if (t.pad & UDLOD_TILE_SPLITS) != 0u && k == 0u {
                 atomicAdd(&wg_overflow, 1u);
@@ -428,18 +412,33 @@ fn refine(
             action = ACTION_FINAL;
         }
     }
+    // Each invocation tests one box, built by one copy of the reach for both actions (Mesa
+    // 22.3 runs every branch for every 8 invocations, so a copy per action cost both): a
+    // splitting parent's child k (`decided`, when culling), or a final parent's quadrant k
+    // (`udlod.counts.x`: `cull_quadrants` with culling, unless the tile's box lies inside the
+    // frustum). Its reads go out before the split field's or the vertex checks' and are
+    // waited on after them.
+    var square: ReachSquare;
+    var boxed = false;
+    if action == ACTION_SPLIT {
+        child = Tile(t.x * 2u + (k & 1u), t.y * 2u + (k >> 1u), t.lod - 1u, 0u);
+        square = tile_square(child);
+        boxed = udlod.params.w > 0.5 && !outside_data(child);
+    } else if action == ACTION_FINAL {
+        square = quadrant_square(t, k);
+        boxed = udlod.counts.x != 0u && (t.pad & UDLOD_TILE_INSIDE) == 0u;
+    }
+    var reads: ReachReads;
+    if boxed {
+        reads = reach_reads(square);
+    }
+    var splits = false;
+    if action == ACTION_SPLIT && !outside_data(child) {
+        splits = splits_by_distance(child);
+    }
     // A final tile's vertices are checked by all four of its invocations (one checking them
     // all was the prepass's slowest path on the H200 at 1080p).
     if action == ACTION_FINAL {
-        // Invocation k: quadrant k's box (`udlod.counts.x`: `cull_quadrants` with culling),
-        // unless the tile's box lies inside the frustum. Its reads go out before the vertex
-        // checks and are waited on after them.
-        let test_quadrant = udlod.counts.x != 0u && (t.pad & UDLOD_TILE_INSIDE) == 0u;
-        let square = quadrant_square(t, k);
-        var reads: ReachReads;
-        if test_quadrant {
-            reads = reach_reads(square);
-        }
         let checks = final_tile_checks(t, k);
         if checks.slivers {
             atomicOr(&wg_slivers[li / 4u], 1u);
@@ -447,9 +446,21 @@ fn refine(
         if checks.keeps_grid != 0u {
             atomicOr(&wg_keeps_grid[li / 4u], checks.keeps_grid);
         }
-        if test_quadrant && reach_culled(reach_of(square, reads), square.span) {
-            atomicOr(&wg_dropped[li / 4u], 1u << k);
+    }
+    var culled = false;
+    var inside = false;
+    if boxed {
+        let b = reach_box(reach_of(square, reads));
+        culled = box_outside(udlod.frustum, b, cull_slack(square.span));
+        inside = box_inside(udlod.frustum, b);
+    }
+    if action == ACTION_SPLIT {
+        child = decided(child, splits, culled, inside);
+        if (child.pad & ~UDLOD_TILE_INSIDE) == (UDLOD_TILE_DECIDED | UDLOD_TILE_SPLITS) {
+            atomicAdd(&wg_requests, 1u);
         }
+    } else if action == ACTION_FINAL && culled {
+        atomicOr(&wg_dropped[li / 4u], 1u << k);
     }
     workgroupBarrier();
     if k == 0u {
@@ -536,27 +547,23 @@ fn splits_by_distance(t: Tile) -> bool {
 }
 
 // Tile t with its flags (`UDLOD_TILE_*` in `Tile.pad` of the temporary list): outside the data,
-// else culled, else splitting (near enough), and whether its box lies inside the frustum (then
-// `refine` tests none of its quadrants should it be final: none would be culled, `tile_inside`
-// in select.rs says why). What `refine`
-// will do with the tile, decided by whoever writes it, so the next pass's splits are counted
-// before it and each tile's culling box is built once (mirrors `seed::decided` in
+// else culled, else splitting (`splits`: near enough, `splits_by_distance`), and whether its box
+// lies inside the frustum (then `refine` tests none of its quadrants should it be final: none
+// would be culled, `tile_inside` in select.rs says why). `culled` and `inside` are its box's
+// against the frustum (`tile_square`'s reach; both false without culling). What `refine` will
+// do with the tile, decided by whoever writes it, so the next pass's splits are counted before
+// it and each tile's culling box is built once (mirrors `seed::decided` in
 // src/lod/udlod/seed.rs).
-fn decided(t: Tile) -> Tile {
+fn decided(t: Tile, splits: bool, culled: bool, inside: bool) -> Tile {
     var flags = UDLOD_TILE_DECIDED;
     if outside_data(t) {
         return Tile(t.x, t.y, t.lod, flags | UDLOD_TILE_OUTSIDE);
     }
-    // Asked first: its reads of the split field go out beside the culling box's.
-    let splits = splits_by_distance(t);
-    if udlod.params.w > 0.5 {
-        let b = reach_box(tile_reach(t));
-        if box_outside(udlod.frustum, b, cull_slack(i32(udlod.sizes.x << t.lod))) {
-            return Tile(t.x, t.y, t.lod, flags | UDLOD_TILE_CULLED);
-        }
-        if box_inside(udlod.frustum, b) {
-            flags |= UDLOD_TILE_INSIDE;
-        }
+    if culled {
+        return Tile(t.x, t.y, t.lod, flags | UDLOD_TILE_CULLED);
+    }
+    if inside {
+        flags |= UDLOD_TILE_INSIDE;
     }
     if splits {
         flags |= UDLOD_TILE_SPLITS;

@@ -22,13 +22,28 @@ fn factor_of_ramp(ramp: f32, sample: vec2<i32>, lod: u32) -> f32 {
     // of those two neighbours (each odd along one axis), the triangle between the three turns
     // over (docs/udlod.md, "Folds at the quads' diagonal").
     // (Never binding at or below 1/2: the neighbours are read only past it.)
-    if f > 0.5 && all(odd_at(sample, lod) == vec2<i32>(1)) {
-        let step = i32(1u << lod);
-        let along_x = clamp(morph_ramp(sample - vec2<i32>(0, step), lod), 0.0, 1.0);
-        let along_y = clamp(morph_ramp(sample - vec2<i32>(step, 0), lod), 0.0, 1.0);
-        f = min(f, 0.5 * (1.0 + min(along_x, along_y)));
+    let folds = f > 0.5 && all(odd_at(sample, lod) == vec2<i32>(1));
+    // The two neighbours through one copy of `morph_ramp` in a loop: Mesa 22.3 runs a branch
+    // that no invocation takes all the same, and a loop's body once, so two inlined copies
+    // cost every call of this function two more ramps there, the loop one.
+    let step = i32(1u << lod);
+    var least = 1.0;
+    for (var n = 0; folds && n < 2; n++) {
+        let neighbour = sample - select(vec2<i32>(step, 0), vec2<i32>(0, step), n == 0);
+        least = min(least, clamp(morph_ramp(neighbour, lod), 0.0, 1.0));
+    }
+    if folds {
+        f = min(f, 0.5 * (1.0 + least));
     }
     return f * udlod.params.z;
+}
+
+// Whether `morph_factor(sample, lod)` is not 0, without the fold's neighbour reads: the fold
+// only lowers a factor above 1/2 to one of at least 1/2, so the factor is 0 exactly where the
+// ramp is not above 0 or morphing is off (mirrored by `morph_moves` in select.rs, which a test
+// proves equal to `morph_factor != 0`). The walks ask only this.
+fn morph_moves(sample: vec2<i32>, lod: u32) -> bool {
+    return udlod.params.z != 0.0 && morph_ramp(sample, lod) > 0.0;
 }
 
 // `morph_factor` before its clamp and the on/off switch: at least 1 where the point lies fully
@@ -123,13 +138,13 @@ fn next_odd_level(point: vec2<i32>, lod: u32) -> u32 {
 // The last point of a grid point's walk in `morph_cascade` from its first odd level `first`
 // (`next_odd_level`): the walk up without the positions. Every point of the walk lies between
 // it and `sample` (the walk only moves towards lower coordinates): the prepass's culling box
-// (`rect_reach`, which reads every corner's first step at once, `walk_past`). Mirrored by
+// (`reach_of`, which reads every corner's first step at once, `walk_past`). Mirrored by
 // `walk_end` in select.rs.
 fn walk_on(sample: vec2<i32>, first: u32) -> vec2<i32> {
     var point = sample;
     var j = first;
     loop {
-        if j >= udlod.sizes.y || morph_factor(point, j) == 0.0 {
+        if j >= udlod.sizes.y || !morph_moves(point, j) {
             break;
         }
         point = slid_at(point, j);
@@ -190,7 +205,7 @@ fn morph_moved(sample: vec2<i32>, lod: u32, first: u32, ramp: f32) -> Moved {
     m.moved = MORPH_ONE_LEVEL;
     let next = slid_at(sample, first);
     let j = next_odd_level(next, first + 1u);
-    if j < udlod.sizes.y && morph_factor(next, j) != 0.0 {
+    if j < udlod.sizes.y && morph_moves(next, j) {
         m.moved = MORPH_SLIVERS;
     }
     return m;

@@ -1479,12 +1479,21 @@ pub fn walk_end(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32
         if odd == [0, 0] {
             continue;
         }
-        if morph_factor(levels, p, point, j) == 0.0 {
+        if !morph_moves(levels, p, point, j) {
             break;
         }
         point = slid_at(point, j);
     }
     point
+}
+
+/// Whether [`morph_factor`] is not 0, without the fold's neighbour reads: the fold only lowers
+/// a factor above 1/2 to one of at least 1/2, so the factor is 0 exactly where the ramp is not
+/// above 0 or morphing is off. What the walks ask (`morph_moves` in
+/// `shaders/include/udlod_morph.wgsl`; on Mesa 22.3, which runs every branch, the fold's
+/// reads were two more ramps in each of the prepass's walk steps).
+pub fn morph_moves(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> bool {
+    p.morph && morph_ramp(levels, p, sample, lod) > 0.0
 }
 
 /// The reference selection: the same decisions as the GPU's refine passes, without capacity
@@ -1817,7 +1826,8 @@ pub fn morphed_vertex(
 #[cfg(test)]
 mod tests {
     use super::{
-        FieldKey, Levels, QUAD, SplitField, UdlodSettings, ZoneRule, field_terms, worst_case_share,
+        FieldKey, Levels, QUAD, SelectionParams, SplitField, UdlodSettings, ZoneRule, field_terms,
+        morph_factor, morph_moves, morph_ramp, worst_case_share,
     };
     use crate::dataset::procedural::{self, ProceduralParams};
 
@@ -1829,6 +1839,57 @@ mod tests {
             ..Default::default()
         })
         .unwrap()
+    }
+
+    /// `morph_moves` answers `morph_factor != 0` at every grid point of every level of the
+    /// test terrain from four poses, with morphing on and off; and the poses reach both
+    /// answers, and factors the fold lowered. Negative controls by hand: `morph_moves` without `p.morph` fails (morphing off),
+    /// and with `> 0.5` for `> 0.0` (a factor of 0.4994617 at level 0).
+    #[test]
+    fn morph_moves_is_a_nonzero_morph_factor() {
+        use crate::scene::Camera;
+        use glam::DVec3;
+        let data = test_terrain();
+        let (mut moving, mut still, mut folds) = (0u32, 0u32, 0u32);
+        for morph in [true, false] {
+            let settings = UdlodSettings {
+                morph,
+                ..UdlodSettings::default()
+            };
+            let levels = Levels::for_settings(&data, &settings).unwrap();
+            for (k, height) in [150.0, 400.0, 1200.0, 3000.0].into_iter().enumerate() {
+                let cam = Camera {
+                    position: DVec3::new(3000.0 + 2000.0 * k as f64, 4000.0, height),
+                    yaw_deg: 30.0 + 70.0 * k as f64,
+                    pitch_deg: -20.0,
+                    ..Camera::default()
+                };
+                let p =
+                    SelectionParams::new(&levels, &data, &settings, &cam, cam.position, 640, 360);
+                for lod in 0..levels.root_lod {
+                    let step = 1usize << lod;
+                    for y in (0..levels.height as i32).step_by(step) {
+                        for x in (0..levels.width as i32).step_by(step) {
+                            let f = morph_factor(&levels, &p, [x, y], lod);
+                            let moves = morph_moves(&levels, &p, [x, y], lod);
+                            assert_eq!(
+                                moves,
+                                f != 0.0,
+                                "morph {morph}, pose {k}, level {lod}, ({x}, {y}): factor {f}"
+                            );
+                            moving += moves as u32;
+                            still += !moves as u32;
+                            let ramp = morph_ramp(&levels, &p, [x, y], lod).clamp(0.0, 1.0);
+                            folds += (morph && f < ramp) as u32;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            moving > 0 && still > 0 && folds > 0,
+            "moving {moving}, still {still}, lowered by the fold {folds}"
+        );
     }
 
     /// Every field cell's morph zone (the last `max(W, r s)` of its split distance `s`) starts
