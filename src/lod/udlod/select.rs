@@ -1599,7 +1599,8 @@ pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod:
     let mut f = morph_ramp(levels, p, sample, lod).clamp(0.0, 1.0);
     // A point odd along both axes stays within `(1 + b) / 2`, `b` the smaller factor of its
     // neighbours at (1, 0) and (0, 1) of its block, or the triangle between the three turns
-    // over (docs/udlod.md, "Folds at the quads' diagonal").
+    // over (docs/udlod.md, "Folds at the quads' diagonal"). (The shader reads the two
+    // neighbours in a loop from a least factor of 1: the same minimum of values in [0, 1].)
     if f > 0.5 && sample.map(|v| (v as u32 >> lod) & 1) == [1, 1] {
         let step = 1 << lod;
         let along_x = morph_ramp(levels, p, [sample[0], sample[1] - step], lod).clamp(0.0, 1.0);
