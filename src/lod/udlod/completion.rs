@@ -109,13 +109,9 @@ impl CompletionField {
 
 #[cfg(test)]
 mod tests {
-    use glam::DVec3;
-
     use super::super::select;
     use super::*;
-    use crate::dataset::procedural::{self, ProceduralParams};
     use crate::lod::UdlodSettings;
-    use crate::scene::Camera;
 
     /// The completion lies at or before the split distance, so every quadrant today's morph
     /// collapses stays collapsed, whichever terms `r` keeps; with the pixel term alone some
@@ -124,23 +120,12 @@ mod tests {
     /// uncollapses quadrants (pose 0).
     #[test]
     fn completing_below_the_split_field_only_collapses_more() {
-        let data = procedural::generate(&ProceduralParams {
-            size: 257,
-            spacing: 60.0,
-            ..Default::default()
-        })
-        .unwrap();
+        let data = select::test_terrain();
         let settings = UdlodSettings::default();
         let levels = Levels::for_settings(&data, &settings).unwrap();
         let (mut today, mut below) = (0u32, [0u32; 3]);
-        for (k, height) in [150.0, 400.0, 1200.0, 3000.0].into_iter().enumerate() {
-            let cam = Camera {
-                position: DVec3::new(3000.0 + 2000.0 * k as f64, 4000.0, height),
-                yaw_deg: 30.0 + 70.0 * k as f64,
-                pitch_deg: -20.0,
-                ..Camera::default()
-            };
-            let p = SelectionParams::new(&levels, &data, &settings, &cam, cam.position, 640, 360);
+        for (k, cam) in select::test_poses().iter().enumerate() {
+            let p = SelectionParams::new(&levels, &data, &settings, cam, cam.position, 640, 360);
             let tiles = select::select_tiles(&levels, &p);
             for t in &tiles {
                 today += select::tile_collapse_mask(&levels, &p, *t).count_ones();

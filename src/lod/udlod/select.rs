@@ -1824,23 +1824,40 @@ pub fn morphed_vertex(
     }
 }
 
+/// The 257² procedural terrain (60 m) the unit tests of this module and of `completion` build
+/// their levels on.
+#[cfg(test)]
+pub(super) fn test_terrain() -> crate::dataset::Heightmap {
+    use crate::dataset::procedural::{self, ProceduralParams};
+    procedural::generate(&ProceduralParams {
+        size: 257,
+        spacing: 60.0,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
+/// Four cameras over [`test_terrain`], 150 m to 3 km up, looking down 20 degrees in four
+/// headings.
+#[cfg(test)]
+pub(super) fn test_poses() -> [crate::scene::Camera; 4] {
+    std::array::from_fn(|k| {
+        let height = [150.0, 400.0, 1200.0, 3000.0][k];
+        crate::scene::Camera {
+            position: glam::DVec3::new(3000.0 + 2000.0 * k as f64, 4000.0, height),
+            yaw_deg: 30.0 + 70.0 * k as f64,
+            pitch_deg: -20.0,
+            ..crate::scene::Camera::default()
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::{
         FieldKey, Levels, QUAD, SelectionParams, SplitField, UdlodSettings, ZoneRule, field_terms,
-        morph_factor, morph_moves, morph_ramp, worst_case_share,
+        morph_factor, morph_moves, morph_ramp, test_poses, test_terrain, worst_case_share,
     };
-    use crate::dataset::procedural::{self, ProceduralParams};
-
-    /// The 257² procedural terrain (60 m) the split-field tests build their levels on.
-    fn test_terrain() -> crate::dataset::Heightmap {
-        procedural::generate(&ProceduralParams {
-            size: 257,
-            spacing: 60.0,
-            ..Default::default()
-        })
-        .unwrap()
-    }
 
     /// `morph_moves` answers `morph_factor != 0` at every grid point of every level of the
     /// test terrain from four poses, with morphing on and off; and the poses reach both
@@ -1848,8 +1865,6 @@ mod tests {
     /// and with `> 0.5` for `> 0.0` (a factor of 0.4994617 at level 0).
     #[test]
     fn morph_moves_is_a_nonzero_morph_factor() {
-        use crate::scene::Camera;
-        use glam::DVec3;
         let data = test_terrain();
         let (mut moving, mut still, mut folds) = (0u32, 0u32, 0u32);
         for morph in [true, false] {
@@ -1858,15 +1873,9 @@ mod tests {
                 ..UdlodSettings::default()
             };
             let levels = Levels::for_settings(&data, &settings).unwrap();
-            for (k, height) in [150.0, 400.0, 1200.0, 3000.0].into_iter().enumerate() {
-                let cam = Camera {
-                    position: DVec3::new(3000.0 + 2000.0 * k as f64, 4000.0, height),
-                    yaw_deg: 30.0 + 70.0 * k as f64,
-                    pitch_deg: -20.0,
-                    ..Camera::default()
-                };
+            for (k, cam) in test_poses().iter().enumerate() {
                 let p =
-                    SelectionParams::new(&levels, &data, &settings, &cam, cam.position, 640, 360);
+                    SelectionParams::new(&levels, &data, &settings, cam, cam.position, 640, 360);
                 for lod in 0..levels.root_lod {
                     let step = 1usize << lod;
                     for y in (0..levels.height as i32).step_by(step) {
