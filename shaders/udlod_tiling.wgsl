@@ -195,7 +195,6 @@ fn tile_square(t: Tile) -> ReachSquare {
     return ReachSquare(vec2<i32>(i32(t.x), i32(t.y)) * span, span, t.lod, t);
 }
 
-
 fn square_corner(s: ReachSquare, k: u32) -> vec2<i32> {
     return s.c0 + vec2<i32>(i32(k & 1u), i32(k >> 1u)) * s.span;
 }
