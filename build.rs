@@ -11,6 +11,12 @@
 //! device picks one (`driver::shaders::FrameBlock`, docs/architecture.md, "Uniform buffers on
 //! Mesa 22.3").
 //!
+//! Every shader that includes `terrain_common.wgsl` declares the overrides [`TERRAIN_OVERRIDES`]
+//! (its world, flat or the earth, and its source of heights, the clipmap or one texture) and is
+//! compiled once per [`TERRAIN_VARIANTS`] entry with them set (naga's `process_overrides`, which
+//! also drops what the variant cannot reach), in both frame-block variants: `TerrainSpirv` in
+//! `driver::shaders`, picked per terrain (docs/architecture.md, "Shaders per terrain").
+//!
 //! Workgroup memory is zero-filled at the start of every compute entry point (WGSL's rule,
 //! naga's polyfill) unless the shader's own file has the line [`WORKGROUP_WRITTEN_FIRST`]: it
 //! then promises to write every workgroup variable before reading it, and the fill is left out
@@ -42,6 +48,46 @@ const FRAME_STORAGE: &str = "@group(0) @binding(0) var<storage, read> frame: Fra
 /// invocations (a fifth of UDLOD's prepass there; docs/architecture.md, "Workgroup memory
 /// written first").
 const WORKGROUP_WRITTEN_FIRST: &str = "//!workgroup-memory written-first";
+/// The overrides of a terrain shader (`shaders/include/terrain_common.wgsl`): whether it is built
+/// for the earth (the geolocation lattice) or the flat world, and whether its heights come from
+/// the clipmap or from the single height texture. build.rs compiles every shader that declares
+/// them once per [`TERRAIN_VARIANTS`] entry; the renderer picks one per terrain
+/// (`driver::shaders::TerrainVariant`). Lavapipe before Mesa 24 runs every branch of a shader
+/// whose condition comes from a storage buffer, so a build that holds both worlds or both
+/// height sources pays for the one it does not draw (docs/architecture.md, "Shaders per
+/// terrain").
+const TERRAIN_OVERRIDES: [&str; 2] = ["EARTH_WORLD", "CLIPMAP_HEIGHTS"];
+
+/// One terrain variant: its field name in `driver::shaders::TerrainSpirv` (and file suffix) and
+/// the values of [`TERRAIN_OVERRIDES`].
+struct TerrainVariant {
+    name: &'static str,
+    earth: bool,
+    clipmap: bool,
+}
+
+const TERRAIN_VARIANTS: [TerrainVariant; 4] = [
+    TerrainVariant {
+        name: "flat_texture",
+        earth: false,
+        clipmap: false,
+    },
+    TerrainVariant {
+        name: "flat_clipmap",
+        earth: false,
+        clipmap: true,
+    },
+    TerrainVariant {
+        name: "earth_texture",
+        earth: true,
+        clipmap: false,
+    },
+    TerrainVariant {
+        name: "earth_clipmap",
+        earth: true,
+        clipmap: true,
+    },
+];
 /// Defined in the GLSL storage variant (`shaders/glsl/include/terrain_common.glsl`).
 const GLSL_FRAME_STORAGE: &str = "VKTERRAIN_FRAME_STORAGE";
 
@@ -102,9 +148,13 @@ fn workgroup_memory_init(path: &Path) -> naga::back::spv::ZeroInitializeWorkgrou
     }
 }
 
-/// Compiles composed WGSL (`compose_wgsl` of `path`) to SPIR-V with naga (validator on); fails
-/// the build with the file and line of an error.
-fn compile_wgsl(path: &Path, source: &str, map: &[LineOrigin]) -> Vec<u8> {
+/// Parses and validates composed WGSL (`compose_wgsl` of `path`) with naga; fails the build with
+/// the file and line of an error.
+fn parse_wgsl(
+    path: &Path,
+    source: &str,
+    map: &[LineOrigin],
+) -> (naga::Module, naga::valid::ModuleInfo) {
     let locate = |offset: Option<usize>| -> String {
         let Some(offset) = offset else {
             return path.display().to_string();
@@ -143,6 +193,54 @@ fn compile_wgsl(path: &Path, source: &str, map: &[LineOrigin]) -> Vec<u8> {
             e.emit_to_string_with_path(source, &path.display().to_string())
         ))
     });
+    (module, info)
+}
+
+/// Whether `module` declares the terrain variant's overrides ([`TERRAIN_OVERRIDES`]); fails the
+/// build on any other override, or on one of them without the other.
+fn has_terrain_overrides(path: &Path, module: &naga::Module) -> bool {
+    let names: Vec<&str> = module
+        .overrides
+        .iter()
+        .map(|(_, o)| o.name.as_deref().unwrap_or("(unnamed)"))
+        .collect();
+    if let Some(other) = names.iter().find(|n| !TERRAIN_OVERRIDES.contains(n)) {
+        fail(&format!(
+            "{}: override {other} is not one of {TERRAIN_OVERRIDES:?}, the only ones build.rs sets",
+            path.display()
+        ));
+    }
+    match names.len() {
+        0 => false,
+        n if n == TERRAIN_OVERRIDES.len() => true,
+        _ => fail(&format!(
+            "{}: declares {names:?}; a terrain shader declares all of {TERRAIN_OVERRIDES:?}",
+            path.display()
+        )),
+    }
+}
+
+/// SPIR-V of a validated module; a terrain shader's overrides set to `variant`'s values first.
+fn write_spirv(
+    path: &Path,
+    module: &naga::Module,
+    info: &naga::valid::ModuleInfo,
+    variant: Option<&TerrainVariant>,
+) -> Vec<u8> {
+    let mut constants = naga::back::PipelineConstants::default();
+    if let Some(v) = variant {
+        constants.insert(
+            TERRAIN_OVERRIDES[0].to_string(),
+            f64::from(u8::from(v.earth)),
+        );
+        constants.insert(
+            TERRAIN_OVERRIDES[1].to_string(),
+            f64::from(u8::from(v.clipmap)),
+        );
+    }
+    let (module, info) =
+        naga::back::pipeline_constants::process_overrides(module, info, None, &constants)
+            .unwrap_or_else(|e| fail(&format!("{}: overrides: {e}", path.display())));
     let options = naga::back::spv::Options {
         lang_version: (1, 3),
         // Shaders are written in WebGPU clip space (y up); naga flips y for Vulkan.
@@ -162,9 +260,9 @@ fn compile_wgsl(path: &Path, source: &str, map: &[LineOrigin]) -> Vec<u8> {
     words.iter().flat_map(|w| w.to_le_bytes()).collect()
 }
 
-/// The Rust item for one shader's SPIR-V: `Spirv { frame_uniform, frame_storage }` from the
-/// files `{file}.spv` and, for a shader that reads the frame's block, `{file}.frame_storage.spv`.
-fn spirv_item(doc: &str, upper: &str, file: &str, has_storage: bool) -> String {
+/// A `Spirv { frame_uniform, frame_storage }` value from the files `{file}.spv` and, for a shader
+/// that reads the frame's block, `{file}.frame_storage.spv`.
+fn spirv_value(file: &str, has_storage: bool) -> String {
     let bytes = |name: String| format!("include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{name}\"))");
     let storage = if has_storage {
         format!("Some({})", bytes(format!("{file}.frame_storage.spv")))
@@ -172,8 +270,29 @@ fn spirv_item(doc: &str, upper: &str, file: &str, has_storage: bool) -> String {
         "None".to_string()
     };
     format!(
-        "/// SPIR-V of {doc}.\npub static {upper}_SPV: Spirv = Spirv {{\n    frame_uniform: {},\n    frame_storage: {storage},\n}};",
+        "Spirv {{ frame_uniform: {}, frame_storage: {storage} }}",
         bytes(format!("{file}.spv"))
+    )
+}
+
+/// The Rust item for one shader's SPIR-V: a [`spirv_value`] of `file`.
+fn spirv_item(doc: &str, upper: &str, file: &str, has_storage: bool) -> String {
+    format!(
+        "/// SPIR-V of {doc}.\npub static {upper}_SPV: Spirv = {};",
+        spirv_value(file, has_storage)
+    )
+}
+
+/// The Rust item for a terrain shader's SPIR-V: `TerrainSpirv` with a [`spirv_value`] per
+/// variant (`{file}.{variant}.spv`).
+fn terrain_spirv_item(doc: &str, upper: &str, file: &str, has_storage: bool) -> String {
+    let mut fields = String::new();
+    for v in &TERRAIN_VARIANTS {
+        let value = spirv_value(&format!("{file}.{}", v.name), has_storage);
+        writeln!(fields, "    {}: {value},", v.name).unwrap();
+    }
+    format!(
+        "/// SPIR-V of {doc}, per terrain variant.\npub static {upper}_SPV: TerrainSpirv = TerrainSpirv {{\n{fields}}};"
     )
 }
 
@@ -207,25 +326,45 @@ fn main() {
     for path in &shader_files {
         let stem = path.file_stem().unwrap().to_string_lossy().to_string();
         let (source, map) = compose_wgsl(path, &prelude);
-        let bytes = compile_wgsl(path, &source, &map);
         std::fs::write(out_dir.join(format!("{stem}.composed.wgsl")), &source).unwrap();
-        std::fs::write(out_dir.join(format!("{stem}.spv")), bytes).unwrap();
         let has_storage = source.lines().any(|l| l.trim() == FRAME_UNIFORM);
-        if has_storage {
-            let storage = source.replace(FRAME_UNIFORM, FRAME_STORAGE);
-            let bytes = compile_wgsl(path, &storage, &map);
-            std::fs::write(out_dir.join(format!("{stem}.frame_storage.spv")), bytes).unwrap();
-        } else if source.contains("frame: Frame;") {
+        if !has_storage && source.contains("frame: Frame;") {
             fail(&format!(
                 "{}: declares the frame block otherwise than `{FRAME_UNIFORM}`, so no storage variant can be built",
                 path.display()
             ));
         }
+        let uniform = parse_wgsl(path, &source, &map);
+        let storage = has_storage
+            .then(|| parse_wgsl(path, &source.replace(FRAME_UNIFORM, FRAME_STORAGE), &map));
+        let terrain = has_terrain_overrides(path, &uniform.0);
+        let variants: Vec<Option<&TerrainVariant>> = if terrain {
+            TERRAIN_VARIANTS.iter().map(Some).collect()
+        } else {
+            vec![None]
+        };
+        for variant in variants {
+            let file = match variant {
+                Some(v) => format!("{stem}.{}", v.name),
+                None => stem.clone(),
+            };
+            let bytes = write_spirv(path, &uniform.0, &uniform.1, variant);
+            std::fs::write(out_dir.join(format!("{file}.spv")), bytes).unwrap();
+            if let Some((module, info)) = &storage {
+                let bytes = write_spirv(path, module, info, variant);
+                std::fs::write(out_dir.join(format!("{file}.frame_storage.spv")), bytes).unwrap();
+            }
+        }
         let upper = stem.to_uppercase();
+        let doc = format!("`shaders/{stem}.wgsl`");
+        let item = if terrain {
+            terrain_spirv_item(&doc, &upper, &stem, has_storage)
+        } else {
+            spirv_item(&doc, &upper, &stem, has_storage)
+        };
         writeln!(
             generated,
-            "/// `shaders/{stem}.wgsl` as compiled (constants and includes expanded).\npub static {upper}_WGSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.composed.wgsl\"));\n{}",
-            spirv_item(&format!("`shaders/{stem}.wgsl`"), &upper, &stem, has_storage)
+            "/// `shaders/{stem}.wgsl` as compiled (constants and includes expanded).\npub static {upper}_WGSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.composed.wgsl\"));\n{item}"
         )
         .unwrap();
     }

@@ -120,7 +120,7 @@ fn chunk_culled(t: Chunk) -> bool {
     if chunked.params.z < 0.5 {
         return false;
     }
-    if frame.lattice.x != 0u {
+    if EARTH_WORLD {
         let span = i32(chunked.sizes.x << t.lod);
         let last = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
         let c0 = vec2<i32>(i32(t.x) * span, i32(t.y) * span);

@@ -256,7 +256,7 @@ fn reach_of(s: ReachSquare, reads: ReachReads) -> TileReach {
 // the earth the curved box over it (`earth_box`, the one every method culls with there).
 fn reach_box(r: TileReach) -> Box3 {
     let mm = r.min_max;
-    if frame.lattice.x != 0u {
+    if EARTH_WORLD {
         return earth_box(r.lo, r.hi, mm);
     }
     let z = mm - vec2<f32>(frame.camera_offset.z);

@@ -242,8 +242,13 @@ fn both(
     glsl_spv: Spirv,
 ) -> [Vec<TerrainProbePoint>; 2] {
     [
-        r.probe_terrain_helpers(0, TERRAIN_PROBE_SPV, c"probe_main", points)
-            .unwrap(),
+        r.probe_terrain_helpers(
+            0,
+            TERRAIN_PROBE_SPV.variant(r.terrain_variant()),
+            c"probe_main",
+            points,
+        )
+        .unwrap(),
         r.probe_terrain_helpers(0, glsl_spv, c"main", points)
             .unwrap(),
     ]

@@ -28,6 +28,13 @@ struct Frame {
 // that driver a shader rebuild per frame (`driver::shaders::FrameBlock`, docs/architecture.md,
 // "Uniform buffers on Mesa 22.3"). Keep the line as it is: build.rs finds it by its text.
 @group(0) @binding(0) var<uniform> frame: Frame;
+// What this build of the shader draws: set by build.rs per variant (`driver::shaders::
+// TerrainVariant`, one per terrain: `frame.lattice.x != 0` exactly when EARTH_WORLD, the
+// clipmap's `params.x != 0` exactly when CLIPMAP_HEIGHTS). Branches on them are gone before the
+// driver sees the shader; lavapipe before Mesa 24 runs both sides of a branch on a storage
+// buffer's value (docs/architecture.md, "Shaders per terrain").
+override EARTH_WORLD: bool;
+override CLIPMAP_HEIGHTS: bool;
 // Heights in metres, one texel per sample, read with textureLoad (exact values, no filtering).
 @group(0) @binding(1) var height_tex: texture_2d<f32>;
 // Unit normals per sample (RGBA8 snorm), filtered in the fragment stage.
@@ -53,12 +60,12 @@ fn texture_height(s: vec2<i32>) -> f32 {
     return textureLoad(height_tex, clamp(s, vec2<i32>(0), hi), 0).r;
 }
 
-// Height in metres at an integer sample, clamped to the data: through the clipmap when it is
-// enabled (a uniform branch), else from the single height texture.
+// Height in metres at an integer sample, clamped to the data: through the clipmap in its
+// variant, else from the single height texture.
 fn sample_height(s: vec2<i32>) -> f32 {
     let hi = vec2<i32>(frame.data_size.xy) - vec2<i32>(1);
     let c = clamp(s, vec2<i32>(0), hi);
-    if clipmap.params.x != 0u {
+    if CLIPMAP_HEIGHTS {
         return clipmap_height(vec2<f32>(c));
     }
     return textureLoad(height_tex, c, 0).r;
@@ -67,7 +74,7 @@ fn sample_height(s: vec2<i32>) -> f32 {
 // Bilinear height at a position in sample units; exact at integer positions (weights 1 and 0).
 // Through the clipmap: one lookup, bilinear within the best resident node (clamped to the data).
 fn height_at(grid_pos: vec2<f32>) -> f32 {
-    if clipmap.params.x != 0u {
+    if CLIPMAP_HEIGHTS {
         let hi = vec2<f32>(frame.data_size.xy) - vec2<f32>(1.0);
         return clipmap_height(clamp(grid_pos, vec2<f32>(0.0), hi));
     }
@@ -95,8 +102,7 @@ fn lattice_up(node: vec2<i32>) -> vec3<f32> {
 // integers, so precision does not depend on the distance from the world origin. On the earth:
 // the geolocation lattice interpolated bilinearly (camera-relative corners) plus height * up.
 fn relative_position(cell: vec2<i32>, frac: vec2<f32>, height_m: f32) -> vec3<f32> {
-    let lstep = i32(frame.lattice.x);
-    if lstep == 0 {
+    if !EARTH_WORLD {
         let spacing = frame.camera_offset.w;
         let rel_xy = vec2<f32>(cell - frame.camera_cell.xy) * spacing + frac * spacing - frame.camera_offset.xy;
         return vec3<f32>(rel_xy, height_m - frame.camera_offset.z);
@@ -202,7 +208,7 @@ fn shade(v: TerrainVertex) -> vec4<f32> {
     let gy = dpdy(grid_pos);
     var n: vec3<f32>;
     var albedo: vec3<f32>;
-    if clipmap.params.x != 0u {
+    if CLIPMAP_HEIGHTS {
         let s = clipmap_surface(grid_pos, gx, gy);
         n = s.normal;
         albedo = s.albedo;

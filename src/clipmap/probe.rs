@@ -6,6 +6,7 @@ use std::sync::Arc;
 use ash::vk;
 
 use crate::driver::Gpu;
+use crate::driver::shaders::TerrainVariant;
 use crate::error::Result;
 use crate::gpu_constants::CLIPMAP_PROBE_WORKGROUP;
 
@@ -19,10 +20,12 @@ pub enum ProbeKind {
 }
 
 /// Tests and tools: evaluates `kind` on the GPU for each point (level-0 sample units),
-/// through descriptor set 0 `frame_set` (the state of the frame that set last rendered).
+/// through descriptor set 0 `frame_set` (the state of the frame that set last rendered) and the
+/// build of the terrain shaders `variant` (the terrain's).
 /// Waits.
 pub fn probe(
     gpu: &Arc<Gpu>,
+    variant: TerrainVariant,
     frame_layout: vk::DescriptorSetLayout,
     frame_set: vk::DescriptorSet,
     points: &[[f32; 2]],
@@ -37,7 +40,7 @@ pub fn probe(
     let io = [bytemuck::bytes_of(&header), bytemuck::cast_slice(&items)].concat();
     let out = crate::driver::probe::run(
         gpu,
-        crate::driver::shaders::CLIPMAP_PROBE_SPV,
+        crate::driver::shaders::CLIPMAP_PROBE_SPV.variant(variant),
         match kind {
             ProbeKind::Heights => c"probe_main",
             ProbeKind::Normals => c"probe_surface_main",

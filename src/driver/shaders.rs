@@ -95,6 +95,77 @@ impl Spirv {
     }
 }
 
+/// The world a terrain shader is built for (`EARTH_WORLD` in
+/// `shaders/include/terrain_common.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShaderWorld {
+    /// The grid on the tangent plane: positions from the camera's sample cell.
+    Flat,
+    /// The samples where they lie on the earth: positions through the geolocation lattice.
+    Earth,
+}
+
+/// Where a terrain shader reads heights, normals and albedo (`CLIPMAP_HEIGHTS`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShaderHeights {
+    /// The single height, normal and albedo textures (bindings 1-3).
+    Texture,
+    /// The chunked clipmap's atlas through the view's quadtree (bindings 5-8).
+    Clipmap,
+}
+
+/// Which build of a terrain shader draws a terrain: every shader that includes
+/// `terrain_common.wgsl` is compiled once per world and source of heights, each holding only
+/// its own paths, so no driver runs the other ones (lavapipe before Mesa 24 runs both sides of
+/// a branch on a storage buffer's value: docs/architecture.md, "Shaders per terrain").
+/// `frame::TerrainGpu::variant` gives the terrain's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TerrainVariant {
+    pub world: ShaderWorld,
+    pub heights: ShaderHeights,
+}
+
+impl TerrainVariant {
+    /// The variant for a terrain drawn through a geolocation lattice or not (`earth`), from the
+    /// clipmap or not (`clipmap`).
+    pub const fn new(earth: bool, clipmap: bool) -> TerrainVariant {
+        TerrainVariant {
+            world: if earth {
+                ShaderWorld::Earth
+            } else {
+                ShaderWorld::Flat
+            },
+            heights: if clipmap {
+                ShaderHeights::Clipmap
+            } else {
+                ShaderHeights::Texture
+            },
+        }
+    }
+}
+
+/// A terrain shader's SPIR-V per [`TerrainVariant`] (`build.rs` compiles each with its
+/// overrides set).
+#[derive(Clone, Copy, Debug)]
+pub struct TerrainSpirv {
+    pub flat_texture: Spirv,
+    pub flat_clipmap: Spirv,
+    pub earth_texture: Spirv,
+    pub earth_clipmap: Spirv,
+}
+
+impl TerrainSpirv {
+    /// The build for `variant`.
+    pub const fn variant(self, variant: TerrainVariant) -> Spirv {
+        match (variant.world, variant.heights) {
+            (ShaderWorld::Flat, ShaderHeights::Texture) => self.flat_texture,
+            (ShaderWorld::Flat, ShaderHeights::Clipmap) => self.flat_clipmap,
+            (ShaderWorld::Earth, ShaderHeights::Texture) => self.earth_texture,
+            (ShaderWorld::Earth, ShaderHeights::Clipmap) => self.earth_clipmap,
+        }
+    }
+}
+
 /// Creates a shader module from the variant of `spv` for `gpu`'s frame block.
 pub fn module(gpu: &Gpu, spv: Spirv) -> Result<vk::ShaderModule> {
     let bytes = spv.bytes(gpu.frame_block);
@@ -111,16 +182,19 @@ pub fn module(gpu: &Gpu, spv: Spirv) -> Result<vk::ShaderModule> {
 mod tests {
     use super::*;
 
+    const VARIANTS: [TerrainVariant; 4] = [
+        TerrainVariant::new(false, false),
+        TerrainVariant::new(false, true),
+        TerrainVariant::new(true, false),
+        TerrainVariant::new(true, true),
+    ];
+
     #[test]
     fn every_shader_that_reads_the_frame_block_has_a_storage_variant() {
         // The probe and the methods' shaders read `frame`; the evaluator's metrics do not.
-        for spv in [
-            BRUTE_SPV,
-            UDLOD_SPV,
-            UDLOD_TILING_SPV,
-            TESS_EQUAL_TESE_SPV,
-            TERRAIN_PROBE_COMP_SPV,
-        ] {
+        let terrain = [BRUTE_SPV, UDLOD_SPV, UDLOD_TILING_SPV];
+        let builds = terrain.iter().flat_map(|t| VARIANTS.map(|v| t.variant(v)));
+        for spv in builds.chain([TESS_EQUAL_TESE_SPV, TERRAIN_PROBE_COMP_SPV]) {
             let storage = spv.frame_storage.expect("a storage variant");
             assert_ne!(storage, spv.frame_uniform);
             assert_eq!(spv.bytes(FrameBlock::Storage), storage);
@@ -131,5 +205,30 @@ mod tests {
             EVAL_METRICS_SPV.bytes(FrameBlock::Storage),
             EVAL_METRICS_SPV.frame_uniform
         );
+    }
+
+    #[test]
+    fn each_terrain_build_is_compiled_with_its_own_world_and_heights() {
+        // naga leaves the branch an override decides in the SPIR-V with a constant condition
+        // (the driver drops the dead side), so builds that differ in a value the shader reads
+        // differ in their bytes; one that reads neither setting comes out identical.
+        let [flat_texture, flat_clipmap, earth_texture, earth_clipmap] = VARIANTS;
+        for (name, spv) in [("udlod", UDLOD_SPV), ("brute", BRUTE_SPV)] {
+            for block in [FrameBlock::Uniform, FrameBlock::Storage] {
+                let bytes = |v| spv.variant(v).bytes(block);
+                for (a, b) in [
+                    (flat_texture, flat_clipmap),
+                    (earth_texture, earth_clipmap),
+                    (flat_texture, earth_texture),
+                    (flat_clipmap, earth_clipmap),
+                ] {
+                    assert_ne!(bytes(a), bytes(b), "{name} {block:?}: {a:?} and {b:?}");
+                }
+            }
+        }
+        // UDLOD's prepass reads no heights, but culls through the lattice on the earth.
+        let tiling = |v| UDLOD_TILING_SPV.variant(v).frame_uniform;
+        assert_eq!(tiling(flat_texture), tiling(flat_clipmap));
+        assert_ne!(tiling(flat_clipmap), tiling(earth_clipmap));
     }
 }

@@ -12,7 +12,7 @@ use crate::dataset::{Heightmap, Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::{Buffer, Image};
-use crate::driver::shaders::FrameBlock;
+use crate::driver::shaders::{FrameBlock, TerrainVariant};
 use crate::error::{Error, Result, VkResultExt};
 use crate::slots::ViewSlot;
 
@@ -100,6 +100,9 @@ pub struct TerrainGpu {
     /// Set 0: one per view slot (they differ in their uniform buffer and clipmap quadtree).
     pub descriptors: DescriptorSets,
     uniforms: Vec<Buffer>,
+    /// The build of the terrain shaders that draws this terrain (its world and its source of
+    /// heights), as the frame block's `lattice.x` and the clipmap's `params.x` say at run time.
+    pub variant: TerrainVariant,
 }
 
 impl TerrainGpu {
@@ -209,6 +212,7 @@ impl TerrainGpu {
             sampler,
             descriptors,
             uniforms,
+            variant: TerrainVariant::new(lattice.is_some(), clipmap.enabled),
         })
     }
 }

@@ -67,7 +67,7 @@ impl BruteForce {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: crate::driver::shaders::BRUTE_SPV,
+                spv: crate::driver::shaders::BRUTE_SPV.variant(ctx.terrain.variant),
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout],

@@ -322,6 +322,12 @@ impl Renderer {
         &self.terrain.info
     }
 
+    /// The build of the terrain shaders this renderer draws with (its world and source of
+    /// heights): what a probe of a terrain shader must run.
+    pub fn terrain_variant(&self) -> crate::driver::shaders::TerrainVariant {
+        self.terrain.variant
+    }
+
     /// The LOD method (for its counters and, in tests, its tile list).
     pub fn method(&self) -> &dyn LodMethod {
         self.method.as_ref()

@@ -77,6 +77,7 @@ impl Renderer {
         let slot = self.last_view_slot("probe_heights", view)?;
         crate::clipmap::probe::probe(
             &self.gpu,
+            self.terrain.variant,
             self.terrain.descriptors.layout,
             self.terrain.set(slot),
             points,
@@ -123,7 +124,7 @@ impl Renderer {
                 format!("method {} has no set to probe", self.method.name()),
             )
         })?;
-        crate::lod::chunked::probe::probe(&self.gpu, frame, set, port, inputs)
+        crate::lod::chunked::probe::probe(&self.gpu, frame, set, port, self.terrain.variant, inputs)
     }
 
     /// The view slot view `view` used in the last rendered frame, once that frame is done.

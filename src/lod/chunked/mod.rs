@@ -152,7 +152,7 @@ impl Pipelines {
         draw: ChunkDraw,
     ) -> Result<Self> {
         let gpu = ctx.gpu;
-        let spv = crate::driver::shaders::CHUNKED_SELECT_SPV;
+        let spv = crate::driver::shaders::CHUNKED_SELECT_SPV.variant(ctx.terrain.variant);
         let c = |entry: &std::ffi::CStr| compute_pipeline(gpu, spv, entry, set_layouts);
         Ok(Pipelines {
             prepare: c(c"prepare")?,
@@ -175,7 +175,7 @@ impl Pipelines {
         draw: ChunkDraw,
     ) -> Result<Pipeline> {
         let desc = TerrainPipelineDesc {
-            spv: crate::driver::shaders::CHUNKED_SPV,
+            spv: crate::driver::shaders::CHUNKED_SPV.variant(ctx.terrain.variant),
             vertex_entry: c"vs_main",
             fragment_entry: c"fs_main",
             set_layouts,

@@ -10,6 +10,7 @@ use std::sync::Arc;
 use ash::vk;
 
 use crate::driver::Gpu;
+use crate::driver::shaders::TerrainVariant;
 use crate::error::Result;
 use crate::gpu_constants::UDLOD_PROBE_WORKGROUP;
 use crate::lod::udlod::select::Tile;
@@ -36,21 +37,25 @@ pub enum Port {
 }
 
 impl Port {
-    fn shader(self) -> (crate::driver::shaders::Spirv, &'static CStr) {
+    fn shader(self, variant: TerrainVariant) -> (crate::driver::shaders::Spirv, &'static CStr) {
         match self {
-            Port::Wgsl => (crate::driver::shaders::CHUNKED_PROBE_SPV, c"probe_samples"),
+            Port::Wgsl => (
+                crate::driver::shaders::CHUNKED_PROBE_SPV.variant(variant),
+                c"probe_samples",
+            ),
             Port::Glsl => (crate::driver::shaders::CHUNKED_PROBE_COMP_SPV, c"main"),
         }
     }
 }
 
 /// `chunk_sample` for each `(chunk, local vertex)` with set 0 `frame` and chunked set 1
-/// `chunked` (layout, set) bound. Waits for the GPU.
+/// `chunked` (layout, set) bound, the WGSL built for `variant` (the terrain's). Waits for the GPU.
 pub fn probe(
     gpu: &Arc<Gpu>,
     frame: (vk::DescriptorSetLayout, vk::DescriptorSet),
     chunked: (vk::DescriptorSetLayout, vk::DescriptorSet),
     port: Port,
+    variant: TerrainVariant,
     inputs: &[(Tile, [u32; 2])],
 ) -> Result<Vec<[i32; 2]>> {
     if inputs.is_empty() {
@@ -66,7 +71,7 @@ pub fn probe(
         })
         .collect();
     let io = [bytemuck::bytes_of(&header), bytemuck::cast_slice(&items)].concat();
-    let (spv, entry) = port.shader();
+    let (spv, entry) = port.shader(variant);
     let out = crate::driver::probe::run(
         gpu,
         spv,

@@ -275,7 +275,7 @@ impl Geomipmap {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: crate::driver::shaders::GEOMIPMAP_SPV,
+                spv: crate::driver::shaders::GEOMIPMAP_SPV.variant(ctx.terrain.variant),
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout],

@@ -512,7 +512,7 @@ fn require_linear_filter(gpu: &Gpu, format: vk::Format) -> Result<()> {
 fn earth_pass(gpu: &Arc<Gpu>, ctx: &MethodContext<'_>, sets: &DescriptorSets) -> Result<Pipeline> {
     compute_pipeline(
         gpu,
-        crate::driver::shaders::PGM_EARTH_SPV,
+        crate::driver::shaders::PGM_EARTH_SPV.variant(ctx.terrain.variant),
         c"prepare_earth",
         &[ctx.terrain.descriptors.layout, sets.layout],
     )
@@ -661,7 +661,7 @@ impl Pgm {
             gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: crate::driver::shaders::PGM_SPV,
+                spv: crate::driver::shaders::PGM_SPV.variant(ctx.terrain.variant),
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout, sets.layout],

@@ -223,7 +223,7 @@ impl Tessellation {
             ctx.gpu,
             &ctx.formats,
             &TerrainPipelineDesc {
-                spv: s::TESS_SPV,
+                spv: s::TESS_SPV.variant(ctx.terrain.variant),
                 vertex_entry: c"vs_main",
                 fragment_entry: c"fs_main",
                 set_layouts: &[ctx.terrain.descriptors.layout, set1],

@@ -305,6 +305,9 @@ pub struct Udlod {
     heights: Terrain,
     /// The geolocation lattice (None: the flat world), for the CPU reference's curved boxes.
     lattice: Option<Arc<crate::geo::Lattice>>,
+    /// The build of the terrain shaders this terrain draws with (tests' morph probe too).
+    #[cfg_attr(not(feature = "test-support"), allow(dead_code))]
+    variant: crate::driver::shaders::TerrainVariant,
     /// The split field of the last key asked for (per-tile split distances).
     field: Option<Arc<SplitField>>,
     /// GPU mirror of `levels.min_max` (bound in every slot's set, written again when a slot's
@@ -432,7 +435,7 @@ impl Udlod {
                 ctx.gpu,
                 &ctx.formats,
                 &TerrainPipelineDesc {
-                    spv: crate::driver::shaders::UDLOD_SPV,
+                    spv: crate::driver::shaders::UDLOD_SPV.variant(ctx.terrain.variant),
                     vertex_entry: entry,
                     fragment_entry: c"fs_main",
                     set_layouts,
@@ -482,7 +485,7 @@ impl Udlod {
             .map(|(i, &set)| SlotBuffers::new(gpu, &sets, (i, set), (first, field_bytes), &min_max))
             .collect::<Result<Vec<_>>>()?;
         let set_layouts = [ctx.terrain.descriptors.layout, sets.layout];
-        let tiling = crate::driver::shaders::UDLOD_TILING_SPV;
+        let tiling = crate::driver::shaders::UDLOD_TILING_SPV.variant(ctx.terrain.variant);
         let prepare = compute_pipeline(gpu, tiling, c"prepare", &set_layouts)?;
         let refine = compute_pipeline(gpu, tiling, c"refine", &set_layouts)?;
         let finish = compute_pipeline(gpu, tiling, c"finish", &set_layouts)?;
@@ -493,6 +496,7 @@ impl Udlod {
             settings,
             heights: ctx.data.clone(),
             lattice: ctx.lattice.cloned(),
+            variant: ctx.terrain.variant,
             levels,
             field: None,
             min_max,
@@ -943,6 +947,6 @@ impl LodMethod for Udlod {
         inputs: &[(select::Tile, [u32; 2])],
     ) -> Result<Option<Vec<probe::ProbedVertex>>> {
         let udlod = (self.sets.layout, self.slots[slot.index()].set);
-        probe::probe(&self.gpu, frame, udlod, inputs).map(Some)
+        probe::probe(&self.gpu, self.variant, frame, udlod, inputs).map(Some)
     }
 }

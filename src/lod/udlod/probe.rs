@@ -10,6 +10,7 @@ use ash::vk;
 
 use super::select::Tile;
 use crate::driver::Gpu;
+use crate::driver::shaders::TerrainVariant;
 use crate::error::Result;
 use crate::gpu_constants::UDLOD_PROBE_WORKGROUP;
 
@@ -43,9 +44,10 @@ pub struct ProbedVertex {
 }
 
 /// Evaluates the morph for each `(tile, local vertex)` with set 0 `frame` and UDLOD set 1
-/// `udlod` (layout, set) bound. Waits for the GPU.
+/// `udlod` (layout, set) bound, the probe built for `variant` (the terrain's). Waits for the GPU.
 pub fn probe(
     gpu: &Arc<Gpu>,
+    variant: TerrainVariant,
     frame: (vk::DescriptorSetLayout, vk::DescriptorSet),
     udlod: (vk::DescriptorSetLayout, vk::DescriptorSet),
     inputs: &[(Tile, [u32; 2])],
@@ -65,7 +67,7 @@ pub fn probe(
     let io = [bytemuck::bytes_of(&header), bytemuck::cast_slice(&items)].concat();
     let out = crate::driver::probe::run(
         gpu,
-        crate::driver::shaders::UDLOD_PROBE_SPV,
+        crate::driver::shaders::UDLOD_PROBE_SPV.variant(variant),
         c"probe_vertices",
         &[frame, udlod],
         &io,
