@@ -13,9 +13,10 @@
 //!
 //! Every shader that includes `terrain_common.wgsl` declares the overrides [`TERRAIN_OVERRIDES`]
 //! (its world, flat or the earth, and its source of heights, the clipmap or one texture) and is
-//! compiled once per [`TERRAIN_VARIANTS`] entry with them set (naga's `process_overrides`, which
-//! also drops what the variant cannot reach), in both frame-block variants: `TerrainSpirv` in
-//! `driver::shaders`, picked per terrain (docs/architecture.md, "Shaders per terrain").
+//! compiled once per [`TERRAIN_VARIANTS`] entry with them set (naga's `process_overrides`: the
+//! branches they decide keep a constant condition, whose dead side the driver drops), in both
+//! frame-block variants: `TerrainSpirv` in `driver::shaders`, picked per terrain
+//! (docs/architecture.md, "Shaders per terrain").
 //!
 //! Workgroup memory is zero-filled at the start of every compute entry point (WGSL's rule,
 //! naga's polyfill) unless the shader's own file has the line [`WORKGROUP_WRITTEN_FIRST`]: it
@@ -60,29 +61,29 @@ const TERRAIN_OVERRIDES: [&str; 2] = ["EARTH_WORLD", "CLIPMAP_HEIGHTS"];
 
 /// One terrain variant: its field name in `driver::shaders::TerrainSpirv` (and file suffix) and
 /// the values of [`TERRAIN_OVERRIDES`].
-struct TerrainVariant {
+struct TerrainBuild {
     name: &'static str,
     earth: bool,
     clipmap: bool,
 }
 
-const TERRAIN_VARIANTS: [TerrainVariant; 4] = [
-    TerrainVariant {
+const TERRAIN_VARIANTS: [TerrainBuild; 4] = [
+    TerrainBuild {
         name: "flat_texture",
         earth: false,
         clipmap: false,
     },
-    TerrainVariant {
+    TerrainBuild {
         name: "flat_clipmap",
         earth: false,
         clipmap: true,
     },
-    TerrainVariant {
+    TerrainBuild {
         name: "earth_texture",
         earth: true,
         clipmap: false,
     },
-    TerrainVariant {
+    TerrainBuild {
         name: "earth_clipmap",
         earth: true,
         clipmap: true,
@@ -225,7 +226,7 @@ fn write_spirv(
     path: &Path,
     module: &naga::Module,
     info: &naga::valid::ModuleInfo,
-    variant: Option<&TerrainVariant>,
+    variant: Option<&TerrainBuild>,
 ) -> Vec<u8> {
     let mut constants = naga::back::PipelineConstants::default();
     if let Some(v) = variant {
@@ -338,7 +339,7 @@ fn main() {
         let storage = has_storage
             .then(|| parse_wgsl(path, &source.replace(FRAME_UNIFORM, FRAME_STORAGE), &map));
         let terrain = has_terrain_overrides(path, &uniform.0);
-        let variants: Vec<Option<&TerrainVariant>> = if terrain {
+        let variants: Vec<Option<&TerrainBuild>> = if terrain {
             TERRAIN_VARIANTS.iter().map(Some).collect()
         } else {
             vec![None]

@@ -187,9 +187,15 @@ fn render(
     }
 }
 
-/// The WGSL terrain probe built for `r`'s terrain (its world and source of heights).
-fn wgsl_probe(r: &Renderer) -> Spirv {
-    TERRAIN_PROBE_SPV.variant(r.terrain_variant())
+/// [`probe`] with the WGSL terrain probe built for `r`'s terrain (its world and source of
+/// heights).
+fn probe_wgsl(r: &Renderer, pts: &[([i32; 2], [f32; 2])]) -> Vec<TerrainProbePoint> {
+    probe(
+        r,
+        TERRAIN_PROBE_SPV.variant(r.terrain_variant()),
+        c"probe_main",
+        pts,
+    )
 }
 
 fn probe(
@@ -280,7 +286,7 @@ fn gpu_projection_equals_the_cpu_mirror_and_the_glsl_port() {
             pts.push(([col, row], [0.37, 0.81]));
         }
     }
-    let wgsl = probe(&r.renderer, wgsl_probe(&r.renderer), c"probe_main", &pts);
+    let wgsl = probe_wgsl(&r.renderer, &pts);
     let glsl = probe(&r.renderer, TERRAIN_PROBE_COMP_SPV, c"main", &pts);
     let differing = wgsl.iter().zip(&glsl).filter(|(a, b)| a != b).count();
     assert_eq!(
@@ -457,18 +463,8 @@ fn landmark_spikes_project_where_f64_geodesy_puts_them() {
             );
             let flat = render(&gpu, &data, MethodKind::Brute, None, (w, h), &[camera]);
             let pts: Vec<_> = spikes.iter().map(|(s, _)| (*s, [0.0f32, 0.0])).collect();
-            let got = probe(
-                &geo.renderer,
-                wgsl_probe(&geo.renderer),
-                c"probe_main",
-                &pts,
-            );
-            let got_flat = probe(
-                &flat.renderer,
-                wgsl_probe(&flat.renderer),
-                c"probe_main",
-                &pts,
-            );
+            let got = probe_wgsl(&geo.renderer, &pts);
+            let got_flat = probe_wgsl(&flat.renderer, &pts);
             for (k, (s, hs)) in spikes.iter().enumerate() {
                 let p = enu(
                     lat0,
@@ -608,18 +604,8 @@ fn landmarks_above_the_geoid_project_where_their_ellipsoidal_height_puts_them() 
             &[before],
         );
         let pts: Vec<_> = spikes.iter().map(|(s, _)| (*s, [0.0f32, 0.0])).collect();
-        let got = probe(
-            &geo.renderer,
-            wgsl_probe(&geo.renderer),
-            c"probe_main",
-            &pts,
-        );
-        let got_old = probe(
-            &old.renderer,
-            wgsl_probe(&old.renderer),
-            c"probe_main",
-            &pts,
-        );
+        let got = probe_wgsl(&geo.renderer, &pts);
+        let got_old = probe_wgsl(&old.renderer, &pts);
         let mut worst_old = 0.0f64;
         for (k, (s, hs)) in spikes.iter().enumerate() {
             let (la, lo) = spike_at(*s);
@@ -1020,7 +1006,7 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
             expected.push((lat, lon, source[gy * sw + gx]));
         }
     }
-    let got = probe(&renderer, wgsl_probe(&renderer), c"probe_main", &pts);
+    let got = probe_wgsl(&renderer, &pts);
     let geoid = egm96_undulations(&expected.iter().map(|e| (e.0, e.1)).collect::<Vec<_>>());
     let lattice = config
         .open_lattice(&terrain, vkterrain::render::EarthGeometry::Ellipsoid)
