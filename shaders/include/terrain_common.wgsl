@@ -30,9 +30,9 @@ struct Frame {
 @group(0) @binding(0) var<uniform> frame: Frame;
 // What this build of the shader draws: set by build.rs per variant (`driver::shaders::
 // TerrainVariant`, one per terrain: `frame.lattice.x != 0` exactly when EARTH_WORLD, the
-// clipmap's `params.x != 0` exactly when CLIPMAP_HEIGHTS). Branches on them are gone before the
-// driver sees the shader; lavapipe before Mesa 24 runs both sides of a branch on a storage
-// buffer's value (docs/architecture.md, "Shaders per terrain").
+// clipmap's `params.x != 0` exactly when CLIPMAP_HEIGHTS). naga leaves a branch on them with a
+// constant condition, whose dead side the driver drops; lavapipe before Mesa 24 runs both sides
+// of a branch on a storage buffer's value (docs/architecture.md, "Shaders per terrain").
 override EARTH_WORLD: bool;
 override CLIPMAP_HEIGHTS: bool;
 // Heights in metres, one texel per sample, read with textureLoad (exact values, no filtering).
