@@ -25,7 +25,9 @@
 //!
 //! The stages naga cannot compile (tessellation, task, mesh) are GLSL under `shaders/glsl/`,
 //! composed the same way (a `#define` per shared constant) and compiled by glslangValidator:
-//! see `build/glsl.rs`.
+//! see `build/glsl.rs`. The terrain variants are `#define`s there (`EARTH_WORLD` and
+//! `CLIPMAP_HEIGHTS`, `true` or `false`), the frame block's storage variant
+//! `VKTERRAIN_FRAME_STORAGE`.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -57,7 +59,7 @@ const WORKGROUP_WRITTEN_FIRST: &str = "//!workgroup-memory written-first";
 /// whose condition comes from a storage buffer, so a build that holds both worlds or both
 /// height sources pays for the one it does not draw (docs/architecture.md, "Shaders per
 /// terrain").
-const TERRAIN_OVERRIDES: [&str; 2] = ["EARTH_WORLD", "CLIPMAP_HEIGHTS"];
+const TERRAIN_OVERRIDES: [&str; 2] = glsl::TERRAIN_SETTINGS;
 
 /// One terrain variant: its field name in `driver::shaders::TerrainSpirv` (and file suffix) and
 /// the values of [`TERRAIN_OVERRIDES`].
@@ -374,7 +376,10 @@ fn main() {
 }
 
 /// Compiles every `shaders/glsl/*.<stage>` with glslangValidator; appends `<STEM>_<STAGE>_SPV`
-/// and `<STEM>_<STAGE>_GLSL` (the composed source) to `generated`.
+/// and `<STEM>_<STAGE>_GLSL` (the composed source, before any variant's defines) to
+/// `generated`. A file whose composed source names [`TERRAIN_OVERRIDES`] is a terrain shader:
+/// compiled once per [`TERRAIN_VARIANTS`] entry with them `#define`d, as the WGSL's overrides
+/// are set, into a `TerrainSpirv`.
 fn compile_glsl(out_dir: &Path, generated: &mut String) {
     let dir = Path::new("shaders/glsl");
     let include_dir = dir.join("include");
@@ -396,11 +401,6 @@ fn compile_glsl(out_dir: &Path, generated: &mut String) {
             .iter()
             .map(|(name, value)| (*name, value.wgsl().1)),
     );
-    let mut storage_prelude = prelude.clone();
-    storage_prelude.push(format!("#define {GLSL_FRAME_STORAGE} 1"));
-    let work = out_dir.join("glsl");
-    let storage_work = work.join("frame_storage");
-    std::fs::create_dir_all(&storage_work).unwrap();
     let (major, minor, patch) = glslang.version;
     writeln!(
         generated,
@@ -409,46 +409,88 @@ fn compile_glsl(out_dir: &Path, generated: &mut String) {
     )
     .unwrap();
     for path in &files {
-        let compiled = glsl::compile(&glslang, path, &include_dir, &prelude, &work)
-            .unwrap_or_else(|e| fail(&e));
-        let has_storage = compiled.composed.contains(GLSL_FRAME_STORAGE);
-        let storage = has_storage.then(|| {
-            glsl::compile(
-                &glslang,
-                path,
-                &include_dir,
-                &storage_prelude,
-                &storage_work,
-            )
-            .unwrap_or_else(|e| fail(&e))
-        });
-        for source in &compiled.sources {
+        let (composed, sources) =
+            glsl::compose(path, &include_dir, &prelude).unwrap_or_else(|e| fail(&e));
+        for source in &sources {
             println!("cargo:rerun-if-changed={}", source.display());
         }
-        for w in &compiled.warnings {
-            println!("cargo:warning={}: {w}", path.display());
-        }
+        let has_storage = composed.contains(GLSL_FRAME_STORAGE);
+        let terrain = TERRAIN_OVERRIDES
+            .iter()
+            .any(|name| glsl_names(&composed, name));
         let name = path
             .file_name()
             .unwrap()
             .to_string_lossy()
             .replace('.', "_");
-        std::fs::write(out_dir.join(format!("{name}.spv")), &compiled.spv).unwrap();
-        if let Some(storage) = &storage {
-            std::fs::write(
-                out_dir.join(format!("{name}.frame_storage.spv")),
-                &storage.spv,
-            )
-            .unwrap();
+        let variants: Vec<Option<&TerrainBuild>> = if terrain {
+            TERRAIN_VARIANTS.iter().map(Some).collect()
+        } else {
+            vec![None]
+        };
+        for (index, variant) in variants.into_iter().enumerate() {
+            let file = match variant {
+                Some(v) => format!("{name}.{}", v.name),
+                None => name.clone(),
+            };
+            let mut defines = prelude.clone();
+            if let Some(v) = variant {
+                defines.extend(glsl::terrain_defines(v.earth, v.clipmap));
+            }
+            let work = out_dir.join("glsl").join(&file);
+            let uniform = compile_glsl_build(&glslang, path, &include_dir, &defines, &work);
+            if index == 0 {
+                for w in &uniform.warnings {
+                    println!("cargo:warning={}: {w}", path.display());
+                }
+            }
+            std::fs::write(out_dir.join(format!("{file}.spv")), &uniform.spv).unwrap();
+            if has_storage {
+                defines.push(format!("#define {GLSL_FRAME_STORAGE} 1"));
+                let work = work.join("frame_storage");
+                let storage = compile_glsl_build(&glslang, path, &include_dir, &defines, &work);
+                std::fs::write(
+                    out_dir.join(format!("{file}.frame_storage.spv")),
+                    &storage.spv,
+                )
+                .unwrap();
+            }
         }
-        std::fs::write(out_dir.join(format!("{name}.glsl")), &compiled.composed).unwrap();
+        std::fs::write(out_dir.join(format!("{name}.glsl")), &composed).unwrap();
         let upper = name.to_uppercase();
-        let file = path.display();
+        let doc = format!("`{}` (glslangValidator)", path.display());
+        let item = if terrain {
+            terrain_spirv_item(&doc, &upper, &name, has_storage)
+        } else {
+            spirv_item(&doc, &upper, &name, has_storage)
+        };
         writeln!(
             generated,
-            "{}\n/// `{file}` as compiled (constants and includes expanded).\npub static {upper}_GLSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{name}.glsl\"));",
-            spirv_item(&format!("`{file}` (glslangValidator)"), &upper, &name, has_storage)
+            "/// `{}` as compiled (constants and includes expanded).\npub static {upper}_GLSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{name}.glsl\"));\n{item}",
+            path.display()
         )
         .unwrap();
     }
+}
+
+/// One glslang build of `path` in its own work directory; fails the build on an error.
+fn compile_glsl_build(
+    glslang: &glsl::Glslang,
+    path: &Path,
+    include_dir: &Path,
+    prelude: &[String],
+    work: &Path,
+) -> glsl::Compiled {
+    std::fs::create_dir_all(work).unwrap();
+    glsl::compile(glslang, path, include_dir, prelude, work).unwrap_or_else(|e| fail(&e))
+}
+
+/// Whether `source` uses `name` as an identifier (not as part of a longer one).
+fn glsl_names(source: &str, name: &str) -> bool {
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    source.match_indices(name).any(|(i, _)| {
+        let before = source[..i].chars().next_back();
+        let after = source[i + name.len()..].chars().next();
+        !before.is_some_and(ident) && !after.is_some_and(ident)
+    })
 }

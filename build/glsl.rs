@@ -200,6 +200,20 @@ fn append_lines(
     Ok(())
 }
 
+/// The names of a terrain variant's two settings, its world (the earth or the flat one) and its
+/// source of heights (the clipmap or the single texture): WGSL overrides in
+/// `shaders/include/terrain_common.wgsl`, `#define`s in the GLSL port.
+pub const TERRAIN_SETTINGS: [&str; 2] = ["EARTH_WORLD", "CLIPMAP_HEIGHTS"];
+
+/// The `#define`s that make a GLSL build one terrain variant's, as the WGSL's overrides do.
+pub fn terrain_defines(earth: bool, clipmap: bool) -> [String; 2] {
+    let [world, heights] = TERRAIN_SETTINGS;
+    [
+        format!("#define {world} {earth}"),
+        format!("#define {heights} {clipmap}"),
+    ]
+}
+
 /// The `#define` prelude for `(name, literal)` constants.
 pub fn prelude<'a>(constants: impl IntoIterator<Item = (&'a str, String)>) -> Vec<String> {
     constants

@@ -287,7 +287,8 @@ fn gpu_projection_equals_the_cpu_mirror_and_the_glsl_port() {
         }
     }
     let wgsl = probe_wgsl(&r.renderer, &pts);
-    let glsl = probe(&r.renderer, TERRAIN_PROBE_COMP_SPV, c"main", &pts);
+    let glsl_spv = TERRAIN_PROBE_COMP_SPV.variant(r.renderer.terrain_variant());
+    let glsl = probe(&r.renderer, glsl_spv, c"main", &pts);
     let differing = wgsl.iter().zip(&glsl).filter(|(a, b)| a != b).count();
     assert_eq!(
         differing, 0,

@@ -19,7 +19,8 @@ use vkterrain::clipmap::{Clipmap, ClipmapSettings, DatasetSource, Geometry};
 use vkterrain::dataset::procedural::ProceduralParams;
 use vkterrain::dataset::{Heightmap, tiles};
 use vkterrain::driver::shaders::{
-    Spirv, TERRAIN_PROBE_COMP_GLSL, TERRAIN_PROBE_COMP_SPV, TERRAIN_PROBE_SPV,
+    ShaderHeights, ShaderWorld, Spirv, TERRAIN_PROBE_COMP_GLSL, TERRAIN_PROBE_COMP_SPV,
+    TERRAIN_PROBE_SPV, TerrainVariant,
 };
 use vkterrain::gpu_constants::WGSL_CONSTANTS;
 use vkterrain::lod::MethodKind;
@@ -241,6 +242,7 @@ fn both(
     points: &[TerrainProbePoint],
     glsl_spv: Spirv,
 ) -> [Vec<TerrainProbePoint>; 2] {
+    // Both builds are the terrain's (the renderer's world and source of heights).
     [
         r.probe_terrain_helpers(
             0,
@@ -254,10 +256,13 @@ fn both(
     ]
 }
 
-/// The GLSL probe compiled from the port with `mutation` (needle, replacement) applied.
-/// The GLSL probe with one mutation in the port, in both frame-block variants as build.rs
-/// builds them (leaked: embedded shaders are `'static`).
-fn mutated_probe(name: &str, (needle, replacement): (&str, &str)) -> Spirv {
+/// The GLSL probe with one mutation (needle, replacement) in the port, built for `variant` in
+/// both frame-block variants as build.rs builds them (leaked: embedded shaders are `'static`).
+fn mutated_probe(
+    name: &str,
+    (needle, replacement): (&str, &str),
+    variant: TerrainVariant,
+) -> Spirv {
     let dir = scratch(name);
     let port = std::fs::read_to_string("shaders/glsl/include/terrain_common.glsl").unwrap();
     assert!(
@@ -271,21 +276,22 @@ fn mutated_probe(name: &str, (needle, replacement): (&str, &str)) -> Spirv {
     );
     let probe = std::fs::read_to_string("shaders/glsl/terrain_probe.comp").unwrap();
     let main = write(&dir, "terrain_probe.comp", &probe);
-    let uniform = compile(&dir, &main).unwrap().spv;
-    let mut storage_prelude = prelude();
-    storage_prelude.push("#define VKTERRAIN_FRAME_STORAGE 1".into());
+    let mut defines = prelude();
+    defines.extend(glsl::terrain_defines(
+        variant.world == ShaderWorld::Earth,
+        variant.heights == ShaderHeights::Clipmap,
+    ));
+    let glslang = glsl::Glslang::find().expect("glslangValidator (make deps)");
+    let include = dir.join("include");
+    let uniform = glsl::compile(&glslang, &main, &include, &defines, &dir)
+        .unwrap()
+        .spv;
+    defines.push("#define VKTERRAIN_FRAME_STORAGE 1".into());
     let storage_dir = dir.join("frame_storage");
     std::fs::create_dir_all(&storage_dir).unwrap();
-    let glslang = glsl::Glslang::find().expect("glslangValidator (make deps)");
-    let storage = glsl::compile(
-        &glslang,
-        &main,
-        &dir.join("include"),
-        &storage_prelude,
-        &storage_dir,
-    )
-    .unwrap()
-    .spv;
+    let storage = glsl::compile(&glslang, &main, &include, &defines, &storage_dir)
+        .unwrap()
+        .spv;
     let _ = std::fs::remove_dir_all(&dir);
     Spirv {
         frame_uniform: Vec::leak(uniform),
@@ -303,7 +309,11 @@ fn glsl_port_equals_the_wgsl_helpers_on_the_single_texture_path() {
     .unwrap();
     let points = probe_points(data.width, data.height);
     let r = rendered(&gpu, &data, None);
-    let [wgsl, port] = both(&r, &points, TERRAIN_PROBE_COMP_SPV);
+    let [wgsl, port] = both(
+        &r,
+        &points,
+        TERRAIN_PROBE_COMP_SPV.variant(r.terrain_variant()),
+    );
     assert_eq!(
         differing(&wgsl, &port),
         0,
@@ -320,6 +330,7 @@ fn glsl_port_equals_the_wgsl_helpers_on_the_single_texture_path() {
             "ivec2 c = clamp(s, ivec2(0), hi);",
             "ivec2 c = clamp(s, ivec2(0), hi - ivec2(1));",
         ),
+        r.terrain_variant(),
     );
     let [_, mutated] = both(&r, &points, wrong);
     assert!(
@@ -349,7 +360,11 @@ fn glsl_port_equals_the_wgsl_helpers_through_the_clipmap() {
     let cm = Clipmap::new(Geometry::of(&ds.dataset), settings, Arc::new(ds), 1).unwrap();
     let points = probe_points(data.width, data.height);
     let r = rendered(&gpu, &data, Some(cm));
-    let [wgsl, port] = both(&r, &points, TERRAIN_PROBE_COMP_SPV);
+    let [wgsl, port] = both(
+        &r,
+        &points,
+        TERRAIN_PROBE_COMP_SPV.variant(r.terrain_variant()),
+    );
     assert_eq!(
         differing(&wgsl, &port),
         0,
@@ -362,6 +377,7 @@ fn glsl_port_equals_the_wgsl_helpers_through_the_clipmap() {
             "clamp(d * blend_inv, 0.0, 1.0)",
             "clamp(d * blend_inv * 0.5, 0.0, 1.0)",
         ),
+        r.terrain_variant(),
     );
     let [_, mutated] = both(&r, &points, wrong);
     assert!(

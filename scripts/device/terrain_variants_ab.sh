@@ -7,6 +7,8 @@
 #   ci_earth  the same terrain on the earth, UDLOD at tau 1, and brute force
 #   default   the main job's terrain (flat, through the clipmap), UDLOD at its tau; its pyramid
 #             is generated there first (target/data/default, `vkterrain preprocess`)
+# SET=tessellation runs hardware tessellation over the same three terrains instead (its GLSL
+# stages got their builds per terrain in the thirty-first round).
 # Here, before carrying: both `--no-default-features` release builds stripped into
 # .device-vk (prepare.sh for the loader). Run there from the repository root:
 #   bash scripts/device/terrain_variants_ab.sh > $OUT/variants.txt 2>&1
@@ -22,6 +24,13 @@ runs=(
   "ci_earth brute|config/ci_earth.toml --method brute"
   "default udlod|config/default.toml --method udlod"
 )
+if [ "${SET:-}" = tessellation ]; then
+  runs=(
+    "ci tessellation|config/ci.toml --method tessellation"
+    "ci_earth tessellation|config/ci_earth.toml --method tessellation"
+    "default tessellation|config/default.toml --method tessellation"
+  )
+fi
 for run in "${runs[@]}"; do
   name=${run%%|*}
   args=${run#*|}

@@ -25,7 +25,7 @@ float edge_level(int a, int b) {
     // the height difference; on the earth the chord between the corners through the lattice
     // (a native geographic grid's samples are not square: east-west spacing shrinks with
     // cos(lat), and the grid's one nominal spacing is only one of the two).
-    vec3 d = frame.lattice.x != 0u
+    vec3 d = EARTH_WORLD
         ? relative_position(ivec2(in_grid[a]), vec2(0.0), in_height[a])
             - relative_position(ivec2(in_grid[b]), vec2(0.0), in_height[b])
         : vec3((in_grid[a] - in_grid[b]) * frame.camera_offset.w, in_height[a] - in_height[b]);
@@ -49,7 +49,7 @@ float edge_level(int a, int b) {
 // as `earth_box` grows the other methods' boxes: docs/coordinates.md, "Culling with
 // curvature"); 0 on the flat world.
 float earth_bulge() {
-    if (frame.lattice.x == 0u) {
+    if (!EARTH_WORLD) {
         return 0.0;
     }
     vec3 p0 = relative_position(ivec2(in_grid[0]), vec2(0.0), 0.0);

@@ -192,9 +192,14 @@ mod tests {
     #[test]
     fn every_shader_that_reads_the_frame_block_has_a_storage_variant() {
         // The probe and the methods' shaders read `frame`; the evaluator's metrics do not.
-        let terrain = [BRUTE_SPV, UDLOD_SPV, UDLOD_TILING_SPV];
-        let builds = terrain.iter().flat_map(|t| VARIANTS.map(|v| t.variant(v)));
-        for spv in builds.chain([TESS_EQUAL_TESE_SPV, TERRAIN_PROBE_COMP_SPV]) {
+        let terrain = [
+            BRUTE_SPV,
+            UDLOD_SPV,
+            UDLOD_TILING_SPV,
+            TESS_EQUAL_TESE_SPV,
+            TERRAIN_PROBE_COMP_SPV,
+        ];
+        for spv in terrain.iter().flat_map(|t| VARIANTS.map(|v| t.variant(v))) {
             let storage = spv.frame_storage.expect("a storage variant");
             assert_ne!(storage, spv.frame_uniform);
             assert_eq!(spv.bytes(FrameBlock::Storage), storage);
@@ -213,7 +218,13 @@ mod tests {
         // (the driver drops the dead side), so builds that differ in a value the shader reads
         // differ in their bytes; one that reads neither setting comes out identical.
         let [flat_texture, flat_clipmap, earth_texture, earth_clipmap] = VARIANTS;
-        for (name, spv) in [("udlod", UDLOD_SPV), ("brute", BRUTE_SPV)] {
+        // The GLSL stages get the same settings as `#define`s (glslang drops what they decide).
+        for (name, spv) in [
+            ("udlod", UDLOD_SPV),
+            ("brute", BRUTE_SPV),
+            ("tessellation evaluation", TESS_EQUAL_TESE_SPV),
+            ("GLSL terrain probe", TERRAIN_PROBE_COMP_SPV),
+        ] {
             for block in [FrameBlock::Uniform, FrameBlock::Storage] {
                 let bytes = |v| spv.variant(v).bytes(block);
                 for (a, b) in [
@@ -230,5 +241,10 @@ mod tests {
         let tiling = |v| UDLOD_TILING_SPV.variant(v).frame_uniform;
         assert_eq!(tiling(flat_texture), tiling(flat_clipmap));
         assert_ne!(tiling(flat_clipmap), tiling(earth_clipmap));
+        // Tessellation control measures its edges through the lattice on the earth and reads
+        // its corners' heights from the vertex stage.
+        let control = |v| TESS_TESC_SPV.variant(v).frame_uniform;
+        assert_eq!(control(flat_texture), control(flat_clipmap));
+        assert_ne!(control(flat_texture), control(earth_texture));
     }
 }

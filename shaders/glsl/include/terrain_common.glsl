@@ -33,6 +33,10 @@ layout(set = 0, binding = 0, std140) uniform Frame {
     vec4 camera_hi;
     vec4 camera_lo;
 } frame;
+// What this build draws, as the WGSL's overrides: build.rs defines EARTH_WORLD and
+// CLIPMAP_HEIGHTS (true or false) per terrain variant (`driver::shaders::TerrainVariant`:
+// `frame.lattice.x != 0` exactly when EARTH_WORLD, the clipmap's `params.x != 0` exactly when
+// CLIPMAP_HEIGHTS), so no stage branches on a buffer's value for them.
 layout(set = 0, binding = 1) uniform texture2D height_tex;
 
 // The chunked clipmap (docs/clipmap.md), bindings 5 and 6.
@@ -181,12 +185,12 @@ float texture_height(ivec2 s) {
     return texelFetch(height_tex, clamp(s, ivec2(0), hi), 0).r;
 }
 
-// Height in metres at an integer sample, clamped to the data: through the clipmap when it is
-// enabled (a uniform branch), else from the single height texture.
+// Height in metres at an integer sample, clamped to the data: through the clipmap in its
+// variant, else from the single height texture.
 float sample_height(ivec2 s) {
     ivec2 hi = ivec2(frame.data_size.xy) - ivec2(1);
     ivec2 c = clamp(s, ivec2(0), hi);
-    if (clipmap.params.x != 0u) {
+    if (CLIPMAP_HEIGHTS) {
         return clipmap_height(vec2(c));
     }
     return texelFetch(height_tex, c, 0).r;
@@ -194,7 +198,7 @@ float sample_height(ivec2 s) {
 
 // Bilinear height at a position in sample units; exact at integer positions.
 float height_at(vec2 grid_pos) {
-    if (clipmap.params.x != 0u) {
+    if (CLIPMAP_HEIGHTS) {
         vec2 hi = vec2(frame.data_size.xy) - vec2(1.0);
         return clipmap_height(clamp(grid_pos, vec2(0.0), hi));
     }
@@ -242,8 +246,7 @@ LatticePoint lattice_point(ivec2 cell, vec2 frac_) {
 // Camera-relative position (metres, world axes) of a surface point: the flat world's integer
 // cell subtraction, or the geolocation lattice interpolated bilinearly plus height * up.
 vec3 relative_position(ivec2 cell, vec2 frac_, float height_m) {
-    int step_ = int(frame.lattice.x);
-    if (step_ == 0) {
+    if (!EARTH_WORLD) {
         float spacing = frame.camera_offset.w;
         vec2 rel_xy = vec2(cell - frame.camera_cell.xy) * spacing + frac_ * spacing - frame.camera_offset.xy;
         return vec3(rel_xy, height_m - frame.camera_offset.z);

@@ -13,7 +13,7 @@ layout(location = 0) out vec2 out_grid_pos;
 // or, with `surface = "mesh"` (tess.flags.z, not through the clipmap), brute force's triangles
 // (each quad split along its (c+1, r)-(c, r+1) diagonal), the reference eval measures against.
 float surface_height(vec2 g) {
-    if (tess.flags.z == 0u || clipmap.params.x != 0u) {
+    if (tess.flags.z == 0u || CLIPMAP_HEIGHTS) {
         return height_at(g);
     }
     vec2 base = floor(g);

@@ -188,8 +188,8 @@ impl Pipelines {
                 ctx.gpu,
                 &ctx.formats,
                 &desc,
-                crate::driver::shaders::CHUNKED_TASK_SPV,
-                crate::driver::shaders::CHUNKED_MESH_SPV,
+                crate::driver::shaders::CHUNKED_TASK_SPV.variant(ctx.terrain.variant),
+                crate::driver::shaders::CHUNKED_MESH_SPV.variant(ctx.terrain.variant),
             ),
         }
     }

@@ -43,13 +43,16 @@ impl Port {
                 crate::driver::shaders::CHUNKED_PROBE_SPV.variant(variant),
                 c"probe_samples",
             ),
-            Port::Glsl => (crate::driver::shaders::CHUNKED_PROBE_COMP_SPV, c"main"),
+            Port::Glsl => (
+                crate::driver::shaders::CHUNKED_PROBE_COMP_SPV.variant(variant),
+                c"main",
+            ),
         }
     }
 }
 
 /// `chunk_sample` for each `(chunk, local vertex)` with set 0 `frame` and chunked set 1
-/// `chunked` (layout, set) bound, the WGSL built for `variant` (the terrain's). Waits for the GPU.
+/// `chunked` (layout, set) bound, the shader built for `variant` (the terrain's). Waits for the GPU.
 pub fn probe(
     gpu: &Arc<Gpu>,
     frame: (vk::DescriptorSetLayout, vk::DescriptorSet),

@@ -231,8 +231,8 @@ impl Tessellation {
                 cull_back_faces: true,
             },
             &TessellationStages {
-                control_spv: s::TESS_TESC_SPV,
-                evaluation_spv,
+                control_spv: s::TESS_TESC_SPV.variant(ctx.terrain.variant),
+                evaluation_spv: evaluation_spv.variant(ctx.terrain.variant),
                 control_points: 3,
             },
         )
