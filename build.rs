@@ -409,68 +409,99 @@ fn compile_glsl(out_dir: &Path, generated: &mut String) {
     )
     .unwrap();
     for path in &files {
-        let (composed, sources) =
-            glsl::compose(path, &include_dir, &prelude).unwrap_or_else(|e| fail(&e));
-        for source in &sources {
-            println!("cargo:rerun-if-changed={}", source.display());
-        }
-        let has_storage = composed.contains(GLSL_FRAME_STORAGE);
-        let terrain = TERRAIN_OVERRIDES
-            .iter()
-            .any(|name| glsl_names(&composed, name));
-        let name = path
-            .file_name()
-            .unwrap()
-            .to_string_lossy()
-            .replace('.', "_");
-        let variants: Vec<Option<&TerrainBuild>> = if terrain {
-            TERRAIN_VARIANTS.iter().map(Some).collect()
-        } else {
-            vec![None]
-        };
-        for (index, variant) in variants.into_iter().enumerate() {
-            let file = match variant {
-                Some(v) => format!("{name}.{}", v.name),
-                None => name.clone(),
-            };
-            let mut defines = prelude.clone();
-            if let Some(v) = variant {
-                defines.extend(glsl::terrain_defines(v.earth, v.clipmap));
-            }
-            let work = out_dir.join("glsl").join(&file);
-            let uniform = compile_glsl_build(&glslang, path, &include_dir, &defines, &work);
-            if index == 0 {
-                for w in &uniform.warnings {
-                    println!("cargo:warning={}: {w}", path.display());
-                }
-            }
-            std::fs::write(out_dir.join(format!("{file}.spv")), &uniform.spv).unwrap();
-            if has_storage {
-                defines.push(format!("#define {GLSL_FRAME_STORAGE} 1"));
-                let work = work.join("frame_storage");
-                let storage = compile_glsl_build(&glslang, path, &include_dir, &defines, &work);
-                std::fs::write(
-                    out_dir.join(format!("{file}.frame_storage.spv")),
-                    &storage.spv,
-                )
-                .unwrap();
-            }
-        }
-        std::fs::write(out_dir.join(format!("{name}.glsl")), &composed).unwrap();
-        let upper = name.to_uppercase();
-        let doc = format!("`{}` (glslangValidator)", path.display());
-        let item = if terrain {
-            terrain_spirv_item(&doc, &upper, &name, has_storage)
-        } else {
-            spirv_item(&doc, &upper, &name, has_storage)
-        };
-        writeln!(
-            generated,
-            "/// `{}` as compiled (constants and includes expanded).\npub static {upper}_GLSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{name}.glsl\"));\n{item}",
-            path.display()
-        )
-        .unwrap();
+        let item = compile_glsl_file(&glslang, path, &include_dir, &prelude, out_dir);
+        writeln!(generated, "{item}").unwrap();
     }
+}
+
+/// Compiles one GLSL file: every build of it (per terrain variant where it names
+/// [`TERRAIN_OVERRIDES`], per frame block where it reads the frame), written to `out_dir`, the
+/// builds at once (glslang runs single-threaded). Returns its Rust items.
+fn compile_glsl_file(
+    glslang: &glsl::Glslang,
+    path: &Path,
+    include_dir: &Path,
+    prelude: &[String],
+    out_dir: &Path,
+) -> String {
+    let (composed, sources) =
+        glsl::compose(path, include_dir, prelude).unwrap_or_else(|e| fail(&e));
+    for source in &sources {
+        println!("cargo:rerun-if-changed={}", source.display());
+    }
+    let has_storage = composed.contains(GLSL_FRAME_STORAGE);
+    let terrain = TERRAIN_OVERRIDES
+        .iter()
+        .any(|name| glsl_names(&composed, name));
+    let name = path
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .replace('.', "_");
+    let variants: Vec<Option<&TerrainBuild>> = if terrain {
+        TERRAIN_VARIANTS.iter().map(Some).collect()
+    } else {
+        vec![None]
+    };
+    let mut builds = Vec::new();
+    for variant in variants {
+        let file = match variant {
+            Some(v) => format!("{name}.{}", v.name),
+            None => name.clone(),
+        };
+        let mut defines = prelude.to_vec();
+        if let Some(v) = variant {
+            defines.extend(glsl::terrain_defines(v.earth, v.clipmap));
+        }
+        if has_storage {
+            let mut storage = defines.clone();
+            storage.push(format!("#define {GLSL_FRAME_STORAGE} 1"));
+            builds.push((format!("{file}.frame_storage"), storage));
+        }
+        builds.push((file, defines));
+    }
+    let warnings = compile_glsl_builds(glslang, path, include_dir, &builds, out_dir);
+    for w in &warnings {
+        println!("cargo:warning={}: {w}", path.display());
+    }
+    std::fs::write(out_dir.join(format!("{name}.glsl")), &composed).unwrap();
+    let upper = name.to_uppercase();
+    let doc = format!("`{}` (glslangValidator)", path.display());
+    let item = if terrain {
+        terrain_spirv_item(&doc, &upper, &name, has_storage)
+    } else {
+        spirv_item(&doc, &upper, &name, has_storage)
+    };
+    format!(
+        "/// `{}` as compiled (constants and includes expanded).\npub static {upper}_GLSL: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{name}.glsl\"));\n{item}",
+        path.display()
+    )
+}
+
+/// Every `(file, defines)` build of `path` at once, each to `out_dir/{file}.spv`; returns the
+/// last build's warnings (every build warns alike).
+fn compile_glsl_builds(
+    glslang: &glsl::Glslang,
+    path: &Path,
+    include_dir: &Path,
+    builds: &[(String, Vec<String>)],
+    out_dir: &Path,
+) -> Vec<String> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = builds
+            .iter()
+            .map(|(file, defines)| {
+                scope.spawn(move || {
+                    let work = out_dir.join("glsl").join(file);
+                    let build = compile_glsl_build(glslang, path, include_dir, defines, &work);
+                    std::fs::write(out_dir.join(format!("{file}.spv")), &build.spv).unwrap();
+                    build.warnings
+                })
+            })
+            .collect();
+        let warnings: Vec<Vec<String>> = handles.into_iter().map(|h| h.join().unwrap()).collect();
+        warnings.into_iter().last().unwrap_or_default()
+    })
 }
 
 /// One glslang build of `path` in its own work directory; fails the build on an error.
