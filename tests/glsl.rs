@@ -242,7 +242,7 @@ fn both(
     points: &[TerrainProbePoint],
     glsl_spv: Spirv,
 ) -> [Vec<TerrainProbePoint>; 2] {
-    // Both builds are the terrain's (the renderer's world and source of heights).
+    // The WGSL build is the terrain's; callers pass the GLSL build of the same variant.
     [
         r.probe_terrain_helpers(
             0,

@@ -115,9 +115,10 @@ pub enum ShaderHeights {
 }
 
 /// Which build of a terrain shader draws a terrain: every shader that includes
-/// `terrain_common.wgsl` is compiled once per world and source of heights, each holding only
-/// its own paths, so no driver runs the other ones (lavapipe before Mesa 24 runs both sides of
-/// a branch on a storage buffer's value: docs/architecture.md, "Shaders per terrain").
+/// `terrain_common.wgsl` (or, in GLSL, `terrain_common.glsl`) is compiled once per world and
+/// source of heights, each deciding those branches at build time, so no driver runs the other
+/// paths (lavapipe before Mesa 24 runs both sides of a branch on a storage buffer's value:
+/// docs/architecture.md, "Shaders per terrain").
 /// `frame::TerrainGpu::variant` gives the terrain's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TerrainVariant {
@@ -145,7 +146,7 @@ impl TerrainVariant {
 }
 
 /// A terrain shader's SPIR-V per [`TerrainVariant`] (`build.rs` compiles each with its
-/// overrides set).
+/// overrides set, or for GLSL its `#define`s).
 #[derive(Clone, Copy, Debug)]
 pub struct TerrainSpirv {
     pub flat_texture: Spirv,
@@ -218,7 +219,8 @@ mod tests {
         // (the driver drops the dead side), so builds that differ in a value the shader reads
         // differ in their bytes; one that reads neither setting comes out identical.
         let [flat_texture, flat_clipmap, earth_texture, earth_clipmap] = VARIANTS;
-        // The GLSL stages get the same settings as `#define`s (glslang drops what they decide).
+        // The GLSL stages get the same settings as `#define`s (glslang, too, leaves the decided
+        // branch to the driver).
         for (name, spv) in [
             ("udlod", UDLOD_SPV),
             ("brute", BRUTE_SPV),
