@@ -479,7 +479,7 @@ fn compile_glsl_file(
 }
 
 /// Every `(file, defines)` build of `path` at once, each to `out_dir/{file}.spv`; returns the
-/// last build's warnings (every build warns alike).
+/// builds' warnings, each once.
 fn compile_glsl_builds(
     glslang: &glsl::Glslang,
     path: &Path,
@@ -499,8 +499,13 @@ fn compile_glsl_builds(
                 })
             })
             .collect();
-        let warnings: Vec<Vec<String>> = handles.into_iter().map(|h| h.join().unwrap()).collect();
-        warnings.into_iter().last().unwrap_or_default()
+        let mut warnings: Vec<String> = handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap())
+            .collect();
+        warnings.sort();
+        warnings.dedup();
+        warnings
     })
 }
 
