@@ -4,9 +4,11 @@
 //! surface). Per tau, over the flight's frames: the triangles, those inverted in the grid (a fold
 //! of the morph), and the directed edges no triangle matches with the reverse edge, off the data's
 //! border (0 for a closed surface: no gap between tiles or inside one). With `--pixel X,Y
-//! --frame F` (one tau): the ray through that pixel's centre, the triangles it meets, and the
-//! screen-space areas of the triangles near it (docs/udlod.md, "Open issues": the crack pixel at
-//! grid 8). The flat world only (the scenario's grid frame). CPU only.
+//! --frame F` (one tau): the ray through that pixel's centre, the triangles it meets, those
+//! covering the centre after snapping to 1/256 px with the depth llvmpipe would write there,
+//! and the screen-space areas of the triangles near it (docs/udlod.md, "Open issues": the crack
+//! pixel at grid 8, the main job's floating pixel). The flat world only (the scenario's grid
+//! frame). CPU only.
 //!
 //!   cargo run --release --example udlod_mesh -- --config config/ci.toml [--frames 60] [--tau 0.5,1,2,4]
 //!     [--grid 8] [--field-density 4] [--share 0.76] [--width 640 --height 360]
@@ -344,6 +346,7 @@ fn print_pixel(mesh: &Mesh, cam: &Camera, view: View, pixel: [f64; 2]) {
             t.tile, t.quad, t.half, bary[0], bary[1], bary[2]
         );
     }
+    print_raster_candidates(mesh, cam, view, pixel);
     for (_, hit, _) in hits.iter().take(1) {
         println!(
             "  triangles of tile {:?} within 2 px (twice the signed area, screen px² / grid samples²):",
@@ -365,6 +368,56 @@ fn print_pixel(mesh: &Mesh, cam: &Camera, view: View, pixel: [f64; 2]) {
                     s
                 );
             }
+        }
+    }
+}
+
+/// How a rasterizer may see the pixel: the triangles whose screen positions, snapped to 1/256
+/// px (llvmpipe's subpixel precision), cover its centre, with the view depth interpolated
+/// there over the snapped triangle and over the unsnapped one (1/w linear in screen space).
+/// llvmpipe tests coverage in fixed point but sets up depth from the unsnapped vertices, so a
+/// sliver seen edge-on that covers a pixel centre only after snapping writes its plane's
+/// extrapolation there (docs/udlod.md, "Open issues": a floating pixel on llvmpipe).
+fn print_raster_candidates(mesh: &Mesh, cam: &Camera, view: View, pixel: [f64; 2]) {
+    let (_, _, forward) = cam.basis();
+    let edge = |a: [f64; 2], b: [f64; 2], p: [f64; 2]| {
+        (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+    };
+    // The view depth at `pixel` over triangle `s` (screen), and its doubled signed area.
+    let depth_at = |s: [[f64; 2]; 3], inv_w: [f64; 3]| {
+        let area = edge(s[0], s[1], s[2]);
+        let w = [
+            edge(s[1], s[2], pixel) / area,
+            edge(s[2], s[0], pixel) / area,
+            edge(s[0], s[1], pixel) / area,
+        ];
+        (
+            1.0 / (w[0] * inv_w[0] + w[1] * inv_w[1] + w[2] * inv_w[2]),
+            area,
+            w,
+        )
+    };
+    println!(
+        "  triangles covering it after snapping to 1/256 px (view depth there over the snapped triangle; over the unsnapped one, as llvmpipe sets up depth):"
+    );
+    for t in &mesh.triangles {
+        let inv_w = t.world.map(|v| 1.0 / forward.dot(v - cam.position));
+        if inv_w.iter().any(|&w| w <= 0.0) {
+            // Behind the camera: clipped before rasterization.
+            continue;
+        }
+        let exact = t.world.map(|v| screen(cam, view, v));
+        let snapped = exact.map(|v| v.map(|c| (c * 256.0).round() / 256.0));
+        if edge(snapped[0], snapped[1], snapped[2]) == 0.0 {
+            continue;
+        }
+        let (depth, area, w) = depth_at(snapped, inv_w);
+        if w.iter().all(|&b| b >= 0.0) {
+            let (plane_depth, plane_area, _) = depth_at(exact, inv_w);
+            println!(
+                "    tile {:?} quad {:?} half {}: {depth:.1} m; {plane_depth:.1} m; twice the screen area {area:.3e} / {plane_area:.3e} px², weights {w:.4?}, snapped {snapped:.4?}",
+                t.tile, t.quad, t.half
+            );
         }
     }
 }
