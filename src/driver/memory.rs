@@ -75,6 +75,24 @@ impl Buffer {
         })
     }
 
+    /// A host-visible buffer of `usage` holding exactly `data`, written once at creation.
+    pub fn with_data(
+        gpu: &Arc<Gpu>,
+        name: &str,
+        usage: vk::BufferUsageFlags,
+        data: &[u8],
+    ) -> Result<Self> {
+        let mut buffer = Self::new(
+            gpu,
+            name,
+            data.len() as u64,
+            usage,
+            MemoryLocation::CpuToGpu,
+        )?;
+        buffer.write(data)?;
+        Ok(buffer)
+    }
+
     /// Host-visible contents (None for device-only memory).
     pub fn mapped(&self) -> Option<&[u8]> {
         self.allocation

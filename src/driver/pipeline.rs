@@ -95,6 +95,21 @@ pub struct TerrainPipelineDesc<'a> {
     pub cull_back_faces: bool,
 }
 
+impl<'a> TerrainPipelineDesc<'a> {
+    /// The common case: entry points `vs_main` and `fs_main` of `spv`, a triangle list, back
+    /// faces culled.
+    pub fn triangles(spv: Spirv, set_layouts: &'a [vk::DescriptorSetLayout]) -> Self {
+        TerrainPipelineDesc {
+            spv,
+            vertex_entry: c"vs_main",
+            fragment_entry: c"fs_main",
+            set_layouts,
+            topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+            cull_back_faces: true,
+        }
+    }
+}
+
 /// The tessellation stages of a terrain pipeline (GLSL: `shaders/glsl/`), between the vertex
 /// and fragment stages of [`TerrainPipelineDesc::spv`]; the topology must be a patch list.
 pub struct TessellationStages {

@@ -138,14 +138,12 @@ impl TerrainGpu {
             || vec![0.0; crate::geo::lattice::NODE_FLOATS],
             |l| l.gpu_nodes(),
         );
-        let mut lattice_buffer = Buffer::new(
+        let lattice_buffer = Buffer::with_data(
             gpu,
             "geolocation lattice",
-            (nodes.len() * 4) as u64,
             vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::CpuToGpu,
+            bytemuck::cast_slice(&nodes),
         )?;
-        lattice_buffer.write(bytemuck::cast_slice(&nodes))?;
         let (height, normal, albedo) = if clipmap.enabled {
             // Heights, normals and albedo all come through the clipmap's atlas: 1x1
             // placeholders keep the bindings valid without the full-resolution textures.

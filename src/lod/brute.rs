@@ -8,7 +8,6 @@
 use std::sync::Arc;
 
 use ash::vk;
-use gpu_allocator::MemoryLocation;
 
 use super::{LodMethod, MethodContext};
 use crate::driver::Gpu;
@@ -55,25 +54,19 @@ impl BruteForce {
         let gpu = ctx.gpu;
         let indices_data = grid_indices(BRUTE_CHUNK_QUADS);
         let bytes: &[u8] = bytemuck::cast_slice(&indices_data);
-        let mut indices = Buffer::new(
+        let indices = Buffer::with_data(
             gpu,
             "brute grid indices",
-            bytes.len() as u64,
             vk::BufferUsageFlags::INDEX_BUFFER,
-            MemoryLocation::CpuToGpu,
+            bytes,
         )?;
-        indices.write(bytes)?;
         let pipeline = terrain_pipeline(
             gpu,
             &ctx.formats,
-            &TerrainPipelineDesc {
-                spv: crate::driver::shaders::BRUTE_SPV.variant(ctx.terrain.variant),
-                vertex_entry: c"vs_main",
-                fragment_entry: c"fs_main",
-                set_layouts: &[ctx.terrain.descriptors.layout],
-                topology: vk::PrimitiveTopology::TRIANGLE_LIST,
-                cull_back_faces: true,
-            },
+            &TerrainPipelineDesc::triangles(
+                crate::driver::shaders::BRUTE_SPV.variant(ctx.terrain.variant),
+                &[ctx.terrain.descriptors.layout],
+            ),
         )?;
         let info = &ctx.terrain.info;
         let chunks = |n: u32| (n - 1).div_ceil(BRUTE_CHUNK_QUADS);

@@ -129,14 +129,12 @@ impl EvalShared {
             || vec![0.0; crate::geo::lattice::NODE_FLOATS],
             Lattice::gpu_nodes,
         );
-        let mut lattice_nodes = Buffer::new(
+        let lattice_nodes = Buffer::with_data(
             gpu,
             "eval geolocation lattice",
-            (nodes.len() * 4) as u64,
             vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::CpuToGpu,
+            bytemuck::cast_slice(&nodes),
         )?;
-        lattice_nodes.write(bytemuck::cast_slice(&nodes))?;
         let pixels = shape.width as u64 * shape.height as u64;
         let storage = |name: &str, bytes: u64| {
             Buffer::new(

@@ -175,12 +175,11 @@ impl Pipelines {
         draw: ChunkDraw,
     ) -> Result<Pipeline> {
         let desc = TerrainPipelineDesc {
-            spv: crate::driver::shaders::CHUNKED_SPV.variant(ctx.terrain.variant),
-            vertex_entry: c"vs_main",
-            fragment_entry: c"fs_main",
-            set_layouts,
-            topology: vk::PrimitiveTopology::TRIANGLE_LIST,
             cull_back_faces: false,
+            ..TerrainPipelineDesc::triangles(
+                crate::driver::shaders::CHUNKED_SPV.variant(ctx.terrain.variant),
+                set_layouts,
+            )
         };
         match draw {
             ChunkDraw::Instanced => terrain_pipeline(ctx.gpu, &ctx.formats, &desc),
@@ -218,15 +217,7 @@ pub struct Chunked {
 
 /// A host-written storage buffer holding `bytes`.
 fn host_buffer(gpu: &Arc<Gpu>, name: &str, bytes: &[u8]) -> Result<Buffer> {
-    let mut b = Buffer::new(
-        gpu,
-        name,
-        bytes.len() as u64,
-        vk::BufferUsageFlags::STORAGE_BUFFER,
-        MemoryLocation::CpuToGpu,
-    )?;
-    b.write(bytes)?;
-    Ok(b)
+    Buffer::with_data(gpu, name, vk::BufferUsageFlags::STORAGE_BUFFER, bytes)
 }
 
 /// A device-local storage buffer initialised with `bytes` through a staging copy.
@@ -289,14 +280,12 @@ impl Chunked {
             bytemuck::cast_slice(&levels.tile_error),
         )?;
         let grid = super::brute::grid_indices(settings.chunk_quads);
-        let mut indices = Buffer::new(
+        let indices = Buffer::with_data(
             gpu,
             "chunked grid indices",
-            (grid.len() * 2) as u64,
             vk::BufferUsageFlags::INDEX_BUFFER,
-            MemoryLocation::CpuToGpu,
+            bytemuck::cast_slice(&grid),
         )?;
-        indices.write(bytemuck::cast_slice(&grid))?;
         let mut slots = Vec::with_capacity(ctx.slots);
         for i in 0..ctx.slots {
             let s = Self::slot_buffers(gpu, &settings, &levels, depths, cbt, &sets, i)?;

@@ -14,7 +14,6 @@ use std::sync::Arc;
 
 use ash::vk;
 use glam::DVec3;
-use gpu_allocator::MemoryLocation;
 
 use super::blocks::BlockBounds;
 use super::udlod::select::frustum_planes;
@@ -263,25 +262,19 @@ impl Geomipmap {
             }
         }
         let bytes: &[u8] = bytemuck::cast_slice(&all);
-        let mut indices = Buffer::new(
+        let indices = Buffer::with_data(
             gpu,
             "geomipmap indices",
-            bytes.len() as u64,
             vk::BufferUsageFlags::INDEX_BUFFER,
-            MemoryLocation::CpuToGpu,
+            bytes,
         )?;
-        indices.write(bytes)?;
         let pipeline = terrain_pipeline(
             gpu,
             &ctx.formats,
-            &TerrainPipelineDesc {
-                spv: crate::driver::shaders::GEOMIPMAP_SPV.variant(ctx.terrain.variant),
-                vertex_entry: c"vs_main",
-                fragment_entry: c"fs_main",
-                set_layouts: &[ctx.terrain.descriptors.layout],
-                topology: vk::PrimitiveTopology::TRIANGLE_LIST,
-                cull_back_faces: true,
-            },
+            &TerrainPipelineDesc::triangles(
+                crate::driver::shaders::GEOMIPMAP_SPV.variant(ctx.terrain.variant),
+                &[ctx.terrain.descriptors.layout],
+            ),
         )?;
         Ok(Geomipmap {
             gpu: gpu.clone(),

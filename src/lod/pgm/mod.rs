@@ -649,25 +649,19 @@ impl Pgm {
         let band = band_rows(cols, rows);
         let grid = band_indices(cols, band);
         let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
-        let mut indices = Buffer::new(
+        let indices = Buffer::with_data(
             gpu,
             "pgm band indices",
-            index_bytes.len() as u64,
             vk::BufferUsageFlags::INDEX_BUFFER,
-            MemoryLocation::CpuToGpu,
+            index_bytes,
         )?;
-        indices.write(index_bytes)?;
         let pipeline = terrain_pipeline(
             gpu,
             &ctx.formats,
-            &TerrainPipelineDesc {
-                spv: crate::driver::shaders::PGM_SPV.variant(ctx.terrain.variant),
-                vertex_entry: c"vs_main",
-                fragment_entry: c"fs_main",
-                set_layouts: &[ctx.terrain.descriptors.layout, sets.layout],
-                topology: vk::PrimitiveTopology::TRIANGLE_LIST,
-                cull_back_faces: true,
-            },
+            &TerrainPipelineDesc::triangles(
+                crate::driver::shaders::PGM_SPV.variant(ctx.terrain.variant),
+                &[ctx.terrain.descriptors.layout, sets.layout],
+            ),
         )?;
         Ok(Pgm {
             gpu: gpu.clone(),

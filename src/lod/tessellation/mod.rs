@@ -152,14 +152,12 @@ impl Tessellation {
         gpu.require(Feature::TessellationShader, "method tessellation")?;
         settings.validate()?;
         let bounds = BlockBounds::new(ctx.data, settings.patch_samples)?;
-        let mut bounds_buffer = Buffer::new(
+        let bounds_buffer = Buffer::with_data(
             gpu,
             "tessellation patch bounds",
-            (bounds.bounds.len() * 8) as u64,
             vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::CpuToGpu,
+            bytemuck::cast_slice(&bounds.bounds),
         )?;
-        bounds_buffer.write(bytemuck::cast_slice(&bounds.bounds))?;
         let sets = DescriptorSets::new(gpu, TESS_SET, ctx.slots)?;
         let mut uniforms = Vec::with_capacity(ctx.slots);
         for i in 0..ctx.slots {
@@ -181,14 +179,12 @@ impl Tessellation {
         }
         let grid = grid_indices(CHUNK_QUADS);
         let bytes: &[u8] = bytemuck::cast_slice(&grid);
-        let mut indices = Buffer::new(
+        let indices = Buffer::with_data(
             gpu,
             "tessellation patch indices",
-            bytes.len() as u64,
             vk::BufferUsageFlags::INDEX_BUFFER,
-            MemoryLocation::CpuToGpu,
+            bytes,
         )?;
-        indices.write(bytes)?;
         let pipeline = Self::pipeline(ctx, settings, sets.layout)?;
         let queries = Self::queries(gpu, ctx.slots)?;
         let chunks = |n: u32| n.div_ceil(CHUNK_QUADS);

@@ -401,14 +401,12 @@ impl Udlod {
     ) -> Result<(Buffer, [[u32; 4]; UDLOD_TILE_MASKS as usize])> {
         let layout = grid::IndexLayout::new(grid_size);
         let index_bytes: &[u8] = bytemuck::cast_slice(&layout.indices);
-        let mut indices = Buffer::new(
+        let indices = Buffer::with_data(
             gpu,
             "udlod grid indices",
-            index_bytes.len() as u64,
             vk::BufferUsageFlags::INDEX_BUFFER,
-            MemoryLocation::CpuToGpu,
+            index_bytes,
         )?;
-        indices.write(index_bytes)?;
         Ok((
             indices,
             layout.ranges.map(|(first, count)| [count, first, 0, 0]),
@@ -456,14 +454,12 @@ impl Udlod {
         let levels = Self::build_levels(ctx, &settings)?;
         let sets = DescriptorSets::new(gpu, UDLOD_SET, ctx.slots)?;
         let mm_bytes: &[u8] = bytemuck::cast_slice(&levels.min_max);
-        let mut min_max = Buffer::new(
+        let min_max = Buffer::with_data(
             gpu,
             "udlod min/max",
-            mm_bytes.len() as u64,
             vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::CpuToGpu,
+            mm_bytes,
         )?;
-        min_max.write(mm_bytes)?;
         // The split field's nodes (a one-level tree has none, and a buffer is never empty).
         let field_bytes = (levels.field_nodes() as u64 * 4).max(4);
         let (indices, masks) = Self::grid_indices(gpu, settings.grid_size)?;
