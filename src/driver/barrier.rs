@@ -219,6 +219,27 @@ impl<'a> Barriers<'a> {
         }
     }
 
+    /// Copies `size` bytes of `src` from `src_offset` to the start of `dst` for the host to
+    /// read: the copy waits for `after` (the last access to `src`), and the host read for the
+    /// copy (it still waits for the submission's fence).
+    pub fn copy_for_host(
+        &self,
+        cmd: vk::CommandBuffer,
+        after: MemoryAccess,
+        src: (vk::Buffer, u64),
+        dst: vk::Buffer,
+        size: u64,
+    ) {
+        self.memory(cmd, after, MemoryAccess::TransferRead);
+        let region = vk::BufferCopy {
+            src_offset: src.1,
+            dst_offset: 0,
+            size,
+        };
+        unsafe { self.gpu.device.cmd_copy_buffer(cmd, src.0, dst, &[region]) };
+        self.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+    }
+
     /// A global memory dependency (all buffers).
     pub fn memory(&self, cmd: vk::CommandBuffer, from: MemoryAccess, to: MemoryAccess) {
         let d = &self.gpu.device;

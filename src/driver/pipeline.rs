@@ -74,6 +74,23 @@ pub struct Pipeline {
     pub layout: vk::PipelineLayout,
 }
 
+impl Pipeline {
+    /// Binds this pipeline at `point` with `sets` from set 0 on (its layout's), the pair every
+    /// pass records before its draws or dispatches.
+    pub fn bind(
+        &self,
+        cmd: vk::CommandBuffer,
+        point: vk::PipelineBindPoint,
+        sets: &[vk::DescriptorSet],
+    ) {
+        let d = &self.gpu.device;
+        unsafe {
+            d.cmd_bind_pipeline(cmd, point, self.raw);
+            d.cmd_bind_descriptor_sets(cmd, point, self.layout, 0, sets, &[]);
+        }
+    }
+}
+
 impl Drop for Pipeline {
     fn drop(&mut self) {
         unsafe {

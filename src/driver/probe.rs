@@ -44,15 +44,7 @@ pub fn run(
     sets.push(probe_set.sets[0]);
     let pipeline = compute_pipeline(gpu, spv, entry, &layouts)?;
     gpu.one_shot(|cmd| unsafe {
-        d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
-        d.cmd_bind_descriptor_sets(
-            cmd,
-            vk::PipelineBindPoint::COMPUTE,
-            pipeline.layout,
-            0,
-            &sets,
-            &[],
-        );
+        pipeline.bind(cmd, vk::PipelineBindPoint::COMPUTE, &sets);
         d.cmd_dispatch(cmd, groups, 1, 1);
         Barriers::new(gpu).memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::HostRead);
     })?;

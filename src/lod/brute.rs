@@ -98,15 +98,8 @@ impl LodMethod for BruteForce {
     ) {
         let d = &self.gpu.device;
         unsafe {
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline.raw);
-            d.cmd_bind_descriptor_sets(
-                cmd,
-                vk::PipelineBindPoint::GRAPHICS,
-                self.pipeline.layout,
-                0,
-                &[frame_set],
-                &[],
-            );
+            self.pipeline
+                .bind(cmd, vk::PipelineBindPoint::GRAPHICS, &[frame_set]);
             d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
             d.cmd_draw_indexed(cmd, self.index_count, self.instances, 0, 0, 0);
         }

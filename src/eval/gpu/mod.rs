@@ -610,15 +610,7 @@ impl GpuAnalysis {
     fn dispatch(&self, cmd: vk::CommandBuffer, pipeline: &Pipeline, groups: (u32, u32, u32)) {
         let d = &self.shared.gpu.device;
         unsafe {
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline.raw);
-            d.cmd_bind_descriptor_sets(
-                cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                pipeline.layout,
-                0,
-                &[self.set],
-                &[],
-            );
+            pipeline.bind(cmd, vk::PipelineBindPoint::COMPUTE, &[self.set]);
             d.cmd_dispatch(cmd, groups.0, groups.1, groups.2);
         }
     }

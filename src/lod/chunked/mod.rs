@@ -535,17 +535,14 @@ impl Chunked {
         let src = self.slots[slot.index()].final_chunks.raw;
         use crate::driver::barrier::{Barriers, MemoryAccess};
         let b = Barriers::new(&self.gpu);
-        self.gpu.one_shot(|cmd| unsafe {
-            b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
-            let region = vk::BufferCopy {
-                src_offset: 0,
-                dst_offset: 0,
-                size: n * CHUNK_BYTES,
-            };
-            self.gpu
-                .device
-                .cmd_copy_buffer(cmd, src, host.raw, &[region]);
-            b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+        self.gpu.one_shot(|cmd| {
+            b.copy_for_host(
+                cmd,
+                MemoryAccess::PreviousFrame,
+                (src, 0),
+                host.raw,
+                n * CHUNK_BYTES,
+            )
         })?;
         let bytes = host
             .mapped()

@@ -166,14 +166,13 @@ impl LodMethod for Chunked {
                 Some(_) => MemoryAccess::MeshShaderRead,
             };
             b.memory(cmd, MemoryAccess::ComputeWrite, draw_read);
-            b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
-            let region = vk::BufferCopy {
-                src_offset: 0,
-                dst_offset: 0,
-                size: size_of::<ChunkState>() as u64,
-            };
-            d.cmd_copy_buffer(cmd, s.state.raw, s.counters.raw, &[region]);
-            b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+            b.copy_for_host(
+                cmd,
+                MemoryAccess::ComputeWrite,
+                (s.state.raw, 0),
+                s.counters.raw,
+                size_of::<ChunkState>() as u64,
+            );
         }
     }
 
@@ -187,15 +186,7 @@ impl LodMethod for Chunked {
         let s = &self.slots[slot.index()];
         let draw = &self.pipelines.draw;
         unsafe {
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, draw.raw);
-            d.cmd_bind_descriptor_sets(
-                cmd,
-                vk::PipelineBindPoint::GRAPHICS,
-                draw.layout,
-                0,
-                &[frame_set, s.set],
-                &[],
-            );
+            draw.bind(cmd, vk::PipelineBindPoint::GRAPHICS, &[frame_set, s.set]);
             match &self.mesh {
                 None => {
                     d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);

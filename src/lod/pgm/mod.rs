@@ -768,14 +768,10 @@ impl LodMethod for Pgm {
         // The slot's previous frame read the vertices in its vertex stage (same queue).
         b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::ComputeWrite);
         unsafe {
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pass.raw);
-            d.cmd_bind_descriptor_sets(
+            pass.bind(
                 cmd,
                 vk::PipelineBindPoint::COMPUTE,
-                pass.layout,
-                0,
                 &[frame_set, self.sets.sets[slot.index()]],
-                &[],
             );
             d.cmd_dispatch(
                 cmd,
@@ -799,14 +795,10 @@ impl LodMethod for Pgm {
     ) {
         let d = &self.gpu.device;
         unsafe {
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline.raw);
-            d.cmd_bind_descriptor_sets(
+            self.pipeline.bind(
                 cmd,
                 vk::PipelineBindPoint::GRAPHICS,
-                self.pipeline.layout,
-                0,
                 &[frame_set, self.sets.sets[slot.index()]],
-                &[],
             );
             d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
             d.cmd_draw_indexed(cmd, self.index_count, self.instances, 0, 0, 0);

@@ -314,14 +314,10 @@ impl LodMethod for Tessellation {
         let d = &self.gpu.device;
         let query = self.queries.as_ref().map(|q| (q.pool, slot.index() as u32));
         unsafe {
-            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline.raw);
-            d.cmd_bind_descriptor_sets(
+            self.pipeline.bind(
                 cmd,
                 vk::PipelineBindPoint::GRAPHICS,
-                self.pipeline.layout,
-                0,
                 &[frame_set, self.sets.sets[slot.index()]],
-                &[],
             );
             d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
             if let Some((pool, i)) = query {

@@ -576,18 +576,15 @@ impl Udlod {
             MemoryLocation::GpuToCpu,
         )?;
         let lists = &self.slots[slot.index()].lists;
-        let region = vk::BufferCopy {
-            src_offset: lists.capacity as u64 * TILE_BYTES,
-            dst_offset: 0,
-            size: n * TILE_BYTES,
-        };
         let b = Barriers::new(&self.gpu);
-        self.gpu.one_shot(|cmd| unsafe {
-            b.memory(cmd, MemoryAccess::PreviousFrame, MemoryAccess::TransferRead);
-            self.gpu
-                .device
-                .cmd_copy_buffer(cmd, lists.final_tiles.raw, host.raw, &[region]);
-            b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+        self.gpu.one_shot(|cmd| {
+            b.copy_for_host(
+                cmd,
+                MemoryAccess::PreviousFrame,
+                (lists.final_tiles.raw, lists.capacity as u64 * TILE_BYTES),
+                host.raw,
+                n * TILE_BYTES,
+            )
         })?;
         let bytes = host
             .mapped()
@@ -818,14 +815,13 @@ impl LodMethod for Udlod {
             }
             // The final tiles sorted by draw group into the list's second half.
             sized_pass(&self.finish, &self.scatter, MemoryAccess::VertexShaderRead);
-            b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
-            let region = vk::BufferCopy {
-                src_offset: 0,
-                dst_offset: 0,
-                size: size_of::<TilingState>() as u64,
-            };
-            d.cmd_copy_buffer(cmd, s.state.raw, s.counters.raw, &[region]);
-            b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
+            b.copy_for_host(
+                cmd,
+                MemoryAccess::ComputeWrite,
+                (s.state.raw, 0),
+                s.counters.raw,
+                size_of::<TilingState>() as u64,
+            );
         }
     }
 
@@ -849,15 +845,7 @@ impl LodMethod for Udlod {
         ];
         for (pipeline, offset, count_offset) in runs {
             unsafe {
-                d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
-                d.cmd_bind_descriptor_sets(
-                    cmd,
-                    vk::PipelineBindPoint::GRAPHICS,
-                    pipeline.layout,
-                    0,
-                    &[frame_set, s.set],
-                    &[],
-                );
+                pipeline.bind(cmd, vk::PipelineBindPoint::GRAPHICS, &[frame_set, s.set]);
                 if !self.settings.vertex_pulling {
                     d.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT16);
                 }
