@@ -1001,7 +1001,7 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
             morph_range: 0.2,
             morph_levels: 2,
             field_max,
-            share: vkterrain::lod::udlod::select::worst_case_share(grid, 1),
+            share: vkterrain::lod::udlod::settings::worst_case_share(grid, 1),
             zone_rule: Default::default(),
         };
         let (fa, fb) = (SplitField::new(&a, key), SplitField::new(&b, key));

@@ -15,7 +15,7 @@ use vkterrain::driver::{Gpu, GpuOptions};
 use vkterrain::lod::udlod::grid::{QuadrantDraw, TileMask};
 use vkterrain::lod::udlod::seed;
 use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
-use vkterrain::lod::udlod::{draw_group, grid};
+use vkterrain::lod::udlod::{draw_group, grid, settings};
 use vkterrain::lod::{MethodKind, UdlodSettings};
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer};
@@ -62,11 +62,11 @@ fn cascade(grid_size: u32) -> UdlodSettings {
     }
 }
 
-/// The morph cascade kept inside each tile (`morph_levels` = `select::cascade_levels`: 2 at
+/// The morph cascade kept inside each tile (`morph_levels` = `settings::cascade_levels`: 2 at
 /// grid 4, the default until issue 18's fifteenth round; the split field's reach term).
 fn bounded_cascade(grid_size: u32) -> UdlodSettings {
     UdlodSettings {
-        morph_levels: select::cascade_levels(grid_size),
+        morph_levels: settings::cascade_levels(grid_size),
         ..settings(grid_size)
     }
 }
@@ -862,7 +862,7 @@ fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
 /// and 8, every vertex
 /// on a tile's edge lands, after morphing, exactly on a vertex of a coarser neighbour's edge,
 /// on all four sides. With one level step (`morph_levels = 1`) neighbours differ by at most one
-/// level; with the bounded cascade by up to `select::cascade_levels` levels; with walks past
+/// level; with the bounded cascade by up to `settings::cascade_levels` levels; with walks past
 /// the tile by any number. With either cascade the
 /// test requires edges between tiles two or more levels apart, where a morph of one level
 /// step (the cascade cut after its first level) leaves the fine vertices on the grid in

@@ -14,21 +14,19 @@ use super::gpu::{FrameShape, GpuFrameMetrics};
 use super::metrics::{
     self, Histogram, OnEarth, SWIM_SEED_EVERY, Summary, SwimTracker, ViewColumns,
 };
-use super::run::EvalSetup;
 use crate::dataset::Terrain;
 use crate::error::{Error, Result};
 use crate::geo::Lattice;
 use crate::gpu_constants::EVAL_NO_ERROR_PX;
-use crate::render::FrameRequest;
+use crate::render::{FrameRequest, RenderOptions};
 
 /// The views of one frame as the CPU metrics take them.
-pub fn views_of(setup: &EvalSetup<'_>, requests: &[FrameRequest]) -> Vec<ViewColumns> {
+pub fn views_of(options: &RenderOptions, requests: &[FrameRequest]) -> Vec<ViewColumns> {
     requests
         .iter()
         .enumerate()
         .map(|(v, r)| {
-            let (first, count) =
-                crate::render::view_columns(setup.options.width, setup.options.views, v);
+            let (first, count) = crate::render::view_columns(options.width, options.views, v);
             ViewColumns {
                 camera: r.camera,
                 first,

@@ -561,7 +561,7 @@ impl Run {
             reference.depth = depth.clone();
         }
         if let Some(cpu) = &mut self.cpu {
-            let views = super::check::views_of(setup, requests);
+            let views = super::check::views_of(&setup.options, requests);
             cpu.measure(
                 setup.data,
                 &views,
@@ -652,7 +652,7 @@ impl Run {
                 None => return Ok(()),
             }
         }
-        let views = super::check::views_of(setup, requests);
+        let views = super::check::views_of(&setup.options, requests);
         let shape = (setup.options.width, setup.options.height);
         let errors = match lattice {
             None => coarse::measure(setup.data, &views, &levels, shape, &depth),

@@ -14,8 +14,7 @@ use std::sync::Arc;
 use glam::{DVec3, Vec3};
 
 use super::grid::TileMask;
-use super::settings::MORPH_LEVELS_ALL;
-use super::settings::UdlodSettings;
+use super::settings::{MORPH_LEVELS_ALL, UdlodSettings};
 use crate::dataset::stats::{FieldStats, TileStats, level_interpolate};
 use crate::dataset::{Heightmap, Level0};
 use crate::error::{Error, Result};
@@ -402,7 +401,7 @@ pub struct FieldKey {
     /// per level, the distance-only selection).
     pub field_max: f64,
     /// The share of a tile's worst-case projected error spent on `tau`
-    /// ([`worst_case_share`] unless the settings override it).
+    /// ([`worst_case_share`](super::settings::worst_case_share) unless the settings override it).
     pub share: f64,
     /// How each cell is charged its morph zone's width: [`ZoneRule::Width`] for the morph the
     /// renderer draws; the others only for counting.
@@ -439,88 +438,6 @@ impl FieldKey {
     }
 }
 
-/// The share of a tile's worst-case projected error that the split rule spends on `tau`, as a
-/// function of the tile size (`grid_size`): `tau` is the 99.9th percentile of the
-/// screen-space error, not its maximum. The worst case (the tile's largest error, seen from
-/// its nearest point) overstates that percentile, the more the larger the tile: the largest
-/// error sits at one of `(grid_size 2^l + 1)^2` samples, rarely the nearest one, and the
-/// larger a tile the farther its worst sample may lie behind its nearest point and the
-/// further its maximum lies in the tail of its samples' errors. Smaller tiles therefore need a
-/// share nearer 1 (a larger split distance for the same error). Measured per grid size
-/// (`docs/udlod.md`, "Issue 18, third round"): with these shares the 99.9th percentile lands
-/// in [0.5, 1] tau where the pixel target (not the crack-free chain or the data's resolution)
-/// sets the distances (on the CI data at grid 2, 4 and 8; on other data sets more pixels are
-/// exact and the percentile lower); single pixels may exceed tau. Grid sizes between the
-/// measured ones interpolate in `log2(grid_size)`; larger ones take the grid-8 share (larger
-/// tiles should overstate more, so that refines them more than needed; not measured).
-///
-/// With a finer split field (`field_density` `d > 1`) each field cell takes the error of its
-/// own part of the tile: the field dilates less around rough spots, and the selection spends
-/// more of tau with the same share (grid 4, two nodes per side, at 0.72: p99.9 1.085 px at tau
-/// 1 on the CI flight). Those densities take their own measured shares
-/// ([`FINER_FIELD_SHARES`]); unmeasured ones the largest measured share of all (0.9, grid 2's:
-/// the most refinement, conservative).
-///
-/// The only place the share enters: [`SplitField::new`] bakes it (through [`FieldKey::share`],
-/// which `UdlodSettings::worst_case_share` may override) into the split field that the CPU
-/// reference selection and the GPU prepass both read.
-pub fn worst_case_share(grid_size: u32, field_density: u32) -> f64 {
-    if field_density > 1 {
-        return FINER_FIELD_SHARES
-            .iter()
-            .find(|&&(g, d, _)| g == grid_size && d == field_density)
-            .map_or(MEASURED_SHARES[0].1, |&(_, _, k)| k);
-    }
-    tile_share(grid_size)
-}
-
-/// `(grid_size, share)` with one field node per tile corner, increasing grid sizes
-/// ([`worst_case_share`]).
-const MEASURED_SHARES: [(u32, f64); 3] = [(2, 0.9), (4, 0.72), (8, 0.7)];
-
-/// `(grid_size, field_density, share)` measured for the finer split field on the CI flight
-/// (640x360, `vkterrain eval --config config/ci.toml --earth flat --methods udlod --sweep
-/// grid_size=G --sweep field_density=D --sweep worst_case_share=... --sweep
-/// tau_px=0.5,1,2,4`; docs/udlod.md, "What the tiles could draw", eighteenth round): a swept
-/// share whose p99.9 stays within tau at every tau. Grid 4, two per side: 0.76 exceeded it
-/// (1.010 px at tau 1), 0.78 reached 0.997 tau at tau 2, so 0.80 (at most 0.973 tau); grid 8,
-/// two or four per side: 0.70 exceeded it, 0.76 held (0.70 / 0.76 / 0.82 swept).
-pub const FINER_FIELD_SHARES: [(u32, u32, f64); 3] = [(4, 2, 0.80), (8, 2, 0.76), (8, 4, 0.76)];
-
-/// The split field's nodes per tile side where `UdlodSettings::field_density` is 0: two at the
-/// grid sizes whose share was measured with two ([`FINER_FIELD_SHARES`]: grid 4 and 8), one
-/// elsewhere (grid 2 leaves no room for two cells of 2 quads; larger grids are not measured).
-/// Two per side draws 6-22 % fewer triangles than one at grid 4 at about equal measured error
-/// (docs/udlod.md, "The finer field as the default").
-pub fn field_density(grid_size: u32) -> u32 {
-    if FINER_FIELD_SHARES
-        .iter()
-        .any(|&(g, d, _)| g == grid_size && d == 2)
-    {
-        2
-    } else {
-        1
-    }
-}
-
-/// The share with one field node per tile corner, interpolated between the measured grid sizes.
-fn tile_share(grid_size: u32) -> f64 {
-    let g = grid_size.clamp(
-        MEASURED_SHARES[0].0,
-        MEASURED_SHARES[MEASURED_SHARES.len() - 1].0,
-    );
-    let i = MEASURED_SHARES
-        .iter()
-        .position(|&(m, _)| m >= g)
-        .unwrap_or(0);
-    if MEASURED_SHARES[i].0 == g || i == 0 {
-        return MEASURED_SHARES[i].1;
-    }
-    let ((g0, k0), (g1, k1)) = (MEASURED_SHARES[i - 1], MEASURED_SHARES[i]);
-    let t = (g as f64 / g0 as f64).log2() / (g1 as f64 / g0 as f64).log2();
-    k0 + (k1 - k0) * t
-}
-
 /// Relative margin on the split field's nesting and reach terms: covers the f32 rounding of
 /// `m`, `D` and the `m * d < D` test on the GPU (~1e-7 each).
 pub(super) const CHAIN_MARGIN: f64 = 1e-5;
@@ -539,7 +456,7 @@ pub(super) const CHAIN_MARGIN: f64 = 1e-5;
 /// smallest and `S_Q` the largest corner value of tile `Q`, for every tile `Q` of level `l`
 /// (`cell_requirement`, per field cell; with one node per tile corner the cells are the tiles):
 /// 1. pixel target: `s_Q >= k e_Q f / tau` (`e_Q`: the tile's own error, `k`:
-///    [`worst_case_share`] of the grid size), so wherever `Q`'s geometry is drawn, unmorphed
+///    [`worst_case_share`](super::settings::worst_case_share) of the grid size), so wherever `Q`'s geometry is drawn, unmorphed
 ///    or blended into its children's morph zone, it is at least that far away (with the morph
 ///    cascade `s_Q >= (1 - r) k e_Q f / tau + W[l]` too: its zone is at least `W[l]` wide);
 /// 2. nesting: `s_Q >= S_P` for each child `P`: where an unsplit tile meets finer ones, their
@@ -1020,13 +937,6 @@ pub(super) fn gentle_morph(levels: &Levels, lod: u32, s: &mut [f32]) {
     };
     pass(s, &mut (0..w * h), false);
     pass(s, &mut (0..w * h).rev(), true);
-}
-
-/// Levels over which a tile's vertices may morph and stay inside the tile: the power of two in
-/// `grid_size` (a tile of level `a` starts at a multiple of `grid_size 2^a` samples; a vertex
-/// odd at level `j` slides `2^j` towards the tile's origin, onto a multiple of `2^(j + 1)`).
-pub fn cascade_levels(grid_size: u32) -> u32 {
-    grid_size.trailing_zeros().max(1)
 }
 
 /// Frustum planes in camera-relative world space (metres), `(normal, offset)` with
@@ -1856,7 +1766,7 @@ pub(super) fn test_poses() -> [crate::scene::Camera; 4] {
 mod tests {
     use super::{
         FieldKey, Levels, QUAD, SelectionParams, SplitField, UdlodSettings, ZoneRule, field_terms,
-        morph_factor, morph_moves, morph_ramp, test_poses, test_terrain, worst_case_share,
+        morph_factor, morph_moves, morph_ramp, test_poses, test_terrain,
     };
 
     /// `morph_moves` answers `morph_factor != 0` at every grid point of every level of the
@@ -2065,43 +1975,6 @@ mod tests {
         );
     }
 
-    /// The measured shares are where `docs/udlod.md` says, in (0, 1], never larger for a
-    /// larger tile (the worst case overstates more), and interpolated between.
-    #[test]
-    fn worst_case_share_falls_with_the_tile_size() {
-        assert_eq!(
-            [2, 4, 8].map(|g| worst_case_share(g, 1)),
-            [0.9, 0.72, 0.7],
-            "docs/udlod.md's table"
-        );
-        let mut last = 1.0;
-        for g in (2..=64).step_by(2) {
-            let k = worst_case_share(g, 1);
-            assert!(k > 0.0 && k <= last, "grid {g}: share {k} after {last}");
-            last = k;
-        }
-        let k6 = worst_case_share(6, 1);
-        assert!(k6 > 0.7 && k6 < 0.72, "grid 6: {k6}");
-    }
-
-    /// A finer split field spends more of tau at the same share, so its measured share is
-    /// larger than its grid's corner-field share (a smaller one let the CI flight's p99.9
-    /// exceed tau: docs/udlod.md, "What the tiles could draw"), and an unmeasured density takes
-    /// the largest share measured at all.
-    #[test]
-    fn finer_fields_take_their_own_larger_shares() {
-        assert_eq!(worst_case_share(4, 2), 0.80, "measured");
-        assert_eq!(
-            [worst_case_share(8, 2), worst_case_share(8, 4)],
-            [0.76, 0.76]
-        );
-        for (g, d, k) in super::FINER_FIELD_SHARES {
-            assert!(k > worst_case_share(g, 1), "grid {g} density {d}: {k}");
-        }
-        assert_eq!(worst_case_share(16, 2), 0.9, "unmeasured: grid 2's");
-        assert_eq!(worst_case_share(16, 1), worst_case_share(8, 1));
-    }
-
     /// Released field cell errors come back bit for bit from the same statistics read again
     /// (the renderer's path for a new field key): the field built after the restore equals the
     /// one built before. Controls: released, the levels cannot build a field; another grid's
@@ -2141,36 +2014,5 @@ mod tests {
             (before.split, before.zone, before.corners),
             (after.split, after.zone, after.corners)
         );
-    }
-
-    /// The measured field density (`field_density = 0`) is two nodes per side exactly where a
-    /// share was measured for two, one elsewhere; and it is valid at every grid size, so a sweep
-    /// over grid sizes never meets an invalid default (grid 2 has no room for two cells).
-    /// Negative control: two per side at grid 2 fails `validate`.
-    #[test]
-    fn the_measured_field_density_is_two_where_its_share_was_measured() {
-        use crate::lod::udlod::settings::UdlodSettings;
-        let densities = [2, 4, 8, 16, 32, 64].map(super::field_density);
-        assert_eq!(densities, [1, 2, 2, 1, 1, 1]);
-        for g in [2, 4, 8, 16, 32, 64] {
-            let s = UdlodSettings {
-                grid_size: g,
-                ..UdlodSettings::default()
-            };
-            assert_eq!(s.field_density(), super::field_density(g));
-            assert!(s.validate().is_ok(), "grid {g}");
-            let d = s.field_density();
-            assert!(
-                d == 1 || super::FINER_FIELD_SHARES.contains(&(g, d, s.worst_case_share())),
-                "grid {g}: density {d} without its measured share"
-            );
-        }
-        let two_at_grid_2 = UdlodSettings {
-            grid_size: 2,
-            field_density: 2,
-            ..UdlodSettings::default()
-        };
-        let e = two_at_grid_2.validate().unwrap_err().to_string();
-        assert!(e.contains("field_density 2") && !e.contains('\n'), "{e}");
     }
 }
