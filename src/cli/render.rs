@@ -241,7 +241,19 @@ pub fn check_validation(gpu: &Arc<Gpu>) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The summary `render` prints: what ran, then what it measured, then the files written.
 fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf]) -> String {
+    use std::fmt::Write;
+    let mut o = what_ran(gpu, r, p);
+    o.push_str(&measured(s));
+    for w in written {
+        let _ = writeln!(o, "wrote:           {}", w.display());
+    }
+    o
+}
+
+/// Device, data set, method, clipmap, scenario, views and resolution.
+fn what_ran(gpu: &Gpu, r: &Renderer, p: &Prepared) -> String {
     use std::fmt::Write;
     let mut o = String::new();
     let _ = writeln!(
@@ -260,33 +272,7 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
     );
     let _ = writeln!(o, "method:          {}", r.method_name());
     if let Some(c) = r.clipmap() {
-        let k = &c.counters;
-        let _ = writeln!(
-            o,
-            "clipmap:         atlas {} layers ({:.1} MiB), {} resident; {} loaded, {} load errors, {} deferred, {} evictions, {} frames with fallback data",
-            c.settings.atlas_capacity,
-            c.atlas_bytes() as f64 / (1u64 << 20) as f64,
-            c.atlas.resident(),
-            k.loaded,
-            k.load_errors,
-            k.deferred,
-            k.evictions,
-            k.fallback_frames
-        );
-        if let Some(t) = c.tile_counts() {
-            let _ = writeln!(
-                o,
-                "xyz tiles:       {} fetched ({:.1} MB), {} from the disk cache, {} local; {} errors, {} timeouts, {} corrupt; {} evicted from the cache",
-                t.fetched,
-                t.bytes as f64 / 1e6,
-                t.cache_hits,
-                t.local,
-                t.errors,
-                t.timeouts,
-                t.corrupt,
-                t.evicted
-            );
-        }
+        o.push_str(&clipmap_lines(c));
     }
     let _ = writeln!(o, "scenario:        {}", p.scenario.name);
     if r.options.views > 1 {
@@ -309,6 +295,47 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
             "render pass + classic barriers"
         }
     );
+    o
+}
+
+/// The clipmap's atlas and loading counters (and an XYZ source's tile counters).
+fn clipmap_lines(c: &crate::clipmap::Clipmap) -> String {
+    use std::fmt::Write;
+    let mut o = String::new();
+    let k = &c.counters;
+    let _ = writeln!(
+        o,
+        "clipmap:         atlas {} layers ({:.1} MiB), {} resident; {} loaded, {} load errors, {} deferred, {} evictions, {} frames with fallback data",
+        c.settings.atlas_capacity,
+        c.atlas_bytes() as f64 / (1u64 << 20) as f64,
+        c.atlas.resident(),
+        k.loaded,
+        k.load_errors,
+        k.deferred,
+        k.evictions,
+        k.fallback_frames
+    );
+    if let Some(t) = c.tile_counts() {
+        let _ = writeln!(
+            o,
+            "xyz tiles:       {} fetched ({:.1} MB), {} from the disk cache, {} local; {} errors, {} timeouts, {} corrupt; {} evicted from the cache",
+            t.fetched,
+            t.bytes as f64 / 1e6,
+            t.cache_hits,
+            t.local,
+            t.errors,
+            t.timeouts,
+            t.corrupt,
+            t.evicted
+        );
+    }
+    o
+}
+
+/// Frame count, triangles, frame time, GPU and CPU time per pass, overlap and host memory.
+fn measured(s: &Summary) -> String {
+    use std::fmt::Write;
+    let mut o = String::new();
     let _ = writeln!(
         o,
         "frames:          {} ({} warm-up excluded below)",
@@ -354,9 +381,6 @@ fn report(gpu: &Gpu, r: &Renderer, p: &Prepared, s: &Summary, written: &[PathBuf
             "host memory:     peak RSS {:.0} MiB (VmHWM)",
             b as f64 / (1u64 << 20) as f64
         );
-    }
-    for w in written {
-        let _ = writeln!(o, "wrote:           {}", w.display());
     }
     o
 }
