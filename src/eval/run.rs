@@ -523,36 +523,7 @@ impl Run {
         let is_reference = index == 0;
         let flip_frame = setup.flip_frame(k);
         let keep_rgba = flip_frame || setup.cross_check;
-        let mut delivered: Option<Delivered> = None;
-        let mut sink = |f: &FrameView<'_>| {
-            delivered = Some((
-                if keep_rgba {
-                    f.rgba.to_vec()
-                } else {
-                    Vec::new()
-                },
-                f.depth.map(<[f32]>::to_vec),
-                f.timings,
-                (f.triangles, f.budget_overflow),
-            ));
-            Ok(())
-        };
-        self.renderer.render_views(requests, &mut sink)?;
-        let (rgba, depth, timings, (triangles, budget_overflow)) = delivered
-            .ok_or_else(|| Error::invalid("eval", format!("frame {k} was not delivered")))?;
-        let gpu = self
-            .results
-            .try_recv()
-            .map_err(|_| Error::invalid("eval", format!("frame {k} has no GPU metrics")))?;
-        if gpu.index != k || gpu.missing_reference > 0 {
-            return Err(Error::invalid(
-                "eval",
-                format!(
-                    "frame {k}: GPU metrics of frame {} with {} pixels off the reference tiles",
-                    gpu.index, gpu.missing_reference
-                ),
-            ));
-        }
+        let ((rgba, depth, timings, counts), gpu) = self.render_frame(k, requests, keep_rgba)?;
         let rgba = Arc::new(rgba);
         let depth = depth.map(Arc::new);
         self.depth = depth.clone();
@@ -604,7 +575,62 @@ impl Run {
             self.errors.metres.merge(&gpu.metres);
             self.errors.pixels.merge(&gpu.pixels);
         }
-        self.rows.push(FrameRow {
+        let row = self.row(k, &timings, counts, &gpu, flip);
+        self.rows.push(row);
+        Ok(spawned)
+    }
+
+    /// Renders frame `k` and takes its delivered images (colour only when `keep_rgba`) and
+    /// its GPU metrics, which must be this frame's and wholly on the reference tiles.
+    fn render_frame(
+        &mut self,
+        k: u64,
+        requests: &[FrameRequest],
+        keep_rgba: bool,
+    ) -> Result<(Delivered, GpuFrameMetrics)> {
+        let mut delivered: Option<Delivered> = None;
+        let mut sink = |f: &FrameView<'_>| {
+            delivered = Some((
+                if keep_rgba {
+                    f.rgba.to_vec()
+                } else {
+                    Vec::new()
+                },
+                f.depth.map(<[f32]>::to_vec),
+                f.timings,
+                (f.triangles, f.budget_overflow),
+            ));
+            Ok(())
+        };
+        self.renderer.render_views(requests, &mut sink)?;
+        let delivered = delivered
+            .ok_or_else(|| Error::invalid("eval", format!("frame {k} was not delivered")))?;
+        let gpu = self
+            .results
+            .try_recv()
+            .map_err(|_| Error::invalid("eval", format!("frame {k} has no GPU metrics")))?;
+        if gpu.index != k || gpu.missing_reference > 0 {
+            return Err(Error::invalid(
+                "eval",
+                format!(
+                    "frame {k}: GPU metrics of frame {} with {} pixels off the reference tiles",
+                    gpu.index, gpu.missing_reference
+                ),
+            ));
+        }
+        Ok((delivered, gpu))
+    }
+
+    /// Frame `k`'s row of `frames.csv`.
+    fn row(
+        &self,
+        k: u64,
+        timings: &crate::readback::FrameTimings,
+        (triangles, budget_overflow): (u64, u64),
+        gpu: &GpuFrameMetrics,
+        flip: Option<FlipStats>,
+    ) -> FrameRow {
+        FrameRow {
             variant: self.label.clone(),
             method: self.method.kind().name().to_string(),
             frame: k,
@@ -628,8 +654,7 @@ impl Run {
             flip,
             oracle_triangles: None,
             coarse: None,
-        });
-        Ok(spawned)
+        }
     }
 
     /// Measures the coarse pixels of the frame just rendered (`eval::coarse`) into its row and,
@@ -759,55 +784,7 @@ fn finish(
         if !run.reported {
             continue;
         }
-        let measured: Vec<&FrameRow> = run.rows.iter().skip(setup.warmup).collect();
-        let pick =
-            |g: fn(&FrameRow) -> f64| Percentiles::of(measured.iter().map(|r| g(r)).collect());
-        let mut popping: Vec<f64> = measured.iter().skip(1).map(|r| r.popping_p99_px).collect();
-        let flips: Vec<FlipStats> = measured.iter().filter_map(|r| r.flip).collect();
-        let mean_of = |f: fn(&FlipStats) -> f64| {
-            (!flips.is_empty()).then(|| flips.iter().map(f).sum::<f64>() / flips.len() as f64)
-        };
-        let finite_mean = |g: fn(&FrameRow) -> f64| {
-            let v: Vec<f64> = measured
-                .iter()
-                .map(|r| g(r))
-                .filter(|x| x.is_finite())
-                .collect();
-            if v.is_empty() {
-                f64::INFINITY
-            } else {
-                v.iter().sum::<f64>() / v.len() as f64
-            }
-        };
-        summaries.push(RunSummary {
-            variant: run.label.clone(),
-            method: run.method.kind().name().to_string(),
-            params: run.params.clone(),
-            frames: measured.len(),
-            gpu_ms: pick(|r| r.gpu_ms),
-            gpu_prepass_ms_median: pick(|r| r.gpu_prepass_ms).median,
-            gpu_terrain_ms_median: pick(|r| r.gpu_terrain_ms).median,
-            gpu_eval_ms_median: pick(|r| r.gpu_eval_ms).median,
-            triangles_median: pick(|r| r.triangles as f64).median,
-            budget_overflow_frames: measured.iter().filter(|r| r.budget_overflow > 0).count(),
-            error: run.errors.summary(),
-            holes_total: measured.iter().map(|r| r.holes).sum(),
-            cracks_total: measured.iter().map(|r| r.cracks).sum(),
-            silhouette_px_max: measured.iter().map(|r| r.silhouette_px).max().unwrap_or(0),
-            psnr_db_mean: finite_mean(|r| r.psnr_db),
-            ssim_mean: finite_mean(|r| r.ssim),
-            flip_mean: mean_of(|f| f.mean),
-            flip_p99_mean: mean_of(|f| f.p99),
-            flip_frames: flips.len(),
-            popping_px: Summary::of(&mut popping),
-            swimming_m,
-            swimming_px,
-            oracle_triangles_median: oracle_median(&measured, |_, o| o as f64),
-            coarse: run.coarse.summary(),
-            oracle_ratio_median: oracle_median(&measured, |r, o| {
-                r.triangles as f64 / o.max(1) as f64
-            }),
-        });
+        summaries.push(run_summary(&run, setup.warmup, (swimming_m, swimming_px)));
         rows.append(&mut run.rows);
         images.append(&mut run.images);
     }
@@ -823,24 +800,7 @@ fn finish(
         warmup: setup.warmup,
         clipmap,
         earth: if on_earth { "ellipsoid" } else { "flat" }.into(),
-        reference: format!(
-            "geometric errors against level 0 of the data, exactly: the full-resolution mesh brute force draws (every sample a vertex{}), evaluated on the GPU from reference tiles read from level 0{}; images (PSNR, SSIM, FLIP, holes) against brute force rendered with the same cameras{}",
-            if on_earth {
-                ", on the WGS84 ellipsoid where the renderers' geolocation lattice places it: each pixel's point mapped back to the grid through the lattice, heights along its up"
-            } else {
-                ""
-            },
-            if clipmap {
-                " (the pyramid's, never a clipmap level)"
-            } else {
-                ""
-            },
-            if clipmap {
-                " through the same clipmap"
-            } else {
-                ""
-            }
-        ),
+        reference: reference_text(on_earth, clipmap),
         timing: "GPU time of each method's own passes (prepass + terrain pass) from timestamps; frames are measured one at a time, so no other work is inside them".into(),
         flip_every: setup.flip_every,
         command: setup.command.clone(),
@@ -851,6 +811,82 @@ fn finish(
         cross_check: check,
         images,
     })
+}
+
+/// One reported run's summary over its measured frames (after `warmup`).
+fn run_summary(
+    run: &Run,
+    warmup: usize,
+    (swimming_m, swimming_px): (Summary, Summary),
+) -> RunSummary {
+    let measured: Vec<&FrameRow> = run.rows.iter().skip(warmup).collect();
+    let pick = |g: fn(&FrameRow) -> f64| Percentiles::of(measured.iter().map(|r| g(r)).collect());
+    let mut popping: Vec<f64> = measured.iter().skip(1).map(|r| r.popping_p99_px).collect();
+    let flips: Vec<FlipStats> = measured.iter().filter_map(|r| r.flip).collect();
+    let mean_of = |f: fn(&FlipStats) -> f64| {
+        (!flips.is_empty()).then(|| flips.iter().map(f).sum::<f64>() / flips.len() as f64)
+    };
+    let finite_mean = |g: fn(&FrameRow) -> f64| {
+        let v: Vec<f64> = measured
+            .iter()
+            .map(|r| g(r))
+            .filter(|x| x.is_finite())
+            .collect();
+        if v.is_empty() {
+            f64::INFINITY
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    RunSummary {
+        variant: run.label.clone(),
+        method: run.method.kind().name().to_string(),
+        params: run.params.clone(),
+        frames: measured.len(),
+        gpu_ms: pick(|r| r.gpu_ms),
+        gpu_prepass_ms_median: pick(|r| r.gpu_prepass_ms).median,
+        gpu_terrain_ms_median: pick(|r| r.gpu_terrain_ms).median,
+        gpu_eval_ms_median: pick(|r| r.gpu_eval_ms).median,
+        triangles_median: pick(|r| r.triangles as f64).median,
+        budget_overflow_frames: measured.iter().filter(|r| r.budget_overflow > 0).count(),
+        error: run.errors.summary(),
+        holes_total: measured.iter().map(|r| r.holes).sum(),
+        cracks_total: measured.iter().map(|r| r.cracks).sum(),
+        silhouette_px_max: measured.iter().map(|r| r.silhouette_px).max().unwrap_or(0),
+        psnr_db_mean: finite_mean(|r| r.psnr_db),
+        ssim_mean: finite_mean(|r| r.ssim),
+        flip_mean: mean_of(|f| f.mean),
+        flip_p99_mean: mean_of(|f| f.p99),
+        flip_frames: flips.len(),
+        popping_px: Summary::of(&mut popping),
+        swimming_m,
+        swimming_px,
+        oracle_triangles_median: oracle_median(&measured, |_, o| o as f64),
+        coarse: run.coarse.summary(),
+        oracle_ratio_median: oracle_median(&measured, |r, o| r.triangles as f64 / o.max(1) as f64),
+    }
+}
+
+/// What the errors and images are measured against, in words (report.md's "Reference").
+fn reference_text(on_earth: bool, clipmap: bool) -> String {
+    format!(
+        "geometric errors against level 0 of the data, exactly: the full-resolution mesh brute force draws (every sample a vertex{}), evaluated on the GPU from reference tiles read from level 0{}; images (PSNR, SSIM, FLIP, holes) against brute force rendered with the same cameras{}",
+        if on_earth {
+            ", on the WGS84 ellipsoid where the renderers' geolocation lattice places it: each pixel's point mapped back to the grid through the lattice, heights along its up"
+        } else {
+            ""
+        },
+        if clipmap {
+            " (the pyramid's, never a clipmap level)"
+        } else {
+            ""
+        },
+        if clipmap {
+            " through the same clipmap"
+        } else {
+            ""
+        }
+    )
 }
 
 /// Median of `value(row, oracle triangles)` over the rows the oracle ran on (`None` when it
