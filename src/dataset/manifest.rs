@@ -165,6 +165,14 @@ impl Manifest {
     /// Every field against the layout it implies: sizes, spacing, georeferencing, level and
     /// statistics entries (file names included: nothing outside the data set).
     pub fn check(&self, what: &str) -> Result<()> {
+        self.check_grid(what)?;
+        self.check_metadata(what)?;
+        self.check_levels(what)?;
+        self.check_stats(what)
+    }
+
+    /// Level 0's size, spacing and extent.
+    fn check_grid(&self, what: &str) -> Result<()> {
         let bad = |m: String| Err(Error::invalid(what, m));
         let (w, h) = (self.width, self.height);
         if !(2..=MAX_SIDE_SAMPLES).contains(&w) || !(2..=MAX_SIDE_SAMPLES).contains(&h) {
@@ -191,6 +199,13 @@ impl Manifest {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Georeferencing, vertical datum, no-data value, content, height range and layers.
+    fn check_metadata(&self, what: &str) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid(what, m));
+        let (w, h) = (self.width, self.height);
         if let Some(g) = &self.georef {
             g.check(what, w, h)?;
         }
@@ -219,6 +234,12 @@ impl Manifest {
         {
             return bad(format!("layers {:?} are not supported", self.layers));
         }
+        Ok(())
+    }
+
+    /// Each level's entry (file, sizes, nodes, record size) against the layout.
+    fn check_levels(&self, what: &str) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid(what, m));
         let (layout, layers) = self.layout()?;
         if layout.levels() as usize != self.levels.len() {
             return bad(format!(
@@ -258,6 +279,13 @@ impl Manifest {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// The statistics entries: at most 64, each file inside the data set and of a stored size.
+    fn check_stats(&self, what: &str) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid(what, m));
+        let (w, h) = (self.width, self.height);
         if self.tile_stats.len() > 64 {
             return bad(format!("{} statistics entries", self.tile_stats.len()));
         }
