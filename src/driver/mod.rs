@@ -126,66 +126,17 @@ impl Gpu {
         // 640x360 where the same frames take ~50 ms without it).
         let anisotropy =
             offered.sampler_anisotropy && info.device_type != vk::PhysicalDeviceType::CPU;
-        let base = vk::PhysicalDeviceFeatures::default()
-            .sampler_anisotropy(anisotropy)
-            .multi_draw_indirect(offered.multi_draw_indirect)
-            .draw_indirect_first_instance(offered.draw_indirect_first_instance)
-            .pipeline_statistics_query(offered.pipeline_statistics_query)
-            .tessellation_shader(offered.tessellation_shader);
-        let mut f12 = vk::PhysicalDeviceVulkan12Features::default()
-            .timeline_semaphore(true)
-            .draw_indirect_count(offered.draw_indirect_count);
-        let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
-            .dynamic_rendering(modern)
-            .synchronization2(modern);
-        let priorities = [1.0f32];
-        let queues = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(queue_family)
-            .queue_priorities(&priorities)];
-        // Zero-copy ring publishing imports the ring's slots as buffers (host_memory.rs).
-        let external_memory_host = offered.external_memory_host;
-        let mut extensions = Vec::new();
-        if external_memory_host {
-            extensions.push(ash::ext::external_memory_host::NAME.as_ptr());
-        }
-        // Task + mesh shaders (the chunked method's mesh path) where offered and not masked.
-        let mut fmesh = vk::PhysicalDeviceMeshShaderFeaturesEXT::default()
-            .task_shader(true)
-            .mesh_shader(true);
-        if offered.mesh_shader {
-            extensions.push(ash::ext::mesh_shader::NAME.as_ptr());
-        }
-        let mut create = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queues)
-            .enabled_extension_names(&extensions)
-            .enabled_features(&base)
-            .push_next(&mut f12);
-        if info.api_version >= vk::API_VERSION_1_3 {
-            create = create.push_next(&mut f13);
-        }
-        if offered.mesh_shader {
-            create = create.push_next(&mut fmesh);
-        }
-        let device =
-            unsafe { instance.raw.create_device(physical, &create, None) }.vk("vkCreateDevice")?;
+        let device = create_device(
+            &instance.raw,
+            (physical, queue_family),
+            &info,
+            &offered,
+            modern,
+            anisotropy,
+        )?;
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
 
-        let allocator =
-            gpu_allocator::vulkan::Allocator::new(&gpu_allocator::vulkan::AllocatorCreateDesc {
-                instance: instance.raw.clone(),
-                device: device.clone(),
-                physical_device: physical,
-                debug_settings: Default::default(),
-                buffer_device_address: false,
-                allocation_sizes: Default::default(),
-            })
-            .map_err(|source| {
-                unsafe { device.destroy_device(None) };
-                Error::Allocation {
-                    what: "allocator".into(),
-                    source,
-                }
-            })?;
+        let allocator = create_allocator(&instance.raw, &device, physical)?;
 
         let enabled = Capabilities {
             dynamic_rendering: modern,
@@ -193,7 +144,7 @@ impl Gpu {
             sampler_anisotropy: anisotropy,
             // Enabled only when a method needs it (none does yet).
             geometry_shader: false,
-            external_memory_host,
+            // The rest as offered: external host memory (the zero-copy ring), mesh shaders, ...
             ..offered
         };
         Ok(Arc::new(Gpu {
@@ -314,4 +265,80 @@ impl Drop for Gpu {
         }
         // `instance` drops after this, destroying the messenger and the instance.
     }
+}
+
+/// The logical device with one queue of the universal `queue_family` and the features `offered` (after masking)
+/// that the renderer uses: dynamic rendering and synchronization2 when `modern`, mesh shaders
+/// and host-memory import where offered.
+fn create_device(
+    instance: &ash::Instance,
+    (physical, queue_family): (vk::PhysicalDevice, u32),
+    info: &DeviceInfo,
+    offered: &Capabilities,
+    modern: bool,
+    anisotropy: bool,
+) -> Result<ash::Device> {
+    let base = vk::PhysicalDeviceFeatures::default()
+        .sampler_anisotropy(anisotropy)
+        .multi_draw_indirect(offered.multi_draw_indirect)
+        .draw_indirect_first_instance(offered.draw_indirect_first_instance)
+        .pipeline_statistics_query(offered.pipeline_statistics_query)
+        .tessellation_shader(offered.tessellation_shader);
+    let mut f12 = vk::PhysicalDeviceVulkan12Features::default()
+        .timeline_semaphore(true)
+        .draw_indirect_count(offered.draw_indirect_count);
+    let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
+        .dynamic_rendering(modern)
+        .synchronization2(modern);
+    let priorities = [1.0f32];
+    let queues = [vk::DeviceQueueCreateInfo::default()
+        .queue_family_index(queue_family)
+        .queue_priorities(&priorities)];
+    // Zero-copy ring publishing imports the ring's slots as buffers (host_memory.rs).
+    let mut extensions = Vec::new();
+    if offered.external_memory_host {
+        extensions.push(ash::ext::external_memory_host::NAME.as_ptr());
+    }
+    // Task + mesh shaders (the chunked method's mesh path) where offered and not masked.
+    let mut fmesh = vk::PhysicalDeviceMeshShaderFeaturesEXT::default()
+        .task_shader(true)
+        .mesh_shader(true);
+    if offered.mesh_shader {
+        extensions.push(ash::ext::mesh_shader::NAME.as_ptr());
+    }
+    let mut create = vk::DeviceCreateInfo::default()
+        .queue_create_infos(&queues)
+        .enabled_extension_names(&extensions)
+        .enabled_features(&base)
+        .push_next(&mut f12);
+    if info.api_version >= vk::API_VERSION_1_3 {
+        create = create.push_next(&mut f13);
+    }
+    if offered.mesh_shader {
+        create = create.push_next(&mut fmesh);
+    }
+    unsafe { instance.create_device(physical, &create, None) }.vk("vkCreateDevice")
+}
+
+/// gpu-allocator over `device`; destroys the device if it fails, as nothing else owns it yet.
+fn create_allocator(
+    instance: &ash::Instance,
+    device: &ash::Device,
+    physical: vk::PhysicalDevice,
+) -> Result<gpu_allocator::vulkan::Allocator> {
+    gpu_allocator::vulkan::Allocator::new(&gpu_allocator::vulkan::AllocatorCreateDesc {
+        instance: instance.clone(),
+        device: device.clone(),
+        physical_device: physical,
+        debug_settings: Default::default(),
+        buffer_device_address: false,
+        allocation_sizes: Default::default(),
+    })
+    .map_err(|source| {
+        unsafe { device.destroy_device(None) };
+        Error::Allocation {
+            what: "allocator".into(),
+            source,
+        }
+    })
 }
