@@ -113,6 +113,45 @@ impl KeyframeSpec {
         }
     }
 
+    /// Keyframe `i` as the scenario interpolates it (time still NaN where not given).
+    fn key<D: Level0 + ?Sized>(
+        &self,
+        i: usize,
+        data: &D,
+        earth: Option<&Earth>,
+        grid_on_earth: bool,
+        template: &Camera,
+    ) -> Result<Key> {
+        if self.is_geo() {
+            let pose = self.geo_pose(i)?;
+            let Some(earth) = earth else {
+                return Err(Error::invalid(
+                    "scenario",
+                    format!(
+                        "keyframe {i}: a WGS84 pose needs a data set on the earth (georeferenced, or [dataset] anchor)"
+                    ),
+                ));
+            };
+            let t = self.t.unwrap_or(f64::NAN);
+            return Key::on_earth(earth, &pose, None, t, data, template);
+        }
+        let position = self.grid_position(i, data)?;
+        if let (true, Some(earth)) = (grid_on_earth, earth) {
+            let pose = earth.grid_pose(data, position, self.yaw, self.pitch, self.roll)?;
+            let t = self.t.unwrap_or(f64::NAN);
+            return Key::on_earth(earth, &pose, Some(position.z), t, data, template);
+        }
+        Ok(Key {
+            t: self.t.unwrap_or(f64::NAN),
+            position,
+            yaw: self.yaw,
+            pitch: self.pitch,
+            roll: self.roll,
+            geo: None,
+            given: None,
+        })
+    }
+
     /// The keyframe's WGS84 pose; `yaw`/`pitch`/`roll` (world angles) do not mix with it.
     fn geo_pose(&self, i: usize) -> Result<GeoPose> {
         let bad = |m: &str| Err(Error::invalid("scenario", format!("keyframe {i}: {m}")));
@@ -303,66 +342,9 @@ impl Scenario {
             ..Camera::default()
         };
         for (i, k) in file.keyframes.iter().enumerate() {
-            if k.is_geo() {
-                let pose = k.geo_pose(i)?;
-                let Some(earth) = earth else {
-                    return bad(format!(
-                        "keyframe {i}: a WGS84 pose needs a data set on the earth (georeferenced, or [dataset] anchor)"
-                    ));
-                };
-                let t = k.t.unwrap_or(f64::NAN);
-                keys.push(Key::on_earth(earth, &pose, None, t, data, &template)?);
-                continue;
-            }
-            let position = k.grid_position(i, data)?;
-            if let (true, Some(earth)) = (grid_on_earth, earth) {
-                let pose = earth.grid_pose(data, position, k.yaw, k.pitch, k.roll)?;
-                let t = k.t.unwrap_or(f64::NAN);
-                keys.push(Key::on_earth(
-                    earth,
-                    &pose,
-                    Some(position.z),
-                    t,
-                    data,
-                    &template,
-                )?);
-                continue;
-            }
-            keys.push(Key {
-                t: k.t.unwrap_or(f64::NAN),
-                position,
-                yaw: k.yaw,
-                pitch: k.pitch,
-                roll: k.roll,
-                geo: None,
-                given: None,
-            });
+            keys.push(k.key(i, data, earth, grid_on_earth, &template)?);
         }
-        match file.speed {
-            Some(speed) => {
-                if !(speed.is_finite() && speed > 0.0) {
-                    return bad(format!("speed {speed} m/s must be positive"));
-                }
-                if file.keyframes.iter().any(|k| k.t.is_some()) {
-                    return bad("with `speed`, keyframes take no `t`".into());
-                }
-                let mut t = 0.0;
-                for i in 0..keys.len() {
-                    if i > 0 {
-                        t += keys[i].position.distance(keys[i - 1].position) / speed;
-                    }
-                    keys[i].t = t;
-                }
-            }
-            None => {
-                if keys.iter().any(|k| k.t.is_nan()) {
-                    return bad("every keyframe needs `t` (or give the scenario a `speed`)".into());
-                }
-                if keys.windows(2).any(|w| w[1].t < w[0].t) {
-                    return bad("keyframe times must not decrease".into());
-                }
-            }
-        }
+        Self::time_keys(file, &mut keys)?;
         let template = Camera {
             position: keys[0].position,
             yaw_deg: keys[0].yaw,
@@ -389,6 +371,38 @@ impl Scenario {
             c.validate()?;
         }
         Ok(scenario)
+    }
+
+    /// Each key's time: from `speed` along the keys' straight segments, or each key's own
+    /// `t`, which must then be given everywhere and not decrease.
+    fn time_keys(file: &ScenarioFile, keys: &mut [Key]) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid("scenario", m));
+        match file.speed {
+            Some(speed) => {
+                if !(speed.is_finite() && speed > 0.0) {
+                    return bad(format!("speed {speed} m/s must be positive"));
+                }
+                if file.keyframes.iter().any(|k| k.t.is_some()) {
+                    return bad("with `speed`, keyframes take no `t`".into());
+                }
+                let mut t = 0.0;
+                for i in 0..keys.len() {
+                    if i > 0 {
+                        t += keys[i].position.distance(keys[i - 1].position) / speed;
+                    }
+                    keys[i].t = t;
+                }
+            }
+            None => {
+                if keys.iter().any(|k| k.t.is_nan()) {
+                    return bad("every keyframe needs `t` (or give the scenario a `speed`)".into());
+                }
+                if keys.windows(2).any(|w| w[1].t < w[0].t) {
+                    return bad("keyframe times must not decrease".into());
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Per segment whose keys share a datum of their own ([`Key::shares_own_datum`]): the
