@@ -66,32 +66,66 @@ pub fn run(args: &SubscribeArgs) -> anyhow::Result<()> {
     let keys = Keys::of(&settings.prefix, &args.ring);
     let deadline = Instant::now() + Duration::from_secs_f64(args.seconds.max(0.0));
     if let Some(msg) = &args.control {
-        session
-            .put(&keys.control, msg.as_bytes().to_vec())
-            .wait()
-            .map_err(|e| anyhow::anyhow!("zenoh put: {e}"))?;
-        // Let the message leave before the session closes.
-        std::thread::sleep(Duration::from_millis(200));
-        println!("sent control to {}", keys.control);
-        return Ok(());
+        return send_control(&session, &keys, msg);
     }
     if args.status {
-        while Instant::now() < deadline {
-            let replies = session
-                .get(&keys.status)
-                .timeout(Duration::from_secs(2))
-                .wait()
-                .map_err(|e| anyhow::anyhow!("zenoh get: {e}"))?;
-            if let Ok(reply) = replies.recv()
-                && let Ok(sample) = reply.result()
-            {
-                println!("{}", String::from_utf8_lossy(&sample.payload().to_bytes()));
-                return Ok(());
-            }
-            std::thread::sleep(Duration::from_millis(200));
-        }
-        anyhow::bail!("no status from {} within {} s", keys.status, args.seconds);
+        return print_status(&session, &keys, deadline, args.seconds);
     }
+    receive_frames(args, &session, &keys, deadline)?;
+    let _ = session.close().wait();
+    Ok(())
+}
+
+/// A bounded handler that drops the oldest sample when full (a slow subscriber skips frames,
+/// counted in `lost`, and never holds the publisher up).
+fn newest_frames() -> zenoh::handlers::RingChannel {
+    zenoh::handlers::RingChannel::new(4)
+}
+
+/// `--control`: sends one control message.
+fn send_control(session: &zenoh::Session, keys: &Keys, msg: &str) -> anyhow::Result<()> {
+    session
+        .put(&keys.control, msg.as_bytes().to_vec())
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh put: {e}"))?;
+    // Let the message leave before the session closes.
+    std::thread::sleep(Duration::from_millis(200));
+    println!("sent control to {}", keys.control);
+    Ok(())
+}
+
+/// `--status`: asks the service's queryable until it answers or `deadline` passes.
+fn print_status(
+    session: &zenoh::Session,
+    keys: &Keys,
+    deadline: Instant,
+    seconds: f64,
+) -> anyhow::Result<()> {
+    while Instant::now() < deadline {
+        let replies = session
+            .get(&keys.status)
+            .timeout(Duration::from_secs(2))
+            .wait()
+            .map_err(|e| anyhow::anyhow!("zenoh get: {e}"))?;
+        if let Ok(reply) = replies.recv()
+            && let Ok(sample) = reply.result()
+        {
+            println!("{}", String::from_utf8_lossy(&sample.payload().to_bytes()));
+            return Ok(());
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    anyhow::bail!("no status from {} within {} s", keys.status, seconds);
+}
+
+/// Subscribes to the frames until `deadline` or `--frames`, printing a line per frame (unless
+/// `--quiet`) and the summary line; `--save` writes the last one.
+fn receive_frames(
+    args: &SubscribeArgs,
+    session: &zenoh::Session,
+    keys: &Keys,
+    deadline: Instant,
+) -> anyhow::Result<()> {
     let sub = session
         .declare_subscriber(&keys.frame)
         .with(newest_frames())
@@ -156,12 +190,5 @@ pub fn run(args: &SubscribeArgs) -> anyhow::Result<()> {
         lat.median, lat.p99
     );
     drop(sub);
-    let _ = session.close().wait();
     Ok(())
-}
-
-/// A bounded handler that drops the oldest sample when full (a slow subscriber skips frames,
-/// counted in `lost`, and never holds the publisher up).
-fn newest_frames() -> zenoh::handlers::RingChannel {
-    zenoh::handlers::RingChannel::new(4)
 }
