@@ -359,13 +359,11 @@ pub fn evaluate(
 ) -> Result<Evaluation> {
     let started = Instant::now();
     let gpu = setup.gpu;
-    let shape = FrameShape {
-        width: setup.options.width,
-        height: setup.options.height,
-        views: setup.options.views,
-    };
-    let brute = MethodConfig::Brute {};
-    let others: Vec<&Variant> = variants.iter().filter(|v| v.method != brute).collect();
+    let shape = shape_of(setup);
+    let renderers = 1 + variants
+        .iter()
+        .filter(|v| v.method != MethodConfig::Brute {})
+        .count();
     // The renderers' own lattice (None: the flat world): the exact surface is placed as they
     // place the terrain (docs/eval.md, "On the earth").
     let lattice = setup.config.open_lattice(setup.data, setup.options.earth)?;
@@ -375,32 +373,11 @@ pub fn evaluate(
         lattice.as_ref(),
         shape,
         setup.frames as u64,
-        1 + others.len(),
+        renderers,
         setup.reference_mib << 20,
     )?;
     let (flip_tx, flip_rx) = unbounded::<FlipDone>();
-    let mut runs = Vec::with_capacity(1 + others.len());
-    let reference = variants.iter().find(|v| v.method == brute);
-    runs.push(open_run(
-        setup,
-        &shared,
-        Role::Reference,
-        reference.map_or("reference (brute force)", |v| v.label.as_str()),
-        &brute,
-        &[],
-        reference.is_some(),
-    )?);
-    for v in &others {
-        runs.push(open_run(
-            setup,
-            &shared,
-            Role::Variant,
-            &v.label,
-            &v.method,
-            &v.params,
-            true,
-        )?);
-    }
+    let mut runs = open_runs(setup, &shared, variants)?;
     progress.start(
         &format!("{} renderers", runs.len()),
         setup.frames as u64 * runs.len() as u64,
@@ -409,16 +386,7 @@ pub fn evaluate(
     let mut oracle: Option<Oracle> = None;
     for k in 0..setup.frames as u64 {
         let requests = setup.requests(k);
-        let cones: Vec<ViewCone> = requests
-            .iter()
-            .enumerate()
-            .map(|(v, r)| ViewCone {
-                camera: r.camera,
-                aspect: crate::render::view_columns(shape.width, shape.views, v).1 as f64
-                    / shape.height as f64,
-            })
-            .collect();
-        shared.prepare(k, &cones)?;
+        shared.prepare(k, &view_cones(&shape, &requests))?;
         let mut reference = ReferenceFrame::default();
         for (i, run) in runs.iter_mut().enumerate() {
             let spawned = run.frame(setup, k, &requests, &mut reference, i, &flip_tx)?;
@@ -457,6 +425,53 @@ pub fn evaluate(
         .unwrap_or_else(|p| p.into_inner())
         .tiles_loaded;
     finish(setup, runs, wall_s, (tiles_loaded, lattice.is_some()))
+}
+
+/// The reference (brute force: reported when it is one of the variants) and every other
+/// variant's run, in that order.
+fn open_runs(
+    setup: &EvalSetup<'_>,
+    shared: &Arc<EvalShared>,
+    variants: &[Variant],
+) -> Result<Vec<Run>> {
+    let brute = MethodConfig::Brute {};
+    let others: Vec<&Variant> = variants.iter().filter(|v| v.method != brute).collect();
+    let mut runs = Vec::with_capacity(1 + others.len());
+    let reference = variants.iter().find(|v| v.method == brute);
+    runs.push(open_run(
+        setup,
+        shared,
+        Role::Reference,
+        reference.map_or("reference (brute force)", |v| v.label.as_str()),
+        &brute,
+        &[],
+        reference.is_some(),
+    )?);
+    for v in &others {
+        runs.push(open_run(
+            setup,
+            shared,
+            Role::Variant,
+            &v.label,
+            &v.method,
+            &v.params,
+            true,
+        )?);
+    }
+    Ok(runs)
+}
+
+/// Each view's camera and aspect ratio (its share of the frame's columns).
+fn view_cones(shape: &FrameShape, requests: &[FrameRequest]) -> Vec<ViewCone> {
+    requests
+        .iter()
+        .enumerate()
+        .map(|(v, r)| ViewCone {
+            camera: r.camera,
+            aspect: crate::render::view_columns(shape.width, shape.views, v).1 as f64
+                / shape.height as f64,
+        })
+        .collect()
 }
 
 fn open_run(
