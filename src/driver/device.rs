@@ -197,11 +197,6 @@ impl DeviceInfo {
         )
     }
 
-    fn has_extension(&self, name: &CStr) -> bool {
-        let name = name.to_string_lossy();
-        self.extensions.iter().any(|e| *e == name)
-    }
-
     /// Why this device cannot run vkterrain, if it cannot.
     pub fn unsuitable_reason(&self) -> Option<String> {
         if self.api_version < vk::API_VERSION_1_2 {
@@ -270,25 +265,6 @@ pub(crate) fn describe(
         let memory = instance.get_physical_device_memory_properties(pd);
         let queue_families = instance.get_physical_device_queue_family_properties(pd);
 
-        let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
-        let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
-        let mut fmesh = vk::PhysicalDeviceMeshShaderFeaturesEXT::default();
-        let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f12);
-        let is_13 = props.api_version >= vk::API_VERSION_1_3;
-        if is_13 {
-            f2 = f2.push_next(&mut f13);
-        }
-        let mesh_ext = ash::ext::mesh_shader::NAME.to_string_lossy();
-        let has_mesh_ext = extensions.iter().any(|e| *e == mesh_ext);
-        if has_mesh_ext {
-            f2 = f2.push_next(&mut fmesh);
-        }
-        instance.get_physical_device_features2(pd, &mut f2);
-        let f = f2.features;
-        // Task and mesh stages both (the chunked method's mesh path uses the two).
-        let mesh_shader =
-            has_mesh_ext && fmesh.task_shader == vk::TRUE && fmesh.mesh_shader == vk::TRUE;
-
         let name = props
             .device_name_as_c_str()
             .map(|s| s.to_string_lossy().into_owned())
@@ -318,27 +294,7 @@ pub(crate) fn describe(
             caps: Capabilities::default(),
             host_pointer_alignment,
         };
-        info.caps = Capabilities {
-            timeline_semaphore: f12.timeline_semaphore == vk::TRUE,
-            dynamic_rendering: is_13 && f13.dynamic_rendering == vk::TRUE,
-            synchronization2: is_13 && f13.synchronization2 == vk::TRUE,
-            sampler_anisotropy: f.sampler_anisotropy == vk::TRUE,
-            max_anisotropy: props.limits.max_sampler_anisotropy,
-            multi_draw_indirect: f.multi_draw_indirect == vk::TRUE,
-            draw_indirect_first_instance: f.draw_indirect_first_instance == vk::TRUE,
-            draw_indirect_count: f12.draw_indirect_count == vk::TRUE,
-            pipeline_statistics_query: f.pipeline_statistics_query == vk::TRUE,
-            timestamps: props.limits.timestamp_compute_and_graphics == vk::TRUE,
-            timestamp_period_ns: props.limits.timestamp_period,
-            tessellation_shader: f.tessellation_shader == vk::TRUE,
-            geometry_shader: f.geometry_shader == vk::TRUE,
-            mesh_shader,
-            external_memory_host: info.has_extension(ash::ext::external_memory_host::NAME),
-            texture_compression_bc: f.texture_compression_bc == vk::TRUE,
-            texture_compression_etc2: f.texture_compression_etc2 == vk::TRUE,
-            texture_compression_astc: f.texture_compression_astc_ldr == vk::TRUE,
-            unified_memory,
-        };
+        info.caps = capabilities(instance, pd, &props, &info.extensions, unified_memory);
         Ok(info)
     }
 }
@@ -409,4 +365,58 @@ pub fn choose(
             reason: "none offers Vulkan 1.2 with timeline semaphores and a graphics+compute queue"
                 .into(),
         })
+}
+
+/// What the device offers of what vkterrain can use: Vulkan 1.2/1.3 and core features, mesh
+/// shaders, host-memory import, timestamps, compressed textures.
+fn capabilities(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    props: &vk::PhysicalDeviceProperties,
+    extensions: &[String],
+    unified_memory: bool,
+) -> Capabilities {
+    let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
+    let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
+    let mut fmesh = vk::PhysicalDeviceMeshShaderFeaturesEXT::default();
+    let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f12);
+    let is_13 = props.api_version >= vk::API_VERSION_1_3;
+    if is_13 {
+        f2 = f2.push_next(&mut f13);
+    }
+    let has = |name: &CStr| {
+        let name = name.to_string_lossy();
+        extensions.iter().any(|e| *e == name)
+    };
+    let has_mesh_ext = has(ash::ext::mesh_shader::NAME);
+    if has_mesh_ext {
+        f2 = f2.push_next(&mut fmesh);
+    }
+    unsafe { instance.get_physical_device_features2(pd, &mut f2) };
+    let f = f2.features;
+    // Task and mesh stages both (the chunked method's mesh path uses the two).
+    let mesh_shader =
+        has_mesh_ext && fmesh.task_shader == vk::TRUE && fmesh.mesh_shader == vk::TRUE;
+
+    Capabilities {
+        timeline_semaphore: f12.timeline_semaphore == vk::TRUE,
+        dynamic_rendering: is_13 && f13.dynamic_rendering == vk::TRUE,
+        synchronization2: is_13 && f13.synchronization2 == vk::TRUE,
+        sampler_anisotropy: f.sampler_anisotropy == vk::TRUE,
+        max_anisotropy: props.limits.max_sampler_anisotropy,
+        multi_draw_indirect: f.multi_draw_indirect == vk::TRUE,
+        draw_indirect_first_instance: f.draw_indirect_first_instance == vk::TRUE,
+        draw_indirect_count: f12.draw_indirect_count == vk::TRUE,
+        pipeline_statistics_query: f.pipeline_statistics_query == vk::TRUE,
+        timestamps: props.limits.timestamp_compute_and_graphics == vk::TRUE,
+        timestamp_period_ns: props.limits.timestamp_period,
+        tessellation_shader: f.tessellation_shader == vk::TRUE,
+        geometry_shader: f.geometry_shader == vk::TRUE,
+        mesh_shader,
+        external_memory_host: has(ash::ext::external_memory_host::NAME),
+        texture_compression_bc: f.texture_compression_bc == vk::TRUE,
+        texture_compression_etc2: f.texture_compression_etc2 == vk::TRUE,
+        texture_compression_astc: f.texture_compression_astc_ldr == vk::TRUE,
+        unified_memory,
+    }
 }
