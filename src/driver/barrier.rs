@@ -219,9 +219,9 @@ impl<'a> Barriers<'a> {
         }
     }
 
-    /// Copies `size` bytes of `src` from `src_offset` to the start of `dst` for the host to
-    /// read: the copy waits for `after` (the last access to `src`), and the host read for the
-    /// copy (it still waits for the submission's fence).
+    /// Copies `size` bytes from `src` (buffer, byte offset) to the start of `dst` for the host
+    /// to read: the copy waits for `after` (the last access to `src`), and the host read for
+    /// the copy (it still waits for the submission's fence).
     pub fn copy_for_host(
         &self,
         cmd: vk::CommandBuffer,
