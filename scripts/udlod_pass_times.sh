@@ -2,7 +2,7 @@
 # UDLOD's GPU time per pass on lavapipe, from `vkterrain render`'s summary.json: the medians
 # of the prepass and the terrain pass over frames 5 on (after lavapipe's lazy compiles), and
 # the prepass per third frame (llvmpipe's slow dispatch mode shows as stretches of frames:
-# docs/udlod.md, "Measured this round, not built"). The config's method becomes UDLOD with
+# docs/udlod-rounds.md, "Measured this round, not built"). The config's method becomes UDLOD with
 # LINES added to its `[method]` table; the copy sits beside the config, so its relative
 # paths hold. THREADS sets LP_NUM_THREADS, FRAMES the frame count (60).
 # Usage: [LINES="collapse = false"] [THREADS=1] [FRAMES=100] scripts/udlod_pass_times.sh BIN CONFIG [render args]

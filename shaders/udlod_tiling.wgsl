@@ -580,7 +580,7 @@ fn decided(t: Tile, splits: bool, culled: bool, inside: bool) -> Tile {
 // keeps_grid: the quadrants (bit `qx + 2 qy`) that keep their own grid: those with a vertex odd
 // at the tile's level short of the grid above by `UDLOD_COLLAPSE_MARGIN`
 // (`select::tile_collapse_mask`); the others' surface is the parent grid's over their even
-// vertices, and they are drawn as that grid (docs/udlod.md, "Collapsed quadrants"). All four
+// vertices, and they are drawn as that grid (docs/udlod-rounds.md, "Collapsed quadrants"). All four
 // without the setting `collapse` (`udlod.params.x`) or with morphing off.
 struct TileChecks {
     slivers: bool,
@@ -671,7 +671,7 @@ fn quadrants_of(local: vec2<u32>, quads: u32) -> u32 {
 // rather than a stale entry. The groups' counts are read and their draws written by all
 // invocations; one runs the scan in workgroup memory (one invocation walking the 162 groups'
 // counters in the state buffer: most of the 0.02-0.04 ms that 81 masks first cost the H200,
-// docs/udlod.md "Quadrants outside the view").
+// docs/udlod-rounds.md "Quadrants outside the view").
 var<workgroup> wg_finish_count: array<u32, DRAW_GROUPS>;
 var<workgroup> wg_finish_first: array<u32, DRAW_GROUPS>;
 // Per group: its draw's entry in `state.draws`, or `NO_DRAW`.

@@ -54,7 +54,7 @@ fn one_step(grid_size: u32) -> UdlodSettings {
 }
 
 /// [`settings`] with the morph cascade over every level (`morph_levels = 0`, the default:
-/// vertices walk on past their tile, docs/udlod.md, "Walks past the tile").
+/// vertices walk on past their tile, docs/udlod-rounds.md, "Walks past the tile").
 fn cascade(grid_size: u32) -> UdlodSettings {
     UdlodSettings {
         morph_levels: 0,
@@ -72,7 +72,7 @@ fn bounded_cascade(grid_size: u32) -> UdlodSettings {
 }
 
 /// [`cascade`] with a split field of two nodes per tile side (`field_density = 2`:
-/// docs/udlod.md, "A finer split field"; the default's at grid 4 and 8).
+/// docs/udlod-rounds.md, "A finer split field"; the default's at grid 4 and 8).
 fn finer_field(grid_size: u32) -> UdlodSettings {
     UdlodSettings {
         field_density: 2,
@@ -213,7 +213,7 @@ fn a_new_field_key_reads_the_cells_again() {
     );
 }
 
-/// The coarse levels walked on the host (`seed_tiles`; docs/udlod.md, "The seed") save the
+/// The coarse levels walked on the host (`seed_tiles`; docs/udlod-rounds.md, "The seed") save the
 /// prepass its passes over them and change no tile: over 40 poses at every grid size, the GPU
 /// draws the CPU reference's tiles with the default seed (256 tiles), with a seed of 16 and with
 /// the root alone (`seed_tiles = 1`, every level a pass: what the prepass did before), and it
@@ -283,11 +283,11 @@ fn seeded_selection_at(data: &Heightmap, cams: &[Camera], lod: UdlodSettings) {
     }
 }
 
-/// Collapsed quadrants (docs/udlod.md, "Collapsed quadrants"): the prepass draws each quadrant
-/// of a tile whose odd vertices all lie fully on its parent's grid as that grid, and that is
-/// the same surface. Over a low flight (most tiles in their morph zones) and 30 poses, at every
-/// grid size and morph variant, and at grid 2, every quadrant drawn (`cull_quadrants = false`):
-/// the GPU gives every tile the mask the CPU mirror (`select::tile_mask`, here the collapse of
+/// Collapsed quadrants (docs/udlod-rounds.md, "Collapsed quadrants"): the prepass draws each
+/// quadrant of a tile whose odd vertices all lie fully on its parent's grid as that grid, and that
+/// is the same surface. Over a low flight (most tiles in their morph zones) and 30 poses, at every
+/// grid size and morph variant, and at grid 2, every quadrant drawn (`cull_quadrants = false`): the
+/// GPU gives every tile the mask the CPU mirror (`select::tile_mask`, here the collapse of
 /// `select::tile_collapse_mask` alone) does, and the frames with and without collapsing are
 /// identical, colour and depth, bit for bit, while they draw exactly the triangles the masks
 /// save (`grid::mask_triangles`). Negative control by hand: a threshold of 0.5 instead of
@@ -308,12 +308,12 @@ fn collapsed_tiles_draw_the_same_surface() {
     collapsed_tiles_draw_the_same_surface_at(&data, &cams, 2, "default", cascade(2));
 }
 
-/// Quadrants outside the view (docs/udlod.md, "Quadrants outside the view"): the quadrants of a
-/// drawn tile whose boxes lie outside the frustum are not drawn, and that changes no pixel.
-/// Over a low flight and 30 poses at grids 2, 4 and 8: the GPU gives every tile the mask the
-/// CPU mirror (`select::tile_mask`) does, the frames with and without `cull_quadrants` are
-/// identical, colour and depth, bit for bit, and differ by exactly the dropped quadrants'
-/// triangles (`grid::mask_triangles`). Negative control by hand: `refine` dropping quadrant
+/// Quadrants outside the view (docs/udlod-rounds.md, "Quadrants outside the view"): the quadrants
+/// of a drawn tile whose boxes lie outside the frustum are not drawn, and that changes no pixel.
+/// Over a low flight and 30 poses at grids 2, 4 and 8: the GPU gives every tile the mask the CPU
+/// mirror (`select::tile_mask`) does, the frames with and without `cull_quadrants` are identical,
+/// colour and depth, bit for bit, and differ by exactly the dropped quadrants' triangles
+/// (`grid::mask_triangles`). Negative control by hand: `refine` dropping quadrant
 /// `k ^ 1` instead of quadrant `k` fails the mirror at the first pose.
 #[test]
 fn quadrants_outside_the_view_change_no_pixel() {
@@ -858,7 +858,7 @@ fn leaf_levels(tiles: &[Tile]) -> HashMap<(u32, u32), u32> {
     m
 }
 
-/// Shared edges are closed (docs/udlod.md, "The morph cascade"): over 200 poses at tau 1, 4
+/// Shared edges are closed (docs/udlod-rounds.md, "The morph cascade"): over 200 poses at tau 1, 4
 /// and 8, every vertex
 /// on a tile's edge lands, after morphing, exactly on a vertex of a coarser neighbour's edge,
 /// on all four sides. With one level step (`morph_levels = 1`) neighbours differ by at most one
@@ -1222,7 +1222,7 @@ fn culling_keeps_every_tile_a_brute_force_box_test_keeps_at(grid: u32) {
 /// grid 4 / 8, 0.26-0.28 at grid 4 without the separation (the control).
 const FOLD_GUARD_QUADS: f32 = 0.22;
 
-/// Walks past the tile (docs/udlod.md, "Walks past the tile"): over 60 poses at tau 1 and 4,
+/// Walks past the tile (docs/udlod-rounds.md, "Walks past the tile"): over 60 poses at tau 1 and 4,
 /// every morphed vertex of every tile lies in the rectangle `select::tile_reach` gives it, and
 /// the tile whose heights bound the box holds that rectangle; enough vertices lie outside
 /// their own tile that this means something; and no vertex passes its neighbour along a grid

@@ -158,7 +158,7 @@ fn screen_space_error_is_within_tau_at(grid: u32) {
             udlod.pixels.p999
         );
         // The worst pixel too: a fold of the morph (triangles turned over where the factor
-        // jumped between neighbouring vertices, docs/udlod.md "The morph cascade") showed as
+        // jumped between neighbouring vertices, docs/udlod-rounds.md "The morph cascade") showed as
         // single pixels 5-10 tau off, or far more. Measured: 1.30-1.54 tau.
         assert!(
             udlod.pixels.max <= 2.0 * tau,
@@ -667,9 +667,9 @@ fn vertex_pulling_draws_the_same_surface_as_the_indexed_grid_at(grid: u32) {
 /// (`field_density = 2`) frames 109, 111, 215 and 227 with one level step and 145, 160, 196
 /// and 228 with the cascade, one pixel each, and none with `"static"` in any of the 330; all
 /// at the share of 0.72, which the test keeps). Since a point odd along both axes morphs at
-/// most `(1 + b) / 2` (`b` its neighbours', docs/udlod.md "Folds at the quads' diagonal"), no
-/// triangle turns over in the grid, and culling every tile left one such pixel in one frame
-/// with the cascade (frame 245 with one node per tile corner, 228 with two per side; `eval
+/// most `(1 + b) / 2` (`b` its neighbours', docs/udlod-rounds.md "Folds at the quads' diagonal"),
+/// no triangle turns over in the grid, and culling every tile left one such pixel in one frame with
+/// the cascade (frame 245 with one node per tile corner, 228 with two per side; `eval
 /// --sweep morph_levels=1,0 --sweep field_density=1,2`, all 330 frames) and none with one
 /// level step; the cascade's two variants are checked on those frames and on one of the
 /// frames found before. UDLOD culls back faces only on tiles none of whose vertices can morph

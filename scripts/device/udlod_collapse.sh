@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Collapsed tiles (docs/udlod.md, "Collapsed tiles") on the GPU machine, 1920x1080: one `eval`
+# Collapsed tiles (docs/udlod-rounds.md, "Collapsed tiles") on the GPU machine, 1920x1080: one `eval`
 # per data set (the CI terrain, Puget Sound) with `--sweep collapse=0,1 --sweep
 # tau_px=0.5,1,2,4` (error, triangles, UDLOD/oracle; CSVs to $OUT/eval-*), then `bench` with
 # collapsing off and on, alternated, two rounds (frames back to back, 300 after 20 of warm-up).

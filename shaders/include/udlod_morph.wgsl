@@ -20,7 +20,7 @@ fn factor_of_ramp(ramp: f32, sample: vec2<i32>, lod: u32) -> f32 {
     // A point odd along both axes slides along its block's diagonal from (1, 1) to (0, 0),
     // across the quad's split from (1, 0) to (0, 1): past `(1 + b) / 2`, `b` the smaller factor
     // of those two neighbours (each odd along one axis), the triangle between the three turns
-    // over (docs/udlod.md, "Folds at the quads' diagonal").
+    // over (docs/udlod-rounds.md, "Folds at the quads' diagonal").
     // (Never binding at or below 1/2: the neighbours are read only past it.)
     let folds = f > 0.5 && all(odd_at(sample, lod) == vec2<i32>(1));
     // The two neighbours through one copy of `morph_ramp` in a loop: Mesa 22.3 runs a branch

@@ -65,7 +65,7 @@ pub fn render(
 /// check: the shipped default, and grids 4 and 8 (issue 18's third round measured grid 4 as
 /// the better choice but for its host memory: docs/udlod.md), so a change of the default
 /// keeps all of them covered. `VKTERRAIN_UDLOD_GRIDS=2` (a comma-separated list) runs
-/// those tests at other grids instead, by hand (docs/udlod.md, "Grid 2 under the tests").
+/// those tests at other grids instead, by hand (docs/udlod-rounds.md, "Grid 2 under the tests").
 pub fn udlod_grids() -> Vec<u32> {
     if let Ok(list) = std::env::var("VKTERRAIN_UDLOD_GRIDS") {
         return list

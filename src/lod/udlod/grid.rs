@@ -1,6 +1,6 @@
 //! A tile's triangles per draw mask: which quadrants of a tile are drawn as their own grid,
-//! as their parent grid's quads (docs/udlod.md, "Collapsed quadrants") or not at all (outside
-//! the frustum: "Quadrants outside the view").
+//! as their parent grid's quads (docs/udlod-rounds.md, "Collapsed quadrants") or not at all
+//! (outside the frustum: "Quadrants outside the view").
 //!
 //! A tile of `grid` quads per side has four quadrants of `grid / 2` (quadrant `q = qx + 2 qy`,
 //! origin `(qx, qy) * grid / 2`). A quadrant whose vertices odd at the tile's level all lie

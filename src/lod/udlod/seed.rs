@@ -7,7 +7,7 @@
 //! instead with the reference selection's decisions ([`select::tile_splits`],
 //! [`select::tile_culled`]) and hands the GPU's first pass the walk's frontier as its
 //! parents: every tile the walk kept that does not split (at any level), and the last level
-//! walked. The GPU's passes then run only from that level down (docs/udlod.md, "The seed").
+//! walked. The GPU's passes then run only from that level down (docs/udlod-rounds.md, "The seed").
 //!
 //! The walk applies the passes' capacity rule level by level (a level splits only if all of
 //! its splits fit the lists) and stops before a level that would not fit, leaving that level

@@ -108,7 +108,7 @@ impl Levels {
     /// Level 0's tiles are dropped when there is a coarser level
     /// ([`TileStats::without_finest`]): a level-0 tile never splits and has no error, and its
     /// parent's heights bound it for culling ([`Levels::stats_tile`]), so the statistics take
-    /// a quarter of the memory (docs/udlod.md, "Host memory of the statistics").
+    /// a quarter of the memory (docs/udlod-rounds.md, "Host memory of the statistics").
     pub fn from_stats(stats: TileStats, spacing: f64) -> Self {
         Self::from_stats_with_finest(stats.without_finest(), spacing)
     }
@@ -882,7 +882,7 @@ const SEPARATION_LEVELS: u32 = 2;
 /// Growth of the split distance allowed from one field corner to the next (8-neighbourhood):
 /// see [`gentle_morph`]. 2; with 1.5 (until issue 18's fifth round) the cascade drew 0-7 %
 /// more triangles on the data sets and 12-16 % more on half-rough terrain, with no fold under
-/// either ratio in the fold runs (docs/udlod.md, "The morph cascade").
+/// either ratio in the fold runs (docs/udlod-rounds.md, "The morph cascade").
 const FIELD_STEP_RATIO: f64 = 2.0;
 
 /// Grid steps of the level below that the morph zone spans at least, with the morph cascade.
@@ -1163,7 +1163,7 @@ pub fn tile_visibility(levels: &Levels, p: &SelectionParams, t: Tile) -> Visibil
 }
 
 /// The quadrants (bits `1 << q`, [`super::grid`]) of final tile `t` whose box lies outside the
-/// frustum: drawn as nothing (docs/udlod.md, "Quadrants outside the view"). Each box is
+/// frustum: drawn as nothing (docs/udlod-rounds.md, "Quadrants outside the view"). Each box is
 /// [`tile_culled`]'s for the quadrant's rectangle ([`quadrant_reach`]); none without culling
 /// or with `cull_quadrants` off. `quadrant_square` and `reach_culled` in `shaders/udlod_tiling.wgsl`.
 pub fn quadrants_culled(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
@@ -1509,7 +1509,7 @@ pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod:
     let mut f = morph_ramp(levels, p, sample, lod).clamp(0.0, 1.0);
     // A point odd along both axes stays within `(1 + b) / 2`, `b` the smaller factor of its
     // neighbours at (1, 0) and (0, 1) of its block, or the triangle between the three turns
-    // over (docs/udlod.md, "Folds at the quads' diagonal"). (The shader reads the two
+    // over (docs/udlod-rounds.md, "Folds at the quads' diagonal"). (The shader reads the two
     // neighbours in a loop from a least factor of 1: the same minimum of values in [0, 1].)
     if f > 0.5 && sample.map(|v| (v as u32 >> lod) & 1) == [1, 1] {
         let step = 1 << lod;

@@ -107,7 +107,7 @@ pub enum BackFaces {
 }
 
 /// The LOD metric on a native non-square grid on the earth (config `lod_metric`;
-/// docs/udlod.md, "Per-axis metric on the earth").
+/// docs/udlod-rounds.md, "Per-axis metric on the earth").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LodMetric {
@@ -360,7 +360,7 @@ const MEASURED_SHARES: [(u32, f64); 3] = [(2, 0.9), (4, 0.72), (8, 0.7)];
 /// `(grid_size, field_density, share)` measured for the finer split field on the CI flight
 /// (640x360, `vkterrain eval --config config/ci.toml --earth flat --methods udlod --sweep
 /// grid_size=G --sweep field_density=D --sweep worst_case_share=... --sweep
-/// tau_px=0.5,1,2,4`; docs/udlod.md, "What the tiles could draw", eighteenth round): a swept
+/// tau_px=0.5,1,2,4`; docs/udlod-rounds.md, "What the tiles could draw", eighteenth round): a swept
 /// share whose p99.9 stays within tau at every tau. Grid 4, two per side: 0.76 exceeded it
 /// (1.010 px at tau 1), 0.78 reached 0.997 tau at tau 2, so 0.80 (at most 0.973 tau); grid 8,
 /// two or four per side: 0.70 exceeded it, 0.76 held (0.70 / 0.76 / 0.82 swept).
@@ -370,7 +370,7 @@ pub const FINER_FIELD_SHARES: [(u32, u32, f64); 3] = [(4, 2, 0.80), (8, 2, 0.76)
 /// grid sizes whose share was measured with two ([`FINER_FIELD_SHARES`]: grid 4 and 8), one
 /// elsewhere (grid 2 leaves no room for two cells of 2 quads; larger grids are not measured).
 /// Two per side draws 6-22 % fewer triangles than one at grid 4 at about equal measured error
-/// (docs/udlod.md, "The finer field as the default").
+/// (docs/udlod-rounds.md, "The finer field as the default").
 pub fn field_density(grid_size: u32) -> u32 {
     if FINER_FIELD_SHARES
         .iter()
@@ -494,8 +494,8 @@ mod tests {
 
     /// A finer split field spends more of tau at the same share, so its measured share is
     /// larger than its grid's corner-field share (a smaller one let the CI flight's p99.9
-    /// exceed tau: docs/udlod.md, "What the tiles could draw"), and an unmeasured density takes
-    /// the largest share measured at all.
+    /// exceed tau: docs/udlod-rounds.md, "What the tiles could draw"), and an unmeasured density
+    /// takes the largest share measured at all.
     #[test]
     fn finer_fields_take_their_own_larger_shares() {
         assert_eq!(worst_case_share(4, 2), 0.80, "measured");
