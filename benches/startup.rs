@@ -14,7 +14,8 @@ use std::time::Instant;
 
 use vkterrain::dataset::stats::TileStats;
 use vkterrain::dataset::{Level0, PyramidReader};
-use vkterrain::lod::udlod::select::{FieldKey, Levels, SplitField};
+use vkterrain::lod::udlod::field::{FieldKey, SplitField};
+use vkterrain::lod::udlod::levels::Levels;
 use vkterrain::lod::udlod::settings::UdlodSettings;
 use vkterrain::scene::Camera;
 

@@ -13,7 +13,7 @@
 //!     [--grid 4] [--morph-levels 0] [--field-density 2] [--share K] [--width 640 --height 360]
 //!     [--earth flat|ellipsoid]   (the scenario's geometry: Fischer S1/S3 fly `--earth flat`)
 //!     [--zone-rule width|error-scaled|free]   (how the field charges the morph zone's width:
-//!     `select::ZoneRule`; anything but `width` is a what-if the renderer does not draw)
+//!     `field::ZoneRule`; anything but `width` is a what-if the renderer does not draw)
 
 use std::collections::HashSet;
 use std::path::PathBuf;
@@ -21,11 +21,11 @@ use std::path::PathBuf;
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::eval::oracle::Oracle;
 use vkterrain::lod::udlod::completion::{CompletionField, CompletionTerms};
+use vkterrain::lod::udlod::field::{FieldKey, FieldTerm, SplitField, ZoneRule};
 use vkterrain::lod::udlod::grid::{QuadrantDraw, TileMask};
-use vkterrain::lod::udlod::select::{
-    self, FieldKey, FieldTerm, Levels, SelectionParams, SplitField, Tile, ZoneRule,
-};
-use vkterrain::lod::udlod::{grid, seed};
+use vkterrain::lod::udlod::levels::{Levels, Tile};
+use vkterrain::lod::udlod::select::{self, SelectionParams};
+use vkterrain::lod::udlod::{field, grid, levels, morph, seed};
 use vkterrain::lod::{MethodConfig, UdlodSettings};
 use vkterrain::render::EarthGeometry;
 
@@ -160,7 +160,7 @@ fn main() -> anyhow::Result<()> {
         };
         // Which term sets each field cell's split distance (every cell of the level, not only
         // those in view), and the corners the gentle morph or the cap raised past them.
-        let terms = select::field_terms(&levels, &field);
+        let terms = field::field_terms(&levels, &field);
         // Level 0's field is all ones and not stored.
         for (l, t) in terms.iter().enumerate().skip(1) {
             let screen = levels.level_error[l] * focal / tau;
@@ -191,7 +191,7 @@ fn main() -> anyhow::Result<()> {
         // only by the crack-free chain.
         let (mut over_rule, mut over_chain) = (0usize, 0usize);
         // What the renderer draws (quadrants whose odd vertices all lie fully on the parent's
-        // grid drawn as that grid, those outside the frustum not at all: `select::tile_mask`),
+        // grid drawn as that grid, those outside the frustum not at all: `morph::tile_mask`),
         // and collapsing whole tiles only (the tenth round's build) for comparison.
         let (mut whole_tris, mut whole_tiles) = (0u64, 0usize);
         let (mut drawn_tris, mut collapsed_quadrants) = (0u64, 0u32);
@@ -215,7 +215,7 @@ fn main() -> anyhow::Result<()> {
             let (mut used, mut used_all) = (HashSet::new(), HashSet::new());
             for t in &tiles {
                 let g = levels.grid_size;
-                let mask = select::tile_mask(&levels, &sp, *t);
+                let mask = morph::tile_mask(&levels, &sp, *t);
                 drawn_tris += grid::mask_triangles(g, mask);
                 collapsed_quadrants += mask.quadrants(QuadrantDraw::Collapsed).count_ones();
                 let own = mask.quadrants(QuadrantDraw::Own);
@@ -225,7 +225,7 @@ fn main() -> anyhow::Result<()> {
                         within_uncollapsed += (own & 1 << q != 0) as u32;
                     }
                 }
-                let collapsing = select::tile_collapse_mask(&levels, &sp, *t);
+                let collapsing = morph::tile_collapse_mask(&levels, &sp, *t);
                 all_quadrant_tris += grid::mask_triangles(g, TileMask::new(g, collapsing, 0));
                 used.insert(mask);
                 used_all.insert(TileMask::new(g, collapsing, 0));
@@ -450,7 +450,7 @@ fn main() -> anyhow::Result<()> {
                 let tiles = select_generic(&levels, &sp, |t| sub_rect_splits(&levels, &sp, t, sub));
                 n += tiles.len();
                 for t in &tiles {
-                    let mask = select::tile_mask(&levels, &sp, *t);
+                    let mask = morph::tile_mask(&levels, &sp, *t);
                     tris += grid::mask_triangles(levels.grid_size, mask);
                 }
             }
@@ -550,7 +550,7 @@ fn tile_exact(
     for r in r0..=r1 {
         for c in c0..=c1 {
             let h = data.sample(c, r) as f64;
-            let dh = (select::level_height(data, t.lod, c, r).unwrap() - h).abs();
+            let dh = (levels::level_height(data, t.lod, c, r).unwrap() - h).abs();
             let pnt = glam::DVec3::new(c as f64 * data.spacing, r as f64 * data.spacing, h);
             let d = (pnt - cam.position).length();
             px = px.max(dh * focal / d);
@@ -784,7 +784,7 @@ impl<'a> ExactView<'a> {
         );
         (r0..=r1).all(|r| {
             (c0..=c1).all(|c| {
-                let lh = select::level_height(data, lod, c, r).unwrap();
+                let lh = levels::level_height(data, lod, c, r).unwrap();
                 let h = data.sample(c, r) as f64;
                 let pnt = glam::DVec3::new(c as f64 * data.spacing, r as f64 * data.spacing, h);
                 (lh - h).abs() * self.focal <= self.tau * (pnt - self.cam.position).length()
@@ -836,7 +836,7 @@ fn cell_field(
                     let mut e = 0.0f64;
                     for r in cy * step..=((cy + 1) * step).min(data.height - 1) {
                         for c in cx * step..=((cx + 1) * step).min(data.width - 1) {
-                            let lh = select::level_height(data, l, c, r).unwrap();
+                            let lh = levels::level_height(data, l, c, r).unwrap();
                             e = e.max((lh - data.sample(c, r) as f64).abs());
                         }
                     }

@@ -1,4 +1,4 @@
-//! The surface UDLOD draws, as the CPU mirror morphs it (`select::morphed_vertex`, proven equal to
+//! The surface UDLOD draws, as the CPU mirror morphs it (`morph::morphed_vertex`, proven equal to
 //! the GPU's in tests/udlod.rs): every tile the CPU reference selects with culling off, every
 //! triangle of its full grid (quadrants uncollapsed: collapsing draws a subset of the same
 //! surface). Per tau, over the flight's frames: the triangles, those inverted in the grid (a fold
@@ -24,7 +24,9 @@ use std::path::PathBuf;
 use glam::DVec3;
 use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::dataset::Heightmap;
-use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
+use vkterrain::lod::udlod::levels::{Levels, Tile};
+use vkterrain::lod::udlod::morph;
+use vkterrain::lod::udlod::select::{self, SelectionParams};
 use vkterrain::lod::{MethodConfig, UdlodSettings};
 use vkterrain::scene::Camera;
 
@@ -234,7 +236,7 @@ impl Mesh {
         let mut triangles = Vec::new();
         for tile in select::select_tiles(levels, &p) {
             let vertex =
-                |i: u32, j: u32| select::morphed_vertex(levels, &p, tile, [i, j]).grid_pos();
+                |i: u32, j: u32| morph::morphed_vertex(levels, &p, tile, [i, j]).grid_pos();
             let grid: Vec<Vec<[f32; 2]>> = (0..=n)
                 .map(|j| (0..=n).map(|i| vertex(i, j)).collect())
                 .collect();

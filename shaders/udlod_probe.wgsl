@@ -1,6 +1,6 @@
 // Tests: UDLOD's vertex morph (`morphed_vertex`, the function the vertex shaders call) for
 // given tiles and local grid vertices, through the set 0 and UDLOD set 1 a view slot last drew
-// with; read back by `lod::udlod::probe::probe` and compared with `select::morphed_vertex`.
+// with; read back by `lod::udlod::probe::probe` and compared with `morph::morphed_vertex`.
 
 //!include terrain_common.wgsl
 //!include udlod_common.wgsl

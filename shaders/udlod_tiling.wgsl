@@ -139,7 +139,7 @@ fn child_slot(i: u32) -> u32 {
 }
 
 // Heights bounding the tile: its own, or for a level-0 tile (none stored when the root is
-// coarser) its parent's (mirrors `Levels::stats_tile` in src/lod/udlod/select.rs).
+// coarser) its parent's (mirrors `Levels::stats_tile` in src/lod/udlod/levels.rs).
 fn tile_min_max(t: Tile) -> vec2<f32> {
     var s = t;
     if t.lod == 0u && udlod.sizes.y >= 1u {
@@ -579,7 +579,7 @@ fn decided(t: Tile, splits: bool, culled: bool, inside: bool) -> Tile {
 // culling (docs/udlod.md, "Pinholes far away and back faces").
 // keeps_grid: the quadrants (bit `qx + 2 qy`) that keep their own grid: those with a vertex odd
 // at the tile's level short of the grid above by `UDLOD_COLLAPSE_MARGIN`
-// (`select::tile_collapse_mask`); the others' surface is the parent grid's over their even
+// (`morph::tile_collapse_mask`); the others' surface is the parent grid's over their even
 // vertices, and they are drawn as that grid (docs/udlod-rounds.md, "Collapsed quadrants"). All four
 // without the setting `collapse` (`udlod.params.x`) or with morphing off.
 struct TileChecks {

@@ -61,8 +61,8 @@ shared_constants! {
     /// Threads per workgroup of the tiling passes.
     UDLOD_WORKGROUP: u32 = 64;
     /// How far past 1 a quadrant's odd vertices' unclamped morph factor must lie for the
-    /// quadrant to be drawn as its parent's grid (`select::tile_collapse_mask`): the vertex stage, which
-    /// recomputes the factor, then clamps it to exactly 1 even where a device rounds the two
+    /// quadrant to be drawn as its parent's grid (`morph::tile_collapse_mask`): the vertex stage,
+    /// which recomputes the factor, then clamps it to exactly 1 even where a device rounds the two
     /// stages' arithmetic differently (Vulkan allows it; the H200 does).
     UDLOD_COLLAPSE_MARGIN: f32 = 1e-3;
     /// Draw masks of a tile: per quadrant its own grid, its parent's grid (collapsed) or

@@ -12,7 +12,7 @@ use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::lod::chunked::select::{self, ChunkParams};
 use vkterrain::lod::chunked::{ChunkedSettings, Traversal};
-use vkterrain::lod::udlod::select::{Levels, Tile};
+use vkterrain::lod::udlod::levels::{Levels, Tile};
 use vkterrain::lod::{MethodConfig, MethodKind};
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer};

@@ -17,7 +17,8 @@ use vkterrain::clipmap::{
 use vkterrain::dataset::{Heightmap, Level0, PyramidReader, Terrain, tiles};
 use vkterrain::gpu_constants::CLIPMAP_LOD_SHIFT;
 use vkterrain::lod::MethodKind;
-use vkterrain::lod::udlod::select::{FieldKey, Levels, SplitField};
+use vkterrain::lod::udlod::field::{FieldKey, SplitField};
+use vkterrain::lod::udlod::levels::Levels;
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer};
 use vkterrain::scene::Camera;
@@ -1055,7 +1056,7 @@ fn levels_from_the_pyramid_reader_equal_levels_from_the_height_map() {
     assert!(e.contains("node 0/1/0") && !e.contains('\n'), "{e}");
 }
 
-/// UDLOD's per-tile min/max, tile errors and level errors exactly as `select.rs` computed them
+/// UDLOD's per-tile min/max, tile errors and level errors exactly as `levels.rs` computed them
 /// before `Level0` (every sample, four grid corners per sample), for `levels`' tiling.
 fn reference_statistics(data: &Heightmap, levels: &Levels) -> (Vec<f32>, Vec<f32>, Vec<f64>) {
     let level_height = |lod: u32, c: u32, r: u32| {

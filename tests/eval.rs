@@ -279,7 +279,7 @@ fn an_overflowing_tile_budget_is_reported() {
 /// ones at tau 1.5 measure tenths of a pixel: a lookup that read the tiles wrongly (x for y, or
 /// another tile size) puts coarse pixels among the level-0 ones (negative control, by hand:
 /// `level_at` with x and y swapped fails it). Tau 1.5, not larger: at 192x108 no level-0 tile
-/// is drawn beyond it since morph zones start where the children allow (docs/udlod.md, "The
+/// is drawn beyond it since morph zones start where the children allow (docs/udlod-rounds.md, "The
 /// zone's start"; tau 2 and 4 draw only coarse pixels there).
 #[test]
 fn coarse_pixels_are_those_over_tiles_coarser_than_level_0() {

@@ -13,9 +13,10 @@ use vkterrain::dataset::interp::GridCell;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::driver::{Gpu, GpuOptions};
 use vkterrain::lod::udlod::grid::{QuadrantDraw, TileMask};
+use vkterrain::lod::udlod::levels::{Levels, Tile};
 use vkterrain::lod::udlod::seed;
-use vkterrain::lod::udlod::select::{self, Levels, SelectionParams, Tile};
-use vkterrain::lod::udlod::{draw_group, grid, settings};
+use vkterrain::lod::udlod::select::{self, SelectionParams};
+use vkterrain::lod::udlod::{draw_group, grid, morph, settings};
 use vkterrain::lod::{MethodKind, UdlodSettings};
 use vkterrain::readback::{CollectSink, OwnedFrame};
 use vkterrain::render::{FrameRequest, Renderer};
@@ -287,8 +288,8 @@ fn seeded_selection_at(data: &Heightmap, cams: &[Camera], lod: UdlodSettings) {
 /// quadrant of a tile whose odd vertices all lie fully on its parent's grid as that grid, and that
 /// is the same surface. Over a low flight (most tiles in their morph zones) and 30 poses, at every
 /// grid size and morph variant, and at grid 2, every quadrant drawn (`cull_quadrants = false`): the
-/// GPU gives every tile the mask the CPU mirror (`select::tile_mask`, here the collapse of
-/// `select::tile_collapse_mask` alone) does, and the frames with and without collapsing are
+/// GPU gives every tile the mask the CPU mirror (`morph::tile_mask`, here the collapse of
+/// `morph::tile_collapse_mask` alone) does, and the frames with and without collapsing are
 /// identical, colour and depth, bit for bit, while they draw exactly the triangles the masks
 /// save (`grid::mask_triangles`). Negative control by hand: a threshold of 0.5 instead of
 /// `1 + margin` in the prepass's `final_tile_checks` changes the GPU's masks at the first pose.
@@ -311,7 +312,7 @@ fn collapsed_tiles_draw_the_same_surface() {
 /// Quadrants outside the view (docs/udlod-rounds.md, "Quadrants outside the view"): the quadrants
 /// of a drawn tile whose boxes lie outside the frustum are not drawn, and that changes no pixel.
 /// Over a low flight and 30 poses at grids 2, 4 and 8: the GPU gives every tile the mask the CPU
-/// mirror (`select::tile_mask`) does, the frames with and without `cull_quadrants` are identical,
+/// mirror (`morph::tile_mask`) does, the frames with and without `cull_quadrants` are identical,
 /// colour and depth, bit for bit, and differ by exactly the dropped quadrants' triangles
 /// (`grid::mask_triangles`). Negative control by hand: `refine` dropping quadrant
 /// `k ^ 1` instead of quadrant `k` fails the mirror at the first pose.
@@ -342,7 +343,7 @@ fn quadrants_outside_the_view_change_no_pixel() {
             assert_eq!(a.depth, b.depth, "grid {grid} pose {i}: depth differs");
             let saved: u64 = (cpu.iter())
                 .map(|(&t, &m)| {
-                    let whole = TileMask::new(grid, select::tile_collapse_mask(&levels, &p, t), 0);
+                    let whole = TileMask::new(grid, morph::tile_collapse_mask(&levels, &p, t), 0);
                     grid::mask_triangles(grid, whole) - grid::mask_triangles(grid, m)
                 })
                 .sum();
@@ -399,11 +400,11 @@ fn frames_and_masks(
     (sink.frames, drawn)
 }
 
-/// The CPU reference's tiles, each with the mask its mirror gives it (`select::tile_mask`).
+/// The CPU reference's tiles, each with the mask its mirror gives it (`morph::tile_mask`).
 fn cpu_masks(levels: &Levels, p: &SelectionParams) -> HashMap<Tile, TileMask> {
     select::select_tiles(levels, p)
         .into_iter()
-        .map(|t| (t, select::tile_mask(levels, p, t)))
+        .map(|t| (t, morph::tile_mask(levels, p, t)))
         .collect()
 }
 
@@ -612,7 +613,7 @@ struct MorphComparison {
     /// Vertices that moved at two or more levels (the morph cascade past its first step).
     cascaded: usize,
     /// Tiles the prepass drew without back-face culling, and tiles where it disagrees with
-    /// the CPU (a tile with a vertex that `select::Moved::Slivers`).
+    /// the CPU (a tile with a vertex that `morph::Moved::Slivers`).
     morphing_tiles: usize,
     misclassified_tiles: usize,
     /// Tiles where the rule before the cascade (an odd vertex part-way) would disagree with
@@ -664,7 +665,7 @@ impl MorphComparison {
 
 /// Renders `cameras` with UDLOD (`lod`) and, after each frame, evaluates the GPU's vertex morph
 /// (`morphed_vertex` in shaders/include/udlod_morph.wgsl, through the state that frame drew
-/// with) at every vertex of every tile the GPU drew, against `select::morphed_vertex`.
+/// with) at every vertex of every tile the GPU drew, against `morph::morphed_vertex`.
 fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> MorphComparison {
     let gpu = common::gpu(false);
     let levels = Levels::for_settings(data, lod).unwrap();
@@ -696,10 +697,10 @@ fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> M
             out.morphing_tiles += morphing;
             for (k, &[x, y, lod]) in tiles.iter().enumerate() {
                 let t = Tile { x, y, lod };
-                let vertex = |i, j| select::morphed_vertex(&levels, &p, t, [i, j]);
+                let vertex = |i, j| morph::morphed_vertex(&levels, &p, t, [i, j]);
                 let grid_vertices = || (0..=g).flat_map(|j| (0..=g).map(move |i| (i, j)));
                 let cpu_slivers =
-                    grid_vertices().any(|(i, j)| vertex(i, j).moved == select::Moved::Slivers);
+                    grid_vertices().any(|(i, j)| vertex(i, j).moved == morph::Moved::Slivers);
                 let odd_rule = grid_vertices().any(|(i, j)| {
                     let m = vertex(i, j).morph;
                     (i | j) & 1 == 1 && m > 0.0 && m < 1.0
@@ -709,7 +710,7 @@ fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> M
                 out.misclassified_by_odd_rule += (odd_rule != gpu_slivers) as usize;
             }
             for ((t, local), gv) in inputs.iter().zip(&gpu_vertices) {
-                let cv = select::morphed_vertex(&levels, &p, *t, *local);
+                let cv = morph::morphed_vertex(&levels, &p, *t, *local);
                 out.vertices += 1;
                 out.cascaded += (cv.levels >= 2) as usize;
                 if cv.morph > 0.0 && cv.morph < 1.0 {
@@ -770,7 +771,7 @@ fn compare_morph(data: &Heightmap, cameras: &[Camera], lod: &UdlodSettings) -> M
 /// (the on/off switch is part of the formula). Many vertices are mid-morph, so the comparison
 /// covers the sliding arithmetic, not only the end points. Negative control (on llvmpipe,
 /// where the comparison is bit for bit; elsewhere positions compare as cell + fraction): dropping the
-/// integer fold (`c += whole; f -= whole`) from `select::morphed_vertex` fails it.
+/// integer fold (`c += whole; f -= whole`) from `morph::morphed_vertex` fails it.
 #[test]
 fn gpu_vertex_morph_equals_the_cpu_mirror() {
     let data = terrain(257, 30.0);
@@ -972,7 +973,7 @@ fn the_drawn_surface_is_closed() {
             println!(
                 "grid {grid} {name}: {triangles} triangles drawn, closed; {inverted} inverted in the grid"
             );
-            // No triangle turns over at one level (docs/udlod.md, "Folds at the quads'
+            // No triangle turns over at one level (docs/udlod-rounds.md, "Folds at the quads'
             // diagonal"); walks over several levels turn over a few.
             if lod.morph_levels() == 1 {
                 assert_eq!(inverted, 0, "grid {grid} {name}: inverted triangles");
@@ -1000,9 +1001,9 @@ fn drawn_surface(
     let g = levels.grid_size;
     let mut out = Vec::new();
     for &t in tiles {
-        let mask = TileMask::new(g, select::tile_collapse_mask(levels, p, t), 0);
+        let mask = TileMask::new(g, morph::tile_collapse_mask(levels, p, t), 0);
         let vertex = |local: [u32; 2]| {
-            let v = select::morphed_vertex(levels, p, t, local);
+            let v = morph::morphed_vertex(levels, p, t, local);
             let mut frac = v.frac.map(f32::to_bits);
             if moved == Some((t, local)) {
                 frac[0] += 1;
@@ -1094,11 +1095,11 @@ fn check_edges(
                 lod: m,
             };
             let on_coarse: Vec<_> = (0..=g)
-                .map(|k| select::morphed_vertex(levels, p, coarse, coarse_local(g, k)))
+                .map(|k| morph::morphed_vertex(levels, p, coarse, coarse_local(g, k)))
                 .map(|v| (v.cell, v.frac))
                 .collect();
             for k in 0..=g {
-                let fine = select::morphed_vertex(levels, p, *t, fine_local(g, k));
+                let fine = morph::morphed_vertex(levels, p, *t, fine_local(g, k));
                 let fine = (fine.cell, fine.frac);
                 if !on_coarse.iter().any(|c| c == &fine) {
                     return Err(format!(
@@ -1230,7 +1231,7 @@ const FOLD_GUARD_QUADS: f32 = 0.22;
 /// shows the box test itself conservative, and the GPU's selection equals the CPU's.)
 /// Negative controls by hand: `tile_reach` without the corners' walks (the tile's own
 /// rectangle) fails the first assertion; the split field without the separation term
-/// (`select::SEPARATION_LEVELS`) fails the guard.
+/// (`field::SEPARATION_LEVELS`) fails the guard.
 #[test]
 fn culling_boxes_hold_every_morphed_vertex() {
     for grid in grids() {
@@ -1269,7 +1270,7 @@ fn culling_boxes_hold_every_morphed_vertex_at(grid: u32, name: &str, lod: UdlodS
                     "grid {grid} {name} tau {tau_px} {cam:?}: {t:?}'s heights tile {h:?} does not hold {reach:?}"
                 );
                 let span = (grid << t.lod) as f32;
-                let at = |i: u32, j: u32| select::morphed_vertex(&levels, &p, t, [i, j]).grid_pos();
+                let at = |i: u32, j: u32| morph::morphed_vertex(&levels, &p, t, [i, j]).grid_pos();
                 for j in 0..=grid {
                     for i in 0..grid {
                         // Along a row x, along a column y: never backwards (in the tile's quads).

@@ -10,7 +10,8 @@ use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::procedural::{self, ProceduralParams};
 use vkterrain::eval::metrics::{self, GeometricError, PixelError};
-use vkterrain::lod::udlod::select::{FieldKey, Levels, SplitField};
+use vkterrain::lod::udlod::field::{FieldKey, SplitField};
+use vkterrain::lod::udlod::levels::Levels;
 use vkterrain::lod::udlod::settings::BackFaces;
 use vkterrain::lod::{MethodKind, UdlodSettings};
 use vkterrain::readback::OwnedFrame;
@@ -337,7 +338,7 @@ fn effective_step(data: &Heightmap, start: DVec3, step: DVec3, frames: usize) ->
 /// of the error image is at most `4 * S * spacing * slide * focal / (D[l + 1] - w[l + 1])`
 /// pixels, `slide = s * 2^l / w[l + 1]` samples per axis.
 ///
-/// The cascade (`select::morph_cascade`): the walk's points `p_0, p_1, ...` (levels
+/// The cascade (`morph::morph_cascade`): the walk's points `p_0, p_1, ...` (levels
 /// `j_0 < j_1 < ...`, at most `morph_levels` of them from the tile's level) with factors
 /// `f_k` end at `x_0 = p_0 + f_0 d_0 + f_0 f_1 d_1 + ...`, `d_k = p_{k+1} - p_k` (`2^{j_k}`
 /// samples per axis), so a change of `f_k` moves the vertex by its own slide plus every later

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 14: what the earth costs on the GPU machine (docs/coordinates.md "Cost on the GPU
+# Issue 14: what the earth costs on the GPU machine (docs/coordinates.md "The earth's cost on the GPU
 # machine"): a build against the one before it. Two parts, 1920x1080, UDLOD:
 # 1. `vkterrain bench` (300 frames after 20) of .device-vk/vkterrain (this tree) and
 #    .device-vk/vkterrain-before (a build before the change) alternated, ROUNDS rounds: Fischer

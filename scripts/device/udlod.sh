@@ -4,7 +4,7 @@
 # The branch's eval sweeps grid 8 (the default) and grid 4 (better on lavapipe, not the default
 # for its host memory) in one run, each at tau 0.5, 0.7, 1, 1.4, 2, 2.8, 4, 5.6: grid 8 at
 # tau 0.5/1/2/4 is the default (share 0.7), grid 8 at 0.7/1.4/2.8/5.6 selects exactly what
-# main (share 0.5) selects at 0.5/1/2/4 (the share only rescales tau: docs/udlod.md, "Issue 18,
+# main (share 0.5) selects at 0.5/1/2/4 (the share only rescales tau: docs/udlod-rounds.md, "Issue 18,
 # third round"), grid 4 at 0.5/1/2/4 is grid 4 with its share 0.72. Watch the frame time of
 # grid 4 against grid 8 (small instances) and whether grid 4 at tau 0.5 reaches max_tiles.
 # The bench (wall frame time, 2 frames in flight) runs each binary's default.

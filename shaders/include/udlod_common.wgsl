@@ -24,7 +24,7 @@ struct Udlod {
     counts: vec4<u32>,
     // xy: the LOD metric's stretch of the grid frame per axis (metres per sample along x and
     // y, each a lower bound on the drawn surface, over the grid frame's spacing): exactly
-    // (1, 1) on square grids (`Levels::stretch` in src/lod/udlod/select.rs).
+    // (1, 1) on square grids (`Levels::stretch` in src/lod/udlod/levels.rs).
     metric: vec4<f32>,
     // Per draw mask (`grid::IndexLayout` in src/lod/udlod/grid.rs): x: its indices (with
     // vertex pulling its vertices) per tile, y: its first index in the index buffer.
@@ -46,7 +46,7 @@ struct Tile {
 // there by a quarter on the main job (docs/architecture.md, "Uniform buffers on Mesa 22.3").
 @group(1) @binding(0) var<uniform> udlod: Udlod;
 // The split field: per level, values m >= 1 at the corners of the level's tiles; a point's
-// split distance is split[lod] / m (see `SplitField` in src/lod/udlod/select.rs).
+// split distance is split[lod] / m (see `SplitField` in src/lod/udlod/field.rs).
 @group(1) @binding(5) var<storage, read> split_field: array<f32>;
 
 // Camera-relative metres of an integer sample position (integers subtracted first: exact).

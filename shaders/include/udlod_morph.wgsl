@@ -1,7 +1,7 @@
 // UDLOD's vertex morph, one function for every caller: the vertex shaders of udlod.wgsl, the
 // prepass's back-face split (udlod_tiling.wgsl) and the test probe udlod_probe.wgsl. Mirrored
 // operation for operation by `morph_factor`, `morph_cascade` and `morphed_vertex` in
-// src/lod/udlod/select.rs; tests/udlod.rs evaluates this code through the probe and proves the
+// src/lod/udlod/morph.rs; tests/udlod.rs evaluates this code through the probe and proves the
 // two equal. Needs terrain_common.wgsl and udlod_common.wgsl.
 
 // 0 = the level's own grid, 1 = fully on the next level's grid (times the on/off switch
@@ -40,7 +40,7 @@ fn factor_of_ramp(ramp: f32, sample: vec2<i32>, lod: u32) -> f32 {
 
 // Whether `morph_factor(sample, lod)` is not 0, without the fold's neighbour reads: the fold
 // only lowers a factor above 1/2 to one of at least 1/2, so the factor is 0 exactly where the
-// ramp is not above 0 or morphing is off (mirrored by `morph_moves` in select.rs, which a test
+// ramp is not above 0 or morphing is off (mirrored by `morph_moves` in morph.rs, which a test
 // proves equal to `morph_factor != 0`). The walks ask only this.
 fn morph_moves(sample: vec2<i32>, lod: u32) -> bool {
     return udlod.params.z != 0.0 && morph_ramp(sample, lod) > 0.0;
@@ -71,7 +71,7 @@ fn odd_at(point: vec2<i32>, j: u32) -> vec2<i32> {
 }
 
 // One step of every morph walk: where a grid point slides at level `j`, its lower even
-// neighbour there (itself where it is even at `j`). Mirrored by `slid_at` in select.rs.
+// neighbour there (itself where it is even at `j`). Mirrored by `slid_at` in morph.rs.
 fn slid_at(point: vec2<i32>, j: u32) -> vec2<i32> {
     return point - odd_at(point, j) * i32(1u << j);
 }
@@ -139,7 +139,7 @@ fn next_odd_level(point: vec2<i32>, lod: u32) -> u32 {
 // (`next_odd_level`): the walk up without the positions. Every point of the walk lies between
 // it and `sample` (the walk only moves towards lower coordinates): the prepass's culling box
 // (`reach_of`, which reads every corner's first step at once, `walk_past`). Mirrored by
-// `walk_end` in select.rs.
+// `walk_end` in morph.rs.
 fn walk_on(sample: vec2<i32>, first: u32) -> vec2<i32> {
     var point = sample;
     var j = first;
@@ -175,7 +175,7 @@ const MORPH_SLIVERS: u32 = 2u;
 // the only answer the prepass's back-face split needs from every vertex of every final tile
 // (`final_tile_checks`); and for a point odd at `lod` the unclamped factor there
 // (`morph_ramp`), which the prepass's collapse check reads. Mirrored by `Cascade::moved` of
-// `morph_cascade` in select.rs.
+// `morph_cascade` in morph.rs.
 struct Moved {
     moved: u32,
     // `morph_ramp(sample, lod)` where the point is odd at `lod` (else 0).

@@ -398,7 +398,7 @@ impl Lattice {
     /// `1 / step` share of the edge's chord: the minimum over all node edges is the minimum
     /// over the grid. A geographic grid's east-west minimum lies on its poleward row, its
     /// north-south one on its equator-most row. UDLOD's per-axis LOD metric
-    /// (`udlod::select::Levels::on_lattice`).
+    /// (`udlod::levels::Levels::on_lattice`).
     pub fn min_axis_spacing(&self, height: f64) -> [f64; 2] {
         let [ni, nj] = self.nodes.map(|n| n as i64);
         let at = |i: i64, j: i64| {
@@ -481,7 +481,7 @@ impl Lattice {
     /// non-square grid (a geographic one) each axis's smallest spacing on the drawn surface at
     /// the lowest height where that lies below the datum ([`Lattice::min_axis_spacing`]); None
     /// on a square grid, whose one spacing stays the metric. UDLOD's
-    /// (`udlod::select::Levels::on_lattice`) and GeoMipMapping's distances.
+    /// (`udlod::levels::Levels::on_lattice`) and GeoMipMapping's distances.
     pub fn lod_metric(&self, axis_spacing: [f64; 2], lowest: f64) -> Option<[f64; 2]> {
         if is_square(axis_spacing) {
             return None;

@@ -307,7 +307,7 @@ pub trait LodMethod {
         &self,
         _slot: ViewSlot,
         _frame: (vk::DescriptorSetLayout, vk::DescriptorSet),
-        _inputs: &[(udlod::select::Tile, [u32; 2])],
+        _inputs: &[(udlod::levels::Tile, [u32; 2])],
     ) -> Result<Option<Vec<udlod::probe::ProbedVertex>>> {
         Ok(None)
     }

@@ -7,8 +7,8 @@ use super::Renderer;
 use crate::clipmap::probe::ProbeKind;
 use crate::driver::shaders::Spirv;
 use crate::error::{Error, Result};
+use crate::lod::udlod::levels::Tile;
 use crate::lod::udlod::probe::ProbedVertex;
-use crate::lod::udlod::select::Tile;
 use crate::slots::ViewSlot;
 
 /// One point of the terrain-helper probes (`ProbePoint` in `shaders/terrain_probe.wgsl` and

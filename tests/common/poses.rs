@@ -5,7 +5,7 @@ use glam::DVec3;
 use vkterrain::dataset::Heightmap;
 use vkterrain::dataset::procedural::Style;
 use vkterrain::geo::{EnuFrame, Geodetic, Lattice, WGS84};
-use vkterrain::lod::udlod::select::{Levels, Tile};
+use vkterrain::lod::udlod::levels::{Levels, Tile};
 use vkterrain::scene::Camera;
 
 /// `n` poses over `data`; UDLOD's and GeoMipMapping's tests stand the low cameras on the

@@ -35,7 +35,7 @@ use crate::driver::pipeline::{
 use crate::error::{Error, Result};
 use crate::frame::ViewState;
 use crate::gpu_constants::UDLOD_MAX_LEVELS;
-use crate::lod::udlod::select::Levels;
+use crate::lod::udlod::levels::Levels;
 use crate::slots::ViewSlot;
 use select::{CbtLayout, ChunkParams, Depths};
 pub use settings::{ChunkDraw, ChunkedSettings, Traversal};

@@ -13,7 +13,7 @@ use crate::driver::Gpu;
 use crate::driver::shaders::TerrainVariant;
 use crate::error::Result;
 use crate::gpu_constants::UDLOD_PROBE_WORKGROUP;
-use crate::lod::udlod::select::Tile;
+use crate::lod::udlod::levels::Tile;
 
 /// One probed vertex (`ChunkProbe` in `shaders/chunked_probe.wgsl`).
 #[repr(C)]

@@ -1,6 +1,6 @@
 //! What-if, counted by `examples/udlod_budget.rs` (issue 18, twenty-seventh round; the
 //! renderer does not draw it): the morph completing at a distance `c` of its own, below the
-//! split field `s`, so that more quadrants collapse (`docs/udlod.md`, "A completion field
+//! split field `s`, so that more quadrants collapse (`docs/udlod-rounds.md`, "A completion field
 //! below the split field, counted").
 //!
 //! Cracks and pops need only `c <= s` at every level. The fold conditions need `c` to grow
@@ -11,10 +11,12 @@
 //! nesting's maximum over the cell. [`CompletionTerms`] drops terms from `r` for unsound
 //! bounds.
 
-use super::select::{
-    CHAIN_MARGIN, Levels, QUAD, SelectionParams, SplitField, Tile, bilinear_in_range, cascade_ramp,
-    cell_terms, collapse_mask_by, field_cell_of, gentle_morph, viewer_distance,
+use super::field::{
+    CHAIN_MARGIN, SplitField, bilinear_in_range, cell_terms, field_cell_of, gentle_morph,
 };
+use super::levels::{Levels, QUAD, Tile};
+use super::morph::{cascade_ramp, collapse_mask_by, viewer_distance};
+use super::select::SelectionParams;
 
 /// Which of a cell's terms the completion field `r` keeps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -93,7 +95,7 @@ impl CompletionField {
         split(lod + 1).min(self.at(levels, &p.field, sample, lod + 1).max(own))
     }
 
-    /// [`super::select::tile_collapse_mask`] with the morph completing at this field (the
+    /// [`super::morph::tile_collapse_mask`] with the morph completing at this field (the
     /// morph cascade on, `morph_levels > 1`).
     pub fn tile_collapse_mask(&self, levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
         if !p.morph || t.lod >= levels.root_lod {
@@ -109,7 +111,7 @@ impl CompletionField {
 
 #[cfg(test)]
 mod tests {
-    use super::super::select;
+    use super::super::{levels, morph, select};
     use super::*;
     use crate::lod::UdlodSettings;
 
@@ -120,20 +122,20 @@ mod tests {
     /// uncollapses quadrants (pose 0).
     #[test]
     fn completing_below_the_split_field_only_collapses_more() {
-        let data = select::test_terrain();
+        let data = levels::test_terrain();
         let settings = UdlodSettings::default();
         let levels = Levels::for_settings(&data, &settings).unwrap();
         let (mut today, mut below) = (0u32, [0u32; 3]);
-        for (k, cam) in select::test_poses().iter().enumerate() {
+        for (k, cam) in levels::test_poses().iter().enumerate() {
             let p = SelectionParams::new(&levels, &data, &settings, cam, cam.position, 640, 360);
             let tiles = select::select_tiles(&levels, &p);
             for t in &tiles {
-                today += select::tile_collapse_mask(&levels, &p, *t).count_ones();
+                today += morph::tile_collapse_mask(&levels, &p, *t).count_ones();
             }
             for (n, terms) in CompletionTerms::ALL.into_iter().enumerate() {
                 let completion = CompletionField::new(&levels, &p.field, terms);
                 for &t in &tiles {
-                    let now = select::tile_collapse_mask(&levels, &p, t);
+                    let now = morph::tile_collapse_mask(&levels, &p, t);
                     let then = completion.tile_collapse_mask(&levels, &p, t);
                     assert_eq!(
                         now & !then,

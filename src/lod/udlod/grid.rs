@@ -4,7 +4,7 @@
 //!
 //! A tile of `grid` quads per side has four quadrants of `grid / 2` (quadrant `q = qx + 2 qy`,
 //! origin `(qx, qy) * grid / 2`). A quadrant whose vertices odd at the tile's level all lie
-//! fully on the parent grid (`select::tile_collapse_mask`) draws the parent grid's `grid / 4`
+//! fully on the parent grid (`morph::tile_collapse_mask`) draws the parent grid's `grid / 4`
 //! quads per side over its even vertices; one whose box lies outside the frustum
 //! (`select::quadrants_culled`) draws nothing; the others their own. A [`TileMask`] names the
 //! tile's draw: the index buffer holds one index list per mask (`IndexLayout`), and with

@@ -4,14 +4,22 @@
 //! levels in the vertex shader. The coarse levels' few tiles are walked on the host instead
 //! ([`seed`]), and the passes start below them.
 //!
-//! CPU state ([`select::Levels`]: per-tile min/max, per-level errors) is built once; its GPU
+//! On the CPU, in the order the data flows: [`levels`] (the quadtree and its statistics),
+//! [`field`] (per-tile split distances: the split field, uploaded), [`select`] (per-frame
+//! parameters, culling and the reference selection the GPU's is tested against) and [`morph`]
+//! (the vertex morph cascade, mirrored by `shaders/include/udlod_morph.wgsl`).
+//!
+//! CPU state ([`levels::Levels`]: per-tile min/max, per-level errors) is built once; its GPU
 //! mirror is the `min_max` buffer. Per frame the host writes only [`UdlodUniforms`] (split
 //! distances from the pixel error target, frustum planes) and the seed's tiles; the tile lists
 //! never come back to the host in the render path (only the tiling state's counters, for
 //! statistics).
 
 pub mod completion;
+pub mod field;
 pub mod grid;
+pub mod levels;
+pub mod morph;
 #[cfg(feature = "test-support")]
 pub mod probe;
 pub mod seed;
@@ -36,8 +44,10 @@ use crate::error::{Error, Result};
 use crate::frame::ViewState;
 use crate::gpu_constants::{UDLOD_MAX_LEVELS, UDLOD_SEED_TILES, UDLOD_TILE_MASKS};
 use crate::slots::ViewSlot;
+use field::{FieldKey, SplitField};
 use grid::{QuadrantDraw, TileMask};
-use select::{FieldKey, Levels, SelectionParams, SplitField};
+use levels::Levels;
+use select::SelectionParams;
 use settings::{BackFaces, LodMetric, UdlodSettings};
 
 /// Per-frame uniforms of set 1 (`Udlod` in `shaders/include/udlod_common.wgsl`).
@@ -51,7 +61,7 @@ pub struct UdlodUniforms {
     pub params: [f32; 4],
     pub viewer: [f32; 4],
     pub counts: [u32; 4],
-    /// xy: the LOD metric's stretch per axis ([`select::Levels::stretch`]).
+    /// xy: the LOD metric's stretch per axis ([`levels::Levels::stretch`]).
     pub metric: [f32; 4],
     /// Per draw mask ([`grid::TileMask`]): its indices (vertices with vertex pulling) per tile
     /// and first index ([`grid::IndexLayout`]).
@@ -517,8 +527,8 @@ impl Udlod {
 
     /// The split field for `key`, built when the key changes (once per renderer and view
     /// size in practice). The field's cells' errors are held only while it is built: another
-    /// key reads (or computes) them again, as at start-up (docs/udlod.md, "The finer field as
-    /// the default").
+    /// key reads (or computes) them again, as at start-up (docs/udlod-rounds.md, "The finer field
+    /// as the default").
     fn split_field(&mut self, key: FieldKey) -> Result<Arc<SplitField>> {
         if let Some(f) = self.field.as_ref().filter(|f| f.key == key) {
             return Ok(f.clone());
@@ -928,7 +938,7 @@ impl LodMethod for Udlod {
         &self,
         slot: ViewSlot,
         frame: (vk::DescriptorSetLayout, vk::DescriptorSet),
-        inputs: &[(select::Tile, [u32; 2])],
+        inputs: &[(levels::Tile, [u32; 2])],
     ) -> Result<Option<Vec<probe::ProbedVertex>>> {
         let udlod = (self.sets.layout, self.slots[slot.index()].set);
         probe::probe(&self.gpu, self.variant, frame, udlod, inputs).map(Some)

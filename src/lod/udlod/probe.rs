@@ -2,13 +2,13 @@
 //! (`morphed_vertex` in `shaders/include/udlod_morph.wgsl`, the function both vertex shaders
 //! call) for given tiles and local grid vertices, through the set 0 and set 1 a view slot
 //! last drew with (`shaders/udlod_probe.wgsl`). Tests compare the results with
-//! [`super::select::morphed_vertex`].
+//! [`super::morph::morphed_vertex`].
 
 use std::sync::Arc;
 
 use ash::vk;
 
-use super::select::Tile;
+use super::levels::Tile;
 use crate::driver::Gpu;
 use crate::driver::shaders::TerrainVariant;
 use crate::error::Result;

@@ -14,7 +14,8 @@
 //! to the GPU's first pass, which refuses it by the same rule: the selection is the one the
 //! GPU would have made from the root.
 
-use super::select::{self, Levels, SelectionParams, Tile, Visibility};
+use super::levels::{Levels, Tile};
+use super::select::{self, SelectionParams, Visibility};
 use crate::gpu_constants::{
     UDLOD_TILE_CULLED, UDLOD_TILE_DECIDED, UDLOD_TILE_INSIDE, UDLOD_TILE_OUTSIDE, UDLOD_TILE_SPLITS,
 };

@@ -15,22 +15,22 @@ pub struct UdlodSettings {
     /// Quads per tile side: a power of two, 2..=64 (the draw masks' quadrants, the morph
     /// cascade's levels and the split field's cells divide it by powers of two). The crack,
     /// fold and popping tests cover grids 4 (the default) and 8; grid 2 draws fewer triangles
-    /// but pops past the popping test's guard with the default morph (`docs/udlod.md`, "What
+    /// but pops past the popping test's guard with the default morph (`docs/udlod-rounds.md`, "What
     /// sets the field; grid 2 with walks past the tile").
     pub grid_size: u32,
     /// Screen-space geometric error target in pixels.
     pub tau_px: f64,
     /// Fraction of each level's range over which vertices morph (0.05..=0.45).
     pub morph_range: f64,
-    /// Levels over which a tile's vertices may morph (`docs/udlod.md`, "The morph cascade" and
-    /// "Walks past the tile"): 0 (the default) every level, the morph cascade with vertices
+    /// Levels over which a tile's vertices may morph (`docs/udlod-rounds.md`, "The morph cascade"
+    /// and "Walks past the tile"): 0 (the default) every level, the morph cascade with vertices
     /// walking on past their tile (culling boxes grow to the corners' walks,
     /// `select::tile_reach`); `2..=`[`cascade_levels`] (grid 4: 2, grid 8: 3) at most that
     /// many, which keeps them inside their tile (the largest was the default until issue 18's
     /// fifteenth round); 1 one level step, the CDLOD-style chain, where neighbours differ by
     /// at most one level.
     pub morph_levels: u32,
-    /// Split-field nodes per tile side (`docs/udlod.md`, "A finer split field"): 0 (the
+    /// Split-field nodes per tile side (`docs/udlod-rounds.md`, "A finer split field"): 0 (the
     /// default) the density measured for the grid size ([`field_density`]: 2 at grid 4
     /// and 8, else 1); 1 at the tiles' corners; 2 also at their edges' midpoints and centres,
     /// each cell taking the error of its quarter of the tile, so a rough tile raises its
@@ -58,7 +58,7 @@ pub struct UdlodSettings {
     /// Frustum culling of tiles.
     pub cull: bool,
     /// With `cull`, the quadrants of drawn tiles whose boxes lie outside the frustum are not
-    /// drawn (`docs/udlod.md`, "Quadrants outside the view": the same image, fewer triangles
+    /// drawn (`docs/udlod-rounds.md`, "Quadrants outside the view": the same image, fewer triangles
     /// where the view's edge cuts coarse tiles). Off only to measure it.
     pub cull_quadrants: bool,
     /// Which tiles are drawn with back-face culling.
@@ -69,7 +69,7 @@ pub struct UdlodSettings {
     pub error_field_max: f64,
     /// Draw each quadrant of a tile whose vertices odd at the tile's level all lie fully on its
     /// parent's grid as that grid (a quarter of the quadrant's triangles; the same surface,
-    /// bit for bit: `docs/udlod.md`, "Collapsed quadrants"; at grid 2 whole tiles only). Off
+    /// bit for bit: `docs/udlod-rounds.md`, "Collapsed quadrants"; at grid 2 whole tiles only). Off
     /// only to measure it.
     pub collapse: bool,
     /// Draw without an index buffer (six vertex-shader runs per quad) instead of the shared
@@ -131,12 +131,12 @@ impl Default for UdlodSettings {
             tau_px: 1.0,
             morph_range: 0.2,
             // The morph cascade (issue 18): up to 2x fewer triangles than one level step at
-            // 640x360, -0.6 to -15 % at 1080p on the H200 (docs/udlod.md, "The morph
+            // 640x360, -0.6 to -15 % at 1080p on the H200 (docs/udlod-rounds.md, "The morph
             // cascade").
             morph_levels: 0,
             // Two nodes per tile side at grid 4 and 8 (issue 18, nineteenth round): 6-22 % fewer
-            // triangles at about equal measured error (docs/udlod.md, "The finer field as the
-            // default").
+            // triangles at about equal measured error (docs/udlod-rounds.md, "The finer field as
+            // the default").
             field_density: 0,
             worst_case_share: 0.0,
             // 16.8 M triangles of grid-4 tiles: Hedberg's uneven map at tau 0.5 and 1080p
@@ -326,7 +326,7 @@ impl UdlodSettings {
 /// larger a tile the farther its worst sample may lie behind its nearest point and the
 /// further its maximum lies in the tail of its samples' errors. Smaller tiles therefore need a
 /// share nearer 1 (a larger split distance for the same error). Measured per grid size
-/// (`docs/udlod.md`, "Issue 18, third round"): with these shares the 99.9th percentile lands
+/// (`docs/udlod-rounds.md`, "Issue 18, third round"): with these shares the 99.9th percentile lands
 /// in [0.5, 1] tau where the pixel target (not the crack-free chain or the data's resolution)
 /// sets the distances (on the CI data at grid 2, 4 and 8; on other data sets more pixels are
 /// exact and the percentile lower); single pixels may exceed tau. Grid sizes between the
@@ -340,7 +340,7 @@ impl UdlodSettings {
 /// ([`FINER_FIELD_SHARES`]); unmeasured ones the largest measured share of all (0.9, grid 2's:
 /// the most refinement, conservative).
 ///
-/// The only place the share enters: [`SplitField::new`](super::select::SplitField::new) bakes it (through [`FieldKey::share`](super::select::FieldKey::share),
+/// The only place the share enters: [`SplitField::new`](super::field::SplitField::new) bakes it (through [`FieldKey::share`](super::field::FieldKey::share),
 /// which `UdlodSettings::worst_case_share` may override) into the split field that the CPU
 /// reference selection and the GPU prepass both read.
 pub fn worst_case_share(grid_size: u32, field_density: u32) -> f64 {
