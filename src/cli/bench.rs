@@ -4,9 +4,13 @@
 //! `benches/frame_time.rs` runs the same code under `cargo bench`.
 
 use std::fmt::Write;
+use std::path::Path;
+use std::sync::Arc;
 
 use clap::Args;
 
+use super::render::Prepared;
+use crate::driver::Gpu;
 use crate::render::FrameRequest;
 use crate::render::stats::Summary;
 
@@ -47,6 +51,37 @@ fn parse_resolution(s: &str) -> anyhow::Result<(u32, u32)> {
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let p = super::render::prepare(&args.render)?;
+    let resolutions = checked_resolutions(args, &p)?;
+    let gpu = p.config.open_gpu()?;
+    let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
+    let mut rows = Vec::new();
+    let mut out = header(&gpu, &p, warmup);
+    print!("{out}");
+    for &(w, h) in &resolutions {
+        for &n in &args.compare_frames_in_flight {
+            let s = measure(&gpu, &p, (w, h), n, warmup)?;
+            let line = row_line((w, h), n, &s);
+            println!("{line}");
+            out.push_str(&line);
+            out.push('\n');
+            rows.push(BenchRow {
+                width: w,
+                height: h,
+                frames_in_flight: n,
+                summary: s,
+            });
+        }
+    }
+    super::render::check_validation(&gpu)?;
+    if let Some(path) = &args.json {
+        write_json(path, &gpu, &p, warmup, &rows)?;
+    }
+    Ok(())
+}
+
+/// `args`' resolutions, after checking that the config accepts each and the renderer each
+/// number of frames in flight (before the device is opened).
+fn checked_resolutions(args: &BenchArgs, p: &Prepared) -> anyhow::Result<Vec<(u32, u32)>> {
     let resolutions = args
         .resolutions
         .iter()
@@ -61,9 +96,11 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     for &n in &args.compare_frames_in_flight {
         crate::render::check_frames_in_flight(n as usize)?;
     }
-    let gpu = p.config.open_gpu()?;
-    let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
-    let mut rows = Vec::new();
+    Ok(resolutions)
+}
+
+/// What runs (device, data set, method, scenario, frames) and the table's column heads.
+fn header(gpu: &Gpu, p: &Prepared, warmup: usize) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
@@ -81,70 +118,79 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         "{:>10} {:>3} {:>10} {:>10} {:>10} {:>10} {:>10} {:>8}",
         "resolution", "N", "triangles", "median ms", "p99 ms", "gpu ms", "readback", "overlap"
     );
-    print!("{out}");
-    for &(w, h) in &resolutions {
-        for &n in &args.compare_frames_in_flight {
-            let mut options = p.config.render_options();
-            options.width = w;
-            options.height = h;
-            options.frames_in_flight = n as usize;
-            let mut renderer = p.config.open_renderer(&gpu, &p.data, options)?;
-            // The sink touches every row so the host really reads the frame (as a consumer would).
-            let mut checksum = 0u64;
-            let mut sink = |f: &crate::readback::FrameView<'_>| {
-                checksum = checksum.wrapping_add(
-                    f.rgba
-                        .chunks(f.row_stride)
-                        .map(|r| r[0] as u64)
-                        .sum::<u64>(),
-                );
-                Ok(())
-            };
-            for frame in 0..p.frames as u64 {
-                let views = FrameRequest::with_extra_views_on(
-                    p.scenario.camera(frame),
-                    &p.config.render.extra_views,
-                    renderer.earth_frame(),
-                );
-                renderer.render_views(&views, &mut sink)?;
-            }
-            renderer.finish(&mut sink)?;
-            let s = renderer.stats.summary(warmup);
-            let line = format!(
-                "{:>10} {:>3} {:>10.0} {:>10.2} {:>10.2} {:>10.2} {:>10.3} {:>7.0}%",
-                format!("{w}x{h}"),
-                n,
-                s.triangles.median,
-                s.frame_ms.median,
-                s.frame_ms.p99,
-                s.gpu_total_ms.median,
-                s.gpu_readback_ms.median,
-                s.overlapped_fraction * 100.0
-            );
-            println!("{line}");
-            out.push_str(&line);
-            out.push('\n');
-            rows.push(BenchRow {
-                width: w,
-                height: h,
-                frames_in_flight: n,
-                summary: s,
-            });
-        }
+    out
+}
+
+/// Renders the scenario once at `w`x`h` with `frames_in_flight` frames in flight, every frame
+/// read by the host, and summarizes the frame times after `warmup` frames.
+fn measure(
+    gpu: &Arc<Gpu>,
+    p: &Prepared,
+    (w, h): (u32, u32),
+    frames_in_flight: u32,
+    warmup: usize,
+) -> anyhow::Result<Summary> {
+    let mut options = p.config.render_options();
+    options.width = w;
+    options.height = h;
+    options.frames_in_flight = frames_in_flight as usize;
+    let mut renderer = p.config.open_renderer(gpu, &p.data, options)?;
+    // The sink touches every row so the host really reads the frame (as a consumer would).
+    let mut checksum = 0u64;
+    let mut sink = |f: &crate::readback::FrameView<'_>| {
+        checksum = checksum.wrapping_add(
+            f.rgba
+                .chunks(f.row_stride)
+                .map(|r| r[0] as u64)
+                .sum::<u64>(),
+        );
+        Ok(())
+    };
+    for frame in 0..p.frames as u64 {
+        let views = FrameRequest::with_extra_views_on(
+            p.scenario.camera(frame),
+            &p.config.render.extra_views,
+            renderer.earth_frame(),
+        );
+        renderer.render_views(&views, &mut sink)?;
     }
-    super::render::check_validation(&gpu)?;
-    if let Some(path) = &args.json {
-        let json = serde_json::json!({
-            "device": gpu.info.name,
-            "device_type": gpu.info.type_name(),
-            "dataset": p.data.name(),
-            "method": p.config.method.kind().name(),
-            "scenario": p.scenario.name,
-            "frames": p.frames,
-            "warmup": warmup,
-            "rows": rows,
-        });
-        crate::output::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())?;
-    }
+    renderer.finish(&mut sink)?;
+    Ok(renderer.stats.summary(warmup))
+}
+
+/// One row of the table: resolution, frames in flight, and `s`'s medians, p99 and overlap.
+fn row_line((w, h): (u32, u32), frames_in_flight: u32, s: &Summary) -> String {
+    format!(
+        "{:>10} {:>3} {:>10.0} {:>10.2} {:>10.2} {:>10.2} {:>10.3} {:>7.0}%",
+        format!("{w}x{h}"),
+        frames_in_flight,
+        s.triangles.median,
+        s.frame_ms.median,
+        s.frame_ms.p99,
+        s.gpu_total_ms.median,
+        s.gpu_readback_ms.median,
+        s.overlapped_fraction * 100.0
+    )
+}
+
+/// Writes what ran and the `rows` as JSON to `path` (atomically).
+fn write_json(
+    path: &Path,
+    gpu: &Gpu,
+    p: &Prepared,
+    warmup: usize,
+    rows: &[BenchRow],
+) -> anyhow::Result<()> {
+    let json = serde_json::json!({
+        "device": gpu.info.name,
+        "device_type": gpu.info.type_name(),
+        "dataset": p.data.name(),
+        "method": p.config.method.kind().name(),
+        "scenario": p.scenario.name,
+        "frames": p.frames,
+        "warmup": warmup,
+        "rows": rows,
+    });
+    crate::output::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())?;
     Ok(())
 }

@@ -58,6 +58,137 @@ fn layer_range(layer: u32) -> vk::ImageSubresourceRange {
     }
 }
 
+/// The atlas's size: texels per side of a layer, layers, and quadtree cells (over all levels).
+struct AtlasShape {
+    side: u32,
+    layers: u32,
+    cells: u64,
+}
+
+impl AtlasShape {
+    /// The shape for `geometry` with `settings.atlas_capacity` layers (at least 2), which the
+    /// device must allow; `geometry` None: the disabled placeholder's 1x1 texels, 2 layers.
+    fn new(
+        gpu: &Gpu,
+        geometry: Option<&Geometry>,
+        settings: &ClipmapSettings,
+        node_count: u32,
+    ) -> Result<Self> {
+        let Some(g) = geometry else {
+            return Ok(AtlasShape {
+                side: 1,
+                layers: 2,
+                cells: 1,
+            });
+        };
+        let max_layers = gpu.info.limits.max_image_array_layers;
+        if settings.atlas_capacity > max_layers {
+            return Err(Error::invalid(
+                "clipmap.atlas_capacity",
+                format!(
+                    "{} exceeds the device's {max_layers} array layers",
+                    settings.atlas_capacity
+                ),
+            ));
+        }
+        Ok(AtlasShape {
+            side: g.side(),
+            layers: settings.atlas_capacity.max(2),
+            cells: g.levels.len() as u64 * (node_count as u64).pow(2),
+        })
+    }
+}
+
+/// The height, normal and albedo atlases (the last two with `shading_mips` levels), every
+/// layer and level ready to be sampled by any shader stage.
+fn atlas_images(gpu: &Arc<Gpu>, shape: &AtlasShape, shading_mips: u32) -> Result<[Image; 3]> {
+    let make = |name: &str, format, mips: u32| {
+        Image::new(
+            gpu,
+            &ImageDesc {
+                name,
+                format,
+                extent: vk::Extent2D {
+                    width: shape.side,
+                    height: shape.side,
+                },
+                layers: shape.layers,
+                mips,
+                usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
+                aspect: vk::ImageAspectFlags::COLOR,
+            },
+        )
+    };
+    let atlas = make("clipmap height atlas", vk::Format::R32_SFLOAT, 1)?;
+    let normals = make(
+        "clipmap normal atlas",
+        vk::Format::R8G8B8A8_SNORM,
+        shading_mips,
+    )?;
+    let albedo = make(
+        "clipmap albedo atlas",
+        vk::Format::R8G8B8A8_SRGB,
+        shading_mips,
+    )?;
+    gpu.one_shot(|cmd| {
+        for image in [&atlas, &normals, &albedo] {
+            Barriers::new(gpu).image(
+                cmd,
+                image.raw,
+                vk::ImageSubresourceRange {
+                    layer_count: shape.layers,
+                    level_count: image.mips,
+                    ..layer_range(0)
+                },
+                ImageAccess::Undefined,
+                ImageAccess::SampledAnyShader,
+            )
+        }
+    })?;
+    Ok([atlas, normals, albedo])
+}
+
+/// `count` quadtree buffers (one per view slot) of `cells` cells each, zeroed.
+fn quadtree_buffers(gpu: &Arc<Gpu>, count: usize, cells: u64) -> Result<Vec<Buffer>> {
+    let mut quadtrees = Vec::with_capacity(count);
+    for s in 0..count {
+        let mut q = Buffer::new(
+            gpu,
+            &format!("clipmap quadtree {s}"),
+            HEADER_BYTES + cells * 4,
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?;
+        if let Some(m) = q.mapped_mut() {
+            m.fill(0);
+        }
+        quadtrees.push(q);
+    }
+    Ok(quadtrees)
+}
+
+/// A staging buffer of `bytes` per frame slot; `bytes` None (the disabled placeholder): none.
+fn staging_buffers(
+    gpu: &Arc<Gpu>,
+    slots: usize,
+    bytes: Option<u64>,
+) -> Result<Vec<Option<Buffer>>> {
+    let mut staging = Vec::with_capacity(slots);
+    for s in 0..slots {
+        staging.push(match bytes {
+            Some(bytes) => Some(Buffer::new(
+                gpu,
+                &format!("clipmap staging {s}"),
+                bytes,
+                vk::BufferUsageFlags::TRANSFER_SRC,
+                MemoryLocation::CpuToGpu,
+            )?),
+            None => None,
+        });
+    }
+    Ok(staging)
+}
+
 impl ClipmapGpu {
     /// The device mirror; `geometry` None: a disabled placeholder (tiny atlas, header with
     /// `enabled = 0`) so the bindings exist for the single-texture path. One atlas, a quadtree
@@ -74,90 +205,12 @@ impl ClipmapGpu {
             Some(g) => (0..g.shading_mips()).map(|m| g.mip_side(m)).collect(),
             None => vec![1],
         };
-        let per_layer = geometry.map(layer_bytes).unwrap_or(0);
-        let (side, layers, cells) = match geometry {
-            Some(g) => {
-                let max_layers = gpu.info.limits.max_image_array_layers;
-                if settings.atlas_capacity > max_layers {
-                    return Err(Error::invalid(
-                        "clipmap.atlas_capacity",
-                        format!(
-                            "{} exceeds the device's {max_layers} array layers",
-                            settings.atlas_capacity
-                        ),
-                    ));
-                }
-                (
-                    g.side(),
-                    settings.atlas_capacity.max(2),
-                    g.levels.len() as u64 * (node_count as u64).pow(2),
-                )
-            }
-            None => (1, 2, 1),
-        };
-        let make = |name: &str, format, mips: u32| {
-            Image::new(
-                gpu,
-                &ImageDesc {
-                    name,
-                    format,
-                    extent: vk::Extent2D {
-                        width: side,
-                        height: side,
-                    },
-                    layers,
-                    mips,
-                    usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
-                    aspect: vk::ImageAspectFlags::COLOR,
-                },
-            )
-        };
-        let m = mips.len() as u32;
-        let atlas = make("clipmap height atlas", vk::Format::R32_SFLOAT, 1)?;
-        let normals = make("clipmap normal atlas", vk::Format::R8G8B8A8_SNORM, m)?;
-        let albedo = make("clipmap albedo atlas", vk::Format::R8G8B8A8_SRGB, m)?;
-        gpu.one_shot(|cmd| {
-            for image in [&atlas, &normals, &albedo] {
-                Barriers::new(gpu).image(
-                    cmd,
-                    image.raw,
-                    vk::ImageSubresourceRange {
-                        layer_count: layers,
-                        level_count: image.mips,
-                        ..layer_range(0)
-                    },
-                    ImageAccess::Undefined,
-                    ImageAccess::SampledAnyShader,
-                )
-            }
-        })?;
-        let mut quadtrees = Vec::with_capacity(slots * views);
-        for s in 0..slots * views {
-            let mut q = Buffer::new(
-                gpu,
-                &format!("clipmap quadtree {s}"),
-                HEADER_BYTES + cells * 4,
-                vk::BufferUsageFlags::STORAGE_BUFFER,
-                MemoryLocation::CpuToGpu,
-            )?;
-            if let Some(m) = q.mapped_mut() {
-                m.fill(0);
-            }
-            quadtrees.push(q);
-        }
-        let mut staging = Vec::with_capacity(slots);
-        for s in 0..slots {
-            staging.push(match geometry {
-                Some(_) => Some(Buffer::new(
-                    gpu,
-                    &format!("clipmap staging {s}"),
-                    settings.max_uploads_per_frame as u64 * per_layer,
-                    vk::BufferUsageFlags::TRANSFER_SRC,
-                    MemoryLocation::CpuToGpu,
-                )?),
-                None => None,
-            });
-        }
+        let shape = AtlasShape::new(gpu, geometry, settings, node_count)?;
+        let [atlas, normals, albedo] = atlas_images(gpu, &shape, mips.len() as u32)?;
+        let quadtrees = quadtree_buffers(gpu, slots * views, shape.cells)?;
+        let staging_bytes =
+            geometry.map(|g| settings.max_uploads_per_frame as u64 * layer_bytes(g));
+        let staging = staging_buffers(gpu, slots, staging_bytes)?;
         Ok(ClipmapGpu {
             gpu: gpu.clone(),
             atlas,
@@ -167,7 +220,7 @@ impl ClipmapGpu {
             quadtrees,
             staging,
             staged: vec![Vec::new(); slots],
-            side,
+            side: shape.side,
             mips,
             scratch: Vec::new(),
         })

@@ -192,14 +192,13 @@ impl Chart {
         X::CoordDescType: ValueFormatter<f64>,
         Y::CoordDescType: ValueFormatter<f64>,
     {
-        let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
         let mut chart = ChartBuilder::on(root)
             .caption(&self.title, (FONT, 22))
             .margin(16)
             .x_label_area_size(52)
             .y_label_area_size(76)
             .build_cartesian_2d(x_spec, y_spec)
-            .map_err(err)?;
+            .map_err(draw_error)?;
         let log = |a: &Axis| if a.log { " (log)" } else { "" };
         chart
             .configure_mesh()
@@ -212,72 +211,13 @@ impl Chart {
             .light_line_style(BLACK.mix(0.05))
             .bold_line_style(BLACK.mix(0.15))
             .draw()
-            .map_err(err)?;
-        let inside = |(px, py): (f64, f64)| {
-            px.is_finite() && py.is_finite() && x.range.contains(&px) && y.range.contains(&py)
-        };
+            .map_err(draw_error)?;
         let mut placed = LabelSlots::default();
         for (i, s) in self.series.iter().enumerate() {
-            let colour = PALETTE[i % PALETTE.len()];
-            let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|&p| inside(p)).collect();
-            let line_style = colour.mix(0.8).stroke_width(2);
-            let legend_colour = colour;
-            let shape = i;
-            let anno = if s.line {
-                chart
-                    .draw_series(LineSeries::new(pts.clone(), line_style))
-                    .map_err(err)?
-            } else {
-                chart
-                    .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
-                    .map_err(err)?
-            };
-            anno.label(&s.name).legend(move |(lx, ly)| {
-                EmptyElement::at((lx, ly))
-                    + PathElement::new(vec![(0, 0), (20, 0)], legend_colour.stroke_width(2))
-                    + marker((10, 0), shape, legend_colour)
-            });
-            if s.markers {
-                chart
-                    .draw_series(
-                        pts.iter()
-                            .map(|&p| EmptyElement::at(p) + marker((0, 0), shape, colour)),
-                    )
-                    .map_err(err)?;
-            }
-            let labelled: Vec<_> = merged_labels(s, x, y)
-                .into_iter()
-                .filter(|(p, _)| inside(*p))
-                .map(|(p, text)| (p, text, placed.line_for(x.fraction(p.0), y.fraction(p.1))))
-                .collect();
-            chart
-                .draw_series(labelled.into_iter().map(|(p, text, line)| {
-                    EmptyElement::at(p) + point_label(text, line, x.fraction(p.0) > 0.8, colour)
-                }))
-                .map_err(err)?;
+            draw_labelled_series(&mut chart, i, s, x, y, &mut placed)?;
         }
         if !self.highlight.is_empty() {
-            let front: Vec<(f64, f64)> = self
-                .highlight
-                .iter()
-                .copied()
-                .filter(|&p| inside(p))
-                .collect();
-            chart
-                .draw_series(LineSeries::new(
-                    front.clone(),
-                    BLACK.mix(0.5).stroke_width(1),
-                ))
-                .map_err(err)?
-                .label("Pareto front")
-                .legend(|(lx, ly)| Circle::new((lx + 10, ly), 7, BLACK.stroke_width(2)));
-            chart
-                .draw_series(
-                    front
-                        .iter()
-                        .map(|&p| Circle::new(p, 9, BLACK.stroke_width(2))),
-                )
-                .map_err(err)?;
+            self.draw_pareto_front(&mut chart, x, y)?;
         }
         chart
             .configure_series_labels()
@@ -286,7 +226,44 @@ impl Chart {
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK.mix(0.5))
             .draw()
-            .map_err(err)
+            .map_err(draw_error)
+    }
+
+    /// The highlighted points (the Pareto front), within the axes: joined, ringed, and named in
+    /// the legend.
+    fn draw_pareto_front<'a, DB, X, Y>(
+        &self,
+        chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+        x: &Axis,
+        y: &Axis,
+    ) -> DrawResult
+    where
+        DB: DrawingBackend + 'a,
+        X: Ranged<ValueType = f64>,
+        Y: Ranged<ValueType = f64>,
+    {
+        let front: Vec<(f64, f64)> = self
+            .highlight
+            .iter()
+            .copied()
+            .filter(|&p| on_chart(x, y, p))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(
+                front.clone(),
+                BLACK.mix(0.5).stroke_width(1),
+            ))
+            .map_err(draw_error)?
+            .label("Pareto front")
+            .legend(|(lx, ly)| Circle::new((lx + 10, ly), 7, BLACK.stroke_width(2)));
+        chart
+            .draw_series(
+                front
+                    .iter()
+                    .map(|&p| Circle::new(p, 9, BLACK.stroke_width(2))),
+            )
+            .map_err(draw_error)?;
+        Ok(())
     }
 
     /// The chart as SVG text.
@@ -320,6 +297,77 @@ impl Chart {
         let (w, h, rgba) = self.to_rgba()?;
         crate::output::png::write_png(&dir.join(format!("{stem}.png")), w, h, &rgba)
     }
+}
+
+/// A plotters drawing error as the message of a [`DrawResult`].
+fn draw_error<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> String {
+    e.to_string()
+}
+
+/// Whether `p` is finite and within both axes (points outside are not drawn).
+fn on_chart(x: &Axis, y: &Axis, (px, py): (f64, f64)) -> bool {
+    px.is_finite() && py.is_finite() && x.range.contains(&px) && y.range.contains(&py)
+}
+
+/// Series `i` of a chart, its points within the axes: its line (if it has one), its legend
+/// entry, its markers (if it has them) and its point labels, placed below labels already
+/// drawn near them (`placed`).
+fn draw_labelled_series<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    i: usize,
+    s: &Series,
+    x: &Axis,
+    y: &Axis,
+    placed: &mut LabelSlots,
+) -> DrawResult
+where
+    DB: DrawingBackend + 'a,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    let colour = PALETTE[i % PALETTE.len()];
+    let pts: Vec<(f64, f64)> = s
+        .points
+        .iter()
+        .copied()
+        .filter(|&p| on_chart(x, y, p))
+        .collect();
+    let line_style = colour.mix(0.8).stroke_width(2);
+    let legend_colour = colour;
+    let shape = i;
+    let anno = if s.line {
+        chart
+            .draw_series(LineSeries::new(pts.clone(), line_style))
+            .map_err(draw_error)?
+    } else {
+        chart
+            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+            .map_err(draw_error)?
+    };
+    anno.label(&s.name).legend(move |(lx, ly)| {
+        EmptyElement::at((lx, ly))
+            + PathElement::new(vec![(0, 0), (20, 0)], legend_colour.stroke_width(2))
+            + marker((10, 0), shape, legend_colour)
+    });
+    if s.markers {
+        chart
+            .draw_series(
+                pts.iter()
+                    .map(|&p| EmptyElement::at(p) + marker((0, 0), shape, colour)),
+            )
+            .map_err(draw_error)?;
+    }
+    let labelled: Vec<_> = merged_labels(s, x, y)
+        .into_iter()
+        .filter(|(p, _)| on_chart(x, y, *p))
+        .map(|(p, text)| (p, text, placed.line_for(x.fraction(p.0), y.fraction(p.1))))
+        .collect();
+    chart
+        .draw_series(labelled.into_iter().map(|(p, text, line)| {
+            EmptyElement::at(p) + point_label(text, line, x.fraction(p.0) > 0.8, colour)
+        }))
+        .map_err(draw_error)?;
+    Ok(())
 }
 
 /// A point's label, `line` lines below the first at its place, beside the point: to its right,

@@ -118,84 +118,20 @@ impl TerrainGpu {
         lattice: Option<&crate::geo::Lattice>,
     ) -> Result<Self> {
         if let Some(l) = lattice {
-            let need = [
-                (data.width() - 1).div_ceil(l.step) + 1,
-                (data.height() - 1).div_ceil(l.step) + 1,
-            ];
-            if l.nodes != need {
-                return Err(Error::invalid(
-                    data.name(),
-                    format!(
-                        "geolocation lattice of {:?} nodes does not cover {}x{} samples",
-                        l.nodes,
-                        data.width(),
-                        data.height()
-                    ),
-                ));
-            }
+            check_lattice_covers(data, l)?;
         }
-        let nodes = lattice.map_or_else(
-            || vec![0.0; crate::geo::lattice::NODE_FLOATS],
-            |l| l.gpu_nodes(),
-        );
-        let lattice_buffer = Buffer::with_data(
-            gpu,
-            "geolocation lattice",
-            vk::BufferUsageFlags::STORAGE_BUFFER,
-            bytemuck::cast_slice(&nodes),
-        )?;
+        let lattice_buffer = lattice_buffer(gpu, lattice)?;
         let (height, normal, albedo) = if clipmap.enabled {
             // Heights, normals and albedo all come through the clipmap's atlas: 1x1
             // placeholders keep the bindings valid without the full-resolution textures.
-            let one = vk::Extent2D {
-                width: 1,
-                height: 1,
-            };
-            (
-                Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, one, &[0; 4])?,
-                Image::texture_with_data(gpu, "normals", vk::Format::R8G8B8A8_SNORM, one, &[0; 4])?,
-                Image::texture_with_data(gpu, "albedo", vk::Format::R8G8B8A8_SRGB, one, &[0; 4])?,
-            )
+            placeholder_textures(gpu)?
         } else {
             let data = data.require_grid("the single-texture path (clipmap off)")?;
             Self::textures(gpu, data, lattice)?
         };
-        let (min_height, max_height) = data.height_range();
-        let info = TerrainInfo {
-            name: data.name().to_string(),
-            width: data.width(),
-            height: data.height(),
-            spacing: data.spacing(),
-            min_height,
-            max_height,
-            lattice: lattice.map(|l| {
-                let radius = (l.curve_radius() as f32).to_bits();
-                [l.step, l.nodes[0], l.nodes[1], radius]
-            }),
-        };
-
+        let info = TerrainInfo::new(data, lattice);
+        let sampler = linear_sampler(gpu)?;
         let d = &gpu.device;
-        let anisotropy = gpu.enabled.sampler_anisotropy;
-        let sampler = unsafe {
-            d.create_sampler(
-                &vk::SamplerCreateInfo::default()
-                    .mag_filter(vk::Filter::LINEAR)
-                    .min_filter(vk::Filter::LINEAR)
-                    .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
-                    .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                    .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                    .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                    .anisotropy_enable(anisotropy)
-                    .max_anisotropy(if anisotropy {
-                        gpu.info.caps.max_anisotropy.min(16.0)
-                    } else {
-                        1.0
-                    })
-                    .max_lod(vk::LOD_CLAMP_NONE),
-                None,
-            )
-        }
-        .vk("vkCreateSampler")?;
         let textures = [&height, &normal, &albedo];
         let (descriptors, uniforms) =
             Self::descriptor_sets(gpu, slots, textures, sampler, clipmap, &lattice_buffer)
@@ -313,6 +249,99 @@ impl TerrainGpu {
         )?;
         Ok((height, normal, albedo))
     }
+}
+
+impl TerrainInfo {
+    /// The facts of `data`, with the geolocation lattice's where it lies on the earth.
+    fn new(data: &Terrain, lattice: Option<&crate::geo::Lattice>) -> Self {
+        let (min_height, max_height) = data.height_range();
+        TerrainInfo {
+            name: data.name().to_string(),
+            width: data.width(),
+            height: data.height(),
+            spacing: data.spacing(),
+            min_height,
+            max_height,
+            lattice: lattice.map(|l| {
+                let radius = (l.curve_radius() as f32).to_bits();
+                [l.step, l.nodes[0], l.nodes[1], radius]
+            }),
+        }
+    }
+}
+
+/// Refuses a geolocation lattice whose nodes (one every `step` samples, the last sample
+/// included) do not cover `data`.
+fn check_lattice_covers(data: &Terrain, l: &crate::geo::Lattice) -> Result<()> {
+    let need = [
+        (data.width() - 1).div_ceil(l.step) + 1,
+        (data.height() - 1).div_ceil(l.step) + 1,
+    ];
+    if l.nodes != need {
+        return Err(Error::invalid(
+            data.name(),
+            format!(
+                "geolocation lattice of {:?} nodes does not cover {}x{} samples",
+                l.nodes,
+                data.width(),
+                data.height()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Binding 9's buffer: the lattice's nodes, or one placeholder node in the flat world.
+fn lattice_buffer(gpu: &Arc<Gpu>, lattice: Option<&crate::geo::Lattice>) -> Result<Buffer> {
+    let nodes = lattice.map_or_else(
+        || vec![0.0; crate::geo::lattice::NODE_FLOATS],
+        |l| l.gpu_nodes(),
+    );
+    Buffer::with_data(
+        gpu,
+        "geolocation lattice",
+        vk::BufferUsageFlags::STORAGE_BUFFER,
+        bytemuck::cast_slice(&nodes),
+    )
+}
+
+/// Height, normal and albedo textures of one zero texel each.
+fn placeholder_textures(gpu: &Arc<Gpu>) -> Result<(Image, Image, Image)> {
+    let one = vk::Extent2D {
+        width: 1,
+        height: 1,
+    };
+    Ok((
+        Image::texture_with_data(gpu, "heights", vk::Format::R32_SFLOAT, one, &[0; 4])?,
+        Image::texture_with_data(gpu, "normals", vk::Format::R8G8B8A8_SNORM, one, &[0; 4])?,
+        Image::texture_with_data(gpu, "albedo", vk::Format::R8G8B8A8_SRGB, one, &[0; 4])?,
+    ))
+}
+
+/// Binding 4: trilinear, clamped at the edges, anisotropic (up to 16x) where the device
+/// enabled it.
+fn linear_sampler(gpu: &Gpu) -> Result<vk::Sampler> {
+    let anisotropy = gpu.enabled.sampler_anisotropy;
+    unsafe {
+        gpu.device.create_sampler(
+            &vk::SamplerCreateInfo::default()
+                .mag_filter(vk::Filter::LINEAR)
+                .min_filter(vk::Filter::LINEAR)
+                .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
+                .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                .anisotropy_enable(anisotropy)
+                .max_anisotropy(if anisotropy {
+                    gpu.info.caps.max_anisotropy.min(16.0)
+                } else {
+                    1.0
+                })
+                .max_lod(vk::LOD_CLAMP_NONE),
+            None,
+        )
+    }
+    .vk("vkCreateSampler")
 }
 
 impl Drop for TerrainGpu {

@@ -614,10 +614,9 @@ impl GpuAnalysis {
             d.cmd_dispatch(cmd, groups.0, groups.1, groups.2);
         }
     }
-}
 
-impl FrameAnalysis for GpuAnalysis {
-    fn record(&mut self, cmd: vk::CommandBuffer, frame: &AnalysisFrame<'_>) -> Result<()> {
+    /// Refuses a frame whose size is not the one this analysis was made for.
+    fn check_extent(&self, frame: &AnalysisFrame<'_>) -> Result<()> {
         let shape = self.shared.shape;
         let extent = frame.targets.extent;
         if (extent.width, extent.height) != (shape.width, shape.height) {
@@ -629,28 +628,13 @@ impl FrameAnalysis for GpuAnalysis {
                 ),
             ));
         }
-        let uniforms = self.uniforms(frame)?;
-        self.uniform.write(bytemuck::bytes_of(&uniforms))?;
-        let gpu = &self.shared.gpu;
-        let b = Barriers::new(gpu);
-        // After everything earlier in the queue: other renderers' analyses read and write the
-        // shared buffers, this renderer's previous frame its own.
-        b.memory(
-            cmd,
-            MemoryAccess::PreviousFrame,
-            MemoryAccess::TransferWrite,
-        );
-        b.memory(
-            cmd,
-            MemoryAccess::PreviousFrame,
-            MemoryAccess::ComputeReadWrite,
-        );
-        self.record_copies(cmd, frame);
-        b.memory(
-            cmd,
-            MemoryAccess::TransferWrite,
-            MemoryAccess::ComputeReadWrite,
-        );
+        Ok(())
+    }
+
+    /// The compute passes over the copied targets, each after the writes of those before it:
+    /// the new tracked points (when `uniforms` seeds any), per pixel and per tracked point, per
+    /// 8x8 block, then the fold and the reduction into the statistics.
+    fn record_passes(&self, cmd: vk::CommandBuffer, b: &Barriers<'_>, uniforms: &EvalFrame) {
         let s = &self.shared;
         let seeds = uniforms.points[2];
         if seeds > 0 {
@@ -688,8 +672,13 @@ impl FrameAnalysis for GpuAnalysis {
             MemoryAccess::ComputeReadWrite,
         );
         self.dispatch(cmd, &s.reduce, (1, 1, 1));
-        b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
-        let d = &gpu.device;
+    }
+
+    /// Copies the statistics (totals, histogram and the `points` tracked points) into the
+    /// host's buffer and, on the frames whose error images are kept, the error image into the
+    /// export buffer.
+    fn record_readback(&self, cmd: vk::CommandBuffer, frame: &AnalysisFrame<'_>, points: u32) {
+        let d = &self.shared.gpu.device;
         let bytes = TOTALS_BYTES + HIST_BYTES + points as u64 * 8;
         unsafe {
             d.cmd_copy_buffer(
@@ -717,6 +706,37 @@ impl FrameAnalysis for GpuAnalysis {
                 );
             }
         }
+    }
+}
+
+impl FrameAnalysis for GpuAnalysis {
+    fn record(&mut self, cmd: vk::CommandBuffer, frame: &AnalysisFrame<'_>) -> Result<()> {
+        self.check_extent(frame)?;
+        let uniforms = self.uniforms(frame)?;
+        self.uniform.write(bytemuck::bytes_of(&uniforms))?;
+        let gpu = &self.shared.gpu;
+        let b = Barriers::new(gpu);
+        // After everything earlier in the queue: other renderers' analyses read and write the
+        // shared buffers, this renderer's previous frame its own.
+        b.memory(
+            cmd,
+            MemoryAccess::PreviousFrame,
+            MemoryAccess::TransferWrite,
+        );
+        b.memory(
+            cmd,
+            MemoryAccess::PreviousFrame,
+            MemoryAccess::ComputeReadWrite,
+        );
+        self.record_copies(cmd, frame);
+        b.memory(
+            cmd,
+            MemoryAccess::TransferWrite,
+            MemoryAccess::ComputeReadWrite,
+        );
+        self.record_passes(cmd, &b, &uniforms);
+        b.memory(cmd, MemoryAccess::ComputeWrite, MemoryAccess::TransferRead);
+        self.record_readback(cmd, frame, uniforms.points[0]);
         b.memory(cmd, MemoryAccess::TransferWrite, MemoryAccess::HostRead);
         self.recorded += 1;
         Ok(())

@@ -507,6 +507,23 @@ fn require_linear_filter(gpu: &Gpu, format: vk::Format) -> Result<()> {
     Ok(())
 }
 
+/// The pipeline that draws the bands of the grid (`shaders/pgm.wgsl`), with set 0 and PGM's
+/// set 1.
+fn band_pipeline(
+    gpu: &Arc<Gpu>,
+    ctx: &MethodContext<'_>,
+    sets: &DescriptorSets,
+) -> Result<Pipeline> {
+    terrain_pipeline(
+        gpu,
+        &ctx.formats,
+        &TerrainPipelineDesc::triangles(
+            crate::driver::shaders::PGM_SPV.variant(ctx.terrain.variant),
+            &[ctx.terrain.descriptors.layout, sets.layout],
+        ),
+    )
+}
+
 /// The compute pass that places the grid vertices on the earth (`shaders/pgm_earth.wgsl`),
 /// with set 0 and PGM's set 1.
 fn earth_pass(gpu: &Arc<Gpu>, ctx: &MethodContext<'_>, sets: &DescriptorSets) -> Result<Pipeline> {
@@ -553,6 +570,92 @@ impl SlotBuffers {
     }
 }
 
+/// `data`'s heights and their mips ([`height_mips`]) as one texture, and its level count.
+fn height_mip_texture(
+    gpu: &Arc<Gpu>,
+    data: &Heightmap,
+    format: vk::Format,
+) -> Result<(Image, u32)> {
+    let levels = height_mips(data);
+    let refs: Vec<&[u8]> = levels.iter().map(|l| bytemuck::cast_slice(l)).collect();
+    let heights = Image::texture_with_mips(
+        gpu,
+        "pgm height mips",
+        format,
+        vk::Extent2D {
+            width: data.width,
+            height: data.height,
+        },
+        &refs,
+    )?;
+    Ok((heights, levels.len() as u32))
+}
+
+/// The trilinear sampler of the height mips (clamped at the edges, every level).
+fn mip_sampler(gpu: &Gpu) -> Result<vk::Sampler> {
+    unsafe {
+        gpu.device.create_sampler(
+            &vk::SamplerCreateInfo::default()
+                .mag_filter(vk::Filter::LINEAR)
+                .min_filter(vk::Filter::LINEAR)
+                .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
+                .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+                .max_lod(vk::LOD_CLAMP_NONE),
+            None,
+        )
+    }
+    .vk("vkCreateSampler")
+}
+
+/// Every view slot's buffers of set 1, each slot's set written with them, `heights` and
+/// `sampler`: the uniforms, row fractions and earth vertices, each a buffer per slot.
+fn slot_buffers(
+    gpu: &Arc<Gpu>,
+    sets: &DescriptorSets,
+    slots: usize,
+    rows: u32,
+    vertex_bytes: u64,
+    heights: &Image,
+    sampler: vk::Sampler,
+) -> Result<(Vec<Buffer>, Vec<Buffer>, Vec<Buffer>)> {
+    let mut uniforms = Vec::with_capacity(slots);
+    let mut row_t = Vec::with_capacity(slots);
+    let mut earth_vertices = Vec::with_capacity(slots);
+    for i in 0..slots {
+        let b = SlotBuffers::new(gpu, i, rows, vertex_bytes)?;
+        sets.write(
+            i,
+            &[
+                ("pgm", Resource::Buffer(b.uniforms.raw)),
+                ("height_mips", Resource::Image(heights.view)),
+                ("mip_sampler", Resource::Sampler(sampler)),
+                ("row_t", Resource::Buffer(b.row_t.raw)),
+                ("earth_vertices", Resource::Buffer(b.earth_vertices.raw)),
+            ],
+        )?;
+        uniforms.push(b.uniforms);
+        row_t.push(b.row_t);
+        earth_vertices.push(b.earth_vertices);
+    }
+    Ok((uniforms, row_t, earth_vertices))
+}
+
+/// The index buffer of one band ([`band_indices`]: `band` rows of quads, `cols` vertices
+/// wide), and its index count.
+fn band_index_buffer(gpu: &Arc<Gpu>, cols: u32, band: u32) -> Result<(Buffer, u32)> {
+    let grid = band_indices(cols, band);
+    let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
+    let indices = Buffer::with_data(
+        gpu,
+        "pgm band indices",
+        vk::BufferUsageFlags::INDEX_BUFFER,
+        index_bytes,
+    )?;
+    Ok((indices, grid.len() as u32))
+}
+
 pub struct Pgm {
     gpu: Arc<Gpu>,
     settings: PgmSettings,
@@ -586,7 +689,6 @@ impl Pgm {
         let gpu = ctx.gpu;
         let settings = settings.clone();
         settings.validate()?;
-        let d = &gpu.device;
         let format = vk::Format::R32_SFLOAT;
         require_linear_filter(gpu, format)?;
         let mut raw = Raw {
@@ -594,32 +696,8 @@ impl Pgm {
             sampler: vk::Sampler::null(),
         };
         let data = ctx.data.require_grid("method pgm")?.clone();
-        let levels = height_mips(&data);
-        let refs: Vec<&[u8]> = levels.iter().map(|l| bytemuck::cast_slice(l)).collect();
-        let heights = Image::texture_with_mips(
-            gpu,
-            "pgm height mips",
-            format,
-            vk::Extent2D {
-                width: data.width,
-                height: data.height,
-            },
-            &refs,
-        )?;
-        raw.sampler = unsafe {
-            d.create_sampler(
-                &vk::SamplerCreateInfo::default()
-                    .mag_filter(vk::Filter::LINEAR)
-                    .min_filter(vk::Filter::LINEAR)
-                    .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
-                    .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                    .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                    .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                    .max_lod(vk::LOD_CLAMP_NONE),
-                None,
-            )
-        }
-        .vk("vkCreateSampler")?;
+        let (heights, mips) = height_mip_texture(gpu, &data, format)?;
+        raw.sampler = mip_sampler(gpu)?;
         let sets = DescriptorSets::new(gpu, PGM_SET, ctx.slots)?;
         let [cols, rows] = settings.grid();
         let lattice = ctx.lattice.filter(|_| settings.earth_projection).cloned();
@@ -627,46 +705,22 @@ impl Pgm {
             Some(_) => (cols * rows) as u64 * size_of::<EarthVertex>() as u64,
             None => size_of::<EarthVertex>() as u64,
         };
-        let mut uniforms = Vec::with_capacity(ctx.slots);
-        let mut row_t = Vec::with_capacity(ctx.slots);
-        let mut earth_vertices = Vec::with_capacity(ctx.slots);
-        for i in 0..ctx.slots {
-            let b = SlotBuffers::new(gpu, i, rows, vertex_bytes)?;
-            sets.write(
-                i,
-                &[
-                    ("pgm", Resource::Buffer(b.uniforms.raw)),
-                    ("height_mips", Resource::Image(heights.view)),
-                    ("mip_sampler", Resource::Sampler(raw.sampler)),
-                    ("row_t", Resource::Buffer(b.row_t.raw)),
-                    ("earth_vertices", Resource::Buffer(b.earth_vertices.raw)),
-                ],
-            )?;
-            uniforms.push(b.uniforms);
-            row_t.push(b.row_t);
-            earth_vertices.push(b.earth_vertices);
-        }
+        let (uniforms, row_t, earth_vertices) = slot_buffers(
+            gpu,
+            &sets,
+            ctx.slots,
+            rows,
+            vertex_bytes,
+            &heights,
+            raw.sampler,
+        )?;
         let band = band_rows(cols, rows);
-        let grid = band_indices(cols, band);
-        let index_bytes: &[u8] = bytemuck::cast_slice(&grid);
-        let indices = Buffer::with_data(
-            gpu,
-            "pgm band indices",
-            vk::BufferUsageFlags::INDEX_BUFFER,
-            index_bytes,
-        )?;
-        let pipeline = terrain_pipeline(
-            gpu,
-            &ctx.formats,
-            &TerrainPipelineDesc::triangles(
-                crate::driver::shaders::PGM_SPV.variant(ctx.terrain.variant),
-                &[ctx.terrain.descriptors.layout, sets.layout],
-            ),
-        )?;
+        let (indices, index_count) = band_index_buffer(gpu, cols, band)?;
+        let pipeline = band_pipeline(gpu, ctx, &sets)?;
         Ok(Pgm {
             gpu: gpu.clone(),
             pipeline,
-            index_count: grid.len() as u32,
+            index_count,
             indices,
             instances: (rows - 1).div_ceil(band),
             band,
@@ -679,7 +733,7 @@ impl Pgm {
             },
             sets,
             _heights: heights,
-            mips: levels.len() as u32,
+            mips,
             block_min: BlockMin::new(&data),
             lattice,
             data,
