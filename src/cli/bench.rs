@@ -55,15 +55,11 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let gpu = p.config.open_gpu()?;
     let warmup = args.render.warmup.min(p.frames.saturating_sub(2) as usize);
     let mut rows = Vec::new();
-    let mut out = header(&gpu, &p, warmup);
-    print!("{out}");
+    print!("{}", header(&gpu, &p, warmup));
     for &(w, h) in &resolutions {
         for &n in &args.compare_frames_in_flight {
             let s = measure(&gpu, &p, (w, h), n, warmup)?;
-            let line = row_line((w, h), n, &s);
-            println!("{line}");
-            out.push_str(&line);
-            out.push('\n');
+            println!("{}", row_line((w, h), n, &s));
             rows.push(BenchRow {
                 width: w,
                 height: h,
