@@ -1,8 +1,11 @@
-//! References into the docs resolve. Code, scripts and docs point readers at a section as
-//! `docs/NAME.md, "Section"` (or `docs/NAME.md "Section"`, `docs/NAME.md ("Section"`). Sections
-//! move between files (issue 18's rounds left docs/udlod.md for docs/udlod-rounds.md), so every
-//! such reference must name a file that exists and a heading or bold item in it that starts
-//! with the quoted text.
+//! The docs and the code point at each other, and both kinds of pointer must resolve.
+//! - Code, scripts and docs point readers at a section as `docs/NAME.md, "Section"` (or
+//!   `docs/NAME.md "Section"`, `docs/NAME.md ("Section"`). Sections move between files (issue
+//!   18's rounds left docs/udlod.md for docs/udlod-rounds.md), so every such reference must
+//!   name a file that exists and a heading or bold item in it that starts with the quoted text.
+//! - The docs name code as `module::item` or `Type::member` in backticks. Code moves between
+//!   modules (`udlod::select` became four), so every such path into this crate must name an
+//!   item defined where the path says.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -229,5 +232,284 @@ fn references_parse_and_a_missing_section_does_not_resolve() {
     assert!(
         !resolves("Capacity of the lists", &names),
         "more than the item resolved"
+    );
+}
+
+/// Docs whose code paths are checked: every doc but the rounds' lab notes, which name code as
+/// it was in each round (functions since renamed or removed included).
+fn docs_naming_current_code() -> Vec<PathBuf> {
+    let root = repo();
+    let mut docs = vec![root.join("README.md")];
+    if let Ok(entries) = fs::read_dir(root.join("docs")) {
+        for entry in entries.flatten() {
+            let path = entry.path();
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            if name.ends_with(".md") && name != "udlod-rounds.md" {
+                docs.push(path);
+            }
+        }
+    }
+    docs
+}
+
+/// The Rust sources of the crate, its tests, examples, benchmarks and build script, with
+/// their module names (a file's stem, or its folder's name for `mod.rs`).
+fn rust_sources() -> Vec<(String, PathBuf, String)> {
+    let root = repo();
+    let mut files = vec![root.join("build.rs")];
+    for dir in ["src", "tests", "examples", "benches", "build"] {
+        text_files(&root.join(dir), &mut files);
+    }
+    files
+        .into_iter()
+        .filter(|f| f.extension().is_some_and(|e| e == "rs"))
+        .filter_map(|f| {
+            let text = fs::read_to_string(&f).ok()?;
+            let stem = f.file_stem()?.to_str()?;
+            let module = if stem == "mod" {
+                f.parent()?.file_name()?.to_str()?
+            } else {
+                stem
+            };
+            Some((module.to_string(), f, text))
+        })
+        .collect()
+}
+
+/// Crates a path in the docs may start with that are not this one: the manifest's
+/// dependencies, the standard library, and LLVM's C++ namespace (named in a profile).
+fn foreign_roots() -> Vec<String> {
+    let manifest = fs::read_to_string(repo().join("Cargo.toml")).unwrap_or_default();
+    let mut roots: Vec<String> = ["std", "core", "alloc", "llvm"].map(String::from).to_vec();
+    let mut in_dependencies = false;
+    for line in manifest.lines() {
+        let line = line.trim();
+        if line.starts_with('[') {
+            in_dependencies = line.ends_with("dependencies]");
+        } else if in_dependencies && let Some((name, _)) = line.split_once('=') {
+            roots.push(name.trim().replace('-', "_"));
+        }
+    }
+    roots
+}
+
+/// The `a::b::c` paths in backticks of a doc (an optional `()` after the last segment).
+fn code_paths(doc: &str) -> Vec<Vec<String>> {
+    let ident = |s: &str| {
+        !s.is_empty()
+            && !s.starts_with(|c: char| c.is_ascii_digit())
+            && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+    };
+    doc.split('`')
+        .skip(1)
+        .step_by(2)
+        .map(|span| span.strip_suffix("()").unwrap_or(span))
+        .map(|span| span.split("::").map(String::from).collect::<Vec<_>>())
+        .filter(|segments| segments.len() >= 2 && segments.iter().all(|s| ident(s)))
+        .collect()
+}
+
+/// Whether `text` defines `name`: an item (`fn`, `struct`, `enum`, `const`, `static`, `type`,
+/// `trait`, `mod`, `macro_rules!`) or, on a line of its own, a field or enum variant.
+fn defines(text: &str, name: &str) -> bool {
+    let ident_char = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let item = [
+        "fn",
+        "struct",
+        "enum",
+        "const",
+        "static",
+        "type",
+        "trait",
+        "mod",
+        "macro_rules!",
+    ]
+    .iter()
+    .any(|keyword| {
+        let needle = format!("{keyword} {name}");
+        text.match_indices(&needle).any(|(at, _)| {
+            let before = text[..at].chars().next_back();
+            let after = text[at + needle.len()..].chars().next();
+            !before.is_some_and(ident_char) && !after.is_some_and(ident_char)
+        })
+    });
+    item || text.lines().any(|line| {
+        let line = line.trim_start();
+        let line = ["pub(crate) ", "pub(super) ", "pub "]
+            .iter()
+            .find_map(|p| line.strip_prefix(p))
+            .unwrap_or(line);
+        line.strip_prefix(name)
+            .map(|rest| rest.trim_start())
+            .is_some_and(|rest| {
+                rest.starts_with([',', '(', '{', '=', ':']) && !rest.starts_with("::")
+            })
+    })
+}
+
+/// Why `path` does not name an item of this crate where it says, or `None` where it does
+/// (or where it is another crate's).
+/// - `[module::]Type::member` (`Type` the last capitalised segment before the last): a file
+///   that defines or implements `Type` defines `member`, and with modules named, one of them
+///   defines `Type`; a type the code only imports is another crate's.
+/// - `module::item`: a file of one of the modules named (or one with an inline `mod` of that
+///   name) defines `item`.
+fn unresolved_path(
+    path: &[String],
+    sources: &[(String, PathBuf, String)],
+    foreign: &[String],
+) -> Option<String> {
+    let (last, before) = path.split_last()?;
+    if foreign.contains(&path[0]) {
+        return None;
+    }
+    let in_modules = |modules: &[String], (module, file, text): &(String, PathBuf, String)| {
+        modules.iter().any(|m| {
+            m == module
+                || file.components().any(|c| c.as_os_str() == m.as_str())
+                || text.contains(&format!("mod {m} "))
+        })
+    };
+    let Some(at) = before
+        .iter()
+        .rposition(|s| s.starts_with(|c: char| c.is_ascii_uppercase()))
+    else {
+        let found = sources
+            .iter()
+            .any(|s| in_modules(before, s) && defines(&s.2, last));
+        return (!found).then(|| format!("no {last} in {}", before.join("::")));
+    };
+    let (modules, ty) = (&before[..at], &before[at]);
+    let defining = |text: &str| {
+        ["struct", "enum", "trait", "type"]
+            .iter()
+            .any(|k| defines_keyword(text, k, ty))
+    };
+    let holders: Vec<&(String, PathBuf, String)> = sources
+        .iter()
+        .filter(|(_, _, text)| {
+            defining(text)
+                || text.contains(&format!("impl {ty}"))
+                || text.contains(&format!(" for {ty} "))
+        })
+        .collect();
+    if holders.is_empty() {
+        let mentioned = sources.iter().any(|(_, _, text)| contains_word(text, ty));
+        return (!mentioned).then(|| format!("no type {ty} in the code"));
+    }
+    if !modules.is_empty()
+        && !sources
+            .iter()
+            .any(|s| in_modules(modules, s) && defining(&s.2))
+    {
+        return Some(format!("no type {ty} in {}", modules.join("::")));
+    }
+    (!holders.iter().any(|(_, _, text)| defines(text, last))).then(|| format!("{ty} has no {last}"))
+}
+
+fn defines_keyword(text: &str, keyword: &str, name: &str) -> bool {
+    text.contains(&format!("{keyword} {name} "))
+        || text.contains(&format!("{keyword} {name}<"))
+        || text.contains(&format!("{keyword} {name}("))
+        || text.contains(&format!("{keyword} {name};"))
+        || text.contains(&format!("{keyword} {name}:"))
+}
+
+fn contains_word(text: &str, word: &str) -> bool {
+    let ident_char = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    text.match_indices(word).any(|(at, _)| {
+        !text[..at].chars().next_back().is_some_and(ident_char)
+            && !text[at + word.len()..]
+                .chars()
+                .next()
+                .is_some_and(ident_char)
+    })
+}
+
+#[test]
+fn every_code_path_the_docs_name_exists() {
+    let root = repo();
+    let sources = rust_sources();
+    let foreign = foreign_roots();
+    assert!(
+        foreign.iter().any(|c| c == "ash"),
+        "the manifest's dependencies were not read"
+    );
+    let (mut count, mut unresolved) = (0, Vec::new());
+    for doc in docs_naming_current_code() {
+        let Ok(text) = fs::read_to_string(&doc) else {
+            continue;
+        };
+        for path in code_paths(&text) {
+            count += 1;
+            if let Some(why) = unresolved_path(&path, &sources, &foreign) {
+                let shown = doc.strip_prefix(&root).unwrap_or(&doc).display();
+                unresolved.push(format!("{shown}: `{}`: {why}", path.join("::")));
+            }
+        }
+    }
+    // 204 paths when this test was written; an empty scan must not pass.
+    assert!(
+        count >= 150,
+        "only {count} code paths found in the docs: is the scan broken?"
+    );
+    assert!(
+        unresolved.is_empty(),
+        "{} of {count} code paths in the docs do not resolve:\n{}",
+        unresolved.len(),
+        unresolved.join("\n")
+    );
+}
+
+/// Negative controls: a moved item, a missing member and a missing type are reported; a
+/// foreign crate's path and a type the code only imports are not this crate's to check.
+#[test]
+fn code_paths_parse_and_a_moved_item_does_not_resolve() {
+    let doc = "`select::select_tiles` and `Levels::new()`, `std::fs::read`, not `a b::c` or `x`";
+    assert_eq!(
+        code_paths(doc),
+        [
+            vec!["select", "select_tiles"],
+            vec!["Levels", "new"],
+            vec!["std", "fs", "read"]
+        ]
+    );
+    let sources = vec![
+        ("select".to_string(), PathBuf::from("src/lod/udlod/select.rs"), "pub fn select_tiles() {}\n".to_string()),
+        (
+            "levels".to_string(),
+            PathBuf::from("src/lod/udlod/levels.rs"),
+            "pub struct Levels {\n    pub root_lod: u32,\n}\nimpl Levels {\n    pub fn new() {}\n}\nuse zenoh::CongestionControl;\n"
+                .to_string(),
+        ),
+    ];
+    let foreign = vec!["std".to_string()];
+    let check = |p: &str| {
+        unresolved_path(
+            &p.split("::").map(String::from).collect::<Vec<_>>(),
+            &sources,
+            &foreign,
+        )
+    };
+    assert_eq!(check("select::select_tiles"), None);
+    assert_eq!(check("udlod::levels::Levels::new"), None);
+    assert_eq!(check("Levels::root_lod"), None);
+    assert_eq!(check("std::fs::read"), None);
+    assert_eq!(check("CongestionControl::Drop"), None);
+    assert!(
+        check("select::Levels::new").is_some(),
+        "a type in the wrong module resolved"
+    );
+    assert!(
+        check("levels::select_tiles").is_some(),
+        "an item in the wrong module resolved"
+    );
+    assert!(
+        check("Levels::stretch").is_some(),
+        "a missing member resolved"
+    );
+    assert!(
+        check("SplitField::new").is_some(),
+        "a missing type resolved"
     );
 }
