@@ -19,7 +19,7 @@ export VKTERRAIN_SHARED_DATA ?= $(abspath $(SHARED)/data)
 # (scripts/lavapipe.sh; docs/architecture.md "Which lavapipe"). VKTERRAIN_LAVAPIPE=system opts out.
 LAVAPIPE = lvp_env=$$(scripts/lavapipe.sh) && env $$lvp_env
 
-.PHONY: run test bench bench-udlod bench-eval bench-eval-short bench-clipmap bench-ring bench-ring-fuzz bench-preprocess bench-startup fuzz data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test
+.PHONY: run test doc bench bench-udlod bench-eval bench-eval-short bench-clipmap bench-ring bench-ring-fuzz bench-preprocess bench-startup fuzz data data-srtm data-pyrenees data-franconia data-proc4k data-default deps deps-test
 
 # The main job: UDLOD through the chunked clipmap over the embedded procedural terrain (its tile
 # pyramid is generated once into target/data/default).
@@ -28,6 +28,10 @@ run: deps data-default
 
 test: deps-test
 	$(LAVAPIPE) VKTERRAIN_VALIDATION=1 $(CARGO) test --locked
+
+# The API docs, failing on a broken or private intra-doc link (target/doc/vkterrain/).
+doc: deps
+	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --no-deps --lib --locked
 
 bench: deps
 	$(LAVAPIPE) $(CARGO) bench --locked --bench frame_time

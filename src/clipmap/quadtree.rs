@@ -3,7 +3,7 @@
 //! the best *resident* node covering it (`{atlas_index, atlas_lod}`; the nearest resident
 //! ancestor when the node itself is missing).
 //!
-//! [`lookup`] is the one height formula: `shaders/include/clipmap.wgsl` performs the same f32
+//! [`ViewQuadtree::lookup`] is the one height formula: `shaders/include/clipmap.wgsl` performs the same f32
 //! operations in the same order (power-of-two scales built from exponent bits, integer node
 //! arithmetic, no division or transcendental), and `tests/clipmap.rs` reads GPU heights back
 //! and proves them equal.

@@ -1,5 +1,5 @@
 //! How a finished frame leaves the GPU: the readback copies recorded at the end of its command
-//! buffer, the timestamps around its passes, and the borrowed [`FrameView`] the sink gets.
+//! buffer, the timestamps around its passes, and the borrowed [`crate::readback::FrameView`] the sink gets.
 
 use std::sync::Arc;
 

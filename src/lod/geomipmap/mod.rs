@@ -188,7 +188,7 @@ pub fn block_distance(
     viewer.clamp(lo_xy, hi_xy).distance(viewer)
 }
 
-/// A frame's LOD stretch: `stretch` (the grid's, [`lod_stretch`]) lowered on the earth to the
+/// A frame's LOD stretch: `stretch` (the grid's, `lod_stretch`) lowered on the earth to the
 /// spacing at the LOD viewer where that is smaller ([`Lattice::stretch_at`]: a viewer beyond a
 /// geographic grid's poleward edge). `lowest`: the data's lowest height.
 ///

@@ -28,7 +28,7 @@ pub struct FieldKey {
     pub zone_rule: ZoneRule,
 }
 
-/// How the split field charges each cell for its morph zone's width `W` ([`zone_widths`]).
+/// How the split field charges each cell for its morph zone's width `W` (`zone_widths`).
 /// The renderer's morph assumes [`ZoneRule::Width`]; the others are what-ifs that
 /// `examples/udlod_budget.rs` counts (`--zone-rule`; `docs/udlod-rounds.md`, "What sets the field"):
 /// fields built with them are not sound for the morph drawn.
@@ -86,7 +86,7 @@ pub(super) const CHAIN_MARGIN: f64 = 1e-5;
 ///    `l - q` (`q`: `FieldKey::morph_levels`; the diagonal in the LOD metric,
 ///    [`Levels::tile_diagonal`], `sqrt(2) extent` on square grids): a tile's vertices morph
 ///    over at most `q` levels and stay inside it; with walks past the tile (the default) the
-///    separation instead, beyond `S_G` of level `l - 2`: no fold ([`cell_requirement`]);
+///    separation instead, beyond `S_G` of level `l - 2`: no fold (`cell_requirement`);
 /// 4. with the morph cascade, a gentle morph: a corner's distance is at least its neighbour's
 ///    over `FIELD_STEP_RATIO` (`gentle_morph`).
 ///
@@ -111,7 +111,7 @@ pub struct SplitField {
     /// Per level, `(k, s)` pairs: with the level's split distances ([`Self::tile_split`])
     /// sorted in decreasing order, `s` (metres) is the one at rank `k`, so `k` tiles have one of
     /// at least `s` and every other tile one of at most `s`; at `k` = 0, 1, 2, 4, 8, ... and
-    /// the level's tile count (`s` = 0). What [`reserved_leaves_bound`] needs of the field,
+    /// the level's tile count (`s` = 0). What [`super::select::reserved_leaves_bound`] needs of the field,
     /// without a pass over the tiles per frame. Empty for level 0, which never splits.
     pub split_ranks: Vec<Vec<(u32, f32)>>,
 }

@@ -183,7 +183,7 @@ impl Levels {
         }
     }
 
-    /// Whether [`SplitField::new`] can build a field from these levels: the field's cells'
+    /// Whether [`super::field::SplitField::new`] can build a field from these levels: the field's cells'
     /// errors are held (always with one node per tile corner, whose cells are the tiles).
     pub fn holds_field_errors(&self) -> bool {
         self.field_density == 1 || self.field_error.len() == self.field_cells_held()

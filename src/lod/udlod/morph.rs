@@ -47,7 +47,7 @@ pub fn morph_moves(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: 
 /// the next level's grid; 0 everywhere with morphing off): the next level's scaled distance
 /// against the last `morph_range` of its split distance, or with the morph cascade the last
 /// `max(zone, morph_range s)` metres of the point's split distance `s`
-/// ([`SplitField::zone`]). A pure function of the point and the
+/// ([`super::field::SplitField::zone`]). A pure function of the point and the
 /// level, so vertices shared by tiles agree. `morph_factor` in
 /// `shaders/include/udlod_morph.wgsl`, operation for operation.
 pub fn morph_factor(levels: &Levels, p: &SelectionParams, sample: [i32; 2], lod: u32) -> f32 {

@@ -363,7 +363,7 @@ pub struct TileReach {
 }
 
 /// The rectangle a tile's morphed vertices can reach. A vertex's walk
-/// ([`morph_cascade`]) only moves towards lower coordinates, and where it stays within the
+/// ([`super::morph::morph_cascade`]) only moves towards lower coordinates, and where it stays within the
 /// tile's first `cascade_levels` levels it ends inside the tile; past them the point it has
 /// reached is one of the tile's corners, whose own walk it then follows. So every vertex
 /// (each a blend of its walk's points) lies between the lowest point of the corners' walks
