@@ -12,6 +12,7 @@ pub mod memory;
 pub mod pipeline;
 #[cfg(feature = "test-support")]
 pub mod probe;
+pub mod sampler;
 pub mod shaders;
 pub mod sync;
 

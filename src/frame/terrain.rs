@@ -12,8 +12,9 @@ use crate::dataset::{Heightmap, Level0, Terrain};
 use crate::driver::Gpu;
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::{Buffer, Image};
+use crate::driver::sampler::{Sampler, SamplerInfo};
 use crate::driver::shaders::{FrameBlock, TerrainVariant};
-use crate::error::{Error, Result, VkResultExt};
+use crate::error::{Error, Result};
 use crate::slots::ViewSlot;
 
 /// Descriptor set 0, shared by every terrain shader (`shaders/include/terrain_common.wgsl` and
@@ -90,16 +91,16 @@ pub struct TerrainInfo {
 
 /// Data-set textures on the GPU plus the set-0 layout and one set per frame slot.
 pub struct TerrainGpu {
-    gpu: Arc<Gpu>,
     pub info: TerrainInfo,
     _height: Image,
     _normal: Image,
     _albedo: Image,
     _lattice: Buffer,
-    sampler: vk::Sampler,
     /// Set 0: one per view slot (they differ in their uniform buffer and clipmap quadtree).
     pub descriptors: DescriptorSets,
     uniforms: Vec<Buffer>,
+    /// Binding 4, dropped after the sets that name it.
+    _sampler: Sampler,
     /// The build of the terrain shaders that draws this terrain (its world and its source of
     /// heights), as the frame block's `lattice.x` and the clipmap's `params.x` say at run time.
     pub variant: TerrainVariant,
@@ -130,22 +131,21 @@ impl TerrainGpu {
             Self::textures(gpu, data, lattice)?
         };
         let info = TerrainInfo::new(data, lattice);
-        let sampler = linear_sampler(gpu)?;
-        let d = &gpu.device;
+        // Binding 4: trilinear, clamped at the edges, anisotropic (up to 16x) where the
+        // device enabled it.
+        let sampler = Sampler::new(gpu, SamplerInfo::trilinear_clamped().anisotropic(16.0))?;
         let textures = [&height, &normal, &albedo];
         let (descriptors, uniforms) =
-            Self::descriptor_sets(gpu, slots, textures, sampler, clipmap, &lattice_buffer)
-                .inspect_err(|_| unsafe { d.destroy_sampler(sampler, None) })?;
+            Self::descriptor_sets(gpu, slots, textures, sampler.raw, clipmap, &lattice_buffer)?;
         Ok(TerrainGpu {
-            gpu: gpu.clone(),
             info,
             _height: height,
             _normal: normal,
             _albedo: albedo,
             _lattice: lattice_buffer,
-            sampler,
             descriptors,
             uniforms,
+            _sampler: sampler,
             variant: TerrainVariant::new(lattice.is_some(), clipmap.enabled),
         })
     }
@@ -316,38 +316,4 @@ fn placeholder_textures(gpu: &Arc<Gpu>) -> Result<(Image, Image, Image)> {
         Image::texture_with_data(gpu, "normals", vk::Format::R8G8B8A8_SNORM, one, &[0; 4])?,
         Image::texture_with_data(gpu, "albedo", vk::Format::R8G8B8A8_SRGB, one, &[0; 4])?,
     ))
-}
-
-/// Binding 4: trilinear, clamped at the edges, anisotropic (up to 16x) where the device
-/// enabled it.
-fn linear_sampler(gpu: &Gpu) -> Result<vk::Sampler> {
-    let anisotropy = gpu.enabled.sampler_anisotropy;
-    unsafe {
-        gpu.device.create_sampler(
-            &vk::SamplerCreateInfo::default()
-                .mag_filter(vk::Filter::LINEAR)
-                .min_filter(vk::Filter::LINEAR)
-                .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
-                .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                .anisotropy_enable(anisotropy)
-                .max_anisotropy(if anisotropy {
-                    gpu.info.caps.max_anisotropy.min(16.0)
-                } else {
-                    1.0
-                })
-                .max_lod(vk::LOD_CLAMP_NONE),
-            None,
-        )
-    }
-    .vk("vkCreateSampler")
-}
-
-impl Drop for TerrainGpu {
-    fn drop(&mut self) {
-        unsafe {
-            self.gpu.device.destroy_sampler(self.sampler, None);
-        }
-    }
 }

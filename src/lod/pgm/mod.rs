@@ -33,7 +33,8 @@ use crate::driver::barrier::{Barriers, MemoryAccess};
 use crate::driver::descriptors::{Binding, DescriptorSets, Resource, stages};
 use crate::driver::memory::{Buffer, Image};
 use crate::driver::pipeline::{Pipeline, TerrainPipelineDesc, compute_pipeline, terrain_pipeline};
-use crate::error::{Error, Result, VkResultExt};
+use crate::driver::sampler::{Sampler, SamplerInfo};
+use crate::error::{Error, Result};
 use crate::frame::ViewState;
 use crate::gpu_constants::PGM_EARTH_TILE;
 use crate::scene::Camera;
@@ -459,19 +460,6 @@ pub fn band_indices(cols: u32, band: u32) -> Vec<u16> {
     out
 }
 
-/// The sampler, destroyed in `Drop` even when `new` fails half way (a null handle is valid to
-/// destroy).
-struct Raw {
-    gpu: Arc<Gpu>,
-    sampler: vk::Sampler,
-}
-
-impl Drop for Raw {
-    fn drop(&mut self) {
-        unsafe { self.gpu.device.destroy_sampler(self.sampler, None) };
-    }
-}
-
 /// Descriptor set 1 (`shaders/pgm.wgsl`; on the earth `shaders/pgm_earth.wgsl` too): the
 /// uniforms, the height mip chain, its sampler, the row fractions, the grid vertices placed
 /// on the earth.
@@ -591,24 +579,6 @@ fn height_mip_texture(
     Ok((heights, levels.len() as u32))
 }
 
-/// The trilinear sampler of the height mips (clamped at the edges, every level).
-fn mip_sampler(gpu: &Gpu) -> Result<vk::Sampler> {
-    unsafe {
-        gpu.device.create_sampler(
-            &vk::SamplerCreateInfo::default()
-                .mag_filter(vk::Filter::LINEAR)
-                .min_filter(vk::Filter::LINEAR)
-                .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
-                .address_mode_u(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                .address_mode_v(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
-                .max_lod(vk::LOD_CLAMP_NONE),
-            None,
-        )
-    }
-    .vk("vkCreateSampler")
-}
-
 /// Every view slot's buffers of set 1, each slot's set written with them, `heights` and
 /// `sampler`: the uniforms, row fractions and earth vertices, each a buffer per slot.
 fn slot_buffers(
@@ -681,7 +651,7 @@ pub struct Pgm {
     /// asked for by `earth_projection = false`).
     lattice: Option<std::sync::Arc<crate::geo::Lattice>>,
     // Last: destroyed after everything that uses it.
-    _raw: Raw,
+    _sampler: Sampler,
 }
 
 impl Pgm {
@@ -691,13 +661,10 @@ impl Pgm {
         settings.validate()?;
         let format = vk::Format::R32_SFLOAT;
         require_linear_filter(gpu, format)?;
-        let mut raw = Raw {
-            gpu: gpu.clone(),
-            sampler: vk::Sampler::null(),
-        };
         let data = ctx.data.require_grid("method pgm")?.clone();
         let (heights, mips) = height_mip_texture(gpu, &data, format)?;
-        raw.sampler = mip_sampler(gpu)?;
+        // The height mips' sampler: trilinear, clamped at the edges, every level.
+        let sampler = Sampler::new(gpu, SamplerInfo::trilinear_clamped())?;
         let sets = DescriptorSets::new(gpu, PGM_SET, ctx.slots)?;
         let [cols, rows] = settings.grid();
         let lattice = ctx.lattice.filter(|_| settings.earth_projection).cloned();
@@ -712,7 +679,7 @@ impl Pgm {
             rows,
             vertex_bytes,
             &heights,
-            raw.sampler,
+            sampler.raw,
         )?;
         let band = band_rows(cols, rows);
         let (indices, index_count) = band_index_buffer(gpu, cols, band)?;
@@ -738,7 +705,7 @@ impl Pgm {
             lattice,
             data,
             settings,
-            _raw: raw,
+            _sampler: sampler,
         })
     }
 
