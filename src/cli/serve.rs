@@ -691,95 +691,113 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.status_file {
         let s = read_status_file(path)?;
-        let age_s = (sys::realtime_ns() / 1_000_000).saturating_sub(s.updated_unix_ms) as f64 / 1e3;
-        let state = if s.state == "running" && !sys::pid_alive(s.pid) {
-            "dead (process gone without stopping)".to_string()
-        } else {
-            s.state.clone()
-        };
-        println!(
-            "state:           {state} (pid {}, updated {age_s:.1} s ago)",
-            s.pid
-        );
-        println!(
-            "ring:            {} in {} (generation {}, {})",
-            s.ring,
-            s.ring_dir,
-            s.generation,
-            if s.zero_copy { "zero-copy" } else { "copied" }
-        );
-        if let Some(n) = &s.zero_copy_note {
-            println!("zero-copy off:   {n}");
-        }
-        println!("device:          {}", s.device);
-        println!("dataset:         {}", s.dataset);
-        println!("resolution:      {}x{}", s.width, s.height);
-        println!("frames rendered: {}", s.frames_rendered);
-        println!(
-            "frame time:      median {:.2} ms, p99 {:.2} ms; publish median {:.3} ms",
-            s.frame_ms_median, s.frame_ms_p99, s.publish_ms_median
-        );
-        println!("camera:          {}", s.camera);
-        println!(
-            "control:         {} accepted, {} rejected{}",
-            s.control_accepted,
-            s.control_rejected,
-            s.control_last_error
-                .as_deref()
-                .map(|e| format!(" (last: {e})"))
-                .unwrap_or_default()
-        );
-        if let Some(c) = &s.clipmap {
-            println!(
-                "clipmap:         {}/{} nodes resident; {} loaded, {} load errors, {} deferred, {} evictions, {} frames with fallback data",
-                c.resident_nodes,
-                c.atlas_capacity,
-                c.loaded,
-                c.load_errors,
-                c.deferred,
-                c.evictions,
-                c.fallback_frames
-            );
-        }
-        if let Some(z) = &s.zenoh {
-            println!(
-                "zenoh:           {}: {} published ({} in shared memory), {} dropped",
-                z.key, z.published, z.shm_frames, z.dropped
-            );
-        }
-        for (name, (received, lost)) in &s.consumers {
-            println!("consumer:        {name}: {received} received, {lost} skipped");
-        }
-        println!("uptime:          {:.1} s", s.uptime_s);
+        print_service_status(&s);
     }
     if let Some(name) = &args.ring {
-        let dir = args
-            .ring_dir
-            .clone()
-            .unwrap_or_else(crate::output::ring::location::default_dir);
-        let owner = match &args.ring_owner {
-            Some(o) => Some(sys::user_id(o)?),
-            None => crate::output::ring::location::owner_from_env()?,
-        };
-        let r = crate::output::ring::RingReader::open(&RingLocation::new(dir, name)?, owner)?;
-        let g = r.geometry();
-        let alive = r.producer_alive();
-        let state = match (r.state(), alive) {
-            (1, true) => "live",
-            (1, false) => "stale (its producer is gone)",
-            (2, _) => "closed",
-            (3, _) => "replaced",
-            _ => "unknown",
-        };
+        print_ring_header(args, name)?;
+    }
+    Ok(())
+}
+
+/// The status file's report: the service's state, output and frame times, its counters,
+/// and its uptime.
+fn print_service_status(s: &Status) {
+    let age_s = (sys::realtime_ns() / 1_000_000).saturating_sub(s.updated_unix_ms) as f64 / 1e3;
+    let state = if s.state == "running" && !sys::pid_alive(s.pid) {
+        "dead (process gone without stopping)".to_string()
+    } else {
+        s.state.clone()
+    };
+    println!(
+        "state:           {state} (pid {}, updated {age_s:.1} s ago)",
+        s.pid
+    );
+    println!(
+        "ring:            {} in {} (generation {}, {})",
+        s.ring,
+        s.ring_dir,
+        s.generation,
+        if s.zero_copy { "zero-copy" } else { "copied" }
+    );
+    if let Some(n) = &s.zero_copy_note {
+        println!("zero-copy off:   {n}");
+    }
+    println!("device:          {}", s.device);
+    println!("dataset:         {}", s.dataset);
+    println!("resolution:      {}x{}", s.width, s.height);
+    println!("frames rendered: {}", s.frames_rendered);
+    println!(
+        "frame time:      median {:.2} ms, p99 {:.2} ms; publish median {:.3} ms",
+        s.frame_ms_median, s.frame_ms_p99, s.publish_ms_median
+    );
+    println!("camera:          {}", s.camera);
+    print_service_counters(s);
+    println!("uptime:          {:.1} s", s.uptime_s);
+}
+
+/// The status file's counters: control commands, clipmap streaming, Zenoh publishing and the
+/// consumers' reports.
+fn print_service_counters(s: &Status) {
+    println!(
+        "control:         {} accepted, {} rejected{}",
+        s.control_accepted,
+        s.control_rejected,
+        s.control_last_error
+            .as_deref()
+            .map(|e| format!(" (last: {e})"))
+            .unwrap_or_default()
+    );
+    if let Some(c) = &s.clipmap {
         println!(
-            "ring {name}:       {state}, generation {}, {}x{} RGBA8, {} slots{}, latest frame {}",
-            r.generation(),
-            g.width,
-            g.height,
-            g.slot_count,
-            if g.depth { " + depth" } else { "" },
-            r.latest().map_or("none".into(), |l| l.to_string())
+            "clipmap:         {}/{} nodes resident; {} loaded, {} load errors, {} deferred, {} evictions, {} frames with fallback data",
+            c.resident_nodes,
+            c.atlas_capacity,
+            c.loaded,
+            c.load_errors,
+            c.deferred,
+            c.evictions,
+            c.fallback_frames
         );
     }
+    if let Some(z) = &s.zenoh {
+        println!(
+            "zenoh:           {}: {} published ({} in shared memory), {} dropped",
+            z.key, z.published, z.shm_frames, z.dropped
+        );
+    }
+    for (name, (received, lost)) in &s.consumers {
+        println!("consumer:        {name}: {received} received, {lost} skipped");
+    }
+}
+
+/// Ring `name`'s header, read directly from its segment (`--ring-dir`, `--ring-owner`).
+fn print_ring_header(args: &StatusArgs, name: &str) -> anyhow::Result<()> {
+    let dir = args
+        .ring_dir
+        .clone()
+        .unwrap_or_else(crate::output::ring::location::default_dir);
+    let owner = match &args.ring_owner {
+        Some(o) => Some(sys::user_id(o)?),
+        None => crate::output::ring::location::owner_from_env()?,
+    };
+    let r = crate::output::ring::RingReader::open(&RingLocation::new(dir, name)?, owner)?;
+    let g = r.geometry();
+    let alive = r.producer_alive();
+    let state = match (r.state(), alive) {
+        (1, true) => "live",
+        (1, false) => "stale (its producer is gone)",
+        (2, _) => "closed",
+        (3, _) => "replaced",
+        _ => "unknown",
+    };
+    println!(
+        "ring {name}:       {state}, generation {}, {}x{} RGBA8, {} slots{}, latest frame {}",
+        r.generation(),
+        g.width,
+        g.height,
+        g.slot_count,
+        if g.depth { " + depth" } else { "" },
+        r.latest().map_or("none".into(), |l| l.to_string())
+    );
     Ok(())
 }

@@ -509,6 +509,19 @@ impl Clipmap {
         self.frame += 1;
         let frame = self.frame;
         // (1) recentre each view, collect wanted nodes; (2) union over views.
+        let wanted = self.recentre_views(viewers, frame);
+        self.collect_finished_loads(&wanted, frame);
+        // (3) copy finished loads into the atlas, bounded per frame.
+        let uploads = self.store_ready_nodes(&wanted, frame);
+        self.request_missing_nodes(&wanted, frame);
+        // (4) re-point every cell at its best resident node.
+        self.resolve_views();
+        uploads
+    }
+
+    /// Steps (1) and (2): every view recentred on its viewer; the nodes any view wants, each
+    /// with its most urgent priority, touched in the atlas and handed to the streamer.
+    fn recentre_views(&mut self, viewers: &[DVec2], frame: u64) -> HashMap<NodeKey, (u32, u64)> {
         let mut wanted: HashMap<NodeKey, (u32, u64)> = HashMap::new();
         for (view, &viewer) in self.views.iter_mut().zip(viewers) {
             for (key, prio) in view.recentre(&self.geometry, viewer) {
@@ -521,8 +534,12 @@ impl Clipmap {
         }
         self.streamer
             .set_wanted(wanted.keys().copied().collect::<HashSet<_>>());
+        wanted
+    }
 
-        // Finished loads (never waits).
+    /// Finished loads (never waits): still wanted ones queued as ready, failures remembered
+    /// for retry.
+    fn collect_finished_loads(&mut self, wanted: &HashMap<NodeKey, (u32, u64)>, frame: u64) {
         for (key, result) in self.streamer.poll() {
             self.in_flight.remove(&key);
             match result {
@@ -543,8 +560,15 @@ impl Clipmap {
                 }
             }
         }
+    }
 
-        // (3) copy finished loads into the atlas, bounded per frame.
+    /// Step (3): ready nodes still wanted stored in atlas layers, at most
+    /// `max_uploads_per_frame` uploads (those pending from start-up first).
+    fn store_ready_nodes(
+        &mut self,
+        wanted: &HashMap<NodeKey, (u32, u64)>,
+        frame: u64,
+    ) -> Vec<Upload> {
         let mut uploads = std::mem::take(&mut self.pending_uploads);
         while uploads.len() < self.settings.max_uploads_per_frame as usize {
             let Some((key, node, shading)) = self.ready.pop_front() else {
@@ -563,8 +587,11 @@ impl Clipmap {
                 None => self.counters.deferred += 1,
             }
         }
+        uploads
+    }
 
-        // New requests: coarse first, then near; bounded in flight and by free atlas layers.
+    /// New requests: coarse first, then near; bounded in flight and by free atlas layers.
+    fn request_missing_nodes(&mut self, wanted: &HashMap<NodeKey, (u32, u64)>, frame: u64) {
         let retry = self.settings.retry_frames as u64;
         self.failed.retain(|_, f| frame - *f < retry);
         let mut missing: Vec<(NodeKey, (u32, u64))> = wanted
@@ -592,8 +619,11 @@ impl Clipmap {
                 self.counters.requested += 1;
             }
         }
+    }
 
-        // (4) re-point every cell at its best resident node.
+    /// Step (4): every view's cells re-pointed at their best resident nodes; the frame's
+    /// fallback and eviction counters.
+    fn resolve_views(&mut self) {
         for view in &mut self.views {
             view.resolve(&self.geometry, &self.atlas);
         }
@@ -601,7 +631,6 @@ impl Clipmap {
             self.counters.fallback_frames += 1;
         }
         self.counters.evictions = self.atlas.evictions;
-        uploads
     }
 
     /// Height in metres at a level-0 sample position as `view` samples it now (what the GPU

@@ -640,38 +640,8 @@ fn paste(
     notes: &mut ReadNotes,
     name: String,
 ) -> Result<Raster> {
-    let x0 = offsets.iter().map(|o| o[0]).min().expect("inputs");
-    let y0 = offsets.iter().map(|o| o[1]).min().expect("inputs");
-    let x1 = (0..inputs.len())
-        .map(|i| offsets[i][0] + inputs[i].width as i64)
-        .max()
-        .expect("inputs");
-    let y1 = (0..inputs.len())
-        .map(|i| offsets[i][1] + inputs[i].height as i64)
-        .max()
-        .expect("inputs");
-    let (w, h) = ((x1 - x0) as u64, (y1 - y0) as u64);
-    if w > MAX_SIDE_SAMPLES || h > MAX_SIDE_SAMPLES {
-        return Err(Error::invalid(
-            &name,
-            format!("the mosaic is {w}x{h} samples, over {MAX_SIDE_SAMPLES} per side"),
-        ));
-    }
-    for i in 1..inputs.len() {
-        for j in 0..i {
-            if offsets[i] == offsets[j]
-                && (inputs[i].width, inputs[i].height) == (inputs[j].width, inputs[j].height)
-            {
-                return Err(Error::invalid(
-                    inputs[j].name(),
-                    format!(
-                        "inconsistent mosaic: {} overlaps it entirely (the same area twice)",
-                        inputs[i].name()
-                    ),
-                ));
-            }
-        }
-    }
+    let ([x0, y0], w, h) = union_extent(inputs, offsets);
+    check_mosaic_shape(&name, inputs, offsets, w, h)?;
     check_memory(&name, w, h, opts.memory_budget)?;
     let g0 = &grids[0];
     let georef = Georef::north_up(g0.crs.clone(), g0.at(x0 as f64, y0 as f64), g0.step());
@@ -690,7 +660,84 @@ fn paste(
         &mut provenance,
         &mut warnings,
     )?;
-    let (wu, hu) = (w as usize, h as usize);
+    let (heights, covered) =
+        paste_heights(inputs, offsets, [x0, y0], w as usize, h as usize, notes)?;
+    check_no_gap(inputs, &georef, &covered, w as usize)?;
+    Ok(Raster {
+        name,
+        width: w as u32,
+        height: h as u32,
+        spacing,
+        heights,
+        vertical_datum: vertical_datum(&inputs[0]),
+        nodata: inputs[0].nodata,
+        georef: Some(georef),
+        provenance,
+        warnings,
+    })
+}
+
+/// The union of the inputs' grids: its first sample's offset from the first grid and its
+/// width and height in samples.
+fn union_extent(inputs: &[Input], offsets: &[[i64; 2]]) -> ([i64; 2], u64, u64) {
+    let x0 = offsets.iter().map(|o| o[0]).min().expect("inputs");
+    let y0 = offsets.iter().map(|o| o[1]).min().expect("inputs");
+    let x1 = (0..inputs.len())
+        .map(|i| offsets[i][0] + inputs[i].width as i64)
+        .max()
+        .expect("inputs");
+    let y1 = (0..inputs.len())
+        .map(|i| offsets[i][1] + inputs[i].height as i64)
+        .max()
+        .expect("inputs");
+    ([x0, y0], (x1 - x0) as u64, (y1 - y0) as u64)
+}
+
+/// A mosaic of `w`x`h` samples within the side limit, and no input pasted twice over the same
+/// area.
+fn check_mosaic_shape(
+    name: &str,
+    inputs: &[Input],
+    offsets: &[[i64; 2]],
+    w: u64,
+    h: u64,
+) -> Result<()> {
+    if w > MAX_SIDE_SAMPLES || h > MAX_SIDE_SAMPLES {
+        return Err(Error::invalid(
+            name,
+            format!("the mosaic is {w}x{h} samples, over {MAX_SIDE_SAMPLES} per side"),
+        ));
+    }
+    for i in 1..inputs.len() {
+        for j in 0..i {
+            if offsets[i] == offsets[j]
+                && (inputs[i].width, inputs[i].height) == (inputs[j].width, inputs[j].height)
+            {
+                return Err(Error::invalid(
+                    inputs[j].name(),
+                    format!(
+                        "inconsistent mosaic: {} overlaps it entirely (the same area twice)",
+                        inputs[i].name()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Every input's rows read into the `wu`x`hu` union grid whose first sample is at `origin`
+/// (offsets from the first grid): the heights (NaN where no input has a valid value) and
+/// which samples some input covers.
+fn paste_heights(
+    inputs: &[Input],
+    offsets: &[[i64; 2]],
+    origin: [i64; 2],
+    wu: usize,
+    hu: usize,
+    notes: &mut ReadNotes,
+) -> Result<(Vec<f32>, Vec<bool>)> {
+    let [x0, y0] = origin;
     let mut heights = vec![f32::NAN; wu * hu];
     let mut covered = vec![false; wu * hu];
     for (i, input) in inputs.iter().enumerate() {
@@ -709,6 +756,11 @@ fn paste(
             }
         })?;
     }
+    Ok((heights, covered))
+}
+
+/// An error naming the first sample of the `wu`-wide union grid that no input covers.
+fn check_no_gap(inputs: &[Input], georef: &Georef, covered: &[bool], wu: usize) -> Result<()> {
     if let Some(k) = covered.iter().position(|c| !c) {
         let [x, y] = georef.at((k % wu) as f64, (k / wu) as f64);
         return Err(Error::invalid(
@@ -719,18 +771,7 @@ fn paste(
             ),
         ));
     }
-    Ok(Raster {
-        name,
-        width: w as u32,
-        height: h as u32,
-        spacing,
-        heights,
-        vertical_datum: vertical_datum(&inputs[0]),
-        nodata: inputs[0].nodata,
-        georef: Some(georef),
-        provenance,
-        warnings,
-    })
+    Ok(())
 }
 
 /// A MEM dataset (Float32, NaN nodata) holding `input`'s heights in metres.

@@ -130,8 +130,11 @@ pub fn level_interpolate(lod: u32, corners: [f64; 4], c: u32, r: u32) -> f64 {
 /// Partial statistics of one band of rows: per level, the tile rows it touches.
 struct Partial {
     /// Per level: first tile row, then `rows x nx` entries of (min, max, error).
-    levels: Vec<(u32, Vec<[f32; 2]>, Vec<f64>)>,
+    levels: Vec<LevelPartial>,
 }
+
+/// One level of a [`Partial`]: its first tile row and its tiles' (min, max) and errors.
+type LevelPartial = (u32, Vec<[f32; 2]>, Vec<f64>);
 
 /// Full rows of level 0 held while a band is swept: the band's current row and, per level,
 /// the two level rows around it.
@@ -175,8 +178,40 @@ impl RowCache {
 
 /// Sweeps rows `r0..=r1`.
 fn band<D: Level0 + ?Sized>(data: &D, shape: &Shape, r0: u32, r1: u32) -> Result<Partial> {
-    let (w, h) = (shape.width, shape.height);
-    let mut levels: Vec<(u32, Vec<[f32; 2]>, Vec<f64>)> = shape
+    let mut levels = empty_partial_levels(shape, r0, r1);
+    let mut cache = RowCache { rows: Vec::new() };
+    let (nx0, _, _) = shape.levels[0];
+    let mut seg = vec![[f32::INFINITY, f32::NEG_INFINITY]; nx0 as usize];
+    let mut seg_err: Vec<f64> = Vec::new();
+    let mut needed = Vec::with_capacity(2 * shape.levels.len() + 1);
+    for r in r0..=r1 {
+        rows_needed(shape, r, &mut needed);
+        cache.ensure(data, &needed)?;
+        let row = cache.get(r);
+        segment_min_max(shape, row, &mut seg);
+        for (lod, &(nx, ny, span)) in shape.levels.iter().enumerate() {
+            let lod = lod as u32;
+            seg_err.clear();
+            seg_err.resize(nx as usize, 0.0);
+            if lod > 0 {
+                segment_errors(shape, &cache, row, r, (lod, span), &mut seg_err);
+            }
+            fold_row(
+                &mut levels[lod as usize],
+                (nx, ny, span),
+                lod,
+                r,
+                &seg,
+                &seg_err,
+            );
+        }
+    }
+    Ok(Partial { levels })
+}
+
+/// Every level's tile rows that rows `r0..=r1` touch, every tile empty.
+fn empty_partial_levels(shape: &Shape, r0: u32, r1: u32) -> Vec<LevelPartial> {
+    shape
         .levels
         .iter()
         .map(|&(nx, ny, span)| {
@@ -189,87 +224,105 @@ fn band<D: Level0 + ?Sized>(data: &D, shape: &Shape, r0: u32, r1: u32) -> Result
                 vec![0.0f64; rows * nx as usize],
             )
         })
-        .collect();
-    let mut cache = RowCache { rows: Vec::new() };
-    let (nx0, _, _) = shape.levels[0];
-    let mut seg = vec![[f32::INFINITY, f32::NEG_INFINITY]; nx0 as usize];
-    let mut seg_err: Vec<f64> = Vec::new();
-    let mut needed = Vec::with_capacity(2 * shape.levels.len() + 1);
-    for r in r0..=r1 {
-        needed.clear();
-        needed.push(r);
-        for lod in 1..shape.levels.len() as u32 {
-            let step = 1u32 << lod;
-            let rl = r >> lod << lod;
-            for k in [rl, (rl + step).min(h - 1)] {
-                if !needed.contains(&k) {
-                    needed.push(k);
-                }
-            }
-        }
-        cache.ensure(data, &needed)?;
-        let row = cache.get(r);
-        // Level-0 segments (shared edge samples in both neighbours).
-        for (tx, s) in seg.iter_mut().enumerate() {
-            let c0 = tx as u32 * shape.grid;
-            let c1 = (c0 + shape.grid).min(w - 1);
-            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for &v in &row[c0 as usize..=c1 as usize] {
-                lo = lo.min(v);
-                hi = hi.max(v);
-            }
-            *s = [lo, hi];
-        }
-        for (lod, &(nx, ny, span)) in shape.levels.iter().enumerate() {
-            let lod = lod as u32;
-            let step = 1u32 << lod;
-            seg_err.clear();
-            seg_err.resize(nx as usize, 0.0);
-            if lod > 0 {
-                let rl = r >> lod << lod;
-                let south = cache.get(rl);
-                let north = cache.get((rl + step).min(h - 1));
-                for (tx, e) in seg_err.iter_mut().enumerate() {
-                    let c0 = tx as u32 * span;
-                    let c1 = (c0 + span).min(w - 1);
-                    let mut worst = 0.0f64;
-                    for c in c0..=c1 {
-                        let cl = c >> lod << lod;
-                        let cr = (cl + step).min(w - 1);
-                        let k = [
-                            south[cl as usize] as f64,
-                            south[cr as usize] as f64,
-                            north[cl as usize] as f64,
-                            north[cr as usize] as f64,
-                        ];
-                        let v = row[c as usize] as f64;
-                        worst = worst.max((level_interpolate(lod, k, c, r) - v).abs());
-                    }
-                    *e = worst;
-                }
-            }
-            let (first, mm, err) = &mut levels[lod as usize];
-            // The tile row holding row r, and the one below when r is their shared edge.
-            let ty = r / span;
-            let below = (r % span == 0 && ty > 0).then(|| ty - 1);
-            for t in [Some(ty).filter(|&t| t < ny), below].into_iter().flatten() {
-                let base = ((t - *first) * nx) as usize;
-                let per = 1usize << lod;
-                for tx in 0..nx as usize {
-                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-                    for s in &seg[tx * per..((tx + 1) * per).min(nx0 as usize)] {
-                        lo = lo.min(s[0]);
-                        hi = hi.max(s[1]);
-                    }
-                    let m = &mut mm[base + tx];
-                    m[0] = m[0].min(lo);
-                    m[1] = m[1].max(hi);
-                    err[base + tx] = err[base + tx].max(seg_err[tx]);
-                }
+        .collect()
+}
+
+/// The level-0 rows sweeping row `r` reads, into `needed` (cleared first): `r` itself and, per
+/// coarser level, the two level rows around it.
+fn rows_needed(shape: &Shape, r: u32, needed: &mut Vec<u32>) {
+    needed.clear();
+    needed.push(r);
+    for lod in 1..shape.levels.len() as u32 {
+        let step = 1u32 << lod;
+        let rl = r >> lod << lod;
+        for k in [rl, (rl + step).min(shape.height - 1)] {
+            if !needed.contains(&k) {
+                needed.push(k);
             }
         }
     }
-    Ok(Partial { levels })
+}
+
+/// `(min, max)` of `row` over every level-0 tile's columns, into `seg`.
+fn segment_min_max(shape: &Shape, row: &[f32], seg: &mut [[f32; 2]]) {
+    // Level-0 segments (shared edge samples in both neighbours).
+    for (tx, s) in seg.iter_mut().enumerate() {
+        let c0 = tx as u32 * shape.grid;
+        let c1 = (c0 + shape.grid).min(shape.width - 1);
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for &v in &row[c0 as usize..=c1 as usize] {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        *s = [lo, hi];
+    }
+}
+
+/// The largest error of the level-`lod` grid (`lod >= 1`, tiles of `span` quads) over the
+/// samples of `row` (level-0 row `r`) in each of its tiles, into `seg_err`; the level rows
+/// around `r` come from `cache`.
+fn segment_errors(
+    shape: &Shape,
+    cache: &RowCache,
+    row: &[f32],
+    r: u32,
+    (lod, span): (u32, u32),
+    seg_err: &mut [f64],
+) {
+    let (w, h) = (shape.width, shape.height);
+    let step = 1u32 << lod;
+    let rl = r >> lod << lod;
+    let south = cache.get(rl);
+    let north = cache.get((rl + step).min(h - 1));
+    for (tx, e) in seg_err.iter_mut().enumerate() {
+        let c0 = tx as u32 * span;
+        let c1 = (c0 + span).min(w - 1);
+        let mut worst = 0.0f64;
+        for c in c0..=c1 {
+            let cl = c >> lod << lod;
+            let cr = (cl + step).min(w - 1);
+            let k = [
+                south[cl as usize] as f64,
+                south[cr as usize] as f64,
+                north[cl as usize] as f64,
+                north[cr as usize] as f64,
+            ];
+            let v = row[c as usize] as f64;
+            worst = worst.max((level_interpolate(lod, k, c, r) - v).abs());
+        }
+        *e = worst;
+    }
+}
+
+/// Row `r`'s level-0 segments and level-`lod` errors folded into the level's tiles
+/// (`(nx, ny, span)`) that hold the row.
+fn fold_row(
+    level: &mut LevelPartial,
+    (nx, ny, span): (u32, u32, u32),
+    lod: u32,
+    r: u32,
+    seg: &[[f32; 2]],
+    seg_err: &[f64],
+) {
+    let (first, mm, err) = level;
+    // The tile row holding row r, and the one below when r is their shared edge.
+    let ty = r / span;
+    let below = (r % span == 0 && ty > 0).then(|| ty - 1);
+    for t in [Some(ty).filter(|&t| t < ny), below].into_iter().flatten() {
+        let base = ((t - *first) * nx) as usize;
+        let per = 1usize << lod;
+        for tx in 0..nx as usize {
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for s in &seg[tx * per..((tx + 1) * per).min(seg.len())] {
+                lo = lo.min(s[0]);
+                hi = hi.max(s[1]);
+            }
+            let m = &mut mm[base + tx];
+            m[0] = m[0].min(lo);
+            m[1] = m[1].max(hi);
+            err[base + tx] = err[base + tx].max(seg_err[tx]);
+        }
+    }
 }
 
 impl TileStats {

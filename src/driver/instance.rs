@@ -4,7 +4,7 @@
 //! requested, `VK_LAYER_KHRONOS_validation` runs with synchronization validation on, and every
 //! warning or error it reports is counted in a [`ValidationLog`] so tests can fail on it.
 
-use std::ffi::{CStr, c_void};
+use std::ffi::{CStr, c_char, c_void};
 use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -78,88 +78,19 @@ impl Instance {
     pub fn new(validation: bool) -> Result<Self> {
         // SAFETY: dlopen of the system loader; no other Vulkan state exists yet.
         let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::NoLoader(e.to_string()))?;
-        let loader_version = unsafe { entry.try_enumerate_instance_version() }
-            .vk("vkEnumerateInstanceVersion")?
-            .unwrap_or(vk::API_VERSION_1_0);
-        if loader_version < vk::API_VERSION_1_2 {
-            return Err(Error::UnsuitableDevice {
-                name: "Vulkan loader".into(),
-                reason: format!(
-                    "instance version {}.{} < 1.2 (vkterrain needs timeline semaphores)",
-                    vk::api_version_major(loader_version),
-                    vk::api_version_minor(loader_version)
-                ),
-            });
-        }
-        let api_version = loader_version.min(vk::API_VERSION_1_3);
-
-        let mut layers = Vec::new();
-        let mut extensions = Vec::new();
-        if validation {
-            let available = unsafe { entry.enumerate_instance_layer_properties() }
-                .vk("vkEnumerateInstanceLayerProperties")?;
-            if !available
-                .iter()
-                .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER))
-            {
-                return Err(Error::NoValidationLayer);
-            }
-            layers.push(VALIDATION_LAYER.as_ptr());
-            extensions.push(ash::ext::debug_utils::NAME.as_ptr());
-            extensions.push(ash::ext::validation_features::NAME.as_ptr());
-        }
-
-        let app = vk::ApplicationInfo::default()
-            .application_name(c"vkterrain")
-            .engine_name(c"vkterrain")
-            .api_version(api_version);
-        let enables = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
-        let mut features =
-            vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
+        let api_version = instance_api_version(&entry)?;
+        let (layers, extensions) = layers_and_extensions(&entry, validation)?;
         let log = Arc::new(ValidationLog::default());
-        let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-            .message_severity(
-                vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                    | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-            )
-            .message_type(
-                vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                    | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
-            )
-            .pfn_user_callback(Some(debug_callback))
-            .user_data(Arc::as_ptr(&log) as *mut c_void);
-        let mut info = vk::InstanceCreateInfo::default()
-            .application_info(&app)
-            .enabled_layer_names(&layers)
-            .enabled_extension_names(&extensions);
-        if validation {
-            // Chained so that instance creation and destruction are validated too.
-            info = info.push_next(&mut features).push_next(&mut messenger_info);
-        }
-        let raw = unsafe { entry.create_instance(&info, None) }.map_err(|result| match result {
-            vk::Result::ERROR_INCOMPATIBLE_DRIVER => Error::NoDevice,
-            result => Error::Vulkan {
-                call: "vkCreateInstance",
-                result,
-            },
-        })?;
-
+        let mut messenger_info = validation_messenger_info(&log);
+        let raw = create_instance(
+            &entry,
+            api_version,
+            &layers,
+            &extensions,
+            validation.then_some(&mut messenger_info),
+        )?;
         let debug = if validation {
-            let loader = ash::ext::debug_utils::Instance::new(&entry, &raw);
-            // The create info above was chained into the instance's pNext list; it must stand
-            // alone here.
-            messenger_info.p_next = std::ptr::null();
-            match unsafe { loader.create_debug_utils_messenger(&messenger_info, None) } {
-                Ok(m) => Some((loader, m)),
-                Err(result) => {
-                    unsafe { raw.destroy_instance(None) };
-                    return Err(Error::Vulkan {
-                        call: "vkCreateDebugUtilsMessengerEXT",
-                        result,
-                    });
-                }
-            }
+            Some(create_messenger(&entry, &raw, &mut messenger_info)?)
         } else {
             None
         };
@@ -170,6 +101,121 @@ impl Instance {
             validation: validation.then_some(log),
             api_version,
         })
+    }
+}
+
+/// The API version to ask for: the loader's, at most 1.3; an error below 1.2.
+fn instance_api_version(entry: &ash::Entry) -> Result<u32> {
+    let loader_version = unsafe { entry.try_enumerate_instance_version() }
+        .vk("vkEnumerateInstanceVersion")?
+        .unwrap_or(vk::API_VERSION_1_0);
+    if loader_version < vk::API_VERSION_1_2 {
+        return Err(Error::UnsuitableDevice {
+            name: "Vulkan loader".into(),
+            reason: format!(
+                "instance version {}.{} < 1.2 (vkterrain needs timeline semaphores)",
+                vk::api_version_major(loader_version),
+                vk::api_version_minor(loader_version)
+            ),
+        });
+    }
+    Ok(loader_version.min(vk::API_VERSION_1_3))
+}
+
+/// The instance layers and extensions to enable: none without validation; with it, the
+/// validation layer (an error if it is not installed) and its two extensions.
+fn layers_and_extensions(
+    entry: &ash::Entry,
+    validation: bool,
+) -> Result<(Vec<*const c_char>, Vec<*const c_char>)> {
+    let mut layers = Vec::new();
+    let mut extensions = Vec::new();
+    if validation {
+        let available = unsafe { entry.enumerate_instance_layer_properties() }
+            .vk("vkEnumerateInstanceLayerProperties")?;
+        if !available
+            .iter()
+            .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER))
+        {
+            return Err(Error::NoValidationLayer);
+        }
+        layers.push(VALIDATION_LAYER.as_ptr());
+        extensions.push(ash::ext::debug_utils::NAME.as_ptr());
+        extensions.push(ash::ext::validation_features::NAME.as_ptr());
+    }
+    Ok((layers, extensions))
+}
+
+/// The validation messenger's create info: warnings and errors of every type, reported to
+/// [`debug_callback`] with `log` as its user data (`log` must outlive the messenger).
+fn validation_messenger_info(
+    log: &Arc<ValidationLog>,
+) -> vk::DebugUtilsMessengerCreateInfoEXT<'static> {
+    vk::DebugUtilsMessengerCreateInfoEXT::default()
+        .message_severity(
+            vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+        )
+        .message_type(
+            vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+        )
+        .pfn_user_callback(Some(debug_callback))
+        .user_data(Arc::as_ptr(log) as *mut c_void)
+}
+
+/// `vkCreateInstance`; with `messenger_info` (validation on), synchronization validation is
+/// enabled and the messenger chained in.
+fn create_instance(
+    entry: &ash::Entry,
+    api_version: u32,
+    layers: &[*const c_char],
+    extensions: &[*const c_char],
+    messenger_info: Option<&mut vk::DebugUtilsMessengerCreateInfoEXT<'static>>,
+) -> Result<ash::Instance> {
+    let app = vk::ApplicationInfo::default()
+        .application_name(c"vkterrain")
+        .engine_name(c"vkterrain")
+        .api_version(api_version);
+    let enables = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+    let mut features = vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
+    let mut info = vk::InstanceCreateInfo::default()
+        .application_info(&app)
+        .enabled_layer_names(layers)
+        .enabled_extension_names(extensions);
+    if let Some(messenger_info) = messenger_info {
+        // Chained so that instance creation and destruction are validated too.
+        info = info.push_next(&mut features).push_next(messenger_info);
+    }
+    unsafe { entry.create_instance(&info, None) }.map_err(|result| match result {
+        vk::Result::ERROR_INCOMPATIBLE_DRIVER => Error::NoDevice,
+        result => Error::Vulkan {
+            call: "vkCreateInstance",
+            result,
+        },
+    })
+}
+
+/// The validation messenger of `raw`; if it cannot be created, `raw` is destroyed.
+fn create_messenger(
+    entry: &ash::Entry,
+    raw: &ash::Instance,
+    messenger_info: &mut vk::DebugUtilsMessengerCreateInfoEXT<'static>,
+) -> Result<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)> {
+    let loader = ash::ext::debug_utils::Instance::new(entry, raw);
+    // The create info was chained into the instance's pNext list (`create_instance`); it must
+    // stand alone here.
+    messenger_info.p_next = std::ptr::null();
+    match unsafe { loader.create_debug_utils_messenger(messenger_info, None) } {
+        Ok(m) => Ok((loader, m)),
+        Err(result) => {
+            unsafe { raw.destroy_instance(None) };
+            Err(Error::Vulkan {
+                call: "vkCreateDebugUtilsMessengerEXT",
+                result,
+            })
+        }
     }
 }
 
