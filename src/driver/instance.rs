@@ -90,7 +90,7 @@ impl Instance {
             validation.then_some(&mut messenger_info),
         )?;
         let debug = if validation {
-            Some(create_messenger(&entry, &raw, &mut messenger_info)?)
+            Some(create_messenger(&entry, &raw, &messenger_info)?)
         } else {
             None
         };
@@ -184,11 +184,18 @@ fn create_instance(
         .application_info(&app)
         .enabled_layer_names(layers)
         .enabled_extension_names(extensions);
-    if let Some(messenger_info) = messenger_info {
+    let mut messenger_info = messenger_info;
+    if let Some(messenger_info) = messenger_info.as_deref_mut() {
         // Chained so that instance creation and destruction are validated too.
         info = info.push_next(&mut features).push_next(messenger_info);
     }
-    unsafe { entry.create_instance(&info, None) }.map_err(|result| match result {
+    let created = unsafe { entry.create_instance(&info, None) };
+    // Chaining pointed the messenger's create info at `features`, which ends here: it stands
+    // alone again before `create_messenger` reads it.
+    if let Some(messenger_info) = messenger_info {
+        messenger_info.p_next = std::ptr::null();
+    }
+    created.map_err(|result| match result {
         vk::Result::ERROR_INCOMPATIBLE_DRIVER => Error::NoDevice,
         result => Error::Vulkan {
             call: "vkCreateInstance",
@@ -201,12 +208,9 @@ fn create_instance(
 fn create_messenger(
     entry: &ash::Entry,
     raw: &ash::Instance,
-    messenger_info: &mut vk::DebugUtilsMessengerCreateInfoEXT<'static>,
+    messenger_info: &vk::DebugUtilsMessengerCreateInfoEXT<'static>,
 ) -> Result<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)> {
     let loader = ash::ext::debug_utils::Instance::new(entry, raw);
-    // The create info was chained into the instance's pNext list (`create_instance`); it must
-    // stand alone here.
-    messenger_info.p_next = std::ptr::null();
     match unsafe { loader.create_debug_utils_messenger(messenger_info, None) } {
         Ok(m) => Ok((loader, m)),
         Err(result) => {
