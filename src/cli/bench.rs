@@ -11,7 +11,6 @@ use clap::Args;
 
 use super::render::Prepared;
 use crate::driver::Gpu;
-use crate::render::FrameRequest;
 use crate::render::stats::Summary;
 
 #[derive(Args, Debug, Clone)]
@@ -142,15 +141,7 @@ fn measure(
         );
         Ok(())
     };
-    for frame in 0..p.frames as u64 {
-        let views = FrameRequest::with_extra_views_on(
-            p.scenario.camera(frame),
-            &p.config.render.extra_views,
-            renderer.earth_frame(),
-        );
-        renderer.render_views(&views, &mut sink)?;
-    }
-    renderer.finish(&mut sink)?;
+    super::render::render_flight(&mut renderer, p, &mut sink)?;
     Ok(renderer.stats.summary(warmup))
 }
 

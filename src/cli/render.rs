@@ -12,6 +12,7 @@ use crate::dataset::{Level0, Terrain};
 use crate::driver::Gpu;
 use crate::lod::MethodKind;
 use crate::output::png::PngSink;
+use crate::readback::FrameSink;
 use crate::render::stats::Summary;
 use crate::render::{FrameRequest, Renderer};
 use crate::scene::Scenario;
@@ -141,6 +142,25 @@ pub fn png_frames(selection: &[i64], frames: u32) -> Vec<u64> {
     out
 }
 
+/// Renders `p`'s scenario into `renderer`, every frame's views (the camera and the config's
+/// extra views) delivered to `sink`, the frames still in flight included.
+pub(super) fn render_flight(
+    renderer: &mut Renderer,
+    p: &Prepared,
+    sink: &mut dyn FrameSink,
+) -> anyhow::Result<()> {
+    for frame in 0..p.frames as u64 {
+        let views = FrameRequest::with_extra_views_on(
+            p.scenario.camera(frame),
+            &p.config.render.extra_views,
+            renderer.earth_frame(),
+        );
+        renderer.render_views(&views, sink)?;
+    }
+    renderer.finish(sink)?;
+    Ok(())
+}
+
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let p = prepare(args)?;
     let gpu = p.config.open_gpu()?;
@@ -155,18 +175,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         &p.out_dir,
         png_frames(&p.config.output.png_frames, p.frames),
     );
-    let result = (|| -> anyhow::Result<()> {
-        for frame in 0..p.frames as u64 {
-            let views = FrameRequest::with_extra_views_on(
-                p.scenario.camera(frame),
-                &p.config.render.extra_views,
-                renderer.earth_frame(),
-            );
-            renderer.render_views(&views, &mut sink)?;
-        }
-        renderer.finish(&mut sink)?;
-        Ok(())
-    })();
+    let result = render_flight(&mut renderer, &p, &mut sink);
     let written = sink.finish();
     let written = match result.and_then(|()| written.map_err(anyhow::Error::from)) {
         Ok(w) => w,
