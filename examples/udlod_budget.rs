@@ -15,10 +15,12 @@
 //!     [--zone-rule width|error-scaled|free]   (how the field charges the morph zone's width:
 //!     `field::ZoneRule`; anything but `width` is a what-if the renderer does not draw)
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use vkterrain::cli::render::{RenderArgs, prepare};
+use vkterrain::dataset::Heightmap;
 use vkterrain::eval::oracle::Oracle;
 use vkterrain::lod::udlod::completion::{CompletionField, CompletionTerms};
 use vkterrain::lod::udlod::field::{FieldKey, FieldTerm, SplitField, ZoneRule};
@@ -28,86 +30,20 @@ use vkterrain::lod::udlod::select::{self, SelectionParams};
 use vkterrain::lod::udlod::{field, grid, levels, morph, seed};
 use vkterrain::lod::{MethodConfig, UdlodSettings};
 use vkterrain::render::EarthGeometry;
+use vkterrain::scene::Camera;
 
 fn main() -> anyhow::Result<()> {
-    let mut args = std::env::args().skip(1);
-    let mut config = None;
-    let mut scenario = None;
-    let mut frames = 6usize;
-    let mut taus = vec![0.5, 1.0, 2.0, 4.0];
-    let mut grid = None;
-    let mut morph_levels = None;
-    let mut field_density = None;
-    let mut share = None;
-    let mut zone_rule = ZoneRule::Width;
-    let (mut width, mut height) = (None, None);
-    let mut earth = None;
-    while let Some(a) = args.next() {
-        // The value after a flag, parsed, or an error naming the flag (no panics on bad input).
-        let mut value = |what: &str| {
-            args.next()
-                .ok_or_else(|| anyhow::anyhow!("{a} needs {what}"))
-        };
-        match a.as_str() {
-            "--config" => config = Some(PathBuf::from(value("a path")?)),
-            "--scenario" => scenario = Some(PathBuf::from(value("a path")?)),
-            "--grid" => grid = Some(parse(&a, &value("a number")?)?),
-            "--morph-levels" => morph_levels = Some(parse(&a, &value("a number")?)?),
-            "--field-density" => field_density = Some(parse(&a, &value("a number")?)?),
-            "--share" => share = Some(parse(&a, &value("a number")?)?),
-            "--zone-rule" => {
-                zone_rule = match value("width, error-scaled or free")?.as_str() {
-                    "width" => ZoneRule::Width,
-                    "error-scaled" => ZoneRule::ErrorScaled,
-                    "free" => ZoneRule::Free,
-                    r => anyhow::bail!("--zone-rule {r}: width, error-scaled or free"),
-                }
-            }
-            "--earth" => {
-                earth = Some(match value("ellipsoid or flat")?.as_str() {
-                    "ellipsoid" => EarthGeometry::Ellipsoid,
-                    "flat" => EarthGeometry::Flat,
-                    e => anyhow::bail!("--earth {e}: ellipsoid or flat"),
-                })
-            }
-            "--frames" => frames = parse(&a, &value("a number")?)?,
-            "--width" => width = Some(parse(&a, &value("a number")?)?),
-            "--height" => height = Some(parse(&a, &value("a number")?)?),
-            "--tau" => {
-                taus = value("taus, comma-separated")?
-                    .split(',')
-                    .map(|s| parse(&a, s))
-                    .collect::<anyhow::Result<_>>()?
-            }
-            _ => anyhow::bail!("unknown argument {a}"),
-        }
-    }
+    let args = Args::parse(std::env::args().skip(1))?;
     let p = prepare(&RenderArgs {
-        config,
-        scenario,
-        width,
-        height,
-        earth,
+        config: args.config.clone(),
+        scenario: args.scenario.clone(),
+        width: args.width,
+        height: args.height,
+        earth: args.earth,
         ..Default::default()
     })?;
     let data = p.data.require_grid("udlod_budget")?.clone();
-    let mut settings = match &p.config.method {
-        MethodConfig::Udlod(s) => s.clone(),
-        _ => UdlodSettings::default(),
-    };
-    if let Some(g) = grid {
-        settings.grid_size = g;
-    }
-    if let Some(q) = morph_levels {
-        settings.morph_levels = q;
-    }
-    if let Some(d) = field_density {
-        settings.field_density = d;
-    }
-    if let Some(k) = share {
-        settings.worst_case_share = k;
-    }
-    settings.validate()?;
+    let settings = args.settings(&p.config.method)?;
     let (w, h) = (p.config.render.width, p.config.render.height);
     let t0 = std::time::Instant::now();
     let levels = Levels::for_settings(&*data, &settings)?;
@@ -130,40 +66,233 @@ fn main() -> anyhow::Result<()> {
     );
     print_cell_errors(&levels);
     let focal = p.scenario.camera(0).focal_px(h);
-    let picks: Vec<u64> = (0..frames)
-        .map(|i| (i as u64 * p.frames as u64) / frames as u64)
+    let picks: Vec<u64> = (0..args.frames)
+        .map(|i| (i as u64 * p.frames as u64) / args.frames as u64)
         .collect();
-    for &tau in &taus {
-        let s = UdlodSettings {
+    let cams: Vec<Camera> = picks.iter().map(|&k| p.scenario.camera(k)).collect();
+    for &tau in &args.taus {
+        println!("\n== tau {tau} px (focal {focal:.1} px)");
+        let v = TauView::new(
+            &levels,
+            &data,
+            &settings,
+            args.zone_rule,
+            &cams,
+            focal,
+            tau,
+            (w, h),
+        );
+        v.print_field_terms();
+        let drawn = Drawn::over_frames(&v, &oracle);
+        drawn.print_chain_and_seed(&v);
+        let tris_o = drawn.oracle_triangles;
+        v.print_counterfactual_fields(tris_o);
+        v.print_cell_fields(tris_o);
+        v.print_own_need(tris_o);
+        v.print_tile_oracles(tris_o);
+        v.print_sub_rectangles(tris_o);
+        if drawn.tiles == 0 {
+            // Nothing in view (e.g. the scenario's cameras are in the other earth geometry's
+            // frame): no ratio or quantile to print.
+            println!("  no tile drawn in frames {picks:?} (is `--earth` the scenario's?)");
+            continue;
+        }
+        drawn.print_summary(&v, &picks);
+    }
+    Ok(())
+}
+
+/// The command line (the module's docs list the flags).
+struct Args {
+    config: Option<PathBuf>,
+    scenario: Option<PathBuf>,
+    /// How many evenly spaced frames of the flight are measured.
+    frames: usize,
+    taus: Vec<f64>,
+    grid: Option<u32>,
+    morph_levels: Option<u32>,
+    field_density: Option<u32>,
+    share: Option<f64>,
+    zone_rule: ZoneRule,
+    width: Option<u32>,
+    height: Option<u32>,
+    earth: Option<EarthGeometry>,
+}
+
+impl Args {
+    fn parse(mut args: impl Iterator<Item = String>) -> anyhow::Result<Args> {
+        let mut out = Args {
+            config: None,
+            scenario: None,
+            frames: 6,
+            taus: vec![0.5, 1.0, 2.0, 4.0],
+            grid: None,
+            morph_levels: None,
+            field_density: None,
+            share: None,
+            zone_rule: ZoneRule::Width,
+            width: None,
+            height: None,
+            earth: None,
+        };
+        while let Some(a) = args.next() {
+            // The value after a flag, or an error naming the flag (no panics on bad input).
+            let mut value = |what: &str| {
+                args.next()
+                    .ok_or_else(|| anyhow::anyhow!("{a} needs {what}"))
+            };
+            match a.as_str() {
+                "--config" => out.config = Some(PathBuf::from(value("a path")?)),
+                "--scenario" => out.scenario = Some(PathBuf::from(value("a path")?)),
+                "--grid" => out.grid = Some(parse(&a, &value("a number")?)?),
+                "--morph-levels" => out.morph_levels = Some(parse(&a, &value("a number")?)?),
+                "--field-density" => out.field_density = Some(parse(&a, &value("a number")?)?),
+                "--share" => out.share = Some(parse(&a, &value("a number")?)?),
+                "--zone-rule" => out.zone_rule = zone_rule(&value("width, error-scaled or free")?)?,
+                "--earth" => out.earth = Some(earth(&value("ellipsoid or flat")?)?),
+                "--frames" => out.frames = parse(&a, &value("a number")?)?,
+                "--width" => out.width = Some(parse(&a, &value("a number")?)?),
+                "--height" => out.height = Some(parse(&a, &value("a number")?)?),
+                "--tau" => {
+                    out.taus = value("taus, comma-separated")?
+                        .split(',')
+                        .map(|s| parse(&a, s))
+                        .collect::<anyhow::Result<_>>()?
+                }
+                _ => anyhow::bail!("unknown argument {a}"),
+            }
+        }
+        Ok(out)
+    }
+
+    /// The config's UDLOD settings (the defaults for another method) with this command
+    /// line's overrides, checked.
+    fn settings(&self, method: &MethodConfig) -> anyhow::Result<UdlodSettings> {
+        let mut settings = match method {
+            MethodConfig::Udlod(s) => s.clone(),
+            _ => UdlodSettings::default(),
+        };
+        if let Some(g) = self.grid {
+            settings.grid_size = g;
+        }
+        if let Some(q) = self.morph_levels {
+            settings.morph_levels = q;
+        }
+        if let Some(d) = self.field_density {
+            settings.field_density = d;
+        }
+        if let Some(k) = self.share {
+            settings.worst_case_share = k;
+        }
+        settings.validate()?;
+        Ok(settings)
+    }
+}
+
+fn zone_rule(text: &str) -> anyhow::Result<ZoneRule> {
+    Ok(match text {
+        "width" => ZoneRule::Width,
+        "error-scaled" => ZoneRule::ErrorScaled,
+        "free" => ZoneRule::Free,
+        r => anyhow::bail!("--zone-rule {r}: width, error-scaled or free"),
+    })
+}
+
+fn earth(text: &str) -> anyhow::Result<EarthGeometry> {
+    Ok(match text {
+        "ellipsoid" => EarthGeometry::Ellipsoid,
+        "flat" => EarthGeometry::Flat,
+        e => anyhow::bail!("--earth {e}: ellipsoid or flat"),
+    })
+}
+
+/// One tau over the measured frames: the split field (with `--zone-rule` a what-if one) and
+/// the cameras that every selection below reads.
+struct TauView<'a> {
+    levels: &'a Levels,
+    data: &'a Heightmap,
+    /// The settings at this tau.
+    settings: UdlodSettings,
+    field: Arc<SplitField>,
+    cams: &'a [Camera],
+    focal: f64,
+    tau: f64,
+    size: (u32, u32),
+}
+
+impl<'a> TauView<'a> {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        levels: &'a Levels,
+        data: &'a Heightmap,
+        settings: &UdlodSettings,
+        zone_rule: ZoneRule,
+        cams: &'a [Camera],
+        focal: f64,
+        tau: f64,
+        size: (u32, u32),
+    ) -> Self {
+        let settings = UdlodSettings {
             tau_px: tau,
             ..settings.clone()
         };
-        println!("\n== tau {tau} px (focal {focal:.1} px)");
         let key = FieldKey {
             zone_rule,
-            ..FieldKey::new(&s, focal)
+            ..FieldKey::new(&settings, focal)
         };
-        let field = std::sync::Arc::new(SplitField::new(&levels, key));
-        // Every selection below reads this field (with `--zone-rule` a what-if one).
-        let params = |cam: &vkterrain::scene::Camera| {
-            let z_ref = data.height_at(cam.position.x, cam.position.y);
-            SelectionParams::with_reference(
-                &levels,
-                field.clone(),
-                z_ref,
-                &s,
-                cam,
-                cam.position,
-                w,
-                h,
-            )
-        };
-        // Which term sets each field cell's split distance (every cell of the level, not only
-        // those in view), and the corners the gentle morph or the cap raised past them.
-        let terms = field::field_terms(&levels, &field);
+        let field = Arc::new(SplitField::new(levels, key));
+        TauView {
+            levels,
+            data,
+            settings,
+            field,
+            cams,
+            focal,
+            tau,
+            size,
+        }
+    }
+
+    /// The selection's parameters for `cam`, its reference height the data's under it.
+    fn params(&self, cam: &Camera) -> SelectionParams {
+        let z_ref = self.data.height_at(cam.position.x, cam.position.y);
+        let (w, h) = self.size;
+        SelectionParams::with_reference(
+            self.levels,
+            self.field.clone(),
+            z_ref,
+            &self.settings,
+            cam,
+            cam.position,
+            w,
+            h,
+        )
+    }
+
+    /// A whole tile's triangles.
+    fn triangles_per_tile(&self) -> u64 {
+        2 * (self.levels.grid_size as u64).pow(2)
+    }
+
+    /// The tiles over all frames of the selection whose tiles split where `splits` says.
+    fn count_tiles(&self, splits: impl Fn(&SelectionParams, &Camera, Tile) -> bool) -> usize {
+        self.cams
+            .iter()
+            .map(|cam| {
+                let sp = self.params(cam);
+                select_generic(self.levels, &sp, |t| splits(&sp, cam, t)).len()
+            })
+            .sum()
+    }
+
+    /// Which term sets each field cell's split distance (every cell of the level, not only
+    /// those in view), and the corners the gentle morph or the cap raised past them.
+    fn print_field_terms(&self) {
+        let (levels, field) = (self.levels, &self.field);
+        let terms = field::field_terms(levels, field);
         // Level 0's field is all ones and not stored.
         for (l, t) in terms.iter().enumerate().skip(1) {
-            let screen = levels.level_error[l] * focal / tau;
+            let screen = levels.level_error[l] * self.focal / self.tau;
             let (nx, ny) = levels.field_cells_per_side(l as u32);
             let off = field.corner_offsets[l] as usize;
             let m = &field.corners[off..off + ((nx + 1) * (ny + 1)) as usize];
@@ -181,118 +310,26 @@ fn main() -> anyhow::Result<()> {
                 t.corners,
             );
         }
-        let (mut tiles_n, mut tris_o, mut slack) = (0usize, 0u64, Vec::new());
-        // Per drawn tile with an error: how tight the worst case is (the largest exact
-        // per-sample projected error / the tile's error at its nearest sample) and how far its
-        // worst sample lies behind its nearest point (nearest distance / worst sample's).
-        let (mut tight, mut behind) = (Vec::new(), Vec::new());
-        // Drawn tiles whose parent's exact per-sample projected error is within tau (the
-        // parent alone would do): split by the parent's own pixel term (rule looseness) or
-        // only by the crack-free chain.
-        let (mut over_rule, mut over_chain) = (0usize, 0usize);
-        // What the renderer draws (quadrants whose odd vertices all lie fully on the parent's
-        // grid drawn as that grid, those outside the frustum not at all: `morph::tile_mask`),
-        // and collapsing whole tiles only (the tenth round's build) for comparison.
-        let (mut whole_tris, mut whole_tiles) = (0u64, 0usize);
-        let (mut drawn_tris, mut collapsed_quadrants) = (0u64, 0u32);
-        // Drawn quadrants whose parent grid is within tau at every sample, and of those the
-        // ones drawn uncollapsed (the morph not complete there).
-        let (mut within, mut within_uncollapsed) = (0u32, 0u32);
-        let mut per_level = vec![0usize; levels.levels() as usize];
-        // Triangles with every quadrant of the drawn tiles drawn (`cull_quadrants = false`).
-        let mut all_quadrant_tris = 0u64;
-        // Draw masks in use per frame (each an indirect draw per pipeline that has such
-        // tiles), with and without the quadrants outside the frustum dropped.
-        let (mut masks_used, mut masks_used_all) = (0usize, 0usize);
-        let mut seeds = Vec::new();
-        for &k in &picks {
-            let cam = p.scenario.camera(k);
-            let sp = params(&cam);
-            seeds.push(timed_seed(&levels, &sp, s.seed_tiles));
-            let tiles = select::select_tiles(&levels, &sp);
-            tiles_n += tiles.len();
-            let view = ExactView::new(&data, &cam, focal, tau);
-            let (mut used, mut used_all) = (HashSet::new(), HashSet::new());
-            for t in &tiles {
-                let g = levels.grid_size;
-                let mask = morph::tile_mask(&levels, &sp, *t);
-                drawn_tris += grid::mask_triangles(g, mask);
-                collapsed_quadrants += mask.quadrants(QuadrantDraw::Collapsed).count_ones();
-                let own = mask.quadrants(QuadrantDraw::Own);
-                for q in 0..4u32 {
-                    if view.quadrant_within_tau(&levels, *t, q) {
-                        within += 1;
-                        within_uncollapsed += (own & 1 << q != 0) as u32;
-                    }
-                }
-                let collapsing = morph::tile_collapse_mask(&levels, &sp, *t);
-                all_quadrant_tris += grid::mask_triangles(g, TileMask::new(g, collapsing, 0));
-                used.insert(mask);
-                used_all.insert(TileMask::new(g, collapsing, 0));
-                let whole = (collapsing == grid::ALL_QUADRANTS) as u32 * collapsing;
-                whole_tris += grid::mask_triangles(g, TileMask::new(g, whole, 0));
-                whole_tiles += (whole != 0) as usize;
-            }
-            masks_used += used.len();
-            masks_used_all += used_all.len();
-            let mut parents = std::collections::HashMap::new();
-            for t in &tiles {
-                let bound = tile_slack(&levels, &data, &cam, focal, tau, *t);
-                slack.push(bound);
-                if bound > 0.0 {
-                    let (exact, near_over_worst) = tile_exact(&levels, &data, &cam, focal, *t);
-                    tight.push(exact / tau / bound);
-                    behind.push(near_over_worst);
-                }
-                per_level[t.lod as usize] += 1;
-                if t.lod < levels.root_lod {
-                    let q = Tile {
-                        x: t.x / 2,
-                        y: t.y / 2,
-                        lod: t.lod + 1,
-                    };
-                    let needed = *parents
-                        .entry(q)
-                        .or_insert_with(|| view.tile_splits(&levels, q));
-                    if !needed {
-                        let screen =
-                            settings.worst_case_share() * levels.tile_error(q) as f64 * focal / tau;
-                        if (select::tile_distance(&levels, &sp, q) as f64) < screen {
-                            over_rule += 1;
-                        } else {
-                            over_chain += 1;
-                        }
-                    }
-                }
-            }
-            tris_o += oracle.count(&data, &cam, w, h, tau).triangles;
-        }
-        println!(
-            "  drawn tiles per level (0..root): {per_level:?}; whose parent meets tau exactly: {} by its pixel term, {} only by the chain (of {tiles_n})",
-            over_rule, over_chain
-        );
-        let column =
-            |f: fn(&(usize, u32, f64)) -> String| -> Vec<String> { seeds.iter().map(f).collect() };
-        println!(
-            "  seed ({} tiles at most): tiles {:?}, GPU passes {:?} of {} levels, host walk {:?} us (median of 200, flat world)",
-            s.seed_tiles,
-            column(|x| x.0.to_string()),
-            column(|x| x.1.to_string()),
-            levels.levels(),
-            column(|x| format!("{:.1}", x.2)),
-        );
-        let g2 = 2 * (settings.grid_size as u64).pow(2);
-        let keep = 1.0 - s.morph_range;
+    }
+
+    /// Counterfactual split fields (`Cf`): the old rule and each change of the first rounds.
+    fn print_counterfactual_fields(&self, tris_o: u64) {
+        let keep = 1.0 - self.settings.morph_range;
         let base = Cf {
             beta: 1.0 / keep,
             chain: true,
             per_tile: true,
             cap: 1e9,
-            morph_range: s.morph_range,
+            morph_range: self.settings.morph_range,
             box_dist: false,
             diam3d: false,
         };
-        let variants: Vec<(&str, Cf)> = vec![
+        let linear = Cf { beta: 1.0, ..base };
+        let unchained = Cf {
+            chain: false,
+            ..linear
+        };
+        let variants = [
             (
                 "level error, chain, ref height",
                 Cf {
@@ -301,52 +338,41 @@ fn main() -> anyhow::Result<()> {
                 },
             ),
             ("per-tile error, chain, beta 1/(1-r)", base),
-            ("per-tile error, chain, beta 1", Cf { beta: 1.0, ..base }),
+            ("per-tile error, chain, beta 1", linear),
             (
                 "per-tile, chain, beta 1, r 0.1",
                 Cf {
-                    beta: 1.0,
                     morph_range: 0.1,
-                    ..base
+                    ..linear
                 },
             ),
             (
                 "per-tile, chain, beta 1, box dist, 3d diam",
                 Cf {
-                    beta: 1.0,
                     box_dist: true,
                     diam3d: true,
-                    ..base
+                    ..linear
                 },
             ),
-            (
-                "per-tile, no chain, beta 1",
-                Cf {
-                    beta: 1.0,
-                    chain: false,
-                    ..base
-                },
-            ),
+            ("per-tile, no chain, beta 1", unchained),
             (
                 "per-tile, no chain, beta 1, box",
                 Cf {
-                    beta: 1.0,
-                    chain: false,
                     box_dist: true,
-                    ..base
+                    ..unchained
                 },
             ),
         ];
-        for (name, cf) in &variants {
-            let f = sfield(&levels, focal, tau, *cf);
-            let mut n = 0usize;
-            for &k in &picks {
-                let cam = p.scenario.camera(k);
-                let sp = params(&cam);
-                n += select_cf(&levels, &sp, &cam, &f, *cf).len();
-            }
-            print_cf(name, n, g2, tris_o);
+        for (name, cf) in variants {
+            let f = sfield(self.levels, self.focal, self.tau, cf);
+            let n = self.count_tiles(|sp, cam, t| cf_splits(self.levels, sp, cam, &f, cf, t));
+            print_cf(name, n, self.triangles_per_tile(), tris_o);
         }
+    }
+
+    /// Counterfactual fields with a node every `ns` quads (`cell_field`).
+    fn print_cell_fields(&self, tris_o: u64) {
+        let levels = self.levels;
         for (name, ns, ratio) in [
             ("node every cell, nest", 1u32, 0.0),
             ("node every cell, nest, gentle 1.25", 1, 1.25),
@@ -357,189 +383,330 @@ fn main() -> anyhow::Result<()> {
             if ns > levels.grid_size {
                 continue;
             }
-            let kk = settings.worst_case_share();
-            let cf = cell_field(&levels, &data, kk * focal / tau, ns, ratio);
-            let mut n = 0usize;
-            for &k in &picks {
-                let cam = p.scenario.camera(k);
-                let sp = params(&cam);
-                n += select_generic(&levels, &sp, |t| {
-                    let l = t.lod as usize;
-                    let g = levels.grid_size / ns;
-                    let (w1, h1) = cf[l].1;
-                    let mut mx = 0.0f64;
-                    for j in t.y * g..=((t.y + 1) * g).min(h1 - 1) {
-                        for i in t.x * g..=((t.x + 1) * g).min(w1 - 1) {
-                            mx = mx.max(cf[l].0[(j * w1 + i) as usize]);
-                        }
+            let scale = self.settings.worst_case_share() * self.focal / self.tau;
+            let cf = cell_field(levels, self.data, scale, ns, ratio);
+            let n = self.count_tiles(|sp, _, t| {
+                let l = t.lod as usize;
+                let g = levels.grid_size / ns;
+                let (w1, h1) = cf[l].1;
+                let mut mx = 0.0f64;
+                for j in t.y * g..=((t.y + 1) * g).min(h1 - 1) {
+                    for i in t.x * g..=((t.x + 1) * g).min(w1 - 1) {
+                        mx = mx.max(cf[l].0[(j * w1 + i) as usize]);
                     }
-                    (select::tile_distance(&levels, &sp, t) as f64) < mx
-                })
-                .len();
-            }
-            print_cf(name, n, g2, tris_o);
+                }
+                (select::tile_distance(levels, sp, t) as f64) < mx
+            });
+            print_cf(name, n, self.triangles_per_tile(), tris_o);
         }
+    }
+
+    /// Each tile split by its own need alone (no chain), worst case or the split rule's share.
+    fn print_own_need(&self, tris_o: u64) {
+        let levels = self.levels;
         for (name, kk, boxd) in [
             ("own need k=1, ref dist", 1.0, false),
             (
                 "own need k=share, ref dist",
-                settings.worst_case_share(),
+                self.settings.worst_case_share(),
                 false,
             ),
             ("own need k=1, box dist", 1.0, true),
         ] {
-            let mut n = 0usize;
-            for &k in &picks {
-                let cam = p.scenario.camera(k);
-                let sp = params(&cam);
-                n += select_generic(&levels, &sp, |t| {
-                    let need = kk * levels.tile_error(t) as f64 * focal / tau;
-                    let d = if boxd {
-                        box_distance(&levels, &cam, t)
-                    } else {
-                        select::tile_distance(&levels, &sp, t) as f64
-                    };
-                    d < need
-                })
-                .len();
-            }
-            print_cf(name, n, g2, tris_o);
+            let n = self.count_tiles(|sp, cam, t| {
+                let need = kk * levels.tile_error(t) as f64 * self.focal / self.tau;
+                let d = if boxd {
+                    box_distance(levels, cam, t)
+                } else {
+                    select::tile_distance(levels, sp, t) as f64
+                };
+                d < need
+            });
+            print_cf(name, n, self.triangles_per_tile(), tris_o);
         }
-        {
-            let mut n = 0usize;
-            for &k in &picks {
-                let cam = p.scenario.camera(k);
-                let sp = params(&cam);
-                let view = ExactView::new(&data, &cam, focal, tau);
-                n += select_generic(&levels, &sp, |t| view.tile_splits(&levels, t)).len();
+    }
+
+    /// The tile oracle (exact per-sample errors, no chain or morph), and the least UDLOD's
+    /// tiles could draw: its tiles, each quadrant drawn as the parent's grid wherever that
+    /// grid is within tau at every sample.
+    fn print_tile_oracles(&self, tris_o: u64) {
+        let levels = self.levels;
+        let (mut n, mut tris) = (0usize, 0u64);
+        for cam in self.cams {
+            let sp = self.params(cam);
+            let view = ExactView::new(self.data, cam, self.focal, self.tau);
+            let tiles = select_generic(levels, &sp, |t| view.tile_splits(levels, t));
+            n += tiles.len();
+            for t in tiles {
+                let bits = (0..4u32)
+                    .filter(|&q| view.quadrant_within_tau(levels, t, q))
+                    .fold(0u32, |m, q| m | 1 << q);
+                let mask = TileMask::new(levels.grid_size, bits, 0);
+                tris += grid::mask_triangles(levels.grid_size, mask);
             }
-            print_cf(
-                "tile oracle (exact per-sample, no chain/morph)",
-                n,
-                g2,
-                tris_o,
-            );
         }
-        {
-            // The least UDLOD's tiles could draw: the tile oracle's tiles, each quadrant drawn
-            // as the parent's grid wherever that grid is within tau at every sample.
-            let mut tris = 0u64;
-            for &k in &picks {
-                let cam = p.scenario.camera(k);
-                let sp = params(&cam);
-                let view = ExactView::new(&data, &cam, focal, tau);
-                let tiles = select_generic(&levels, &sp, |t| view.tile_splits(&levels, t));
-                for t in tiles {
-                    let bits = (0..4u32)
-                        .filter(|&q| view.quadrant_within_tau(&levels, t, q))
-                        .fold(0u32, |m, q| m | 1 << q);
-                    let mask = TileMask::new(levels.grid_size, bits, 0);
-                    tris += grid::mask_triangles(levels.grid_size, mask);
-                }
-            }
-            println!(
-                "  cf tile oracle, quadrants collapsed where the parent grid is within tau: triangles {tris} ratio {:.2}",
-                tris as f64 / tris_o as f64
-            );
-        }
+        print_cf(
+            "tile oracle (exact per-sample, no chain/morph)",
+            n,
+            self.triangles_per_tile(),
+            tris_o,
+        );
+        println!(
+            "  cf tile oracle, quadrants collapsed where the parent grid is within tau: triangles {tris} ratio {:.2}",
+            tris as f64 / tris_o as f64
+        );
+    }
+
+    /// The split test over `sub` x `sub` sub-rectangles of each tile (`sub_rect_splits`).
+    fn print_sub_rectangles(&self, tris_o: u64) {
+        let levels = self.levels;
         for sub in [1u32, 2, 4, 8] {
             let (mut n, mut tris) = (0usize, 0u64);
-            for &k in &picks {
-                let cam = p.scenario.camera(k);
-                let sp = params(&cam);
-                let tiles = select_generic(&levels, &sp, |t| sub_rect_splits(&levels, &sp, t, sub));
+            for cam in self.cams {
+                let sp = self.params(cam);
+                let tiles = select_generic(levels, &sp, |t| sub_rect_splits(levels, &sp, t, sub));
                 n += tiles.len();
                 for t in &tiles {
-                    let mask = morph::tile_mask(&levels, &sp, *t);
+                    let mask = morph::tile_mask(levels, &sp, *t);
                     tris += grid::mask_triangles(levels.grid_size, mask);
                 }
             }
             println!(
                 "  cf split test per {sub}x{sub} sub-rectangles: tiles {n} triangles uncollapsed {} collapsed {tris} ratio {:.2}",
-                n as u64 * g2,
+                n as u64 * self.triangles_per_tile(),
                 tris as f64 / tris_o as f64
             );
         }
-        if tiles_n == 0 {
-            // Nothing in view (e.g. the scenario's cameras are in the other earth geometry's
-            // frame): no ratio or quantile to print.
-            println!("  no tile drawn in frames {picks:?} (is `--earth` the scenario's?)");
-            continue;
+    }
+}
+
+/// What the renderer draws at one tau over the measured frames, with the oracle's count.
+#[derive(Default)]
+struct Drawn {
+    tiles: usize,
+    oracle_triangles: u64,
+    per_level: Vec<usize>,
+    /// Per drawn tile, its projected-error bound / tau at its nearest sample (`tile_slack`).
+    slack: Vec<f64>,
+    /// Per drawn tile with an error: how tight the worst case is (the largest exact
+    /// per-sample projected error / the tile's error at its nearest sample) and how far its
+    /// worst sample lies behind its nearest point (nearest distance / worst sample's).
+    tight: Vec<f64>,
+    behind: Vec<f64>,
+    /// Drawn tiles whose parent's exact per-sample projected error is within tau (the parent
+    /// alone would do): split by the parent's own pixel term (rule looseness) or only by the
+    /// crack-free chain.
+    over_rule: usize,
+    over_chain: usize,
+    /// Triangles as drawn (quadrants whose odd vertices all lie fully on the parent's grid
+    /// drawn as that grid, those outside the frustum not at all: `morph::tile_mask`), and the
+    /// quadrants collapsed.
+    drawn_triangles: u64,
+    collapsed_quadrants: u32,
+    /// Collapsing whole tiles only (the tenth round's build), for comparison.
+    whole_triangles: u64,
+    whole_tiles: usize,
+    /// Drawn quadrants whose parent grid is within tau at every sample, and of those the
+    /// ones drawn uncollapsed (the morph not complete there).
+    within: u32,
+    within_uncollapsed: u32,
+    /// Triangles with every quadrant of the drawn tiles drawn (`cull_quadrants = false`).
+    all_quadrant_triangles: u64,
+    /// Draw masks in use summed over the frames (each an indirect draw per pipeline that has
+    /// such tiles), with and without the quadrants outside the frustum dropped.
+    masks_used: usize,
+    masks_used_all: usize,
+    /// Per frame, the prepass's seed (`timed_seed`).
+    seeds: Vec<(usize, u32, f64)>,
+}
+
+impl Drawn {
+    fn over_frames(v: &TauView, oracle: &Oracle) -> Drawn {
+        let mut d = Drawn {
+            per_level: vec![0; v.levels.levels() as usize],
+            ..Default::default()
+        };
+        for cam in v.cams {
+            let sp = v.params(cam);
+            d.seeds
+                .push(timed_seed(v.levels, &sp, v.settings.seed_tiles));
+            let tiles = select::select_tiles(v.levels, &sp);
+            d.tiles += tiles.len();
+            let view = ExactView::new(v.data, cam, v.focal, v.tau);
+            d.add_masks(v, &sp, &view, &tiles);
+            d.add_errors(v, &sp, cam, &view, &tiles);
+            let (w, h) = v.size;
+            d.oracle_triangles += oracle.count(v.data, cam, w, h, v.tau).triangles;
         }
-        slack.sort_by(f64::total_cmp);
-        let q = |f: f64| slack[((slack.len() - 1) as f64 * f) as usize];
+        d
+    }
+
+    /// One frame's tiles as drawn: their masks, triangles and collapsed quadrants.
+    fn add_masks(&mut self, v: &TauView, sp: &SelectionParams, view: &ExactView, tiles: &[Tile]) {
+        let levels = v.levels;
+        let g = levels.grid_size;
+        let (mut used, mut used_all) = (HashSet::new(), HashSet::new());
+        for t in tiles {
+            let mask = morph::tile_mask(levels, sp, *t);
+            self.drawn_triangles += grid::mask_triangles(g, mask);
+            self.collapsed_quadrants += mask.quadrants(QuadrantDraw::Collapsed).count_ones();
+            let own = mask.quadrants(QuadrantDraw::Own);
+            for q in 0..4u32 {
+                if view.quadrant_within_tau(levels, *t, q) {
+                    self.within += 1;
+                    self.within_uncollapsed += (own & 1 << q != 0) as u32;
+                }
+            }
+            let collapsing = morph::tile_collapse_mask(levels, sp, *t);
+            self.all_quadrant_triangles += grid::mask_triangles(g, TileMask::new(g, collapsing, 0));
+            used.insert(mask);
+            used_all.insert(TileMask::new(g, collapsing, 0));
+            let whole = (collapsing == grid::ALL_QUADRANTS) as u32 * collapsing;
+            self.whole_triangles += grid::mask_triangles(g, TileMask::new(g, whole, 0));
+            self.whole_tiles += (whole != 0) as usize;
+        }
+        self.masks_used += used.len();
+        self.masks_used_all += used_all.len();
+    }
+
+    /// One frame's tiles against the exact surface: their slack, the worst case's tightness
+    /// and whether their parent would have done.
+    fn add_errors(
+        &mut self,
+        v: &TauView,
+        sp: &SelectionParams,
+        cam: &Camera,
+        view: &ExactView,
+        tiles: &[Tile],
+    ) {
+        let levels = v.levels;
+        let mut parents = HashMap::new();
+        for t in tiles {
+            let bound = tile_slack(levels, v.data, cam, v.focal, v.tau, *t);
+            self.slack.push(bound);
+            if bound > 0.0 {
+                let (exact, near_over_worst) = tile_exact(levels, v.data, cam, v.focal, *t);
+                self.tight.push(exact / v.tau / bound);
+                self.behind.push(near_over_worst);
+            }
+            self.per_level[t.lod as usize] += 1;
+            if t.lod >= levels.root_lod {
+                continue;
+            }
+            let q = Tile {
+                x: t.x / 2,
+                y: t.y / 2,
+                lod: t.lod + 1,
+            };
+            if *parents
+                .entry(q)
+                .or_insert_with(|| view.tile_splits(levels, q))
+            {
+                continue;
+            }
+            let screen =
+                v.settings.worst_case_share() * levels.tile_error(q) as f64 * v.focal / v.tau;
+            if (select::tile_distance(levels, sp, q) as f64) < screen {
+                self.over_rule += 1;
+            } else {
+                self.over_chain += 1;
+            }
+        }
+    }
+
+    fn print_chain_and_seed(&self, v: &TauView) {
         println!(
-            "  drawn, collapsed quadrants as their parent's grid: {collapsed_quadrants} of {} quadrants, triangles {drawn_tris} ratio {:.2}",
-            tiles_n * 4,
-            drawn_tris as f64 / tris_o as f64
+            "  drawn tiles per level (0..root): {:?}; whose parent meets tau exactly: {} by its pixel term, {} only by the chain (of {})",
+            self.per_level, self.over_rule, self.over_chain, self.tiles
+        );
+        let column = |f: fn(&(usize, u32, f64)) -> String| -> Vec<String> {
+            self.seeds.iter().map(f).collect()
+        };
+        println!(
+            "  seed ({} tiles at most): tiles {:?}, GPU passes {:?} of {} levels, host walk {:?} us (median of 200, flat world)",
+            v.settings.seed_tiles,
+            column(|x| x.0.to_string()),
+            column(|x| x.1.to_string()),
+            v.levels.levels(),
+            column(|x| format!("{:.1}", x.2)),
+        );
+    }
+
+    /// The drawn triangles and their counterfactuals against the oracle, and the tiles'
+    /// error quantiles.
+    fn print_summary(mut self, v: &TauView, picks: &[u64]) {
+        let tris_o = self.oracle_triangles;
+        let ratio = |tris: u64| tris as f64 / tris_o as f64;
+        let g2 = v.triangles_per_tile();
+        println!(
+            "  drawn, collapsed quadrants as their parent's grid: {} of {} quadrants, triangles {} ratio {:.2}",
+            self.collapsed_quadrants,
+            self.tiles * 4,
+            self.drawn_triangles,
+            ratio(self.drawn_triangles)
         );
         // A quadrant is a quarter of the tile's `g2` triangles, collapsed a sixteenth.
-        let if_collapsed = drawn_tris - within_uncollapsed as u64 * (g2 / 4 - g2 / 16);
+        let if_collapsed =
+            self.drawn_triangles - self.within_uncollapsed as u64 * (g2 / 4 - g2 / 16);
         println!(
-            "  drawn quadrants whose parent grid is within tau: {within} of {}, {within_uncollapsed} of them uncollapsed; those collapsed too: triangles {if_collapsed} ratio {:.2}",
-            tiles_n * 4,
-            if_collapsed as f64 / tris_o as f64
+            "  drawn quadrants whose parent grid is within tau: {} of {}, {} of them uncollapsed; those collapsed too: triangles {if_collapsed} ratio {:.2}",
+            self.within,
+            self.tiles * 4,
+            self.within_uncollapsed,
+            ratio(if_collapsed)
         );
-        let cams: Vec<_> = picks.iter().map(|&k| p.scenario.camera(k)).collect();
-        print_completion_counts(
-            &levels,
-            &field,
-            &cams.iter().map(params).collect::<Vec<_>>(),
-            tris_o,
-        );
+        let views: Vec<_> = v.cams.iter().map(|cam| v.params(cam)).collect();
+        print_completion_counts(v.levels, &v.field, &views, tris_o);
         println!(
-            "  cf every quadrant of the drawn tiles drawn (cull_quadrants = false): triangles {all_quadrant_tris} ratio {:.2}; draw masks in use over the frames {masks_used} ({masks_used_all} with every quadrant drawn)",
-            all_quadrant_tris as f64 / tris_o as f64
-        );
-        println!(
-            "  cf collapsing whole tiles only: {whole_tiles} of {tiles_n} tiles, triangles {whole_tris} ratio {:.2}",
-            whole_tris as f64 / tris_o as f64
+            "  cf every quadrant of the drawn tiles drawn (cull_quadrants = false): triangles {} ratio {:.2}; draw masks in use over the frames {} ({} with every quadrant drawn)",
+            self.all_quadrant_triangles,
+            ratio(self.all_quadrant_triangles),
+            self.masks_used,
+            self.masks_used_all
         );
         println!(
-            "  frames {:?}: tiles {} triangles uncollapsed {} oracle {} ratio {:.2}",
-            picks,
-            tiles_n,
-            tiles_n as u64 * g2,
-            tris_o,
-            (tiles_n as u64 * g2) as f64 / tris_o as f64
+            "  cf collapsing whole tiles only: {} of {} tiles, triangles {} ratio {:.2}",
+            self.whole_tiles,
+            self.tiles,
+            self.whole_triangles,
+            ratio(self.whole_triangles)
         );
+        let uncollapsed = self.tiles as u64 * g2;
+        println!(
+            "  frames {picks:?}: tiles {} triangles uncollapsed {uncollapsed} oracle {tris_o} ratio {:.2}",
+            self.tiles,
+            ratio(uncollapsed)
+        );
+        for q in [&mut self.slack, &mut self.tight, &mut self.behind] {
+            q.sort_by(f64::total_cmp);
+        }
+        let q = |v: &Vec<f64>, f: f64| v[((v.len().max(1) - 1) as f64 * f) as usize];
         println!(
             "  per-tile projected error / tau (tile error at its nearest sample): p10 {:.3} p50 {:.3} p90 {:.3} max {:.3}",
-            q(0.1),
-            q(0.5),
-            q(0.9),
-            q(1.0)
+            q(&self.slack, 0.1),
+            q(&self.slack, 0.5),
+            q(&self.slack, 0.9),
+            q(&self.slack, 1.0)
         );
-        for v in [&mut tight, &mut behind] {
-            v.sort_by(f64::total_cmp);
-        }
-        let qv = |v: &Vec<f64>, f: f64| v[((v.len().max(1) - 1) as f64 * f) as usize];
-        if !tight.is_empty() {
+        if !self.tight.is_empty() {
             println!(
                 "  worst case's tightness (exact largest projected error / tile error at its nearest sample), {} tiles: p10 {:.3} p50 {:.3} p90 {:.3}; nearest distance / worst sample's distance: p10 {:.3} p50 {:.3} p90 {:.3}",
-                tight.len(),
-                qv(&tight, 0.1),
-                qv(&tight, 0.5),
-                qv(&tight, 0.9),
-                qv(&behind, 0.1),
-                qv(&behind, 0.5),
-                qv(&behind, 0.9)
+                self.tight.len(),
+                q(&self.tight, 0.1),
+                q(&self.tight, 0.5),
+                q(&self.tight, 0.9),
+                q(&self.behind, 0.1),
+                q(&self.behind, 0.5),
+                q(&self.behind, 0.9)
             );
         }
     }
-    Ok(())
 }
 
 /// A drawn tile's largest exact projected error (px: |level grid - sample| x focal / distance
 /// over its full-resolution samples) and its nearest sample's distance over the distance of
 /// the sample with the largest geometric error.
-fn tile_exact(
-    levels: &Levels,
-    data: &vkterrain::dataset::Heightmap,
-    cam: &vkterrain::scene::Camera,
-    focal: f64,
-    t: Tile,
-) -> (f64, f64) {
+fn tile_exact(levels: &Levels, data: &Heightmap, cam: &Camera, focal: f64, t: Tile) -> (f64, f64) {
     let span = levels.grid_size << t.lod;
     let (c0, r0) = (t.x * span, t.y * span);
     let (c1, r1) = (
@@ -567,8 +734,8 @@ fn tile_exact(
 /// samples) over tau.
 fn tile_slack(
     levels: &Levels,
-    data: &vkterrain::dataset::Heightmap,
-    cam: &vkterrain::scene::Camera,
+    data: &Heightmap,
+    cam: &Camera,
     focal: f64,
     tau: f64,
     t: Tile,
@@ -681,7 +848,7 @@ fn sfield(levels: &Levels, focal: f64, tau: f64, cf: Cf) -> SField {
     SField { s }
 }
 
-fn box_distance(levels: &Levels, cam: &vkterrain::scene::Camera, t: Tile) -> f64 {
+fn box_distance(levels: &Levels, cam: &Camera, t: Tile) -> f64 {
     let span = (levels.grid_size << t.lod) as f64 * levels.spacing;
     let [lo, hi] = levels.tile_min_max(t);
     let mn = glam::DVec3::new(t.x as f64 * span, t.y as f64 * span, lo as f64);
@@ -693,26 +860,27 @@ fn box_distance(levels: &Levels, cam: &vkterrain::scene::Camera, t: Tile) -> f64
     (cam.position.clamp(mn, mx) - cam.position).length()
 }
 
-fn select_cf(
+/// Whether tile `t` splits under the counterfactual field `f`: its nearest distance (`Cf`'s
+/// kind) below the largest of its corners.
+fn cf_splits(
     levels: &Levels,
     p: &SelectionParams,
-    cam: &vkterrain::scene::Camera,
+    cam: &Camera,
     f: &SField,
     cf: Cf,
-) -> Vec<Tile> {
-    select_generic(levels, p, |t| {
-        let l = t.lod as usize;
-        let mx = [(0, 0), (1, 0), (0, 1), (1, 1)]
-            .iter()
-            .map(|&(i, j)| f.s[l][corner_idx(levels, l, t.x + i, t.y + j)])
-            .fold(0.0, f64::max);
-        let d = if cf.box_dist {
-            box_distance(levels, cam, t)
-        } else {
-            select::tile_distance(levels, p, t) as f64
-        };
-        d < mx
-    })
+    t: Tile,
+) -> bool {
+    let l = t.lod as usize;
+    let mx = [(0, 0), (1, 0), (0, 1), (1, 1)]
+        .iter()
+        .map(|&(i, j)| f.s[l][corner_idx(levels, l, t.x + i, t.y + j)])
+        .fold(0.0, f64::max);
+    let d = if cf.box_dist {
+        box_distance(levels, cam, t)
+    } else {
+        select::tile_distance(levels, p, t) as f64
+    };
+    d < mx
 }
 
 fn select_generic(
@@ -752,19 +920,14 @@ fn select_generic(
 /// One frame's exact projected error test over full-resolution samples (the tile oracle's
 /// and the quadrant oracle's).
 struct ExactView<'a> {
-    data: &'a vkterrain::dataset::Heightmap,
-    cam: &'a vkterrain::scene::Camera,
+    data: &'a Heightmap,
+    cam: &'a Camera,
     focal: f64,
     tau: f64,
 }
 
 impl<'a> ExactView<'a> {
-    fn new(
-        data: &'a vkterrain::dataset::Heightmap,
-        cam: &'a vkterrain::scene::Camera,
-        focal: f64,
-        tau: f64,
-    ) -> Self {
+    fn new(data: &'a Heightmap, cam: &'a Camera, focal: f64, tau: f64) -> Self {
         ExactView {
             data,
             cam,
@@ -817,7 +980,7 @@ impl<'a> ExactView<'a> {
 /// values in metres, each the largest need of the cells around it.
 fn cell_field(
     levels: &Levels,
-    data: &vkterrain::dataset::Heightmap,
+    data: &Heightmap,
     scale: f64,
     ns: u32,
     ratio: f64,
@@ -902,9 +1065,6 @@ where
         .map_err(|e| anyhow::anyhow!("{flag} {text:?}: {e}"))
 }
 
-/// Per level, how the field cells' own errors (`Levels::field_cell_error`, metres) spread:
-/// the share exactly 0, the share under 1 cm, and quantiles. A data set's smooth filled voids
-/// (SRTM's ocean) show as errors near, not at, 0.
 /// Triangles drawn, per [`CompletionTerms`], with the morph completing at a field below the
 /// split field (`vkterrain::lod::udlod::completion`), over the frames' selections `views`
 /// (the same tiles and quadrants outside the view as drawn today).
@@ -941,6 +1101,9 @@ fn print_completion_counts(
     }
 }
 
+/// Per level, how the field cells' own errors (`Levels::field_cell_error`, metres) spread:
+/// the share exactly 0, the share under 1 cm, and quantiles. A data set's smooth filled voids
+/// (SRTM's ocean) show as errors near, not at, 0.
 fn print_cell_errors(levels: &Levels) {
     for lod in 1..=levels.root_lod {
         let (nx, ny) = levels.field_cells_per_side(lod);
@@ -964,7 +1127,6 @@ fn print_cell_errors(levels: &Levels) {
     }
 }
 
-/// One counterfactual's line: its tiles, their triangles and the ratio to the oracle's.
 /// The prepass's seed for one frame (`seed::seed`, lists unbounded: no overflow): its tiles,
 /// the GPU passes it leaves, and the host walk's median time over 200 runs (microseconds).
 fn timed_seed(levels: &Levels, p: &SelectionParams, most: u32) -> (usize, u32, f64) {
@@ -984,6 +1146,7 @@ fn timed_seed(levels: &Levels, p: &SelectionParams, most: u32) -> (usize, u32, f
     (walk.tiles.len(), walk.passes, times[times.len() / 2])
 }
 
+/// One counterfactual's line: its tiles, their triangles and the ratio to the oracle's.
 fn print_cf(name: &str, tiles: usize, triangles_per_tile: u64, oracle: u64) {
     let triangles = tiles as u64 * triangles_per_tile;
     println!(
