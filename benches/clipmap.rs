@@ -16,11 +16,12 @@
 use std::sync::Arc;
 
 use clap::Parser;
-use vkterrain::cli::render::{RenderArgs, prepare};
+use vkterrain::cli::render::{Prepared, RenderArgs, prepare};
+use vkterrain::config::Config;
 use vkterrain::dataset::Terrain;
 use vkterrain::driver::Gpu;
 use vkterrain::readback::FrameView;
-use vkterrain::render::stats::{Percentiles, nearest_rank};
+use vkterrain::render::stats::{FrameRecord, Percentiles, nearest_rank};
 use vkterrain::render::{FrameRequest, Renderer};
 
 #[derive(Parser)]
@@ -65,6 +66,9 @@ fn rss_mib() -> f64 {
         .unwrap_or(0.0)
 }
 
+/// Frames before the statistics start.
+const WARMUP: usize = 10;
+
 fn main() -> anyhow::Result<()> {
     let root = env!("CARGO_MANIFEST_DIR");
     let config = std::env::var("VKTERRAIN_CLIPMAP_CONFIG")
@@ -73,7 +77,6 @@ fn main() -> anyhow::Result<()> {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(300);
-    let warmup = 10usize;
     let args = Wrapper::try_parse_from([
         "clipmap",
         "--config",
@@ -90,12 +93,43 @@ fn main() -> anyhow::Result<()> {
         }
     };
     let gpu: Arc<Gpu> = p.config.open_gpu()?;
+    print_header(&p, &gpu);
+    let mut rows = Vec::new();
+    // The two-view variant adds a rear camera (same position, heading + 180 deg), each view
+    // half the width, both through the one atlas. The clipmap variants run first, so their
+    // RSS is not inflated by the one-texture run's freed memory.
+    let rear = vkterrain::scene::ViewOffset {
+        yaw_deg: 180.0,
+        ..Default::default()
+    };
+    for (name, clipmap, extra_views) in [
+        ("clipmap", true, vec![]),
+        ("clipmap 2 views", true, vec![rear]),
+        ("one texture", false, vec![]),
+    ] {
+        let mut config = p.config.clone();
+        config.clipmap.enabled = clipmap;
+        config.render.extra_views = extra_views;
+        let row = run_variant(&gpu, &p, &config, name)?;
+        row.print();
+        rows.push(row);
+    }
+    let out = format!("{root}/target/bench");
+    std::fs::create_dir_all(&out)?;
+    std::fs::write(
+        format!("{out}/clipmap.json"),
+        serde_json::to_string_pretty(&rows)?,
+    )?;
+    Ok(())
+}
+
+fn print_header(p: &Prepared, gpu: &Gpu) {
     println!(
-        "{} ({}x{}, {} frames of {}, {warmup} warm-up, method {}, device {})",
+        "{} ({}x{}, {} frames of {}, {WARMUP} warm-up, method {}, device {})",
         p.data.name(),
         p.config.render.width,
         p.config.render.height,
-        frames,
+        p.frames,
         p.scenario.name,
         p.config.method.kind().name(),
         gpu.info.name
@@ -117,137 +151,125 @@ fn main() -> anyhow::Result<()> {
         "RSS MiB",
         "GPU MiB"
     );
-    let mut rows = Vec::new();
-    // The two-view variant adds a rear camera (same position, heading + 180 deg), each view
-    // half the width, both through the one atlas. The clipmap variants run first, so their
-    // RSS is not inflated by the one-texture run's freed memory.
-    let rear = vkterrain::scene::ViewOffset {
-        yaw_deg: 180.0,
-        ..Default::default()
+}
+
+/// The flight drawn with `config` (the clipmap on or off, its extra views): its row.
+fn run_variant(gpu: &Arc<Gpu>, p: &Prepared, config: &Config, name: &str) -> anyhow::Result<Row> {
+    let cm = config.open_clipmap(None)?;
+    // With the clipmap, level 0 is read node by node (`p.data`); one texture needs the
+    // whole height map.
+    let data: Terrain = if config.clipmap.enabled {
+        p.data.clone()
+    } else {
+        config.open_terrain()?
     };
-    for (name, clipmap, extra_views) in [
-        ("clipmap", true, vec![]),
-        ("clipmap 2 views", true, vec![rear]),
-        ("one texture", false, vec![]),
-    ] {
-        let mut config = p.config.clone();
-        config.clipmap.enabled = clipmap;
-        config.render.extra_views = extra_views;
-        let cm = config.open_clipmap(None)?;
-        // With the clipmap, level 0 is read node by node (`p.data`); one texture needs the
-        // whole height map.
-        let data: Terrain = if clipmap {
-            p.data.clone()
+    let (capacity, atlas_bytes, layer_bytes) = cm
+        .as_ref()
+        .map(|c| (c.settings.atlas_capacity, c.atlas_bytes(), c.layer_bytes()))
+        .unwrap_or((0, 0, 0));
+    let options = config.render_options();
+    let staging_bytes =
+        layer_bytes * config.clipmap.max_uploads_per_frame as u64 * options.frames_in_flight as u64;
+    let mut renderer = Renderer::with_clipmap(gpu, data, config.method.clone(), options, cm)?;
+    let mut sink = |_: &FrameView<'_>| Ok(());
+    // Per frame, the nodes uploaded; and the most resident at once.
+    let mut uploads = Vec::with_capacity(p.frames as usize);
+    let mut max_resident = 0;
+    for frame in 0..p.frames as u64 {
+        let before = renderer.clipmap().map(|c| c.counters.uploaded).unwrap_or(0);
+        let views =
+            FrameRequest::with_extra_views(p.scenario.camera(frame), &config.render.extra_views);
+        renderer.render_views(&views, &mut sink)?;
+        if let Some(c) = renderer.clipmap() {
+            uploads.push(c.counters.uploaded - before);
+            max_resident = max_resident.max(c.atlas.resident());
+            assert!(c.atlas.resident() <= capacity as usize);
         } else {
-            config.open_terrain()?
-        };
-        let (capacity, atlas_bytes, layer_bytes) = cm
-            .as_ref()
-            .map(|c| (c.settings.atlas_capacity, c.atlas_bytes(), c.layer_bytes()))
-            .unwrap_or((0, 0, 0));
-        let options = config.render_options();
-        let staging_bytes = layer_bytes
-            * config.clipmap.max_uploads_per_frame as u64
-            * options.frames_in_flight as u64;
-        let mut renderer = Renderer::with_clipmap(&gpu, data, config.method.clone(), options, cm)?;
-        let mut sink = |_: &FrameView<'_>| Ok(());
-        let mut uploads = Vec::with_capacity(frames as usize);
-        let mut max_resident = 0;
-        for frame in 0..frames as u64 {
-            let before = renderer.clipmap().map(|c| c.counters.uploaded).unwrap_or(0);
-            let views = FrameRequest::with_extra_views(
-                p.scenario.camera(frame),
-                &config.render.extra_views,
-            );
-            renderer.render_views(&views, &mut sink)?;
-            if let Some(c) = renderer.clipmap() {
-                uploads.push(c.counters.uploaded - before);
-                max_resident = max_resident.max(c.atlas.resident());
-                assert!(c.atlas.resident() <= capacity as usize);
-            } else {
-                uploads.push(0);
-            }
+            uploads.push(0);
         }
-        renderer.finish(&mut sink)?;
-        let gpu_bytes = gpu.allocated_bytes();
-        let recs = &renderer.stats.frames[warmup..];
+    }
+    renderer.finish(&mut sink)?;
+    let mut row = Row::of_frames(name, &renderer.stats.frames[WARMUP..], &uploads[WARMUP..]);
+    row.fallback_frames = renderer
+        .clipmap()
+        .map(|c| c.counters.fallback_frames)
+        .unwrap_or(0);
+    row.counters = renderer.clipmap().map(|c| c.counters);
+    row.max_resident_nodes = max_resident;
+    row.atlas_capacity = capacity;
+    row.atlas_bytes = atlas_bytes;
+    row.staging_bytes = staging_bytes;
+    row.rss_mib = rss_mib();
+    row.gpu_mib = gpu.allocated_bytes() as f64 / (1u64 << 20) as f64;
+    Ok(row)
+}
+
+impl Row {
+    /// The frame-time columns of the frames after warm-up, `uploads` the nodes each uploaded;
+    /// the memory and clipmap columns zero.
+    fn of_frames(name: &str, recs: &[FrameRecord], uploads: &[u64]) -> Row {
         let frame_ms = Percentiles::of(recs.iter().map(|r| r.interval_ms).collect());
         let cpu_record_ms = Percentiles::of(recs.iter().map(|r| r.timings.cpu_record_ms).collect());
-        let streaming: Vec<f64> = recs
-            .iter()
-            .zip(&uploads[warmup..])
-            .filter(|(_, u)| **u > 0)
-            .map(|(r, _)| r.interval_ms)
-            .collect();
-        let max_streaming = streaming.iter().cloned().fold(0.0, f64::max);
-        let max_quiet = recs
-            .iter()
-            .zip(&uploads[warmup..])
-            .filter(|(_, u)| **u == 0)
-            .map(|(r, _)| r.interval_ms)
-            .fold(0.0, f64::max);
-        let mut streaming_sorted = streaming.clone();
-        streaming_sorted.sort_by(f64::total_cmp);
+        let interval_where = |uploading: bool| -> Vec<f64> {
+            recs.iter()
+                .zip(uploads)
+                .filter(|(_, u)| (**u > 0) == uploading)
+                .map(|(r, _)| r.interval_ms)
+                .collect()
+        };
+        let mut streaming = interval_where(true);
+        streaming.sort_by(f64::total_cmp);
+        let max_quiet = interval_where(false).into_iter().fold(0.0, f64::max);
         let mut sorted: Vec<f64> = recs.iter().map(|r| r.interval_ms).collect();
         sorted.sort_by(f64::total_cmp);
         let median = nearest_rank(&sorted, 0.5);
-        let counters = renderer.clipmap().map(|c| c.counters);
-        let row = Row {
+        let (max_streaming_over_median, median_streaming_over_median) = match streaming.last() {
+            None => (0.0, 0.0),
+            Some(max) => (max / median, nearest_rank(&streaming, 0.5) / median),
+        };
+        Row {
             variant: name.into(),
             frame_ms,
             cpu_record_ms,
             streaming_frames: streaming.len(),
-            max_streaming_over_median: if streaming.is_empty() {
-                0.0
-            } else {
-                max_streaming / median
-            },
-            median_streaming_over_median: if streaming.is_empty() {
-                0.0
-            } else {
-                nearest_rank(&streaming_sorted, 0.5) / median
-            },
+            max_streaming_over_median,
+            median_streaming_over_median,
             max_quiet_over_median: max_quiet / median,
-            fallback_frames: counters.map(|c| c.fallback_frames).unwrap_or(0),
-            max_resident_nodes: max_resident,
-            atlas_capacity: capacity,
-            atlas_bytes,
-            staging_bytes,
-            rss_mib: rss_mib(),
-            gpu_mib: gpu_bytes as f64 / (1u64 << 20) as f64,
-            counters,
-        };
+            fallback_frames: 0,
+            max_resident_nodes: 0,
+            atlas_capacity: 0,
+            atlas_bytes: 0,
+            staging_bytes: 0,
+            rss_mib: 0.0,
+            gpu_mib: 0.0,
+            counters: None,
+        }
+    }
+
+    fn print(&self) {
         println!(
             "{:<16} {:>9.1} {:>8.1} {:>8.1} {:>10} {:>12.2} {:>12.2} {:>12.2} {:>9.2} {:>9} {:>14} {:>10.2} {:>8.0} {:>8.1}",
-            row.variant,
-            row.frame_ms.median,
-            row.frame_ms.p99,
-            row.frame_ms.max,
-            row.streaming_frames,
-            row.max_streaming_over_median,
-            row.median_streaming_over_median,
-            row.max_quiet_over_median,
-            row.cpu_record_ms.median,
-            row.fallback_frames,
-            format!("{}/{}", row.max_resident_nodes, row.atlas_capacity),
-            row.atlas_bytes as f64 / (1u64 << 20) as f64,
-            row.rss_mib,
-            row.gpu_mib
+            self.variant,
+            self.frame_ms.median,
+            self.frame_ms.p99,
+            self.frame_ms.max,
+            self.streaming_frames,
+            self.max_streaming_over_median,
+            self.median_streaming_over_median,
+            self.max_quiet_over_median,
+            self.cpu_record_ms.median,
+            self.fallback_frames,
+            format!("{}/{}", self.max_resident_nodes, self.atlas_capacity),
+            self.atlas_bytes as f64 / (1u64 << 20) as f64,
+            self.rss_mib,
+            self.gpu_mib
         );
-        if let Some(c) = &row.counters {
+        if let Some(c) = &self.counters {
             println!(
                 "{:<16} {c:?}; staging {:.2} MiB",
                 "",
-                row.staging_bytes as f64 / (1u64 << 20) as f64
+                self.staging_bytes as f64 / (1u64 << 20) as f64
             );
         }
-        rows.push(row);
     }
-    let out = format!("{root}/target/bench");
-    std::fs::create_dir_all(&out)?;
-    std::fs::write(
-        format!("{out}/clipmap.json"),
-        serde_json::to_string_pretty(&rows)?,
-    )?;
-    Ok(())
 }
