@@ -130,6 +130,14 @@ fn vm_hwm_mib() -> f64 {
         / 1024.0
 }
 
+/// The targets, in the order cases cycle through them.
+const TARGETS: [&str; 4] = [
+    "manifest",
+    "level header / node record",
+    "tile statistics",
+    "tile PNG decoding",
+];
+
 fn main() {
     let cases: u64 = std::env::var("VKT_FUZZ_CASES")
         .ok()
@@ -139,43 +147,8 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(0x5eed);
-    // A small real data set: manifest, level files, statistics.
     let dir = std::env::temp_dir().join(format!("vkt-fuzz-{}", std::process::id()));
-    let out = dir.join("ds");
-    preprocess::run(
-        &Options {
-            input: Input::Procedural(ProceduralParams {
-                size: 97,
-                ..Default::default()
-            }),
-            out: out.clone(),
-            center_size: 16,
-            stats_grid_sizes: vec![4, 8],
-            ..Default::default()
-        },
-        &NoProgress,
-    )
-    .expect("fixture");
-    let ds = Dataset::open(&out).expect("fixture");
-    let manifest_text = std::fs::read_to_string(out.join("manifest.json")).expect("manifest");
-    let manifest_json: serde_json::Value = serde_json::from_str(&manifest_text).expect("json");
-    let level1 = std::fs::read(out.join("L1.bin")).expect("level");
-    let record_size = ds.manifest.levels[1].record_size as usize;
-    let record = level1[LEVEL_HEADER as usize..LEVEL_HEADER as usize + record_size].to_vec();
-    let header = level_header(&ds.layout, 1, ds.layers);
-    let stats = std::fs::read(out.join("stats-g8.bin")).expect("stats");
-    let (w, h) = (ds.manifest.width as u32, ds.manifest.height as u32);
-    let tile = {
-        let mut img = image::RgbImage::new(256, 256);
-        for (x, y, p) in img.enumerate_pixels_mut() {
-            *p = image::Rgb(Encoding::Terrarium.encode((x * 7 + y * 3) as f64 * 0.37 - 50.0));
-        }
-        let mut b = Vec::new();
-        img.write_to(&mut std::io::Cursor::new(&mut b), image::ImageFormat::Png)
-            .expect("png");
-        b
-    };
-
+    let fx = Fixture::new(&dir.join("ds"));
     let mut rng = Rng(seed | 1);
     let mut accepted = [0u64; 4];
     let mut counts = [0u64; 4];
@@ -186,92 +159,11 @@ fn main() {
         let target = (case % 4) as usize;
         counts[target] += 1;
         let state = rng.0;
-        let input: Vec<u8>;
-        let result = match target {
-            0 => {
-                input = if rng.below(2) == 0 {
-                    mutate(&mut rng, manifest_text.as_bytes())
-                } else {
-                    let mut v = manifest_json.clone();
-                    rewrite(&mut rng, &mut v);
-                    serde_json::to_vec(&v).expect("json")
-                };
-                std::panic::catch_unwind(AssertUnwindSafe(|| {
-                    let text = String::from_utf8_lossy(&input);
-                    match Manifest::parse(&text, "manifest.json") {
-                        Ok(m) => {
-                            // Accepted: everything a reader derives from it is consistent.
-                            let (layout, _) = m.layout().expect("checked layout");
-                            assert_eq!(layout.levels() as usize, m.levels.len());
-                            assert!(m.spacing.iter().all(|s| s.is_finite() && *s > 0.0));
-                            for l in &m.levels {
-                                assert!(!l.file.contains('/') && !l.file.contains(".."));
-                            }
-                            true
-                        }
-                        Err(e) => {
-                            one_line(&e);
-                            false
-                        }
-                    }
-                }))
-            }
-            1 => {
-                let base = if rng.below(2) == 0 { &record } else { &header };
-                input = mutate(&mut rng, base);
-                std::panic::catch_unwind(AssertUnwindSafe(|| {
-                    if input.len() == LEVEL_HEADER as usize && base.len() == LEVEL_HEADER as usize {
-                        // The header check is an exact comparison.
-                        return input == header;
-                    }
-                    match parse_record(&input, &ds.layout, ds.layers) {
-                        Ok(n) => {
-                            let side = ds.layout.side() as usize;
-                            assert_eq!(n.heights.len(), side * side);
-                            assert_eq!(n.mask.len(), if ds.layers.mask { side * side } else { 0 });
-                            true
-                        }
-                        Err(e) => {
-                            one_line(&e);
-                            false
-                        }
-                    }
-                }))
-            }
-            2 => {
-                input = mutate(&mut rng, &stats);
-                std::panic::catch_unwind(AssertUnwindSafe(|| {
-                    match TileStats::from_bytes(&input, "stats-g8.bin", w, h, 8) {
-                        Ok(s) => {
-                            for l in &s.levels {
-                                assert!(l.min_max.iter().all(|m| m[0] <= m[1] && m[0].is_finite()));
-                                assert!(l.error.iter().all(|e| e.is_finite() && *e >= 0.0));
-                            }
-                            true
-                        }
-                        Err(e) => {
-                            one_line(&e);
-                            false
-                        }
-                    }
-                }))
-            }
-            _ => {
-                input = mutate(&mut rng, &tile);
-                std::panic::catch_unwind(AssertUnwindSafe(|| {
-                    match decode_tile(&input, Encoding::Terrarium, 256) {
-                        Ok(v) => {
-                            assert_eq!(v.len(), 256 * 256);
-                            assert!(v.iter().all(|h| h.is_finite()));
-                            true
-                        }
-                        Err(e) => {
-                            one_line(&e);
-                            false
-                        }
-                    }
-                }))
-            }
+        let (input, result) = match target {
+            0 => fx.manifest_case(&mut rng),
+            1 => fx.level_case(&mut rng),
+            2 => fx.stats_case(&mut rng),
+            _ => fx.tile_case(&mut rng),
         };
         match result {
             Ok(ok) => accepted[target] += ok as u64,
@@ -299,15 +191,7 @@ fn main() {
         "fuzz_readers: {cases} cases in {:.1} s (seed {seed:#x}), no panic, every error one line; peak RSS {hwm:.0} MiB",
         t0.elapsed().as_secs_f64()
     );
-    for (k, name) in [
-        "manifest",
-        "level header / node record",
-        "tile statistics",
-        "tile PNG decoding",
-    ]
-    .iter()
-    .enumerate()
-    {
+    for (k, name) in TARGETS.iter().enumerate() {
         println!(
             "  {name:<27} {:>8} cases, {:>7} accepted",
             counts[k], accepted[k]
@@ -318,4 +202,168 @@ fn main() {
         "peak RSS {hwm} MiB: a reader allocated what its input claimed"
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// One case: the input it built, and whether the reader accepted it (`Err`: it panicked).
+type Case = (Vec<u8>, std::thread::Result<bool>);
+
+/// A small real data set (manifest, level files, statistics) and a tile PNG: the valid inputs
+/// every case mutates.
+struct Fixture {
+    ds: Dataset,
+    manifest_text: String,
+    manifest_json: serde_json::Value,
+    /// Level 1's first node record and its file header.
+    record: Vec<u8>,
+    header: Vec<u8>,
+    /// The grid-8 tile statistics file.
+    stats: Vec<u8>,
+    tile: Vec<u8>,
+}
+
+impl Fixture {
+    fn new(out: &std::path::Path) -> Fixture {
+        preprocess::run(
+            &Options {
+                input: Input::Procedural(ProceduralParams {
+                    size: 97,
+                    ..Default::default()
+                }),
+                out: out.to_path_buf(),
+                center_size: 16,
+                stats_grid_sizes: vec![4, 8],
+                ..Default::default()
+            },
+            &NoProgress,
+        )
+        .expect("fixture");
+        let ds = Dataset::open(out).expect("fixture");
+        let manifest_text = std::fs::read_to_string(out.join("manifest.json")).expect("manifest");
+        let manifest_json = serde_json::from_str(&manifest_text).expect("json");
+        let level1 = std::fs::read(out.join("L1.bin")).expect("level");
+        let record_size = ds.manifest.levels[1].record_size as usize;
+        let record = level1[LEVEL_HEADER as usize..LEVEL_HEADER as usize + record_size].to_vec();
+        let header = level_header(&ds.layout, 1, ds.layers);
+        let stats = std::fs::read(out.join("stats-g8.bin")).expect("stats");
+        Fixture {
+            ds,
+            manifest_text,
+            manifest_json,
+            record,
+            header,
+            stats,
+            tile: terrarium_png(),
+        }
+    }
+
+    /// The manifest, mutated as bytes or rewritten as JSON: accepted, everything a reader
+    /// derives from it is consistent.
+    fn manifest_case(&self, rng: &mut Rng) -> Case {
+        let input = if rng.below(2) == 0 {
+            mutate(rng, self.manifest_text.as_bytes())
+        } else {
+            let mut v = self.manifest_json.clone();
+            rewrite(rng, &mut v);
+            serde_json::to_vec(&v).expect("json")
+        };
+        let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
+            let text = String::from_utf8_lossy(&input);
+            match Manifest::parse(&text, "manifest.json") {
+                Ok(m) => {
+                    let (layout, _) = m.layout().expect("checked layout");
+                    assert_eq!(layout.levels() as usize, m.levels.len());
+                    assert!(m.spacing.iter().all(|s| s.is_finite() && *s > 0.0));
+                    for l in &m.levels {
+                        assert!(!l.file.contains('/') && !l.file.contains(".."));
+                    }
+                    true
+                }
+                Err(e) => rejected(&e),
+            }
+        }));
+        (input, result)
+    }
+
+    /// A level file's header or a node record.
+    fn level_case(&self, rng: &mut Rng) -> Case {
+        let base = if rng.below(2) == 0 {
+            &self.record
+        } else {
+            &self.header
+        };
+        let input = mutate(rng, base);
+        let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
+            if input.len() == LEVEL_HEADER as usize && base.len() == LEVEL_HEADER as usize {
+                // The header check is an exact comparison.
+                return input == self.header;
+            }
+            let (layout, layers) = (&self.ds.layout, self.ds.layers);
+            match parse_record(&input, layout, layers) {
+                Ok(n) => {
+                    let side = layout.side() as usize;
+                    assert_eq!(n.heights.len(), side * side);
+                    assert_eq!(n.mask.len(), if layers.mask { side * side } else { 0 });
+                    true
+                }
+                Err(e) => rejected(&e),
+            }
+        }));
+        (input, result)
+    }
+
+    /// The tile statistics file: accepted, its ranges ordered and its errors finite.
+    fn stats_case(&self, rng: &mut Rng) -> Case {
+        let input = mutate(rng, &self.stats);
+        let (w, h) = (
+            self.ds.manifest.width as u32,
+            self.ds.manifest.height as u32,
+        );
+        let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
+            match TileStats::from_bytes(&input, "stats-g8.bin", w, h, 8) {
+                Ok(s) => {
+                    for l in &s.levels {
+                        assert!(l.min_max.iter().all(|m| m[0] <= m[1] && m[0].is_finite()));
+                        assert!(l.error.iter().all(|e| e.is_finite() && *e >= 0.0));
+                    }
+                    true
+                }
+                Err(e) => rejected(&e),
+            }
+        }));
+        (input, result)
+    }
+
+    /// An XYZ tile PNG: accepted, a whole tile of finite heights.
+    fn tile_case(&self, rng: &mut Rng) -> Case {
+        let input = mutate(rng, &self.tile);
+        let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
+            match decode_tile(&input, Encoding::Terrarium, 256) {
+                Ok(v) => {
+                    assert_eq!(v.len(), 256 * 256);
+                    assert!(v.iter().all(|h| h.is_finite()));
+                    true
+                }
+                Err(e) => rejected(&e),
+            }
+        }));
+        (input, result)
+    }
+}
+
+/// A rejected input: its error must be one line.
+fn rejected(e: &vkterrain::Error) -> bool {
+    one_line(e);
+    false
+}
+
+/// A 256² Terrarium-encoded PNG of a tilted plane.
+fn terrarium_png() -> Vec<u8> {
+    let mut img = image::RgbImage::new(256, 256);
+    for (x, y, p) in img.enumerate_pixels_mut() {
+        *p = image::Rgb(Encoding::Terrarium.encode((x * 7 + y * 3) as f64 * 0.37 - 50.0));
+    }
+    let mut b = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut b), image::ImageFormat::Png)
+        .expect("png");
+    b
 }
