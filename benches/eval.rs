@@ -23,7 +23,7 @@ use std::path::PathBuf;
 use clap::Parser;
 use vkterrain::cli::render::{Prepared, RenderArgs, prepare};
 use vkterrain::eval::metrics::Holes;
-use vkterrain::eval::run::{EvalSetup, Evaluation, evaluate, variants};
+use vkterrain::eval::run::{EvalSetup, Evaluation, Variant, evaluate, variants};
 use vkterrain::eval::{report, table};
 use vkterrain::lod::{MethodConfig, MethodKind, sweep};
 use vkterrain::render::FrameRequest;
@@ -160,49 +160,11 @@ impl std::fmt::Display for Disagreement {
 impl std::error::Error for Disagreement {}
 
 fn run_case(root: &str, case: &Case, short: bool) -> anyhow::Result<Option<Evaluation>> {
-    let mut argv = vec![
-        "eval".to_string(),
-        "--config".into(),
-        format!("{root}/{}", case.config),
-        "--frames".into(),
-        case.frames.to_string(),
-        "--width".into(),
-        case.size.0.to_string(),
-        "--height".into(),
-        case.size.1.to_string(),
-    ];
-    if let Some(s) = case.scenario {
-        argv.extend(["--scenario".into(), format!("{root}/{s}")]);
-    }
-    let args = Wrapper::try_parse_from(argv)?.args;
-    // On the configured earth like `vkterrain eval`: same scenario cameras, same geometry.
-    let p = match prepare(&args) {
-        Ok(p) => p,
-        Err(e) => {
-            println!(
-                "skipping {}: {e:#} (make data builds the data sets)",
-                case.name
-            );
-            return Ok(None);
-        }
+    let Some(p) = prepare_case(root, case)? else {
+        return Ok(None);
     };
     let gpu = p.config.open_gpu()?;
-    // On the ellipsoid the case compares brute force and UDLOD: PGM draws on the earth since
-    // its grid meets the curved surface (docs/pgm.md, "On the earth"), but its earth cases
-    // (CI time, the swimming assertion there) are not added yet.
-    let on_earth = p.config.render.earth == vkterrain::render::EarthGeometry::Ellipsoid
-        && p.config.world_frame()?.is_some();
-    let methods: &[MethodKind] = if on_earth {
-        println!("{}: on the ellipsoid, without PGM (flat only)", case.name);
-        &[MethodKind::Brute, MethodKind::Udlod]
-    } else {
-        &[MethodKind::Brute, MethodKind::Udlod, MethodKind::Pgm]
-    };
-    let mut sweeps = vec![sweep::parse("tau_px=0.5,1,2,4")?];
-    if !on_earth {
-        sweeps.push(sweep::parse("grid_scale=0.5,1")?);
-    }
-    let variants = variants(methods, &sweeps, &p.config.method)?;
+    let variants = case_variants(&p, case.name)?;
     let warmup = 4;
     let command = format!(
         "{}cargo bench --bench eval",
@@ -225,6 +187,67 @@ fn run_case(root: &str, case: &Case, short: bool) -> anyhow::Result<Option<Evalu
     let evaluation = evaluate(&setup, &variants, &mut ())?;
     let out = PathBuf::from(format!("{root}/target/bench/eval/{}", case.name));
     report::write(&evaluation, &out, true)?;
+    print_case(case, &evaluation, &out);
+    if short {
+        check_agreement(&p, &evaluation, warmup)?;
+    }
+    Ok(Some(evaluation))
+}
+
+/// The case's config, scenario, frames and size as `vkterrain eval` would read them (the
+/// configured earth: the same scenario cameras, the same geometry); `None` (with a line
+/// saying why) when its data set is missing.
+fn prepare_case(root: &str, case: &Case) -> anyhow::Result<Option<Prepared>> {
+    let mut argv = vec![
+        "eval".to_string(),
+        "--config".into(),
+        format!("{root}/{}", case.config),
+        "--frames".into(),
+        case.frames.to_string(),
+        "--width".into(),
+        case.size.0.to_string(),
+        "--height".into(),
+        case.size.1.to_string(),
+    ];
+    if let Some(s) = case.scenario {
+        argv.extend(["--scenario".into(), format!("{root}/{s}")]);
+    }
+    let args = Wrapper::try_parse_from(argv)?.args;
+    match prepare(&args) {
+        Ok(p) => Ok(Some(p)),
+        Err(e) => {
+            println!(
+                "skipping {}: {e:#} (make data builds the data sets)",
+                case.name
+            );
+            Ok(None)
+        }
+    }
+}
+
+/// Brute force, UDLOD and PGM over tau 0.5-4, PGM's grid at two scales. On the ellipsoid
+/// the case compares brute force and UDLOD: PGM draws on the earth since its grid meets the
+/// curved surface (docs/pgm.md, "On the earth"), but its earth cases (CI time, the swimming
+/// assertion there) are not added yet.
+fn case_variants(p: &Prepared, name: &str) -> anyhow::Result<Vec<Variant>> {
+    let on_earth = p.config.render.earth == vkterrain::render::EarthGeometry::Ellipsoid
+        && p.config.world_frame()?.is_some();
+    let methods: &[MethodKind] = if on_earth {
+        println!("{name}: on the ellipsoid, without PGM (flat only)");
+        &[MethodKind::Brute, MethodKind::Udlod]
+    } else {
+        &[MethodKind::Brute, MethodKind::Udlod, MethodKind::Pgm]
+    };
+    let mut sweeps = vec![sweep::parse("tau_px=0.5,1,2,4")?];
+    if !on_earth {
+        sweeps.push(sweep::parse("grid_scale=0.5,1")?);
+    }
+    Ok(variants(methods, &sweeps, &p.config.method)?)
+}
+
+/// The case's summary table, and each variant's GPU time as a ratio to brute force's of the
+/// same run (the machines are noisy; absolute times drift between runs).
+fn print_case(case: &Case, evaluation: &Evaluation, out: &std::path::Path) {
     let brute = evaluation
         .summaries
         .iter()
@@ -247,18 +270,12 @@ fn run_case(root: &str, case: &Case, short: bool) -> anyhow::Result<Option<Evalu
         "{}",
         table::text(table::SUMMARY_COLUMNS, &evaluation.summaries)
     );
-    // GPU times as ratios to brute force of the same run (the machines are noisy; absolute
-    // times drift between runs).
     let ratios: Vec<String> = evaluation
         .summaries
         .iter()
         .map(|s| format!("{} {:.2}", s.variant, s.gpu_ms.median / brute))
         .collect();
     println!("median GPU time / brute force's: {}", ratios.join(", "));
-    if short {
-        check_agreement(&p, &evaluation, warmup)?;
-    }
-    Ok(Some(evaluation))
 }
 
 /// Mean swimming (px) per pixel of p99.9 error: how much of a method's error moves with the
