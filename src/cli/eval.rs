@@ -9,7 +9,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::eval::report;
-use crate::eval::run::{EvalSetup, Progress, evaluate, variants};
+use crate::eval::run::{EvalSetup, Evaluation, Progress, evaluate, variants};
 use crate::lod::MethodKind;
 
 #[derive(Args, Debug, Clone)]
@@ -68,8 +68,7 @@ impl Progress for Bars {
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     // On the configured earth (`[render] earth`, `--earth`): docs/eval.md, "On the earth".
     let p = super::render::prepare(&args.render)?;
-    let methods = &args.methods;
-    if methods.is_empty() {
+    if args.methods.is_empty() {
         anyhow::bail!("--methods lists no method");
     }
     if args.reference_mib == 0 {
@@ -80,7 +79,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         .iter()
         .map(|s| crate::lod::sweep::parse(s))
         .collect::<crate::Result<Vec<_>>>()?;
-    let variants = variants(methods, &sweeps, &p.config.method)?;
+    let variants = variants(&args.methods, &sweeps, &p.config.method)?;
     let out = args
         .render
         .out
@@ -105,9 +104,19 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         reference_mib: args.reference_mib,
         command: command_line(),
     };
+    print_start(&setup, &p, variants.len());
+    let evaluation = evaluate(&setup, &variants, &mut Bars(None))?;
+    super::render::check_validation(&gpu)?;
+    require_cross_check(&evaluation)?;
+    report::write(&evaluation, &out, args.force)?;
+    print_results(&evaluation, &out);
+    Ok(())
+}
+
+/// What is about to be evaluated, on standard error.
+fn print_start(setup: &EvalSetup, p: &super::render::Prepared, variants: usize) {
     eprintln!(
-        "eval: {} variants + reference, {} frames of {} on {} at {}x{} ({} view(s){}), device {}",
-        variants.len(),
+        "eval: {variants} variants + reference, {} frames of {} on {} at {}x{} ({} view(s){}), device {}",
         p.frames,
         p.scenario.name,
         p.data.name(),
@@ -119,10 +128,13 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         } else {
             ""
         },
-        gpu.info.name
+        setup.gpu.info.name
     );
-    let evaluation = evaluate(&setup, &variants, &mut Bars(None))?;
-    super::render::check_validation(&gpu)?;
+}
+
+/// With `--cross-check`: an error (and the first 20 places) wherever the GPU's metrics and
+/// the CPU path's differ; nothing is written then.
+fn require_cross_check(evaluation: &Evaluation) -> anyhow::Result<()> {
     if let Some(check) = &evaluation.cross_check
         && let Some(first) = check.problems.first()
     {
@@ -134,7 +146,11 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             check.problems.len()
         );
     }
-    report::write(&evaluation, &out, args.force)?;
+    Ok(())
+}
+
+/// The summary table, the budget warnings and where the report went.
+fn print_results(evaluation: &Evaluation, out: &std::path::Path) {
     print!(
         "{}",
         crate::eval::table::text(crate::eval::table::SUMMARY_COLUMNS, &evaluation.summaries)
@@ -153,7 +169,6 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         evaluation.wall_s,
         out.display()
     );
-    Ok(())
 }
 
 /// This process's command line, quoted for a POSIX shell.
