@@ -307,6 +307,32 @@ impl Layout {
     /// offset a reader will use is proven to lie inside the mapping; the error names the first
     /// field that does not fit.
     pub fn from_header(h: &RingHeader, mapped: u64) -> std::result::Result<Self, String> {
+        let geometry = Self::geometry_of(h)?;
+        let header_size = h.header_size as u64;
+        let (slot_size, pixels_offset, depth_offset) = (
+            h.slot_size as u64,
+            h.pixels_offset as u64,
+            h.depth_offset as u64,
+        );
+        Self::check_slot(&geometry, slot_size, pixels_offset, depth_offset)?;
+        let need = header_size + slot_size * h.slot_count as u64;
+        if need > mapped || need > MAX_SEGMENT_BYTES {
+            return Err(format!(
+                "header and slots need {need} bytes but the segment has {mapped}"
+            ));
+        }
+        Ok(Layout {
+            geometry,
+            header_size,
+            slot_size,
+            pixels_offset,
+            depth_offset,
+        })
+    }
+
+    /// The header's identity (magic, layout version) and geometry (header size, image size,
+    /// formats, row stride, slot count), checked in that order.
+    fn geometry_of(h: &RingHeader) -> std::result::Result<Geometry, String> {
         if h.magic != MAGIC {
             return Err("not a vkterrain ring (bad magic)".into());
         }
@@ -345,18 +371,23 @@ impl Layout {
             DEPTH_F32_REVERSED_Z => true,
             d => return Err(format!("depth_format {d} is unknown")),
         };
-        let g = Geometry {
+        Ok(Geometry {
             width: h.width,
             height: h.height,
             slot_count: h.slot_count,
             depth,
             align: h.header_size,
-        };
-        let (slot_size, pixels_offset, depth_offset) = (
-            h.slot_size as u64,
-            h.pixels_offset as u64,
-            h.depth_offset as u64,
-        );
+        })
+    }
+
+    /// Whether the pixels (and the depth, with `g.depth`) fit a `slot_size`-byte slot after
+    /// its header, each on a 64-byte line.
+    fn check_slot(
+        g: &Geometry,
+        slot_size: u64,
+        pixels_offset: u64,
+        depth_offset: u64,
+    ) -> std::result::Result<(), String> {
         if slot_size % LINE as u64 != 0 {
             return Err(format!("slot_size {slot_size} is not a multiple of 64"));
         }
@@ -369,7 +400,7 @@ impl Layout {
                 g.pixel_bytes()
             ));
         }
-        if depth
+        if g.depth
             && (depth_offset % LINE as u64 != 0
                 || depth_offset < pixels_offset + g.pixel_bytes()
                 || depth_offset + g.depth_bytes() > slot_size)
@@ -378,22 +409,10 @@ impl Layout {
                 "depth at {depth_offset} does not fit the slot after the pixels"
             ));
         }
-        if !depth && depth_offset != 0 {
+        if !g.depth && depth_offset != 0 {
             return Err("depth_offset set without depth".into());
         }
-        let need = header_size + slot_size * h.slot_count as u64;
-        if need > mapped || need > MAX_SEGMENT_BYTES {
-            return Err(format!(
-                "header and slots need {need} bytes but the segment has {mapped}"
-            ));
-        }
-        Ok(Layout {
-            geometry: g,
-            header_size,
-            slot_size,
-            pixels_offset,
-            depth_offset,
-        })
+        Ok(())
     }
 
     /// Whether a slot's metadata agrees with this layout (a reader rejects the slot otherwise).
