@@ -328,6 +328,27 @@ fn panels(img: &super::run::ImageFrame) -> Vec<u8> {
 }
 
 fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)]) -> String {
+    let mut md = report_header(eval);
+    report_summary(&mut md, eval, front);
+    let _ = writeln!(
+        md,
+        "## Charts\n\n![GPU time vs error](frame_time_vs_error.png) ![triangles vs error](triangles_vs_error.png) ![error over time](error_over_time.png)\n\n(SVG versions beside them.)\n"
+    );
+    let _ = writeln!(
+        md,
+        "## Images\n\nReference | method | screen-space error (black 0 to yellow >= 2 px, grey: sky) | FLIP error map (magma: black 0 to white 1).\n"
+    );
+    for (variant, frame, link) in images {
+        let _ = writeln!(
+            md,
+            "- {variant}, frame {frame}: ![{variant} {frame}]({link})"
+        );
+    }
+    md
+}
+
+/// The report's title, the run's setup and the command that regenerates it.
+fn report_header(eval: &Evaluation) -> String {
     let mut md = String::new();
     let _ = writeln!(md, "# Evaluation: {} on {}\n", eval.scenario, eval.dataset);
     let _ = writeln!(
@@ -363,6 +384,11 @@ fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)
         "Regenerate with:\n\n```sh\n{}\n```\n\nDefinitions of every metric: `docs/metrics.md`; how the evaluation works: `docs/eval.md`.\n",
         eval.command
     );
+    md
+}
+
+/// The summary table, its warnings, the Pareto front and the cross-check's verdict.
+fn report_summary(md: &mut String, eval: &Evaluation, front: &[usize]) {
     md.push_str(&super::table::markdown(
         super::table::SUMMARY_COLUMNS,
         &eval.summaries,
@@ -395,21 +421,6 @@ fn report_md(eval: &Evaluation, front: &[usize], images: &[(String, u64, String)
             }
         );
     }
-    let _ = writeln!(
-        md,
-        "## Charts\n\n![GPU time vs error](frame_time_vs_error.png) ![triangles vs error](triangles_vs_error.png) ![error over time](error_over_time.png)\n\n(SVG versions beside them.)\n"
-    );
-    let _ = writeln!(
-        md,
-        "## Images\n\nReference | method | screen-space error (black 0 to yellow >= 2 px, grey: sky) | FLIP error map (magma: black 0 to white 1).\n"
-    );
-    for (variant, frame, link) in images {
-        let _ = writeln!(
-            md,
-            "- {variant}, frame {frame}: ![{variant} {frame}]({link})"
-        );
-    }
-    md
 }
 
 /// A CSV cell for an optional number: empty when absent.
