@@ -41,29 +41,42 @@ fn meta(g: Geometry) -> FrameMeta {
     }
 }
 
-/// Consumers that copy every frame they can get until `stop`.
+/// `n` reader threads on the ring, each running `read` on its own reader (and `stop`) and
+/// returning what it returns.
+fn readers<T: Send + 'static>(
+    name: &RingLocation,
+    n: usize,
+    stop: &Arc<AtomicBool>,
+    read: impl Fn(&mut RingReader, &AtomicBool) -> T + Clone + Send + 'static,
+) -> Vec<std::thread::JoinHandle<T>> {
+    (0..n)
+        .map(|_| {
+            let (name, stop, read) = (name.clone(), stop.clone(), read.clone());
+            std::thread::spawn(move || {
+                let mut r = RingReader::open(&name, Some(euid())).unwrap();
+                read(&mut r, &stop)
+            })
+        })
+        .collect()
+}
+
+/// Consumers that read (with `copy`, copying the pixels of) every frame they can get until
+/// `stop`: each returns the frames it received.
 fn consumers(
     name: &RingLocation,
     n: usize,
     copy: bool,
     stop: &Arc<AtomicBool>,
 ) -> Vec<std::thread::JoinHandle<u64>> {
-    (0..n)
-        .map(|_| {
-            let name = name.clone();
-            let stop = stop.clone();
-            std::thread::spawn(move || {
-                let mut r = RingReader::open(&name, Some(euid())).unwrap();
-                r.copy_pixels = copy;
-                while !stop.load(Ordering::Relaxed) {
-                    if r.wait_next(Duration::from_millis(50)).unwrap() == Next::Closed {
-                        break;
-                    }
-                }
-                r.stats().received
-            })
-        })
-        .collect()
+    readers(name, n, stop, move |r, stop| {
+        r.copy_pixels = copy;
+        while !stop.load(Ordering::Relaxed) {
+            if r.wait_next(Duration::from_millis(50)).unwrap() == Next::Closed {
+                break;
+            }
+        }
+        r.stats().received
+    })
 }
 
 type Json = serde_json::Map<String, serde_json::Value>;
@@ -404,20 +417,13 @@ fn latency_consumers(
     n: usize,
     stop: &Arc<AtomicBool>,
 ) -> Vec<std::thread::JoinHandle<Vec<f64>>> {
-    (0..n)
-        .map(|_| {
-            let name = name.clone();
-            let stop = stop.clone();
-            std::thread::spawn(move || {
-                let mut r = RingReader::open(&name, Some(euid())).unwrap();
-                let mut lat = Vec::new();
-                while !stop.load(Ordering::Relaxed) {
-                    if let Ok(Next::Frame(m)) = r.wait_next(Duration::from_millis(50)) {
-                        lat.push((monotonic_ns() - m.capture_ns) as f64 / 1e3);
-                    }
-                }
-                lat
-            })
-        })
-        .collect()
+    readers(name, n, stop, |r, stop| {
+        let mut lat = Vec::new();
+        while !stop.load(Ordering::Relaxed) {
+            if let Ok(Next::Frame(m)) = r.wait_next(Duration::from_millis(50)) {
+                lat.push((monotonic_ns() - m.capture_ns) as f64 / 1e3);
+            }
+        }
+        lat
+    })
 }
