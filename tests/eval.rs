@@ -96,6 +96,29 @@ fn eval_writes_results_charts_images_and_report() {
             .collect::<Vec<_>>()
     };
     assert_eq!(flips("brute"), [0.0, 0.0, 0.0]);
+    // Tiles (UDLOD's counter, grid 4; `tests/udlod.rs` checks it against the tile list): each
+    // drawn tile draws 2 to 32 triangles, and with quadrants collapsed or dropped some frame
+    // fewer than 32 a tile; brute force has no tiles. Negative control, by hand: triangles / 32
+    // (the bench's column until 2026-12-07), rounded down, breaks the bound in frame 0.
+    let (mut udlod_frames, mut below_full) = (0, 0);
+    for r in rows {
+        let (tiles, triangles) = (&r["tiles"], r["triangles"].as_u64().unwrap());
+        if r["method"] == "udlod" {
+            let t = tiles
+                .as_u64()
+                .unwrap_or_else(|| panic!("udlod row without tiles: {r}"));
+            assert!(t > 0 && 2 * t <= triangles && triangles <= 32 * t, "{r}");
+            udlod_frames += 1;
+            below_full += (triangles < 32 * t) as usize;
+        } else {
+            assert!(tiles.is_null(), "{r}");
+        }
+    }
+    assert!(
+        udlod_frames == 2 * 8 && below_full > 0,
+        "{below_full} of {udlod_frames}"
+    );
+    assert!(summaries[1]["tiles_median"].as_f64().unwrap() > 0.0);
     let pgm = flips("pgm 60x263");
     assert!(pgm.len() == 3 && pgm.iter().all(|&f| f > 0.0), "{pgm:?}");
     // Side by side: reference | method | error | FLIP.

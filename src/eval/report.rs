@@ -88,12 +88,12 @@ fn frames_csv(eval: &Evaluation) -> String {
 
 fn frames_csv_of(rows: &[FrameRow]) -> String {
     let mut csv = String::from(
-        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,gpu_eval_ms,cpu_record_ms,triangles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,cracks,silhouette_px,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles,coarse_px_p999,coarse_share,level0_px_max\n",
+        "variant,method,frame,gpu_ms,gpu_prepass_ms,gpu_terrain_ms,gpu_eval_ms,cpu_record_ms,triangles,tiles,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_mean,err_m_p999,err_m_max,holes,cracks,silhouette_px,psnr_db,ssim,popping_p99_px,flip_mean,flip_p99,oracle_triangles,coarse_px_p999,coarse_share,level0_px_max\n",
     );
     for r in rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{},{},{:.3},{:.5},{:.5},{},{},{},{},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{},{},{},{:.3},{:.5},{:.5},{},{},{},{},{},{}",
             csv_field(&r.variant),
             csv_field(&r.method),
             r.frame,
@@ -103,6 +103,7 @@ fn frames_csv_of(rows: &[FrameRow]) -> String {
             r.gpu_eval_ms,
             r.cpu_record_ms,
             r.triangles,
+            optional(r.tiles.map(|v| v as f64), 0),
             r.error.pixels.mean,
             r.error.pixels.p99,
             r.error.pixels.p999,
@@ -133,12 +134,12 @@ fn summary_csv(eval: &Evaluation) -> String {
 
 fn summary_csv_of(summaries: &[RunSummary]) -> String {
     let mut sum = String::from(
-        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,cracks,silhouette_px_max,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median,budget_overflow_frames,coarse_px_p999,coarse_share,level0_px_max\n",
+        "variant,method,frames,gpu_ms_median,gpu_ms_p90,gpu_ms_p99,gpu_ms_max,triangles_median,tiles_median,err_px_mean,err_px_p99,err_px_p999,err_px_max,err_m_p999,holes,cracks,silhouette_px_max,psnr_db,ssim,flip_mean,flip_p99_mean,flip_frames,popping_px_median,popping_px_max,swimming_px_mean,swimming_px_p99,swimming_m_mean,oracle_triangles_median,oracle_ratio_median,budget_overflow_frames,coarse_px_p999,coarse_share,level0_px_max\n",
     );
     for s in summaries {
         let _ = writeln!(
             sum,
-            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{},{},{},{}",
+            "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.0},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{},{:.3},{:.5},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4},{},{},{},{},{},{}",
             csv_field(&s.variant),
             csv_field(&s.method),
             s.frames,
@@ -147,6 +148,7 @@ fn summary_csv_of(summaries: &[RunSummary]) -> String {
             s.gpu_ms.p99,
             s.gpu_ms.max,
             s.triangles_median,
+            optional(s.tiles_median, 1),
             s.error.pixels.mean,
             s.error.pixels.p99,
             s.error.pixels.p999,
@@ -466,6 +468,7 @@ mod tests {
             gpu_eval_ms: 2.0,
             cpu_record_ms: 0.1,
             triangles: 1000,
+            tiles: Some(40),
             budget_overflow: 0,
             error: GeometricError::default(),
             holes: 0,
@@ -491,6 +494,7 @@ mod tests {
             gpu_terrain_ms_median: 0.0,
             gpu_eval_ms_median: 0.0,
             triangles_median: 0.0,
+            tiles_median: Some(40.0),
             budget_overflow_frames: 0,
             error: GeometricError::default(),
             holes_total: 0,

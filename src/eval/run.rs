@@ -147,6 +147,9 @@ pub struct FrameRow {
     pub gpu_eval_ms: f64,
     pub cpu_record_ms: f64,
     pub triangles: u64,
+    /// The tiles the method drew over the frame's views (its `tiles` counter: UDLOD; None for
+    /// a method without one).
+    pub tiles: Option<u64>,
     /// Tiles the method's budget could not hold this frame (UDLOD's `max_tiles`; 0: none).
     pub budget_overflow: u64,
     /// Percentiles to one histogram bin (1.2%, never understated); count, mean, max exact.
@@ -185,6 +188,8 @@ pub struct RunSummary {
     /// GPU time of the frame analysis and the readback copy per frame (median, ms).
     pub gpu_eval_ms_median: f64,
     pub triangles_median: f64,
+    /// Median of the measured frames' [`FrameRow::tiles`] (None: a method without tiles).
+    pub tiles_median: Option<f64>,
     /// Measured frames whose LOD budget overflowed (coarser than the settings ask: UDLOD's
     /// `max_tiles`); eval warns when it is not 0.
     pub budget_overflow_frames: usize,
@@ -590,7 +595,8 @@ impl Run {
             self.errors.metres.merge(&gpu.metres);
             self.errors.pixels.merge(&gpu.pixels);
         }
-        let row = self.row(k, &timings, counts, &gpu, flip);
+        let mut row = self.row(k, &timings, counts, &gpu, flip);
+        row.tiles = self.drawn_tiles(requests.len());
         self.rows.push(row);
         Ok(spawned)
     }
@@ -636,6 +642,21 @@ impl Run {
         Ok((delivered, gpu))
     }
 
+    /// The method's `tiles` counter summed over the frame's `views` (one frame in flight, as
+    /// in `measure_coarse`: view v's slot is frame slot 0's); None without that counter.
+    fn drawn_tiles(&self, views: usize) -> Option<u64> {
+        let method = self.renderer.method();
+        (0..views)
+            .map(|v| {
+                let counters = method.counters(ViewSlot(v));
+                counters
+                    .iter()
+                    .find(|(name, _)| *name == "tiles")
+                    .map(|c| c.1)
+            })
+            .sum()
+    }
+
     /// Frame `k`'s row of `frames.csv`.
     fn row(
         &self,
@@ -655,6 +676,7 @@ impl Run {
             gpu_eval_ms: timings.gpu_readback_ms,
             cpu_record_ms: timings.cpu_record_ms,
             triangles,
+            tiles: None,
             budget_overflow,
             error: GeometricError {
                 metres: gpu.metres.summary(),
@@ -863,6 +885,7 @@ fn run_summary(
         gpu_terrain_ms_median: pick(|r| r.gpu_terrain_ms).median,
         gpu_eval_ms_median: pick(|r| r.gpu_eval_ms).median,
         triangles_median: pick(|r| r.triangles as f64).median,
+        tiles_median: tiles_median(&measured),
         budget_overflow_frames: measured.iter().filter(|r| r.budget_overflow > 0).count(),
         error: run.errors.summary(),
         holes_total: measured.iter().map(|r| r.holes).sum(),
@@ -906,6 +929,15 @@ fn reference_text(on_earth: bool, clipmap: bool) -> String {
 
 /// Median of `value(row, oracle triangles)` over the rows the oracle ran on (`None` when it
 /// ran on none: not a UDLOD variant).
+/// The median of the rows' tiles (None when no row has them).
+fn tiles_median(rows: &[&FrameRow]) -> Option<f64> {
+    let v: Vec<f64> = rows
+        .iter()
+        .filter_map(|r| r.tiles.map(|t| t as f64))
+        .collect();
+    (!v.is_empty()).then(|| Percentiles::of(v).median)
+}
+
 fn oracle_median(rows: &[&FrameRow], value: impl Fn(&FrameRow, u64) -> f64) -> Option<f64> {
     let v: Vec<f64> = rows
         .iter()

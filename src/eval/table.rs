@@ -28,6 +28,13 @@ pub const SUMMARY_COLUMNS: &[Column<RunSummary>] = &[
         cell: |s| format!("{:.0}", s.triangles_median),
     },
     Column {
+        header: "tiles",
+        cell: |s| match s.tiles_median {
+            Some(t) => format!("{t:.0}"),
+            None => "-".into(),
+        },
+    },
+    Column {
         header: "UDLOD/oracle",
         cell: |s| match s.oracle_ratio_median {
             Some(r) => format!("{r:.2}"),
