@@ -258,17 +258,7 @@ impl Chunked {
         let levels = Self::chunk_levels(ctx, &settings)?;
         let depths = Depths::new(&levels, &settings);
         let cbt = Self::cbt_layout(gpu, &settings, depths)?;
-        let table = match settings.draw {
-            ChunkDraw::Instanced => CHUNKED_SET,
-            ChunkDraw::Mesh => {
-                gpu.require(
-                    Feature::MeshShader,
-                    "method chunked with draw = \"mesh\" (VK_EXT_mesh_shader)",
-                )?;
-                CHUNKED_SET_MESH
-            }
-        };
-        let sets = DescriptorSets::new(gpu, table, ctx.slots)?;
+        let sets = DescriptorSets::new(gpu, Self::set_table(gpu, settings.draw)?, ctx.slots)?;
         let min_max = host_buffer(
             gpu,
             "chunked min/max",
@@ -286,41 +276,11 @@ impl Chunked {
             vk::BufferUsageFlags::INDEX_BUFFER,
             bytemuck::cast_slice(&grid),
         )?;
-        let mut slots = Vec::with_capacity(ctx.slots);
-        for i in 0..ctx.slots {
-            let s = Self::slot_buffers(gpu, &settings, &levels, depths, cbt, &sets, i)?;
-            sets.write(
-                i,
-                &[
-                    ("chunked", Resource::Buffer(s.uniforms.raw)),
-                    ("state", Resource::Buffer(s.state.raw)),
-                    ("lists", Resource::Buffer(s._lists.raw)),
-                    ("final_chunks", Resource::Buffer(s.final_chunks.raw)),
-                    ("min_max", Resource::Buffer(min_max.raw)),
-                    ("chunk_error", Resource::Buffer(errors.raw)),
-                    ("lod_map", Resource::Buffer(s.lod_map.raw)),
-                    ("cbt_heap", Resource::Buffer(s._cbt_heap.raw)),
-                    ("cbt_bits", Resource::Buffer(s._cbt_bits.raw)),
-                ],
-            )?;
-            slots.push(s);
-        }
+        let shared = [&min_max, &errors];
+        let slots = Self::bound_slots(ctx, &settings, &levels, (depths, cbt), &sets, shared)?;
         let set_layouts = [ctx.terrain.descriptors.layout, sets.layout];
         let pipelines = Pipelines::new(ctx, &set_layouts, settings.draw)?;
-        tracing::info!(
-            "chunked: {} traversal, {} draw, {} quads per chunk, levels {}..={} (tree depth {}, root depth \
-             {}); a CBT of this tree: binary depth {}, {} bytes of sums + {} bytes of bits per slot",
-            settings.traversal.name(),
-            settings.draw.name(),
-            settings.chunk_quads,
-            depths.finest,
-            depths.root,
-            depths.tree_depth(),
-            depths.root - depths.start,
-            cbt.depth,
-            cbt.heap_bytes(),
-            cbt.bit_bytes()
-        );
+        log_layout(&settings, depths, cbt);
         let mesh = (settings.draw == ChunkDraw::Mesh)
             .then(|| ash::ext::mesh_shader::Device::new(&gpu.instance.raw, &gpu.device));
         Ok(Chunked {
@@ -339,6 +299,52 @@ impl Chunked {
             pipelines,
             mesh,
         })
+    }
+
+    /// The method's descriptor set table for `draw` (the mesh draw's needs the mesh shader).
+    fn set_table(gpu: &Gpu, draw: ChunkDraw) -> Result<&'static [Binding]> {
+        Ok(match draw {
+            ChunkDraw::Instanced => CHUNKED_SET,
+            ChunkDraw::Mesh => {
+                gpu.require(
+                    Feature::MeshShader,
+                    "method chunked with draw = \"mesh\" (VK_EXT_mesh_shader)",
+                )?;
+                CHUNKED_SET_MESH
+            }
+        })
+    }
+
+    /// Each frame slot's buffers, bound into its descriptor set beside the statistics
+    /// `[min_max, errors]` all slots share.
+    fn bound_slots(
+        ctx: &MethodContext<'_>,
+        settings: &ChunkedSettings,
+        levels: &Levels,
+        (depths, cbt): (Depths, CbtLayout),
+        sets: &DescriptorSets,
+        [min_max, errors]: [&Buffer; 2],
+    ) -> Result<Vec<SlotBuffers>> {
+        let mut slots = Vec::with_capacity(ctx.slots);
+        for i in 0..ctx.slots {
+            let s = Self::slot_buffers(ctx.gpu, settings, levels, depths, cbt, sets, i)?;
+            sets.write(
+                i,
+                &[
+                    ("chunked", Resource::Buffer(s.uniforms.raw)),
+                    ("state", Resource::Buffer(s.state.raw)),
+                    ("lists", Resource::Buffer(s._lists.raw)),
+                    ("final_chunks", Resource::Buffer(s.final_chunks.raw)),
+                    ("min_max", Resource::Buffer(min_max.raw)),
+                    ("chunk_error", Resource::Buffer(errors.raw)),
+                    ("lod_map", Resource::Buffer(s.lod_map.raw)),
+                    ("cbt_heap", Resource::Buffer(s._cbt_heap.raw)),
+                    ("cbt_bits", Resource::Buffer(s._cbt_bits.raw)),
+                ],
+            )?;
+            slots.push(s);
+        }
+        Ok(slots)
     }
 
     /// The chunk quadtree's statistics (a pyramid's stored ones, else computed from level 0).
@@ -551,4 +557,22 @@ impl Chunked {
         let chunks: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(bytes);
         Ok(chunks.iter().map(|t| [t[0], t[1], t[2]]).collect())
     }
+}
+
+/// The method's shape in the log: traversal, draw, chunk size, levels and the CBT it would need.
+fn log_layout(settings: &ChunkedSettings, depths: Depths, cbt: CbtLayout) {
+    tracing::info!(
+        "chunked: {} traversal, {} draw, {} quads per chunk, levels {}..={} (tree depth {}, root depth \
+         {}); a CBT of this tree: binary depth {}, {} bytes of sums + {} bytes of bits per slot",
+        settings.traversal.name(),
+        settings.draw.name(),
+        settings.chunk_quads,
+        depths.finest,
+        depths.root,
+        depths.tree_depth(),
+        depths.root - depths.start,
+        cbt.depth,
+        cbt.heap_bytes(),
+        cbt.bit_bytes()
+    );
 }
