@@ -181,49 +181,8 @@ fn check_srtm(path: &Path) -> Result<()> {
 fn open(path: &Path) -> Result<Input> {
     init();
     let what = path.display().to_string();
-    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    if !meta.is_file() {
-        return Err(Error::invalid(
-            what,
-            "is not a regular file (a device, pipe or directory cannot be a DEM)",
-        ));
-    }
-    check_srtm(path)?;
-    let lower = lower_name(path);
-    let gdal_path = if lower.ends_with(".zip") && !lower.ends_with(".hgt.zip") {
-        format!("/vsizip/{}", path.display())
-    } else {
-        path.display().to_string()
-    };
-    let ds = Dataset::open_ex(
-        &gdal_path,
-        DatasetOptions {
-            open_flags: GdalOpenFlags::GDAL_OF_RASTER | GdalOpenFlags::GDAL_OF_READONLY,
-            ..Default::default()
-        },
-    )
-    .map_err(|e| {
-        Error::invalid(
-            &what,
-            format!("GDAL cannot read it as a raster: {}", gdal_msg(e)),
-        )
-    })?;
-    let bands = ds.raster_count();
-    if bands != 1 {
-        return Err(Error::invalid(
-            what,
-            format!(
-                "has {bands} bands; a DEM has one band of heights (Terrarium / terrain-RGB tiles: use --xyz)"
-            ),
-        ));
-    }
-    let (w, h) = ds.raster_size();
-    if w < 2 || h < 2 || w as u64 > MAX_SIDE_SAMPLES || h as u64 > MAX_SIDE_SAMPLES {
-        return Err(Error::invalid(
-            what,
-            format!("{w}x{h} samples is outside 2..={MAX_SIDE_SAMPLES} per side"),
-        ));
-    }
+    let ds = open_raster(path, &what)?;
+    let (w, h) = one_band_size(&ds, &what)?;
     let band = ds
         .rasterband(1)
         .map_err(|e| Error::invalid(&what, gdal_msg(e)))?;
@@ -252,8 +211,8 @@ fn open(path: &Path) -> Result<Input> {
     let driver = ds.driver().short_name();
     Ok(Input {
         path: path.to_path_buf(),
-        width: w as u32,
-        height: h as u32,
+        width: w,
+        height: h,
         band_type,
         nodata,
         scale,
@@ -263,6 +222,60 @@ fn open(path: &Path) -> Result<Input> {
         driver,
         ds,
     })
+}
+
+/// Opens `path` with GDAL as a read-only raster (`/vsizip/` for a zip other than an SRTM
+/// `.hgt.zip`), after refusing what is not a regular file or a truncated SRTM tile.
+fn open_raster(path: &Path, what: &str) -> Result<Dataset> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(Error::invalid(
+            what,
+            "is not a regular file (a device, pipe or directory cannot be a DEM)",
+        ));
+    }
+    check_srtm(path)?;
+    let lower = lower_name(path);
+    let gdal_path = if lower.ends_with(".zip") && !lower.ends_with(".hgt.zip") {
+        format!("/vsizip/{}", path.display())
+    } else {
+        path.display().to_string()
+    };
+    Dataset::open_ex(
+        &gdal_path,
+        DatasetOptions {
+            open_flags: GdalOpenFlags::GDAL_OF_RASTER | GdalOpenFlags::GDAL_OF_READONLY,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| {
+        Error::invalid(
+            what,
+            format!("GDAL cannot read it as a raster: {}", gdal_msg(e)),
+        )
+    })
+}
+
+/// The raster's size, where it has the one band of heights a DEM has and a size within
+/// `2..=MAX_SIDE_SAMPLES` per side.
+fn one_band_size(ds: &Dataset, what: &str) -> Result<(u32, u32)> {
+    let bands = ds.raster_count();
+    if bands != 1 {
+        return Err(Error::invalid(
+            what,
+            format!(
+                "has {bands} bands; a DEM has one band of heights (Terrarium / terrain-RGB tiles: use --xyz)"
+            ),
+        ));
+    }
+    let (w, h) = ds.raster_size();
+    if w < 2 || h < 2 || w as u64 > MAX_SIDE_SAMPLES || h as u64 > MAX_SIDE_SAMPLES {
+        return Err(Error::invalid(
+            what,
+            format!("{w}x{h} samples is outside 2..={MAX_SIDE_SAMPLES} per side"),
+        ));
+    }
+    Ok((w as u32, h as u32))
 }
 
 /// What reading found besides the heights.
