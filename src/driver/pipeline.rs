@@ -282,13 +282,7 @@ fn create_graphics(
     geometry: Geometry,
 ) -> Result<Pipeline> {
     let d = &gpu.device;
-    let layout = unsafe {
-        d.create_pipeline_layout(
-            &vk::PipelineLayoutCreateInfo::default().set_layouts(desc.set_layouts),
-            None,
-        )
-    }
-    .vk("vkCreatePipelineLayout")?;
+    let layout = pipeline_layout(gpu, desc.set_layouts)?;
     let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
     let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(desc.topology);
     let tessellation_state = vk::PipelineTessellationStateCreateInfo::default()
@@ -299,22 +293,10 @@ fn create_graphics(
     let viewport = vk::PipelineViewportStateCreateInfo::default()
         .viewport_count(1)
         .scissor_count(1);
-    let raster = vk::PipelineRasterizationStateCreateInfo::default()
-        .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(if desc.cull_back_faces {
-            vk::CullModeFlags::BACK
-        } else {
-            vk::CullModeFlags::NONE
-        })
-        // WebGPU-style clip space with naga's y flip: counter-clockwise stays front-facing.
-        .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
-        .line_width(1.0);
+    let raster = rasterization(desc.cull_back_faces);
     let multisample = vk::PipelineMultisampleStateCreateInfo::default()
         .rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
-        .depth_test_enable(true)
-        .depth_write_enable(true)
-        .depth_compare_op(vk::CompareOp::GREATER);
+    let depth = reversed_depth();
     let blend_attachments = [vk::PipelineColorBlendAttachmentState::default()
         .color_write_mask(vk::ColorComponentFlags::RGBA)];
     let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
@@ -369,6 +351,37 @@ fn create_graphics(
     }
 }
 
+/// Filled polygons, back faces culled or not, counter-clockwise front faces: WebGPU-style
+/// clip space with naga's y flip keeps counter-clockwise front-facing.
+fn rasterization(cull_back_faces: bool) -> vk::PipelineRasterizationStateCreateInfo<'static> {
+    vk::PipelineRasterizationStateCreateInfo::default()
+        .polygon_mode(vk::PolygonMode::FILL)
+        .cull_mode(if cull_back_faces {
+            vk::CullModeFlags::BACK
+        } else {
+            vk::CullModeFlags::NONE
+        })
+        .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
+        .line_width(1.0)
+}
+
+/// Depth test and write with `GREATER`: reversed Z, the near plane at 1.
+fn reversed_depth() -> vk::PipelineDepthStencilStateCreateInfo<'static> {
+    vk::PipelineDepthStencilStateCreateInfo::default()
+        .depth_test_enable(true)
+        .depth_write_enable(true)
+        .depth_compare_op(vk::CompareOp::GREATER)
+}
+
+/// A pipeline layout of `set_layouts` (no push constants).
+fn pipeline_layout(
+    gpu: &Gpu,
+    set_layouts: &[vk::DescriptorSetLayout],
+) -> Result<vk::PipelineLayout> {
+    let info = vk::PipelineLayoutCreateInfo::default().set_layouts(set_layouts);
+    unsafe { gpu.device.create_pipeline_layout(&info, None) }.vk("vkCreatePipelineLayout")
+}
+
 /// Builds a compute pipeline for entry point `entry` of a SPIR-V module.
 pub fn compute_pipeline(
     gpu: &Arc<Gpu>,
@@ -378,13 +391,7 @@ pub fn compute_pipeline(
 ) -> Result<Pipeline> {
     let d = &gpu.device;
     let module = crate::driver::shaders::module(gpu, spv)?;
-    let layout = unsafe {
-        d.create_pipeline_layout(
-            &vk::PipelineLayoutCreateInfo::default().set_layouts(set_layouts),
-            None,
-        )
-    }
-    .vk("vkCreatePipelineLayout");
+    let layout = pipeline_layout(gpu, set_layouts);
     let layout = match layout {
         Ok(l) => l,
         Err(e) => {
