@@ -3,12 +3,13 @@
 3ab4290 (its CSV columns: wall-clock frame_ms, no oracle), AFTER by this build (GPU
 timestamps, the oracle). Per tau, one markdown row: p99.9 / max px before and after, after's
 p99.9 / tau (over the coarse pixels too, with their share), triangles (median) before ->
-after and the factor, GPU ms (median) before -> after, UDLOD/oracle before -> after.
+after and the factor, tiles (median) before -> after, GPU ms (median) before -> after, UDLOD/oracle before -> after.
 
 Before's GPU ms is the median of its per-frame prepass + terrain timestamps after the first
 WARMUP frames, what after's `gpu_ms` measures; before's UDLOD/oracle is the median over the
 frames where after computed the oracle of before's triangles over the oracle's (the same
-flight, frames and tau).
+flight, frames and tau). Before's tiles are its triangles over 512: grid 16 drew every tile
+whole; after's are `tiles_median` (eval's tiles column, "-" from a build before it).
 
 usage: scripts/udlod_before_after_table.py BEFORE_DIR AFTER_DIR
 """
@@ -18,6 +19,7 @@ import statistics
 import sys
 
 WARMUP = 5
+BEFORE_TILE_TRIANGLES = 2 * 16 * 16
 
 
 def tau_of(variant):
@@ -77,6 +79,8 @@ def main():
         ]
         ratio_before = statistics.median(ratios) if ratios else float("nan")
         tri_b, tri_a = float(b["triangles_median"]), float(a["triangles_median"])
+        tiles_a = a.get("tiles_median") or ""
+        tiles_a = fmt_int(float(tiles_a)) if tiles_a else "-"
         p999_a = float(a["err_px_p999"])
         coarse = (
             f"{float(a['coarse_px_p999']) / tau:.2f}, {fmt_share(float(a['coarse_share']))}"
@@ -87,6 +91,7 @@ def main():
             f"| | {tau:g} | {float(b['err_px_p999']):.3f} / {fmt_px(float(b['err_px_max']))} "
             f"| {p999_a:.3f} / {fmt_px(float(a['err_px_max']))} | {p999_a / tau:.2f} ({coarse}) "
             f"| {fmt_int(tri_b)} -> {fmt_int(tri_a)} ({tri_b / tri_a:.1f}x) "
+            f"| {fmt_int(tri_b / BEFORE_TILE_TRIANGLES)} -> {tiles_a} "
             f"| {gpu_before:.1f} -> {float(a['gpu_ms_median']):.1f} "
             f"| {ratio_before:.2f} -> {float(a['oracle_ratio_median']):.2f} |"
         )
