@@ -165,30 +165,51 @@ pub struct ImageDesc<'a> {
     pub aspect: vk::ImageAspectFlags,
 }
 
+impl ImageDesc<'_> {
+    /// A 2D image of this description, optimal tiling, one sample, `UNDEFINED` at first.
+    fn create_info(&self) -> vk::ImageCreateInfo<'static> {
+        vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(self.format)
+            .extent(vk::Extent3D {
+                width: self.extent.width,
+                height: self.extent.height,
+                depth: 1,
+            })
+            .mip_levels(self.mips)
+            .array_layers(self.layers)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(self.usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED)
+    }
+
+    /// A view of every mip and layer of `image` (an array view where there are layers).
+    fn view_info(&self, image: vk::Image) -> vk::ImageViewCreateInfo<'static> {
+        let view_type = if self.layers > 1 {
+            vk::ImageViewType::TYPE_2D_ARRAY
+        } else {
+            vk::ImageViewType::TYPE_2D
+        };
+        vk::ImageViewCreateInfo::default()
+            .image(image)
+            .view_type(view_type)
+            .format(self.format)
+            .subresource_range(vk::ImageSubresourceRange {
+                aspect_mask: self.aspect,
+                base_mip_level: 0,
+                level_count: self.mips,
+                base_array_layer: 0,
+                layer_count: self.layers,
+            })
+    }
+}
+
 impl Image {
     pub fn new(gpu: &Arc<Gpu>, desc: &ImageDesc<'_>) -> Result<Self> {
         let d = &gpu.device;
-        let raw = unsafe {
-            d.create_image(
-                &vk::ImageCreateInfo::default()
-                    .image_type(vk::ImageType::TYPE_2D)
-                    .format(desc.format)
-                    .extent(vk::Extent3D {
-                        width: desc.extent.width,
-                        height: desc.extent.height,
-                        depth: 1,
-                    })
-                    .mip_levels(desc.mips)
-                    .array_layers(desc.layers)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .tiling(vk::ImageTiling::OPTIMAL)
-                    .usage(desc.usage)
-                    .sharing_mode(vk::SharingMode::EXCLUSIVE)
-                    .initial_layout(vk::ImageLayout::UNDEFINED),
-                None,
-            )
-        }
-        .vk("vkCreateImage")?;
+        let raw = unsafe { d.create_image(&desc.create_info(), None) }.vk("vkCreateImage")?;
         let requirements = unsafe { d.get_image_memory_requirements(raw) };
         let allocation = match gpu.allocator().allocate(&AllocationCreateDesc {
             name: desc.name,
@@ -219,27 +240,7 @@ impl Image {
                 result,
             });
         }
-        let view_type = if desc.layers > 1 {
-            vk::ImageViewType::TYPE_2D_ARRAY
-        } else {
-            vk::ImageViewType::TYPE_2D
-        };
-        let view = match unsafe {
-            d.create_image_view(
-                &vk::ImageViewCreateInfo::default()
-                    .image(raw)
-                    .view_type(view_type)
-                    .format(desc.format)
-                    .subresource_range(vk::ImageSubresourceRange {
-                        aspect_mask: desc.aspect,
-                        base_mip_level: 0,
-                        level_count: desc.mips,
-                        base_array_layer: 0,
-                        layer_count: desc.layers,
-                    }),
-                None,
-            )
-        } {
+        let view = match unsafe { d.create_image_view(&desc.view_info(raw), None) } {
             Ok(v) => v,
             Err(result) => {
                 cleanup(allocation);
