@@ -46,21 +46,9 @@ impl HostBuffer {
             ));
         }
         let d = &gpu.device;
-        let ext = ash::ext::external_memory_host::Device::new(&gpu.instance.raw, d);
         let handle_type = vk::ExternalMemoryHandleTypeFlags::HOST_ALLOCATION_EXT;
-        let mut host_props = vk::MemoryHostPointerPropertiesEXT::default();
         // SAFETY: `ptr` is a valid host pointer (caller's contract).
-        // The function pointer was loaded for this device, which has the extension enabled.
-        unsafe {
-            (ext.fp().get_memory_host_pointer_properties_ext)(
-                ext.device(),
-                handle_type,
-                ptr.cast(),
-                &mut host_props,
-            )
-        }
-        .result()
-        .vk("vkGetMemoryHostPointerPropertiesEXT")?;
+        let host_types = unsafe { Self::host_pointer_types(gpu, ptr) }?;
         let mut external = vk::ExternalMemoryBufferCreateInfo::default().handle_types(handle_type);
         let raw = unsafe {
             d.create_buffer(
@@ -74,16 +62,7 @@ impl HostBuffer {
         }
         .vk("vkCreateBuffer")?;
         let req = unsafe { d.get_buffer_memory_requirements(raw) };
-        // A coherent type: the host reads the pixels without vkInvalidateMappedMemoryRanges.
-        let types = &gpu.info.memory;
-        let type_index = (0..types.memory_type_count).find(|&i| {
-            let allowed = host_props.memory_type_bits & req.memory_type_bits & (1 << i) != 0;
-            allowed
-                && types.memory_types[i as usize].property_flags.contains(
-                    vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
-                )
-        });
-        let Some(type_index) = type_index else {
+        let Some(type_index) = coherent_type(gpu, host_types & req.memory_type_bits) else {
             unsafe { d.destroy_buffer(raw, None) };
             return Err(Error::invalid(
                 name,
@@ -128,6 +107,43 @@ impl HostBuffer {
             size: len,
         })
     }
+}
+
+impl HostBuffer {
+    /// The memory types (bits) that can import host pointer `ptr`.
+    ///
+    /// # Safety
+    /// `ptr` must be a valid host pointer.
+    unsafe fn host_pointer_types(gpu: &Gpu, ptr: *mut u8) -> Result<u32> {
+        let ext = ash::ext::external_memory_host::Device::new(&gpu.instance.raw, &gpu.device);
+        let mut host_props = vk::MemoryHostPointerPropertiesEXT::default();
+        // SAFETY: the function pointer was loaded for this device, which has the extension
+        // enabled; `ptr` is valid (this function's contract).
+        unsafe {
+            (ext.fp().get_memory_host_pointer_properties_ext)(
+                ext.device(),
+                vk::ExternalMemoryHandleTypeFlags::HOST_ALLOCATION_EXT,
+                ptr.cast(),
+                &mut host_props,
+            )
+        }
+        .result()
+        .vk("vkGetMemoryHostPointerPropertiesEXT")?;
+        Ok(host_props.memory_type_bits)
+    }
+}
+
+/// The first memory type among `allowed` (bits) that is host-visible and coherent: the host
+/// reads the pixels without vkInvalidateMappedMemoryRanges.
+fn coherent_type(gpu: &Gpu, allowed: u32) -> Option<u32> {
+    let types = &gpu.info.memory;
+    let wanted = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+    (0..types.memory_type_count).find(|&i| {
+        allowed & (1 << i) != 0
+            && types.memory_types[i as usize]
+                .property_flags
+                .contains(wanted)
+    })
 }
 
 impl Drop for HostBuffer {
