@@ -290,7 +290,15 @@ fn tiles_loader_assembles_a_level() {
     assert_eq!(map.heights, src.heights);
     let small = tiles::load(&ds.dir, None, 40 * 40).unwrap();
     assert_eq!((small.width, small.height, small.spacing), (35, 25, 20.0));
-    assert!(tiles::load(&ds.dir, Some(9), u64::MAX).is_err());
+    let level1 = tiles::load(&ds.dir, Some(1), u64::MAX).unwrap();
+    assert_eq!((level1.width, level1.height), (35, 25));
+    let e = tiles::load(&ds.dir, Some(9), u64::MAX)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("dataset.lod") && e.contains("has levels 0.."),
+        "{e}"
+    );
 }
 
 proptest! {

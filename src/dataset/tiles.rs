@@ -231,6 +231,51 @@ pub fn native_lod_spacing(georef: Option<&Georef>, height: u64, [sx, sy]: [f64; 
     ew.min(sy)
 }
 
+/// The level [`load_as`] loads: `lod` where it exists and fits [`super::MAX_SIDE`] per side,
+/// else (None) the finest whose samples fit `max_samples` too, or the coarsest.
+fn load_level(ds: &Dataset, dir: &Path, lod: Option<u32>, max_samples: u64) -> Result<u32> {
+    let levels = ds.manifest.levels.len() as u32;
+    let Some(l) = lod else {
+        let fits = |l: u32| {
+            let (w, h) = ds.layout.level_size(l);
+            w <= super::MAX_SIDE as u64 && h <= super::MAX_SIDE as u64 && w * h <= max_samples
+        };
+        return Ok((0..levels).find(|&l| fits(l)).unwrap_or(levels - 1));
+    };
+    if l >= levels {
+        return Err(Error::invalid(
+            "dataset.lod",
+            format!("{l} but {} has levels 0..{levels}", dir.display()),
+        ));
+    }
+    let (w, h) = ds.layout.level_size(l);
+    if w > super::MAX_SIDE as u64 || h > super::MAX_SIDE as u64 {
+        return Err(Error::invalid(
+            "dataset.lod",
+            format!("level {l} is {w}x{h}, over {} per side", super::MAX_SIDE),
+        ));
+    }
+    Ok(l)
+}
+
+/// `heights` (`w` x `h`, spacing `sx` east-west, `sy` north-south) resampled linearly along
+/// each row to spacing `sy`: the new width and samples.
+fn resample_east_west([w, h]: [u32; 2], heights: &[f32], [sx, sy]: [f64; 2]) -> (u32, Vec<f32>) {
+    let w2 = (((w - 1) as f64 * sx / sy).round() as u32 + 1).max(2);
+    let mut out = Vec::with_capacity(w2 as usize * h as usize);
+    for r in 0..h as usize {
+        let row = &heights[r * w as usize..(r + 1) * w as usize];
+        for c in 0..w2 {
+            let g = (c as f64 * sy / sx).min((w - 1) as f64);
+            let c0 = g.floor() as usize;
+            let c1 = (c0 + 1).min(w as usize - 1);
+            let f = g - c0 as f64;
+            out.push((row[c0] as f64 * (1.0 - f) + row[c1] as f64 * f) as f32);
+        }
+    }
+    (w2, out)
+}
+
 /// [`load`] with the grid's loading chosen by `grid`.
 pub fn load_as(
     dir: &Path,
@@ -239,35 +284,7 @@ pub fn load_as(
     grid: LoadGrid,
 ) -> Result<Heightmap> {
     let ds = Dataset::open(dir)?;
-    let fits = |l: u32| {
-        let (w, h) = ds.layout.level_size(l);
-        w <= super::MAX_SIDE as u64 && h <= super::MAX_SIDE as u64 && w * h <= max_samples
-    };
-    let lod = match lod {
-        Some(l) => {
-            let (w, h) = ds.layout.level_size(l);
-            if l as usize >= ds.manifest.levels.len() {
-                return Err(Error::invalid(
-                    "dataset.lod",
-                    format!(
-                        "{l} but {} has levels 0..{}",
-                        dir.display(),
-                        ds.manifest.levels.len()
-                    ),
-                ));
-            }
-            if w > super::MAX_SIDE as u64 || h > super::MAX_SIDE as u64 {
-                return Err(Error::invalid(
-                    "dataset.lod",
-                    format!("level {l} is {w}x{h}, over {} per side", super::MAX_SIDE),
-                ));
-            }
-            l
-        }
-        None => (0..ds.manifest.levels.len() as u32)
-            .find(|&l| fits(l))
-            .unwrap_or(ds.manifest.levels.len() as u32 - 1),
-    };
+    let lod = load_level(&ds, dir, lod, max_samples)?;
     let (w, h, heights, rgba) = ds.level_raster(lod)?;
     let scale = (1u64 << lod) as f64;
     let [sx, sy] = ds.manifest.spacing.map(|s| s * scale);
@@ -296,19 +313,7 @@ pub fn load_as(
     // native grid is resampled east-west to the north-south spacing here, at load time. The
     // data set itself keeps the native grid ([`LoadGrid::Native`] loads it).
     let (w2, heights) = if !square {
-        let w2 = (((w - 1) as f64 * sx / sy).round() as u32 + 1).max(2);
-        let mut out = Vec::with_capacity(w2 as usize * h as usize);
-        for r in 0..h as usize {
-            let row = &heights[r * w as usize..(r + 1) * w as usize];
-            for c in 0..w2 {
-                let g = (c as f64 * sy / sx).min((w - 1) as f64);
-                let c0 = g.floor() as usize;
-                let c1 = (c0 + 1).min(w as usize - 1);
-                let f = g - c0 as f64;
-                out.push((row[c0] as f64 * (1.0 - f) + row[c1] as f64 * f) as f32);
-            }
-        }
-        (w2, out)
+        resample_east_west([w, h], &heights, [sx, sy])
     } else {
         (w, heights)
     };
