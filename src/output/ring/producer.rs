@@ -65,6 +65,36 @@ fn io_err(what: &str, path: &std::path::Path, e: std::io::Error) -> Error {
 }
 
 /// A previous segment under the name (crashed or closed producer), to be marked replaced.
+/// The ring's slots imported as GPU memory where `options` ask for zero-copy and the device
+/// can (else None and why, logged: frames are copied instead).
+fn zero_copy_slots(
+    options: &ProducerOptions,
+    map: &Mapping,
+    layout: &Layout,
+    location: &RingLocation,
+) -> (Option<ZeroCopySlots>, Option<String>) {
+    let Some(request) = &options.zero_copy else {
+        return (None, None);
+    };
+    match import_slots(request, map, layout) {
+        Ok(slots) => (Some(slots), None),
+        Err(reason) => {
+            tracing::warn!(ring = %location, "zero-copy off, copying frames: {reason}");
+            (None, Some(reason))
+        }
+    }
+}
+
+/// Tells the readers of the old segment (`old_map`, its header mapped) that a new one
+/// replaced it, and wakes those waiting.
+fn mark_replaced(old_map: &Mapping) {
+    // SAFETY: header-sized mapping of the old segment.
+    let h = unsafe { &*(old_map.ptr() as *const RingHeader) };
+    h.state.store(STATE_REPLACED, Ordering::Release);
+    h.wake.fetch_add(1, Ordering::Release);
+    sys::futex_wake_all(&h.wake);
+}
+
 fn previous_segment(path: &std::path::Path) -> Result<Option<(Mapping, u64)>> {
     let fd = match sys::open(path, libc::O_RDWR, 0) {
         Ok(fd) => fd,
@@ -163,16 +193,7 @@ impl RingProducer {
         let map =
             Mapping::new(&fd, size as usize, true).map_err(|e| cleanup(io_err("mmap", &tmp, e)))?;
         let generation = sys::realtime_ns().max(old_generation + 1);
-        let (zero_copy, zero_copy_note) = match &options.zero_copy {
-            Some(request) => match import_slots(request, &map, &layout) {
-                Ok(slots) => (Some(slots), None),
-                Err(reason) => {
-                    tracing::warn!(ring = %location, "zero-copy off, copying frames: {reason}");
-                    (None, Some(reason))
-                }
-            },
-            None => (None, None),
-        };
+        let (zero_copy, zero_copy_note) = zero_copy_slots(options, &map, &layout, &location);
         let flags = if zero_copy.is_some() {
             FLAG_ZERO_COPY
         } else {
@@ -184,11 +205,7 @@ impl RingProducer {
         std::fs::rename(&tmp, &path).map_err(|e| cleanup(Error::io(&path, e)))?;
 
         if let Some((old_map, _)) = old {
-            // SAFETY: header-sized mapping of the old segment.
-            let h = unsafe { &*(old_map.ptr() as *const RingHeader) };
-            h.state.store(STATE_REPLACED, Ordering::Release);
-            h.wake.fetch_add(1, Ordering::Release);
-            sys::futex_wake_all(&h.wake);
+            mark_replaced(&old_map);
         }
         tracing::info!(ring = %location, generation, size, "ring created");
         Ok(RingProducer {
