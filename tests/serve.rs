@@ -89,7 +89,6 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let pid = child.id();
     let mut r = open_ring(tmp.path(), &name, Duration::from_secs(60));
     let m = next_frame(&mut r);
     assert_eq!((m.width, m.height), (64, 64));
@@ -108,75 +107,9 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
         assert_eq!(mode & 0o777, 0o600);
     }
 
-    // Fuzz for a bounded time: random bytes, broken JSON, NaN/absurd values, oversized
-    // datagrams, and some valid messages in between. Counts must match exactly.
+    // Fuzz for a bounded time; counts must match exactly.
     let sock = UnixDatagram::unbound().unwrap();
-    let (mut valid, mut invalid) = (0u64, 0u64);
-    let mut x: u64 = 0x1234_5678_9abc_def1;
-    let mut rnd = || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        x
-    };
-    let fixed_bad: Vec<Vec<u8>> = [
-        "",
-        "{",
-        "null",
-        "[]",
-        "{}",
-        r#"{"fov_deg": NaN}"#,
-        r#"{"fov_deg": 1e999}"#,
-        r#"{"fov_deg": 0}"#,
-        r#"{"fov_deg": 500}"#,
-        r#"{"fov_deg": "wide"}"#,
-        r#"{"pose":{"position":[1e308,0,0],"yaw_deg":0,"pitch_deg":0}}"#,
-        r#"{"pose":{"position":[0,0,100],"yaw_deg":0,"pitch_deg":95}}"#,
-        r#"{"pose":{"position":[0,0],"yaw_deg":0,"pitch_deg":0}}"#,
-        r#"{"resolution":[0,0]}"#,
-        r#"{"resolution":[100000,2]}"#,
-        r#"{"resolution":[-1,64]}"#,
-        r#"{"shutdown":true}"#,
-        r#"{"consumer":{"name":"","received":1,"lost":0}}"#,
-    ]
-    .iter()
-    .map(|s| s.as_bytes().to_vec())
-    .chain([vec![0xff, 0xfe, 0x00], vec![b'{'; 65536]])
-    .collect();
-    let fuzz_end = Instant::now() + Duration::from_secs(2);
-    let mut i = 0usize;
-    while Instant::now() < fuzz_end {
-        let msg: Vec<u8> = match i % 4 {
-            0 => fixed_bad[(i / 4) % fixed_bad.len()].clone(),
-            1 => (0..(rnd() % 200)).map(|_| rnd() as u8).collect(),
-            2 => {
-                // Valid JSON skeleton with a random bad token.
-                format!(
-                    r#"{{"fov_deg": {}}}"#,
-                    ["-1", "1e400", "null", "true"][(rnd() % 4) as usize]
-                )
-                .into_bytes()
-            }
-            _ => {
-                valid += 1;
-                format!(
-                    r#"{{"pose":{{"position":[{},{},3000],"yaw_deg":{},"pitch_deg":-30}},"fov_deg":55}}"#,
-                    rnd() % 10000,
-                    rnd() % 10000,
-                    rnd() % 360
-                )
-                .into_bytes()
-            }
-        };
-        if i % 4 != 3 {
-            invalid += 1;
-        }
-        sock.send_to(&msg, &sock_path).unwrap();
-        i += 1;
-        if i % 64 == 0 {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
+    let (mut valid, invalid) = fuzz_control(&sock, &sock_path);
     // A report from a consumer, then a distinctive pose: rendering must go on and use it.
     sock.send_to(
         br#"{"consumer":{"name":"test-reader","received":7,"lost":2}}"#,
@@ -256,6 +189,93 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
     assert_eq!((m.width, m.height, r.pixels().len()), (48, 32, 48 * 32 * 4));
 
     // SIGTERM: frame in flight finished, ring closed, exit 0, nothing left behind.
+    let paths = [sock_path.as_path(), &status_path];
+    terminate_and_check_clean(child, &mut r, tmp.path(), &name, paths);
+}
+
+/// Sends random bytes, broken JSON, NaN and absurd values, an oversized datagram and some
+/// valid poses in between to the control socket for two seconds: (valid, invalid) sent.
+fn fuzz_control(sock: &UnixDatagram, sock_path: &Path) -> (u64, u64) {
+    let (mut valid, mut invalid) = (0u64, 0u64);
+    let mut x: u64 = 0x1234_5678_9abc_def1;
+    let mut rnd = || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let fixed_bad: Vec<Vec<u8>> = [
+        "",
+        "{",
+        "null",
+        "[]",
+        "{}",
+        r#"{"fov_deg": NaN}"#,
+        r#"{"fov_deg": 1e999}"#,
+        r#"{"fov_deg": 0}"#,
+        r#"{"fov_deg": 500}"#,
+        r#"{"fov_deg": "wide"}"#,
+        r#"{"pose":{"position":[1e308,0,0],"yaw_deg":0,"pitch_deg":0}}"#,
+        r#"{"pose":{"position":[0,0,100],"yaw_deg":0,"pitch_deg":95}}"#,
+        r#"{"pose":{"position":[0,0],"yaw_deg":0,"pitch_deg":0}}"#,
+        r#"{"resolution":[0,0]}"#,
+        r#"{"resolution":[100000,2]}"#,
+        r#"{"resolution":[-1,64]}"#,
+        r#"{"shutdown":true}"#,
+        r#"{"consumer":{"name":"","received":1,"lost":0}}"#,
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .chain([vec![0xff, 0xfe, 0x00], vec![b'{'; 65536]])
+    .collect();
+    let fuzz_end = Instant::now() + Duration::from_secs(2);
+    let mut i = 0usize;
+    while Instant::now() < fuzz_end {
+        let msg: Vec<u8> = match i % 4 {
+            0 => fixed_bad[(i / 4) % fixed_bad.len()].clone(),
+            1 => (0..(rnd() % 200)).map(|_| rnd() as u8).collect(),
+            2 => {
+                // Valid JSON skeleton with a random bad token.
+                format!(
+                    r#"{{"fov_deg": {}}}"#,
+                    ["-1", "1e400", "null", "true"][(rnd() % 4) as usize]
+                )
+                .into_bytes()
+            }
+            _ => {
+                valid += 1;
+                format!(
+                    r#"{{"pose":{{"position":[{},{},3000],"yaw_deg":{},"pitch_deg":-30}},"fov_deg":55}}"#,
+                    rnd() % 10000,
+                    rnd() % 10000,
+                    rnd() % 360
+                )
+                .into_bytes()
+            }
+        };
+        if i % 4 != 3 {
+            invalid += 1;
+        }
+        sock.send_to(&msg, sock_path).unwrap();
+        i += 1;
+        if i % 64 == 0 {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    (valid, invalid)
+}
+
+/// Sends SIGTERM to `child` (serving ring `name` in `dir`, controlled through `sock_path`) and
+/// checks a clean stop: exit 0, the ring closed, no segment, control socket or lock file left,
+/// the status file saying "stopped".
+fn terminate_and_check_clean(
+    child: Child,
+    r: &mut RingReader,
+    dir: &Path,
+    name: &str,
+    [sock_path, status_path]: [&Path; 2],
+) {
+    let pid = child.id();
     // SAFETY: signalling our own child.
     assert_eq!(unsafe { libc::kill(pid as i32, libc::SIGTERM) }, 0);
     let o = wait_exit(child, Duration::from_secs(60));
@@ -272,17 +292,17 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
         assert!(start.elapsed() < Duration::from_secs(10));
     }
     assert_eq!(r.state(), STATE_CLOSED);
-    assert!(!tmp.path().join(&name).exists(), "segment left behind");
+    assert!(!dir.join(name).exists(), "segment left behind");
     assert!(!sock_path.exists(), "control socket left behind");
     assert!(
-        std::fs::read_dir(tmp.path()).unwrap().all(|e| !e
+        std::fs::read_dir(dir).unwrap().all(|e| !e
             .unwrap()
             .file_name()
             .to_string_lossy()
             .ends_with(".lock")),
         "lock files left behind"
     );
-    assert_eq!(status_json(&status_path)["state"], "stopped");
+    assert_eq!(status_json(status_path)["state"], "stopped");
 }
 
 #[test]
