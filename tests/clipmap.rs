@@ -1129,6 +1129,82 @@ impl std::fmt::Debug for Bits {
     }
 }
 
+fn bits(v: &[f32]) -> Bits {
+    Bits(v.iter().map(|x| x.to_bits()).collect())
+}
+
+/// The two levels hold the same statistics, to the bit.
+fn same(a: &Levels, b: &Levels) -> bool {
+    let e64 = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let mm = |l: &Levels| l.min_max.iter().flatten().copied().collect::<Vec<_>>();
+    a.tiles_per_side == b.tiles_per_side
+        && a.level_offsets == b.level_offsets
+        && (a.width, a.height, a.root_lod, a.grid_size)
+            == (b.width, b.height, b.root_lod, b.grid_size)
+        && a.spacing.to_bits() == b.spacing.to_bits()
+        && bits(&mm(a)) == bits(&mm(b))
+        && bits(&a.tile_error) == bits(&b.tile_error)
+        && e64(&a.level_error) == e64(&b.level_error)
+}
+
+/// A split field of `d` nodes per tile side whose cells are the `stored` tiles (grid `g`;
+/// `field_density = d` at `d` times the grid): the cells' heights fold into the tiles' as
+/// they are read, equal to folding them in memory, and the levels equal those computed from
+/// the settings (the default's field). One node per corner at the stored grid reads the
+/// stored tiles; at twice the grid (not stored) it folds them, no level-0 node read; grid 16
+/// (not stored) is computed from level 0. Returns the `d`-node field as read.
+fn field_reads_equal_the_computed_ones(
+    reader: &PyramidReader,
+    data: &Heightmap,
+    stored: &vkterrain::dataset::stats::TileStats,
+    d: u32,
+) -> vkterrain::dataset::stats::FieldStats {
+    use vkterrain::dataset::stats::{FieldStats, Finest, TileStats};
+    use vkterrain::lod::udlod::settings::UdlodSettings;
+    let g = stored.grid_size;
+    let finer = UdlodSettings {
+        grid_size: d * g,
+        field_density: d,
+        ..UdlodSettings::default()
+    };
+    let field = reader.field_stats(g, d).unwrap();
+    assert_eq!(reader.node_loads(), 0);
+    assert!(field.cells.is_some() && !field.tiles.has_finest());
+    assert_eq!(field, FieldStats::from_cells(stored.clone(), d).unwrap());
+    let field_levels = Levels::from_field_stats(field.clone(), reader.spacing());
+    let from_settings = Levels::for_settings(data, &finer).unwrap();
+    assert!(same(&field_levels, &from_settings));
+    assert_eq!(
+        bits(&field_levels.field_error),
+        bits(&from_settings.field_error)
+    );
+    assert_eq!(
+        reader.field_stats(g, 1).unwrap(),
+        FieldStats::from_cells(stored.clone(), 1).unwrap()
+    );
+    let not_stored = |grid: u32| {
+        reader
+            .store()
+            .stored_stats(grid, Finest::Skip)
+            .unwrap()
+            .is_none()
+    };
+    assert!(not_stored(2 * g));
+    let corners = reader.field_stats(2 * g, 1).unwrap();
+    assert_eq!(reader.node_loads(), 0);
+    assert_eq!(
+        corners,
+        FieldStats::from_cells(TileStats::compute(data, 2 * g, &|_| {}).unwrap(), 1).unwrap()
+    );
+    assert!(not_stored(16));
+    let s16 = reader.tile_stats(16, Finest::Skip).unwrap();
+    assert!(same(
+        &Levels::from_stats(s16, reader.spacing()),
+        &Levels::new(data, 16).unwrap()
+    ));
+    field
+}
+
 /// UDLOD's statistics stored by `vkterrain preprocess` equal the ones computed from level 0,
 /// bit for bit (and the sample-by-sample definition), so start-up reads no level 0; a grid
 /// size that was not stored is computed from level 0 to the same bits, and twice a stored grid
@@ -1141,23 +1217,10 @@ impl std::fmt::Debug for Bits {
 #[test]
 fn stored_tile_statistics_equal_the_computed_ones() {
     use vkterrain::dataset::preprocess;
-    use vkterrain::dataset::stats::{FieldStats, Finest, TileStats};
+    use vkterrain::dataset::stats::{Finest, TileStats};
     use vkterrain::lod::udlod::settings::UdlodSettings;
     let data = heightmap();
     let reader = PyramidReader::open(dataset()).unwrap();
-    let bits = |v: &[f32]| Bits(v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
-    let e64 = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    let same = |a: &Levels, b: &Levels| {
-        let mm = |l: &Levels| l.min_max.iter().flatten().copied().collect::<Vec<_>>();
-        a.tiles_per_side == b.tiles_per_side
-            && a.level_offsets == b.level_offsets
-            && (a.width, a.height, a.root_lod, a.grid_size)
-                == (b.width, b.height, b.root_lod, b.grid_size)
-            && a.spacing.to_bits() == b.spacing.to_bits()
-            && bits(&mm(a)) == bits(&mm(b))
-            && bits(&a.tile_error) == bits(&b.tile_error)
-            && e64(&a.level_error) == e64(&b.level_error)
-    };
     // Stored (the cells of UDLOD's default split field, which preprocess stores): no level-0
     // node read.
     let g = preprocess::DEFAULT_STATS_GRID_SIZES[0];
@@ -1202,60 +1265,8 @@ fn stored_tile_statistics_equal_the_computed_ones() {
         &Levels::from_stats(coarse, reader.spacing()),
         &from_disk
     ));
-    // A split field of two nodes per tile side whose cells are the stored tiles
-    // (`field_density = 2` at twice the grid): the cells' heights fold into the tiles' as they
-    // are read, equal to folding them in memory, and the levels equal those computed from the
-    // settings (the default's field). One node per corner at the stored grid reads the stored
-    // tiles.
     let d = 2;
-    let finer = UdlodSettings {
-        grid_size: d * g,
-        field_density: d,
-        ..UdlodSettings::default()
-    };
-    let field = reader.field_stats(g, d).unwrap();
-    assert_eq!(reader.node_loads(), 0);
-    assert!(field.cells.is_some() && !field.tiles.has_finest());
-    assert_eq!(field, FieldStats::from_cells(stored.clone(), d).unwrap());
-    let field_levels = Levels::from_field_stats(field.clone(), reader.spacing());
-    let from_settings = Levels::for_settings(&data, &finer).unwrap();
-    assert!(same(&field_levels, &from_settings));
-    assert_eq!(
-        bits(&field_levels.field_error),
-        bits(&from_settings.field_error)
-    );
-    assert_eq!(
-        reader.field_stats(g, 1).unwrap(),
-        FieldStats::from_cells(stored.clone(), 1).unwrap()
-    );
-    // One node per tile corner at twice the stored grid (not stored): folded from the stored
-    // tiles, no level-0 node read, equal to computing them.
-    assert!(
-        reader
-            .store()
-            .stored_stats(2 * g, Finest::Skip)
-            .unwrap()
-            .is_none()
-    );
-    let corners = reader.field_stats(2 * g, 1).unwrap();
-    assert_eq!(reader.node_loads(), 0);
-    assert_eq!(
-        corners,
-        FieldStats::from_cells(TileStats::compute(&data, 2 * g, &|_| {}).unwrap(), 1).unwrap()
-    );
-    // Not stored (grid 16): computed from level 0, equal to the in-memory computation.
-    assert!(
-        reader
-            .store()
-            .stored_stats(16, Finest::Keep)
-            .unwrap()
-            .is_none()
-    );
-    let s16 = reader.tile_stats(16, Finest::Skip).unwrap();
-    assert!(same(
-        &Levels::from_stats(s16, reader.spacing()),
-        &Levels::new(&data, 16).unwrap()
-    ));
+    let field = field_reads_equal_the_computed_ones(&reader, &data, &stored, d);
 
     // A stored minimum one ulp lower: a valid file whose levels differ.
     let moved = dataset().with_file_name("moved-stats");
