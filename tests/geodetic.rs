@@ -918,18 +918,8 @@ fn udlod_renders_the_earth_like_brute_force() {
 #[test]
 fn every_source_sample_is_a_vertex_where_it_lies() {
     let (tmp, zip, out) = srtm3_n42e001("vkt-geodetic");
-    // The source, independently: GDAL's SRTMHGT driver through /vsizip/.
-    let src = gdal::Dataset::open(format!("/vsizip/{}/N42E001.hgt", zip.display())).unwrap();
-    let gt = src.geo_transform().unwrap();
-    let (sw, sh) = src.raster_size();
-    let source: Vec<i16> = src
-        .rasterband(1)
-        .unwrap()
-        .read_as::<i16>((0, 0), (sw, sh), (sw, sh), None)
-        .unwrap()
-        .data()
-        .to_vec();
-    assert_eq!((sw, sh), (1201, 1201));
+    let (source, gt) = srtm3_source(&zip);
+    let (sw, sh) = (1201, 1201);
     let config_path = tmp.join("n42e001.toml");
     let config_text = format!(
         "[render]\nwidth = 320\nheight = 200\nreadback_depth = true\n\n[dataset]\nkind = \"tiles\"\npath = \"{}\"\n",
@@ -1056,11 +1046,48 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
     assert!(camera_n_far_m > 1.0, "negative control: {camera_n_far_m} m");
     assert_eq!(height_misses, 0, "source heights not reproduced");
     assert!(voids < sw * sh / 100, "{voids} voids");
-    // A named landmark: Pica d'Estats (3,143 m; 42 deg 39' 59" N, 1 deg 23' 51" E, as
-    // published). The highest drawn vertex within 1 km of those coordinates lies within 150 m
-    // of them (the summit is where its coordinates say), it is as high as SRTM3 can say
-    // (its 3" samples miss the sharp top: 3,100 m, 75 m away; within 60 m of the published
-    // height), and it is in view, so the check above placed it within 0.5 px.
+    summit_is_where_published(&expected, &got, [lat0, lon0], (w, h));
+    assert!(in_view > 10_000, "{in_view} samples in view");
+    assert!(
+        worst_px <= 0.5,
+        "a sample is {worst_px} px from where it lies"
+    );
+    drop(renderer);
+    common::assert_no_validation_messages(&gpu);
+    std::fs::remove_dir_all(&tmp).ok();
+}
+
+/// SRTM3 N42E001's 1201 x 1201 heights read independently of the renderer (GDAL's SRTMHGT
+/// driver through /vsizip/) and its geotransform.
+#[cfg(feature = "gdal")]
+fn srtm3_source(zip: &std::path::Path) -> (Vec<i16>, [f64; 6]) {
+    let src = gdal::Dataset::open(format!("/vsizip/{}/N42E001.hgt", zip.display())).unwrap();
+    let gt = src.geo_transform().unwrap();
+    let (sw, sh) = src.raster_size();
+    assert_eq!((sw, sh), (1201, 1201));
+    let source = src
+        .rasterband(1)
+        .unwrap()
+        .read_as::<i16>((0, 0), (sw, sh), (sw, sh), None)
+        .unwrap()
+        .data()
+        .to_vec();
+    (source, gt)
+}
+
+/// A named landmark: Pica d'Estats (3,143 m; 42 deg 39' 59" N, 1 deg 23' 51" E, as
+/// published). Of the source samples `expected` (latitude, longitude, height) and their
+/// probed vertices `got` (a `w` x `h` view), the highest within 1 km of those coordinates lies
+/// within 150 m of them (the summit is where its coordinates say), it is as high as SRTM3 can
+/// say (its 3" samples miss the sharp top: 3,100 m, 75 m away; within 60 m of the published
+/// height), and it is in view, so the caller's check placed it within 0.5 px.
+#[cfg(feature = "gdal")]
+fn summit_is_where_published(
+    expected: &[(f64, f64, i16)],
+    got: &[TerrainProbePoint],
+    [lat0, lon0]: [f64; 2],
+    (w, h): (u32, u32),
+) {
     let (plat, plon, ph) = (
         42.0 + 39.0 / 60.0 + 59.0 / 3600.0,
         1.0 + 23.0 / 60.0 + 51.0 / 3600.0,
@@ -1097,14 +1124,6 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
         got[k].clip[3] > 10.0 && on_screen(summit_px),
         "the summit is not in view: {summit_px}"
     );
-    assert!(in_view > 10_000, "{in_view} samples in view");
-    assert!(
-        worst_px <= 0.5,
-        "a sample is {worst_px} px from where it lies"
-    );
-    drop(renderer);
-    common::assert_no_validation_messages(&gpu);
-    std::fs::remove_dir_all(&tmp).ok();
 }
 
 /// The chunked clipmap on a native geographic grid drawn on the ellipsoid (SRTM3 N42E001,
