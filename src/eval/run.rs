@@ -595,8 +595,9 @@ impl Run {
             self.errors.metres.merge(&gpu.metres);
             self.errors.pixels.merge(&gpu.pixels);
         }
-        let mut row = self.row(k, &timings, counts, &gpu, flip);
-        row.tiles = self.drawn_tiles(requests.len());
+        let (triangles, overflow) = counts;
+        let counts = (triangles, overflow, self.drawn_tiles(requests.len()));
+        let row = self.row(k, &timings, counts, &gpu, flip);
         self.rows.push(row);
         Ok(spawned)
     }
@@ -662,7 +663,7 @@ impl Run {
         &self,
         k: u64,
         timings: &crate::readback::FrameTimings,
-        (triangles, budget_overflow): (u64, u64),
+        (triangles, budget_overflow, tiles): (u64, u64, Option<u64>),
         gpu: &GpuFrameMetrics,
         flip: Option<FlipStats>,
     ) -> FrameRow {
@@ -676,7 +677,7 @@ impl Run {
             gpu_eval_ms: timings.gpu_readback_ms,
             cpu_record_ms: timings.cpu_record_ms,
             triangles,
-            tiles: None,
+            tiles,
             budget_overflow,
             error: GeometricError {
                 metres: gpu.metres.summary(),
@@ -927,8 +928,6 @@ fn reference_text(on_earth: bool, clipmap: bool) -> String {
     )
 }
 
-/// Median of `value(row, oracle triangles)` over the rows the oracle ran on (`None` when it
-/// ran on none: not a UDLOD variant).
 /// The median of the rows' tiles (None when no row has them).
 fn tiles_median(rows: &[&FrameRow]) -> Option<f64> {
     let v: Vec<f64> = rows
@@ -938,6 +937,8 @@ fn tiles_median(rows: &[&FrameRow]) -> Option<f64> {
     (!v.is_empty()).then(|| Percentiles::of(v).median)
 }
 
+/// Median of `value(row, oracle triangles)` over the rows the oracle ran on (`None` when it
+/// ran on none: not a UDLOD variant).
 fn oracle_median(rows: &[&FrameRow], value: impl Fn(&FrameRow, u64) -> f64) -> Option<f64> {
     let v: Vec<f64> = rows
         .iter()
