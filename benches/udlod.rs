@@ -226,9 +226,8 @@ fn bench_variant(
 /// returns with up to the frames in flight still running, so this trails the frame just
 /// recorded, which a median over the flight does not mind.
 fn drawn_tiles(renderer: &Renderer) -> f64 {
-    let counters = renderer.method().counters(ViewSlot(0));
-    let tiles = counters.iter().find(|(name, _)| *name == "tiles");
-    tiles.map_or(0.0, |&(_, n)| n as f64)
+    let tiles = renderer.method().counter(ViewSlot(0), "tiles");
+    tiles.map_or(0.0, |n| n as f64)
 }
 
 impl Row {

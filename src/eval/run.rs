@@ -648,13 +648,7 @@ impl Run {
     fn drawn_tiles(&self, views: usize) -> Option<u64> {
         let method = self.renderer.method();
         (0..views)
-            .map(|v| {
-                let counters = method.counters(ViewSlot(v));
-                counters
-                    .iter()
-                    .find(|(name, _)| *name == "tiles")
-                    .map(|c| c.1)
-            })
+            .map(|v| method.counter(ViewSlot(v), "tiles"))
             .sum()
     }
 

@@ -276,6 +276,14 @@ pub trait LodMethod {
     fn counters(&self, _slot: ViewSlot) -> Vec<(&'static str, u64)> {
         Vec::new()
     }
+    /// The counter `name` of [`LodMethod::counters`] (None: the method has none of that name).
+    fn counter(&self, slot: ViewSlot, name: &str) -> Option<u64> {
+        let counters = self.counters(slot);
+        counters
+            .into_iter()
+            .find(|&(n, _)| n == name)
+            .map(|(_, v)| v)
+    }
     /// The tiles the last completed frame of `slot` drew (`None`: the method draws no
     /// quadtree of tiles). The evaluator reads from them which pixels show geometry coarser
     /// than the data's level 0 (docs/eval.md, "Coarse pixels").
