@@ -20,7 +20,6 @@ use vkterrain::lod::{MethodConfig, MethodKind, UdlodSettings};
 use vkterrain::readback::{FrameView, OwnedFrame};
 use vkterrain::render::Renderer;
 use vkterrain::render::stats::Percentiles;
-use vkterrain::slots::ViewSlot;
 
 #[derive(Parser)]
 struct Wrapper {
@@ -172,18 +171,18 @@ fn bench_variant(
     let mut renderer = Renderer::new(gpu, &p.data, method.clone(), options)
         .with_context(|| format!("{name} on {}", p.data.name()))?;
     let mut sampled: Vec<OwnedFrame> = Vec::new();
+    let mut tiles = Vec::new();
     let mut sink = |f: &FrameView<'_>| {
-        if f.index as usize >= WARMUP && f.index % SAMPLE_EVERY == 0 {
-            sampled.push(OwnedFrame::copy_of(f));
+        if f.index as usize >= WARMUP {
+            tiles.push(f.tiles.unwrap_or(0) as f64);
+            if f.index % SAMPLE_EVERY == 0 {
+                sampled.push(OwnedFrame::copy_of(f));
+            }
         }
         Ok(())
     };
-    let mut tiles = Vec::new();
     for frame in 0..p.frames as u64 {
         renderer.render(p.scenario.camera(frame), &mut sink)?;
-        if frame as usize >= WARMUP {
-            tiles.push(drawn_tiles(&renderer));
-        }
     }
     renderer.finish(&mut sink)?;
     let s = renderer.stats.summary(WARMUP);
@@ -220,14 +219,6 @@ fn bench_variant(
         psnr_db_vs_brute: psnr_db,
     };
     Ok((row, sampled))
-}
-
-/// The method's `tiles` counter of the last frame it completed (0 without one): `render`
-/// returns with up to the frames in flight still running, so this trails the frame just
-/// recorded, which a median over the flight does not mind.
-fn drawn_tiles(renderer: &Renderer) -> f64 {
-    let tiles = renderer.method().counter(ViewSlot(0), "tiles");
-    tiles.map_or(0.0, |n| n as f64)
 }
 
 impl Row {

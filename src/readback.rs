@@ -49,6 +49,9 @@ pub struct FrameView<'a> {
     /// Tiles the LOD method wanted but its fixed budget could not hold, over the frame's
     /// views ([`crate::lod::LodMethod::budget_overflow`]; 0: none).
     pub budget_overflow: u64,
+    /// Tiles the LOD method drew over the frame's views ([`crate::lod::LodMethod::tiles`],
+    /// read once the frame completed; None: a method without tiles).
+    pub tiles: Option<u64>,
 }
 
 /// A camera's WGS84 pose and the datum its height is measured from (the terrain's:

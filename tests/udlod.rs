@@ -123,8 +123,11 @@ fn gpu_and_cpu_tiles(
             out.push((gpu_tiles, select::select_tiles(&levels, &p)));
             let counters: HashMap<_, _> = r.method().counters(ViewSlot(0)).into_iter().collect();
             assert_eq!(counters["overflow"], 0);
-            // The `tiles` counter (eval's and the bench's tiles column) counts the tile list.
-            assert_eq!(counters["tiles"], out.last().unwrap().0.len() as u64);
+            // The tiles each frame reports (eval's and the bench's tiles column) and the
+            // `tiles` counter count the tile list.
+            let listed = out.last().unwrap().0.len() as u64;
+            assert_eq!(counters["tiles"], listed);
+            assert_eq!(r.method().tiles(ViewSlot(0)), Some(listed));
         }
     }
     common::assert_no_validation_messages(&gpu);

@@ -147,8 +147,8 @@ pub struct FrameRow {
     pub gpu_eval_ms: f64,
     pub cpu_record_ms: f64,
     pub triangles: u64,
-    /// The tiles the method drew over the frame's views (its `tiles` counter: UDLOD; None for
-    /// a method without one).
+    /// The tiles the method drew over the frame's views (`LodMethod::tiles`: UDLOD's; None
+    /// for a method without tiles).
     pub tiles: Option<u64>,
     /// Tiles the method's budget could not hold this frame (UDLOD's `max_tiles`; 0: none).
     pub budget_overflow: u64,
@@ -317,12 +317,12 @@ impl EvalSetup<'_> {
 }
 
 /// A delivered frame as the evaluator keeps it: RGBA (sampled frames only), depth (with
-/// `--cross-check`), timings, triangles and the LOD budget's overflow.
+/// `--cross-check`), timings, and triangles, the LOD budget's overflow and tiles.
 type Delivered = (
     Vec<u8>,
     Option<Vec<f32>>,
     crate::readback::FrameTimings,
-    (u64, u64),
+    (u64, u64, Option<u64>),
 );
 
 /// A finished FLIP computation: run, frame, statistics, coloured map (image frames).
@@ -595,8 +595,6 @@ impl Run {
             self.errors.metres.merge(&gpu.metres);
             self.errors.pixels.merge(&gpu.pixels);
         }
-        let (triangles, overflow) = counts;
-        let counts = (triangles, overflow, self.drawn_tiles(requests.len()));
         let row = self.row(k, &timings, counts, &gpu, flip);
         self.rows.push(row);
         Ok(spawned)
@@ -620,7 +618,7 @@ impl Run {
                 },
                 f.depth.map(<[f32]>::to_vec),
                 f.timings,
-                (f.triangles, f.budget_overflow),
+                (f.triangles, f.budget_overflow, f.tiles),
             ));
             Ok(())
         };
@@ -641,15 +639,6 @@ impl Run {
             ));
         }
         Ok((delivered, gpu))
-    }
-
-    /// The method's `tiles` counter summed over the frame's `views` (one frame in flight, as
-    /// in `measure_coarse`: view v's slot is frame slot 0's); None without that counter.
-    fn drawn_tiles(&self, views: usize) -> Option<u64> {
-        let method = self.renderer.method();
-        (0..views)
-            .map(|v| method.counter(ViewSlot(v), "tiles"))
-            .sum()
     }
 
     /// Frame `k`'s row of `frames.csv`.

@@ -276,13 +276,10 @@ pub trait LodMethod {
     fn counters(&self, _slot: ViewSlot) -> Vec<(&'static str, u64)> {
         Vec::new()
     }
-    /// The counter `name` of [`LodMethod::counters`] (None: the method has none of that name).
-    fn counter(&self, slot: ViewSlot, name: &str) -> Option<u64> {
-        let counters = self.counters(slot);
-        counters
-            .into_iter()
-            .find(|&(n, _)| n == name)
-            .map(|(_, v)| v)
+    /// Tiles the last completed frame of `slot` drew (None: the method draws no tiles), read
+    /// at every frame's delivery (`FrameView::tiles`), so without allocating.
+    fn tiles(&self, _slot: ViewSlot) -> Option<u64> {
+        None
     }
     /// The tiles the last completed frame of `slot` drew (`None`: the method draws no
     /// quadtree of tiles). The evaluator reads from them which pixels show geometry coarser

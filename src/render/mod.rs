@@ -518,6 +518,11 @@ impl Renderer {
             .view_slots_of(frame)
             .map(|view| self.method.budget_overflow(view))
             .sum();
+        let tiles = self
+            .layout
+            .view_slots_of(frame)
+            .map(|view| self.method.tiles(view))
+            .sum();
         if let Some(stage) = &mut self.analysis {
             stage.complete(frame, pending.index)?;
         }
@@ -552,6 +557,7 @@ impl Renderer {
             timings,
             triangles,
             budget_overflow,
+            tiles,
         };
         let sink_start = Instant::now();
         let result = sink.frame(&view);

@@ -626,6 +626,10 @@ impl LodMethod for Udlod {
         self.read_counters(slot).overflow as u64
     }
 
+    fn tiles(&self, slot: ViewSlot) -> Option<u64> {
+        Some(self.read_counters(slot).drawn().iter().sum())
+    }
+
     fn counters(&self, slot: ViewSlot) -> Vec<(&'static str, u64)> {
         let c = self.read_counters(slot);
         let drawn = c.drawn();
