@@ -34,8 +34,8 @@ struct Row {
     frame_ms_median: f64,
     frame_ms_p99: f64,
     triangles_median: f64,
-    /// The tiles UDLOD drew (its `tiles` counter; 0 for brute force), each frame's after the
-    /// warm-up: not triangles over a full tile's, since collapsed and dropped quadrants draw
+    /// Median of the tiles each frame drew after the warm-up (`FrameView::tiles`; 0 for brute
+    /// force): not triangles over a full tile's, since collapsed and dropped quadrants draw
     /// fewer.
     tiles_median: f64,
     prepass_ms_median: f64,

@@ -645,7 +645,7 @@ impl LodMethod for Udlod {
         let collapsed = |m: TileMask| m.quadrants(QuadrantDraw::Collapsed);
         let dropped = |m: TileMask| m.quadrants(QuadrantDraw::Dropped);
         vec![
-            ("tiles", sum(&|_, _| 1)),
+            ("tiles", drawn.iter().sum()),
             ("morphing", sum(&|_, morphing| morphing as u64)),
             // Tiles with a quadrant drawn as the parent grid, whole tiles drawn so, quadrants.
             ("collapsing", sum(&|m, _| (collapsed(m) != 0) as u64)),
