@@ -559,34 +559,20 @@ impl TileStats {
                 continue;
             }
             level.max_error = f64::from_le_bytes(head[e + 8..e + 16].try_into().expect("8"));
-            let mut largest = 0.0f32;
-            let nx = level.tiles.0 as usize;
             // The coarse tiling has fewer levels: the finer ones past its root fold nowhere.
             let mut coarse_level = coarse.as_deref_mut().and_then(|c| {
                 let factor = (c.grid_size / grid_size) as usize;
                 c.levels.get_mut(lod).map(|l| (factor, l))
             });
-            for (chunk, error) in level.error.chunks_mut(READ_TILES).enumerate() {
-                buf.resize(error.len() * TILE_ENTRY, 0);
-                r.read_exact(&mut buf)
-                    .map_err(|e| bad(format!("level {lod}: unreadable (truncated?): {e}")))?;
-                let first = chunk * READ_TILES;
-                for (k, (err, v)) in error
-                    .iter_mut()
-                    .zip(buf.chunks_exact(TILE_ENTRY))
-                    .enumerate()
-                {
-                    let [lo, hi, er] = tile_entry(v, lod).map_err(bad)?;
-                    *err = er;
-                    largest = largest.max(er);
-                    let i = first + k;
-                    match &mut coarse_level {
-                        None if folding => {}
-                        None => level.min_max[i] = [lo, hi],
-                        Some((factor, c)) => fold_tile(c, *factor, (i % nx, i / nx), [lo, hi, er]),
-                    }
-                }
-            }
+            let largest = read_level_tiles(
+                r,
+                &mut buf,
+                level,
+                lod,
+                folding,
+                coarse_level.as_mut().map(|(f, c)| (*f, &mut **c)),
+            )
+            .map_err(bad)?;
             if let Some((_, c)) = coarse_level {
                 c.max_error = level.max_error;
             }
@@ -802,6 +788,43 @@ fn tile_entry(v: &[u8], lod: usize) -> std::result::Result<[f32; 3], String> {
         ));
     }
     Ok([lo, hi, er])
+}
+
+/// Reads level `lod`'s stored tiles from `r`, [`READ_TILES`] at a time through `buf`, into
+/// its errors and (unless `folding`) its heights, or folds them into `coarse` (its factor
+/// and level); returns the largest error read.
+fn read_level_tiles<R: std::io::Read>(
+    r: &mut R,
+    buf: &mut Vec<u8>,
+    level: &mut LevelTiles,
+    lod: usize,
+    folding: bool,
+    mut coarse: Option<(usize, &mut LevelTiles)>,
+) -> std::result::Result<f32, String> {
+    let mut largest = 0.0f32;
+    let nx = level.tiles.0 as usize;
+    for (chunk, error) in level.error.chunks_mut(READ_TILES).enumerate() {
+        buf.resize(error.len() * TILE_ENTRY, 0);
+        r.read_exact(buf)
+            .map_err(|e| format!("level {lod}: unreadable (truncated?): {e}"))?;
+        let first = chunk * READ_TILES;
+        for (k, (err, v)) in error
+            .iter_mut()
+            .zip(buf.chunks_exact(TILE_ENTRY))
+            .enumerate()
+        {
+            let [lo, hi, er] = tile_entry(v, lod)?;
+            *err = er;
+            largest = largest.max(er);
+            let i = first + k;
+            match &mut coarse {
+                None if folding => {}
+                None => level.min_max[i] = [lo, hi],
+                Some((factor, c)) => fold_tile(c, *factor, (i % nx, i / nx), [lo, hi, er]),
+            }
+        }
+    }
+    Ok(largest)
 }
 
 /// Folds tile `(x, y)` (`[min, max, error]`) into the tile `factor` times larger of `coarse`

@@ -420,27 +420,7 @@ impl Chunked {
         };
         let cap = settings.max_chunks as u64;
         let (nx, ny) = levels.tiles_per_side[0];
-        let (heap, bits) = if settings.traversal == Traversal::Cbt {
-            let (heap, bits) = cbt.initial(depths.root - depths.start);
-            (
-                device_buffer(
-                    gpu,
-                    &format!("chunked cbt heap {i}"),
-                    bytemuck::cast_slice(&heap),
-                )?,
-                device_buffer(
-                    gpu,
-                    &format!("chunked cbt bits {i}"),
-                    bytemuck::cast_slice(&bits),
-                )?,
-            )
-        } else {
-            // Bound but unused by the naive walk.
-            (
-                device_buffer(gpu, &format!("chunked cbt heap {i}"), &[0; 16])?,
-                device_buffer(gpu, &format!("chunked cbt bits {i}"), &[0; 16])?,
-            )
-        };
+        let (heap, bits) = Self::cbt_buffers(gpu, settings, depths, cbt, i)?;
         Ok(SlotBuffers {
             uniforms: buffer(
                 "uniforms",
@@ -485,6 +465,34 @@ impl Chunked {
             )?,
             set: sets.sets[i],
         })
+    }
+
+    /// The CBT's heap and bit field for slot `i`, at the tree's initial subdivision; a
+    /// placeholder pair for the naive walk, whose set binds them unused.
+    fn cbt_buffers(
+        gpu: &Arc<Gpu>,
+        settings: &ChunkedSettings,
+        depths: Depths,
+        cbt: CbtLayout,
+        i: usize,
+    ) -> Result<(Buffer, Buffer)> {
+        let (heap, bits) = if settings.traversal == Traversal::Cbt {
+            cbt.initial(depths.root - depths.start)
+        } else {
+            (vec![0; 4], vec![0; 4])
+        };
+        Ok((
+            device_buffer(
+                gpu,
+                &format!("chunked cbt heap {i}"),
+                bytemuck::cast_slice(&heap),
+            )?,
+            device_buffer(
+                gpu,
+                &format!("chunked cbt bits {i}"),
+                bytemuck::cast_slice(&bits),
+            )?,
+        ))
     }
 
     pub fn levels(&self) -> &Levels {
