@@ -661,65 +661,62 @@ fn other_users_can_neither_squat_nor_impersonate() {
     let _ = std::fs::remove_dir_all(&squatted);
     let _ = std::fs::remove_file(&fake);
     drop(p);
+}
 
-    // 4. Readers: a copy of a genuine ring is accepted when it belongs to the expected owner and
-    //    nobody else may write it (positive control), refused when it belongs to someone else or
-    //    is writable by others; by Rust, C and Python alike.
-    let tmp = tempfile::tempdir().unwrap();
-    let c_exe = build_c(tmp.path());
-    let src = TestDir::new("squat-src");
-    let mut p = RingProducer::create(
-        &src.loc("genuine"),
-        Geometry::new(8, 8, 2, false),
-        &ProducerOptions::default(),
-    )
-    .unwrap();
+/// A producer of one published 8x8 frame at `loc` (the frame: `pattern(0)`).
+fn one_frame_ring(loc: &RingLocation) -> RingProducer {
+    let g = Geometry::new(8, 8, 2, false);
+    let mut p = RingProducer::create(loc, g, &ProducerOptions::default()).unwrap();
     let mut px = vec![0u8; 256];
     pattern(0, &mut px);
-    p.publish(&test_meta(Geometry::new(8, 8, 2, false)), &px, None)
-        .unwrap();
+    p.publish(&test_meta(g), &px, None).unwrap();
+    p
+}
+
+/// Whether the Rust, C (`c_exe`) and Python readers, each expecting owner uid 0, accept ring
+/// `copy` of `dir`; the Python one counts as accepting where no Python is installed.
+fn readers_accept(dir: &TestDir, c_exe: &Path) -> [bool; 3] {
+    let rust = RingReader::open(&dir.loc("copy"), Some(0)).is_ok();
+    let d = dir.s();
+    let common = ["copy", "--dir", &d, "--owner", "0", "--frames", "1"];
+    let received = |o: std::process::Output| {
+        o.status.success() && String::from_utf8_lossy(&o.stdout).contains("received=1")
+    };
+    let c_ok = received(
+        Command::new(c_exe)
+            .args(common)
+            .args(["--timeout-ms", "2000"])
+            .output()
+            .unwrap(),
+    );
+    let py_ok = python().is_none_or(|py| {
+        let script = root().join("consumers/python/vkterrain_ring.py");
+        let mut c = Command::new(py);
+        c.arg(script).args(common).args(["--timeout", "2"]);
+        received(c.output().unwrap())
+    });
+    [rust, c_ok, py_ok]
+}
+
+/// Readers: a copy of a genuine ring is accepted when it belongs to the expected owner and
+/// nobody else may write it (positive control), refused when it belongs to someone else or is
+/// writable by others; by Rust, C and Python alike.
+#[test]
+fn readers_refuse_rings_others_own_or_may_write() {
+    if !require_root("readers_refuse_rings_others_own_or_may_write") {
+        return;
+    }
+    let dir = TestDir::new("impersonate");
+    let tmp = tempfile::tempdir().unwrap();
+    let c_exe = build_c(tmp.path());
+    let src = TestDir::new("impersonate-src");
+    let p = one_frame_ring(&src.loc("genuine"));
     let copy = dir.path().join("copy");
     let case = |uid: u32, mode: u32| -> [bool; 3] {
         std::fs::copy(src.loc("genuine").segment_path(), &copy).unwrap();
         std::os::unix::fs::chown(&copy, Some(uid), None).unwrap();
         std::fs::set_permissions(&copy, std::fs::Permissions::from_mode(mode)).unwrap();
-        let rust = RingReader::open(&dir.loc("copy"), Some(0)).is_ok();
-        let c = Command::new(&c_exe)
-            .args([
-                "copy",
-                "--dir",
-                &dir.s(),
-                "--owner",
-                "0",
-                "--frames",
-                "1",
-                "--timeout-ms",
-                "2000",
-            ])
-            .output()
-            .unwrap();
-        let c_ok = c.status.success() && String::from_utf8_lossy(&c.stdout).contains("received=1");
-        let py = python().map(|py| {
-            Command::new(py)
-                .arg(root().join("consumers/python/vkterrain_ring.py"))
-                .args([
-                    "copy",
-                    "--dir",
-                    &dir.s(),
-                    "--owner",
-                    "0",
-                    "--frames",
-                    "1",
-                    "--timeout",
-                    "2",
-                ])
-                .output()
-                .unwrap()
-        });
-        let py_ok = py.is_none_or(|o| {
-            o.status.success() && String::from_utf8_lossy(&o.stdout).contains("received=1")
-        });
-        [rust, c_ok, py_ok]
+        readers_accept(&dir, &c_exe)
     };
     assert_eq!(case(0, 0o600), [true; 3], "a genuine ring was refused");
     assert_eq!(
@@ -741,28 +738,29 @@ fn other_users_can_neither_squat_nor_impersonate() {
         "a ring writable by the group was accepted"
     );
     drop(p);
+}
 
-    // 5. Without a named owner, a reader trusts the directory's owner only where nobody else
-    //    can write: in a sticky world-writable tree (/dev/shm) it asks for the owner.
-    let e = RingReader::open(&dir.loc("copy"), None)
+/// Without a named owner, a reader trusts the directory's owner only where nobody else can
+/// write: in a sticky world-writable tree (/dev/shm) it asks for the owner; under the build's
+/// own temporary directory (when no ancestor is group- or world-writable) it opens.
+#[test]
+fn readers_without_an_owner_trust_only_directories_nobody_else_writes() {
+    let dir = TestDir::new("no-owner");
+    let p = one_frame_ring(&dir.loc("shm"));
+    let e = RingReader::open(&dir.loc("shm"), None)
         .err()
         .expect("owner inferred in /dev/shm");
     assert!(e.to_string().contains("name the expected owner"), "{e}");
+    drop(p);
     let safe =
         PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("rings-{}", std::process::id()));
-    let mut sp = RingProducer::create(
-        &RingLocation::new(&safe, "safe").unwrap(),
-        Geometry::new(8, 8, 2, false),
-        &ProducerOptions::default(),
-    )
-    .unwrap();
-    sp.publish(&test_meta(Geometry::new(8, 8, 2, false)), &px, None)
-        .unwrap();
+    let safe_loc = RingLocation::new(&safe, "safe").unwrap();
+    let sp = one_frame_ring(&safe_loc);
     let root_chain = Path::new(env!("CARGO_TARGET_TMPDIR"))
         .ancestors()
         .all(|a| std::fs::metadata(a).is_ok_and(|m| m.permissions().mode() & 0o022 == 0));
     if root_chain {
-        assert!(RingReader::open(&RingLocation::new(&safe, "safe").unwrap(), None).is_ok());
+        assert!(RingReader::open(&safe_loc, None).is_ok());
     }
     drop(sp);
     let _ = std::fs::remove_dir_all(&safe);
