@@ -94,6 +94,21 @@ fn write_tiff(
 
 const UTM_TIE: [f64; 6] = [0.0, 0.0, 0.0, 500_000.0, 4_000_000.0, 0.0];
 
+/// [`write_tiff`] in UTM zone 33N (EPSG:32633) at [`UTM_TIE`], with square samples of
+/// `spacing` metres.
+fn write_utm(
+    path: &Path,
+    (w, h): (u32, u32),
+    data: Samples,
+    compression: Compression,
+    spacing: f64,
+    nodata: Option<&str>,
+) {
+    let keys = geokeys(1, 32633);
+    let scale = [spacing, spacing, 0.0];
+    write_tiff(path, w, h, data, compression, scale, UTM_TIE, &keys, nodata);
+}
+
 fn read1(p: &Path) -> vkterrain::Result<vkterrain::dataset::source::Raster> {
     read_inputs(&[p.to_path_buf()], None, None)
 }
@@ -118,17 +133,7 @@ fn geotiff_sample_formats_and_compressions() {
     .enumerate()
     {
         let p = dir.join(format!("i16_{k}.tif"));
-        write_tiff(
-            &p,
-            w,
-            h,
-            Samples::I16(&vals),
-            comp,
-            [10.0, 10.0, 0.0],
-            UTM_TIE,
-            &geokeys(1, 32633),
-            Some("-100"),
-        );
+        write_utm(&p, (w, h), Samples::I16(&vals), comp, 10.0, Some("-100"));
         let r = read1(&p).unwrap();
         assert_eq!((r.width, r.height, r.spacing), (w, h, [10.0, 10.0]));
         for c in 0..w as usize {
@@ -147,60 +152,34 @@ fn geotiff_sample_formats_and_compressions() {
 
         let u: Vec<u16> = vals.iter().map(|v| (*v + 200) as u16).collect();
         let p = dir.join(format!("u16_{k}.tif"));
-        write_tiff(
-            &p,
-            w,
-            h,
-            Samples::U16(&u),
-            comp,
-            [10.0, 10.0, 0.0],
-            UTM_TIE,
-            &geokeys(1, 32633),
-            None,
-        );
+        write_utm(&p, (w, h), Samples::U16(&u), comp, 10.0, None);
         assert_eq!(read1(&p).unwrap().heights[3], u[file_last(3)] as f32);
 
         let f: Vec<f32> = vals.iter().map(|v| *v as f32 + 0.25).collect();
         let p = dir.join(format!("f32_{k}.tif"));
-        write_tiff(
-            &p,
-            w,
-            h,
-            Samples::F32(&f),
-            comp,
-            [10.0, 10.0, 0.0],
-            UTM_TIE,
-            &geokeys(1, 32633),
-            None,
-        );
+        write_utm(&p, (w, h), Samples::F32(&f), comp, 10.0, None);
         assert_eq!(read1(&p).unwrap().heights[4], f[file_last(4)]);
     }
     // 8-bit and 64-bit samples (refused by the hand-written reader) come through GDAL.
     let p = dir.join("u8.tif");
     let b: Vec<u8> = (0..w * h).map(|i| (i % 251) as u8).collect();
-    write_tiff(
+    write_utm(
         &p,
-        w,
-        h,
+        (w, h),
         Samples::U8(&b),
         Compression::Uncompressed,
-        [10.0, 10.0, 0.0],
-        UTM_TIE,
-        &geokeys(1, 32633),
+        10.0,
         None,
     );
     assert_eq!(read1(&p).unwrap().heights[5], b[file_last(5)] as f32);
     let p = dir.join("f64.tif");
     let d: Vec<f64> = (0..w * h).map(|i| i as f64 * 0.5).collect();
-    write_tiff(
+    write_utm(
         &p,
-        w,
-        h,
+        (w, h),
         Samples::F64(&d),
         Compression::Uncompressed,
-        [10.0, 10.0, 0.0],
-        UTM_TIE,
-        &geokeys(1, 32633),
+        10.0,
         None,
     );
     assert_eq!(read1(&p).unwrap().heights[6], d[file_last(6)] as f32);
@@ -859,15 +838,12 @@ fn invalid_geometry_and_manifests_are_refused() {
     );
     expect_err(read1(&p), &p, &["latitudes", "outside -90..90"]);
     let p = dir.join("tiny.tif");
-    write_tiff(
+    write_utm(
         &p,
-        8,
-        8,
+        (8, 8),
         Samples::I16(&vals),
         Compression::Uncompressed,
-        [1e-300, 1e-300, 0.0],
-        UTM_TIE,
-        &geokeys(1, 32633),
+        1e-300,
         None,
     );
     expect_err(read1(&p), &p, &["step"]);
@@ -913,15 +889,12 @@ fn tiles_datasets_say_how_to_build_one() {
     let _memory = shared();
     let dir = tmpdir("tiles-msg");
     let tif = dir.join("dem.tif");
-    write_tiff(
+    write_utm(
         &tif,
-        8,
-        8,
+        (8, 8),
         Samples::I16(&[1; 64]),
         Compression::Uncompressed,
-        [1.0; 3],
-        UTM_TIE,
-        &geokeys(1, 32633),
+        1.0,
         None,
     );
     let e = Dataset::open(&tif).unwrap_err().to_string();
@@ -956,15 +929,12 @@ fn suspicious_data_draws_one_line_warnings() {
     vals[7] = VOID;
     vals[8] = VOID;
     let p = dir.join("nodata_missing.tif");
-    write_tiff(
+    write_utm(
         &p,
-        20,
-        20,
+        (20, 20),
         Samples::I16(&vals),
         Compression::Uncompressed,
-        [30.0, 30.0, 0.0],
-        UTM_TIE,
-        &geokeys(1, 32633),
+        30.0,
         None,
     );
     let r = read1(&p).unwrap();
@@ -977,15 +947,12 @@ fn suspicious_data_draws_one_line_warnings() {
         r.warnings
     );
     // The same file with a nodata tag: no warning.
-    write_tiff(
+    write_utm(
         &p,
-        20,
-        20,
+        (20, 20),
         Samples::I16(&vals),
         Compression::Uncompressed,
-        [30.0, 30.0, 0.0],
-        UTM_TIE,
-        &geokeys(1, 32633),
+        30.0,
         Some("-32768"),
     );
     assert!(read1(&p).unwrap().warnings.is_empty());
@@ -1022,15 +989,12 @@ fn suspicious_data_draws_one_line_warnings() {
     assert_eq!(r.spacing[0], r.spacing[1]);
 
     let p = dir.join("feet.tif");
-    write_tiff(
+    write_utm(
         &p,
-        20,
-        20,
+        (20, 20),
         Samples::I16(&[12000; 400]),
         Compression::Uncompressed,
-        [30.0, 30.0, 0.0],
-        UTM_TIE,
-        &geokeys(1, 32633),
+        30.0,
         None,
     );
     let out = dir.join("o");
