@@ -1272,6 +1272,27 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     let moved = dataset().with_file_name("moved-stats");
     copy_dir(dataset(), &moved);
     let file = moved.join(&file_name);
+    a_moved_minimum_and_a_nan_are_noticed(&moved, &stored, &field, &computed, g, d);
+    stats_with_level_0_read_back(&moved, &par, &stored, (w, h), g);
+    the_header_flag_must_match(&file, (w, h), g);
+    std::fs::remove_dir_all(&moved).ok();
+}
+
+/// In a copy (`moved`) of the data set whose statistics `stored` are: one stored minimum one
+/// ulp lower (still a valid file) makes the levels and the folded read (`field`, `d` cells
+/// per tile side) differ from `computed`; a NaN there is a one-line error naming the file,
+/// from either read.
+fn a_moved_minimum_and_a_nan_are_noticed(
+    moved: &Path,
+    stored: &vkterrain::dataset::stats::TileStats,
+    field: &vkterrain::dataset::stats::FieldStats,
+    computed: &Levels,
+    g: u32,
+    d: u32,
+) {
+    use vkterrain::dataset::stats::Finest;
+    let file_name = format!("stats-g{g}.bin");
+    let file = moved.join(&file_name);
     let mut bytes = std::fs::read(&file).unwrap();
     let levels = stored.levels.len();
     // A tile of level 1 (the first stored; level 0's tiles are not part of `Levels`) whose
@@ -1289,13 +1310,13 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     bytes[first_tile..first_tile + 4]
         .copy_from_slice(&f32::from_bits(v.to_bits() - 1).to_le_bytes());
     std::fs::write(&file, &bytes).unwrap();
-    let mutated = PyramidReader::open(&moved).unwrap();
+    let mutated = PyramidReader::open(moved).unwrap();
     let m = mutated
         .store()
         .stored_stats(g, Finest::Skip)
         .unwrap()
         .unwrap();
-    assert!(!same(&Levels::from_stats(m, reader.spacing()), &computed));
+    assert!(!same(&Levels::from_stats(m, mutated.spacing()), computed));
     let moved_field = mutated.field_stats(g, d).unwrap();
     assert_ne!(
         moved_field.tiles, field.tiles,
@@ -1308,19 +1329,30 @@ fn stored_tile_statistics_equal_the_computed_ones() {
     assert!(e.contains(&file_name) && !e.contains('\n'), "{e}");
     let e = mutated.field_stats(g, d).unwrap_err().to_string();
     assert!(e.contains(&file_name) && !e.contains('\n'), "{e}");
-    // A file with level 0's tiles (as grids from `FINEST_STORED_FROM_GRID` up are stored),
-    // written and read back: the same bits; a NaN in its level 0 is refused where level 0 is
-    // read, and UDLOD's read never looks at it.
+}
+
+/// A file with level 0's tiles (as grids from `FINEST_STORED_FROM_GRID` up are stored),
+/// written and read back: the same bits; a NaN in its level 0 is refused where level 0 is
+/// read, and UDLOD's read never looks at it.
+fn stats_with_level_0_read_back(
+    moved: &Path,
+    par: &vkterrain::dataset::stats::TileStats,
+    stored: &vkterrain::dataset::stats::TileStats,
+    (w, h): (u32, u32),
+    g: u32,
+) {
+    use vkterrain::dataset::stats::{Finest, TileStats};
+    let levels = stored.levels.len();
     let full = moved.join("full-stats.bin");
     par.write(&full).unwrap();
     assert_eq!(
         std::fs::metadata(&full).unwrap().len(),
         TileStats::stored_size(w, h, g, true).unwrap()
     );
-    assert_eq!(TileStats::read(&full, w, h, g, Finest::Keep).unwrap(), par);
+    assert_eq!(TileStats::read(&full, w, h, g, Finest::Keep).unwrap(), *par);
     assert_eq!(
         TileStats::read(&full, w, h, g, Finest::Skip).unwrap(),
-        stored
+        *stored
     );
     let mut bytes = std::fs::read(&full).unwrap();
     let level0_tile = 40 + 16 * levels + 12 * 5;
@@ -1331,14 +1363,19 @@ fn stored_tile_statistics_equal_the_computed_ones() {
         .to_string();
     assert!(e.contains("level 0") && !e.contains('\n'), "{e}");
     assert!(TileStats::read(&full, w, h, g, Finest::Skip).is_ok());
-    // The header's flag (byte 36) must match the file: cleared on the stored file (which
-    // has no level 0) it is a size mismatch, an unknown flag a one-line error.
+}
+
+/// The header's flag (byte 36) must match the file: cleared on the stored file (which has
+/// no level 0) it is a size mismatch, an unknown flag a one-line error (written to `file`).
+fn the_header_flag_must_match(file: &Path, (w, h): (u32, u32), g: u32) {
+    use vkterrain::dataset::stats::{Finest, TileStats};
+    let file_name = format!("stats-g{g}.bin");
     let mut bytes = std::fs::read(dataset().join(&file_name)).unwrap();
     assert_eq!(bytes[36], 1, "the stored file flags level 0 omitted");
     for (flag, expect) in [(0u8, "truncated or altered"), (2, "unknown header flags")] {
         bytes[36] = flag;
-        std::fs::write(&file, &bytes).unwrap();
-        let e = TileStats::read(&file, w, h, g, Finest::Skip)
+        std::fs::write(file, &bytes).unwrap();
+        let e = TileStats::read(file, w, h, g, Finest::Skip)
             .unwrap_err()
             .to_string();
         assert!(
@@ -1346,5 +1383,4 @@ fn stored_tile_statistics_equal_the_computed_ones() {
             "{e}"
         );
     }
-    std::fs::remove_dir_all(&moved).ok();
 }

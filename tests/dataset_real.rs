@@ -385,36 +385,7 @@ fn utm_geotiff_and_geographic_srtm_warp_into_one_mosaic() {
     let raw = raw_hgt(&d.join("srtm/N48W125.hgt.zip"));
     // Crop: file rows 2900..3300 (about 48.19..48.08 N), cols 1800..2400 (-124.5..-124.33).
     let (c0, r0, cw, rh) = (1800usize, 2900usize, 600usize, 400usize);
-    let crop = dir.join("srtm_crop.tif");
-    let gtiff = gdal::DriverManager::get_driver_by_name("GTiff").unwrap();
-    {
-        let mut ds = gtiff
-            .create_with_band_type::<i16, _>(&crop, cw, rh, 1)
-            .unwrap();
-        let s = 1.0 / 3600.0;
-        ds.set_geo_transform(&[
-            -125.0 + (c0 as f64 - 0.5) * s,
-            s,
-            0.0,
-            49.0 - (r0 as f64 - 0.5) * s,
-            0.0,
-            -s,
-        ])
-        .unwrap();
-        ds.set_spatial_ref(&SpatialRef::from_epsg(4326).unwrap())
-            .unwrap();
-        let mut band = ds.rasterband(1).unwrap();
-        band.set_no_data_value(Some(VOID as f64)).unwrap();
-        let data: Vec<i16> = (0..rh)
-            .flat_map(|r| raw[(r0 + r) * 3601 + c0..(r0 + r) * 3601 + c0 + cw].to_vec())
-            .collect();
-        band.write(
-            (0, 0),
-            (cw, rh),
-            &mut gdal::raster::Buffer::new((cw, rh), data),
-        )
-        .unwrap();
-    }
+    let crop = write_srtm_crop(&raw, (c0, r0, cw, rh), &dir.join("srtm_crop.tif"));
     let mut geo = SpatialRef::from_epsg(4326).unwrap();
     geo.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
     let mut utm = SpatialRef::from_epsg(32610).unwrap();
@@ -434,27 +405,7 @@ fn utm_geotiff_and_geographic_srtm_warp_into_one_mosaic() {
     );
     let plane = |e: f64, n: f64| 500.0 + 0.01 * (e - e0) + 0.02 * (n - n_top);
     let utm_tif = dir.join("plane_utm10.tif");
-    {
-        let mut ds = gtiff
-            .create_with_band_type::<f32, _>(&utm_tif, 120, 120, 1)
-            .unwrap();
-        ds.set_geo_transform(&[e0 - 15.0, 30.0, 0.0, n_top + 15.0, 0.0, -30.0])
-            .unwrap();
-        ds.set_spatial_ref(&utm).unwrap();
-        let data: Vec<f32> = (0..120)
-            .flat_map(|r| {
-                (0..120).map(move |c| plane(e0 + c as f64 * 30.0, n_top - r as f64 * 30.0) as f32)
-            })
-            .collect();
-        ds.rasterband(1)
-            .unwrap()
-            .write(
-                (0, 0),
-                (120, 120),
-                &mut gdal::raster::Buffer::new((120, 120), data),
-            )
-            .unwrap();
-    }
+    write_utm_plane(&utm_tif, &utm, (e0, n_top), plane);
     let m = read_inputs(&[utm_tif.clone(), crop.clone()], None, None).unwrap();
     assert!(
         m.provenance.iter().any(|l| l.contains("warped")),
@@ -466,21 +417,7 @@ fn utm_geotiff_and_geographic_srtm_warp_into_one_mosaic() {
     // No coarser than the finest input: SRTM1's ~20.7 m east-west, UTM's 30 m north-south.
     let [sx, sy] = g.step();
     assert!(sx < 21.0 && sy <= 30.0 + 1e-9, "{sx} x {sy}");
-    let srtm_at = |lon: f64, lat: f64, shift: f64| -> Option<f64> {
-        let (fc, fr) = ((lon + 125.0) * 3600.0 + shift, (49.0 - lat) * 3600.0);
-        let (c, r) = (fc.floor() as usize, fr.floor() as usize);
-        if c < c0 + 1 || r < r0 + 1 || c + 2 >= c0 + cw || r + 2 >= r0 + rh {
-            return None;
-        }
-        let v = |c: usize, r: usize| raw[r * 3601 + c];
-        let k = [v(c, r), v(c + 1, r), v(c, r + 1), v(c + 1, r + 1)];
-        if k.contains(&VOID) {
-            return None;
-        }
-        let (tx, ty) = (fc - c as f64, fr - r as f64);
-        let k = k.map(|x| x as f64);
-        Some((k[0] * (1.0 - tx) + k[1] * tx) * (1.0 - ty) + (k[2] * (1.0 - tx) + k[3] * tx) * ty)
-    };
+    let srtm_at = |lon, lat, shift| srtm_bilinear(&raw, (c0, r0, cw, rh), lon, lat, shift);
     let (mut in_plane, mut in_srtm, mut worst_plane, mut worst_srtm, mut worst_shifted) =
         (0, 0, 0f64, 0f64, 0f64);
     let w = m.width as usize;
@@ -525,4 +462,97 @@ fn utm_geotiff_and_geographic_srtm_warp_into_one_mosaic() {
         "the negative control should disagree: {worst_shifted}"
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Writes SRTM1 tile N48W125's samples `raw` in the window `(col, row, width, height)` as a
+/// geographic (EPSG:4326) i16 GeoTIFF at `path`, voids as no-data.
+fn write_srtm_crop(
+    raw: &[i16],
+    (c0, r0, cw, rh): (usize, usize, usize, usize),
+    path: &Path,
+) -> PathBuf {
+    use gdal::spatial_ref::SpatialRef;
+    let gtiff = gdal::DriverManager::get_driver_by_name("GTiff").unwrap();
+    let mut ds = gtiff
+        .create_with_band_type::<i16, _>(path, cw, rh, 1)
+        .unwrap();
+    let s = 1.0 / 3600.0;
+    ds.set_geo_transform(&[
+        -125.0 + (c0 as f64 - 0.5) * s,
+        s,
+        0.0,
+        49.0 - (r0 as f64 - 0.5) * s,
+        0.0,
+        -s,
+    ])
+    .unwrap();
+    ds.set_spatial_ref(&SpatialRef::from_epsg(4326).unwrap())
+        .unwrap();
+    let mut band = ds.rasterband(1).unwrap();
+    band.set_no_data_value(Some(VOID as f64)).unwrap();
+    let data: Vec<i16> = (0..rh)
+        .flat_map(|r| raw[(r0 + r) * 3601 + c0..(r0 + r) * 3601 + c0 + cw].to_vec())
+        .collect();
+    band.write(
+        (0, 0),
+        (cw, rh),
+        &mut gdal::raster::Buffer::new((cw, rh), data),
+    )
+    .unwrap();
+    path.to_path_buf()
+}
+
+/// Writes 120 x 120 samples of 30 m in `utm`, the first at `(e0, n_top)`, of `plane(E, N)`
+/// as an f32 GeoTIFF at `path`.
+fn write_utm_plane(
+    path: &Path,
+    utm: &gdal::spatial_ref::SpatialRef,
+    (e0, n_top): (f64, f64),
+    plane: impl Fn(f64, f64) -> f64 + Copy,
+) {
+    let gtiff = gdal::DriverManager::get_driver_by_name("GTiff").unwrap();
+    let mut ds = gtiff
+        .create_with_band_type::<f32, _>(path, 120, 120, 1)
+        .unwrap();
+    ds.set_geo_transform(&[e0 - 15.0, 30.0, 0.0, n_top + 15.0, 0.0, -30.0])
+        .unwrap();
+    ds.set_spatial_ref(utm).unwrap();
+    let data: Vec<f32> = (0..120)
+        .flat_map(|r| {
+            (0..120).map(move |c| plane(e0 + c as f64 * 30.0, n_top - r as f64 * 30.0) as f32)
+        })
+        .collect();
+    ds.rasterband(1)
+        .unwrap()
+        .write(
+            (0, 0),
+            (120, 120),
+            &mut gdal::raster::Buffer::new((120, 120), data),
+        )
+        .unwrap();
+}
+
+/// The bilinear height of SRTM1 tile N48W125's samples `raw` at `(lon, lat)`, `shift`
+/// samples east of it (the negative control's offset), where its four samples lie inside
+/// the crop window `(col, row, width, height)` (one sample in from its edges) and none is void.
+fn srtm_bilinear(
+    raw: &[i16],
+    (c0, r0, cw, rh): (usize, usize, usize, usize),
+    lon: f64,
+    lat: f64,
+    shift: f64,
+) -> Option<f64> {
+    let (fc, fr) = ((lon + 125.0) * 3600.0 + shift, (49.0 - lat) * 3600.0);
+    let (c, r) = (fc.floor() as usize, fr.floor() as usize);
+    if c < c0 + 1 || r < r0 + 1 || c + 2 >= c0 + cw || r + 2 >= r0 + rh {
+        return None;
+    }
+    let v = |c: usize, r: usize| raw[r * 3601 + c];
+    let k = [v(c, r), v(c + 1, r), v(c, r + 1), v(c + 1, r + 1)];
+    if k.contains(&VOID) {
+        return None;
+    }
+    let (tx, ty) = (fc - c as f64, fr - r as f64);
+    let k = k.map(|x| x as f64);
+    Some((k[0] * (1.0 - tx) + k[1] * tx) * (1.0 - ty) + (k[2] * (1.0 - tx) + k[3] * tx) * ty)
 }

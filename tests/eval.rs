@@ -96,10 +96,29 @@ fn eval_writes_results_charts_images_and_report() {
             .collect::<Vec<_>>()
     };
     assert_eq!(flips("brute"), [0.0, 0.0, 0.0]);
-    // Tiles (UDLOD's counter, grid 4; `tests/udlod.rs` checks it against the tile list): each
-    // drawn tile draws 2 to 32 triangles, and with quadrants collapsed or dropped some frame
-    // fewer than 32 a tile; brute force has no tiles. Negative control, by hand: triangles / 32
-    // (the bench's column until 2026-12-07), rounded down, breaks the bound in frame 0.
+    udlod_rows_count_tiles(rows, 8);
+    assert!(summaries[1]["tiles_median"].as_f64().unwrap() > 0.0);
+    let pgm = flips("pgm 60x263");
+    assert!(pgm.len() == 3 && pgm.iter().all(|&f| f > 0.0), "{pgm:?}");
+    // Side by side: reference | method | error | FLIP.
+    let img = image::open(out.join("images/pgm_60x263_f0007.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (4 * 96, 64));
+    let svg = std::fs::read_to_string(out.join("frame_time_vs_error.svg")).unwrap();
+    assert!(svg.contains("screen-space error, 99.9th percentile") && svg.contains("tau_px=4"));
+
+    // The same directory again without --force: refused, untouched.
+    let before = std::fs::read(out.join("results.json")).unwrap();
+    let o = vkterrain(&["eval", "--config", &config, "--frames", "2", "--out", out_s]);
+    one_line_error(&o, "exists");
+    assert_eq!(std::fs::read(out.join("results.json")).unwrap(), before);
+}
+
+/// Tiles (UDLOD's counter, grid 4; `tests/udlod.rs` checks it against the tile list), over
+/// `rows` of two UDLOD variants of `frames` frames each: each drawn tile draws 2 to 32
+/// triangles, and with quadrants collapsed or dropped some frame fewer than 32 a tile; brute
+/// force has no tiles. Negative control, by hand: triangles / 32 (the bench's column until
+/// 2026-12-07), rounded down, breaks the bound in frame 0.
+fn udlod_rows_count_tiles(rows: &[serde_json::Value], frames: usize) {
     let (mut udlod_frames, mut below_full) = (0, 0);
     for r in rows {
         let (tiles, triangles) = (&r["tiles"], r["triangles"].as_u64().unwrap());
@@ -115,23 +134,9 @@ fn eval_writes_results_charts_images_and_report() {
         }
     }
     assert!(
-        udlod_frames == 2 * 8 && below_full > 0,
+        udlod_frames == 2 * frames && below_full > 0,
         "{below_full} of {udlod_frames}"
     );
-    assert!(summaries[1]["tiles_median"].as_f64().unwrap() > 0.0);
-    let pgm = flips("pgm 60x263");
-    assert!(pgm.len() == 3 && pgm.iter().all(|&f| f > 0.0), "{pgm:?}");
-    // Side by side: reference | method | error | FLIP.
-    let img = image::open(out.join("images/pgm_60x263_f0007.png")).unwrap();
-    assert_eq!((img.width(), img.height()), (4 * 96, 64));
-    let svg = std::fs::read_to_string(out.join("frame_time_vs_error.svg")).unwrap();
-    assert!(svg.contains("screen-space error, 99.9th percentile") && svg.contains("tau_px=4"));
-
-    // The same directory again without --force: refused, untouched.
-    let before = std::fs::read(out.join("results.json")).unwrap();
-    let o = vkterrain(&["eval", "--config", &config, "--frames", "2", "--out", out_s]);
-    one_line_error(&o, "exists");
-    assert_eq!(std::fs::read(out.join("results.json")).unwrap(), before);
 }
 
 #[test]

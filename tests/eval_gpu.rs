@@ -65,33 +65,8 @@ fn gpu_metrics_equal_the_cpu_path(spacing: f64, lattice: Option<&Lattice>) {
         views: 1,
     };
     let shared = EvalShared::new(&gpu, &terrain, lattice, shape, frames, 3, 64 << 20).unwrap();
-    // A method with real errors: PGM at a quarter grid; on the earth (which PGM refuses)
-    // UDLOD at tau 4 px.
-    let variant: MethodConfig = if lattice.is_none() {
-        let mut pgm: MethodConfig = PgmSettings::default().into();
-        pgm.apply_sweep("grid_scale", 0.25).unwrap();
-        pgm
-    } else {
-        UdlodSettings {
-            tau_px: 4.0,
-            ..Default::default()
-        }
-        .into()
-    };
-    // A method with cracks: UDLOD without morphing opens T-junction gaps between levels, so
-    // the crack count (holes with terrain above them) is compared where it is not 0.
-    let cracked: MethodConfig = UdlodSettings {
-        tau_px: 4.0,
-        morph: false,
-        ..Default::default()
-    }
-    .into();
     let mut runs = Vec::new();
-    for (method, role) in [
-        (MethodConfig::Brute {}, Role::Reference),
-        (variant, Role::Variant),
-        (cracked, Role::Variant),
-    ] {
+    for (method, role) in methods_compared(lattice.is_some()) {
         let mut renderer = Renderer::with_world(
             &gpu,
             data.clone(),
@@ -183,4 +158,32 @@ fn gpu_metrics_equal_the_cpu_path(spacing: f64, lattice: Option<&Lattice>) {
     drop(runs);
     drop(shared);
     common::assert_no_validation_messages(&gpu);
+}
+
+/// Brute force (the reference), a method with real errors (PGM at a quarter grid; on the
+/// earth, which PGM refuses, UDLOD at tau 4 px) and one with cracks (UDLOD without morphing
+/// opens T-junction gaps between levels, so the crack count is compared where it is not 0).
+fn methods_compared(on_earth: bool) -> [(MethodConfig, Role); 3] {
+    let variant: MethodConfig = if !on_earth {
+        let mut pgm: MethodConfig = PgmSettings::default().into();
+        pgm.apply_sweep("grid_scale", 0.25).unwrap();
+        pgm
+    } else {
+        UdlodSettings {
+            tau_px: 4.0,
+            ..Default::default()
+        }
+        .into()
+    };
+    let cracked: MethodConfig = UdlodSettings {
+        tau_px: 4.0,
+        morph: false,
+        ..Default::default()
+    }
+    .into();
+    [
+        (MethodConfig::Brute {}, Role::Reference),
+        (variant, Role::Variant),
+        (cracked, Role::Variant),
+    ]
 }

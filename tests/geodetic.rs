@@ -407,53 +407,36 @@ fn horizon_dips_as_the_ellipsoid_says() {
     common::assert_no_validation_messages(&gpu);
 }
 
+/// Three one-sample spikes (grid sample, height) on 20 m flat ground.
+const SPIKES: [([i32; 2], f64); 3] = [([64, 64], 1500.0), ([200, 40], 800.0), ([128, 220], 2500.0)];
+
+/// A `size`² geographic grid of `d`-degree steps from `[lat0, lon0]` with [`SPIKES`].
+fn spiky_grid(size: u32, [lat0, lon0]: [f64; 2], d: f64) -> Heightmap {
+    let heights = |la: f64, lo: f64| {
+        for (s, hgt) in SPIKES {
+            let (sl, so) = (lat0 + s[1] as f64 * d, lon0 + s[0] as f64 * d);
+            if (la - sl).abs() < d / 2.0 && (lo - so).abs() < d / 2.0 {
+                return hgt;
+            }
+        }
+        20.0
+    };
+    geographic(size, lat0, lon0, d, &heights)
+}
+
 #[test]
 fn landmark_spikes_project_where_f64_geodesy_puts_them() {
+    let spikes = SPIKES;
     let gpu = common::gpu(false);
     let (size, d) = (257u32, 0.001);
     let (w, h) = (1024u32, 768u32);
     for lat0 in [0.0, 45.0, 70.0] {
         let lon0 = 10.0;
         // Spikes at three samples; heights above the ellipsoid.
-        let spikes = [
-            ([64i32, 64i32], 1500.0),
-            ([200, 40], 800.0),
-            ([128, 220], 2500.0),
-        ];
-        let heights = |la: f64, lo: f64| {
-            for (s, hgt) in spikes {
-                let (sl, so) = (lat0 + s[1] as f64 * d, lon0 + s[0] as f64 * d);
-                if (la - sl).abs() < d / 2.0 && (lo - so).abs() < d / 2.0 {
-                    return hgt;
-                }
-            }
-            20.0
-        };
-        let data = geographic(size, lat0, lon0, d, &heights);
+        let data = spiky_grid(size, [lat0, lon0], d);
         let lattice = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
         for dist_km in [1.0, 10.0, 50.0, 200.0] {
-            // The camera south-west of the first spike, 3 km up plus the earth's drop, aimed a
-            // little beside it so the tip is off-centre; 5 deg field of view.
-            let (sc, hs) = spikes[0];
-            let (slat, slon) = (lat0 + sc[1] as f64 * d, lon0 + sc[0] as f64 * d);
-            let tip = enu(lat0, lon0, slat, slon, hs);
-            let dist = dist_km * 1000.0;
-            let m = metres_per_deg_lat(slat);
-            let clat = slat - dist * 0.6 / m;
-            let clon = slon - dist * 0.8 / (m * slat.to_radians().cos());
-            let calt = 3000.0 + dist * dist / (2.0 * 6.37e6);
-            let pos = enu(lat0, lon0, clat, clon, calt);
-            let to = tip - pos;
-            let mut camera = Camera {
-                position: pos,
-                yaw_deg: to.x.atan2(to.y).to_degrees() + 0.4,
-                pitch_deg: (to.z / to.truncate().length()).atan().to_degrees() - 0.3,
-                vfov_deg: 5.0,
-                near: 1.0,
-                far: 1e6,
-                ..Camera::default()
-            };
-            camera.roll_deg = 0.0;
+            let (camera, tip, _) = camera_beside_spike([lat0, lon0], d, spikes[0], dist_km);
             let geo = render(
                 &gpu,
                 &data,
@@ -497,31 +480,65 @@ fn landmark_spikes_project_where_f64_geodesy_puts_them() {
                 // Farther off, rays past the thin tip leave the data (sky behind it).
                 continue;
             }
-            // The tip is in view (rendered, not only probed): terrain just below its pixel.
-            // (The spike is one sample wide: at 70 N and 10 km it is ~1,300 px tall and
-            // ~33 px wide at its base, so within a pixel of the tip it covers ~0.01 px.)
-            let e = pixel_of(&camera, tip, w, h);
-            let (ex, ey) = (e.x as u32, e.y as u32);
-            assert!(
-                ex > 0 && ex + 1 < w && ey + 24 < h,
-                "tip outside the image: {e}"
-            );
-            let f = &geo.frames[0];
-            // The spike's own depth there (not terrain behind it): within 2 % of the tip's.
-            let tip_depth = (tip - camera.position).dot(camera.basis().2);
-            let covered = (ey..ey + 24).any(|y| {
-                (ex - 1..=ex + 1).any(|x| {
-                    let d = f.depth_at(x, y).unwrap();
-                    d > 0.0 && (camera.linear_depth(d) - tip_depth).abs() < 0.02 * tip_depth
-                })
-            });
-            assert!(
-                covered,
-                "the spike is not drawn just below the tip's pixel {e}"
-            );
+            spike_is_drawn_below_its_tip(&geo.frames[0], &camera, tip, (w, h));
         }
     }
     common::assert_no_validation_messages(&gpu);
+}
+
+/// The camera `dist_km` south-west of `spike` (its grid sample and height on the grid of
+/// `d`-degree steps from `[lat0, lon0]`), 3 km up plus the earth's drop, aimed a little
+/// beside it so the tip is off-centre; 5 deg field of view. The camera, the tip's point and
+/// the camera's latitude, longitude and height.
+fn camera_beside_spike(
+    [lat0, lon0]: [f64; 2],
+    d: f64,
+    (sc, hs): ([i32; 2], f64),
+    dist_km: f64,
+) -> (Camera, DVec3, [f64; 3]) {
+    let (slat, slon) = (lat0 + sc[1] as f64 * d, lon0 + sc[0] as f64 * d);
+    let tip = enu(lat0, lon0, slat, slon, hs);
+    let dist = dist_km * 1000.0;
+    let m = metres_per_deg_lat(slat);
+    let clat = slat - dist * 0.6 / m;
+    let clon = slon - dist * 0.8 / (m * slat.to_radians().cos());
+    let calt = 3000.0 + dist * dist / (2.0 * 6.37e6);
+    let pos = enu(lat0, lon0, clat, clon, calt);
+    let to = tip - pos;
+    let camera = Camera {
+        position: pos,
+        yaw_deg: to.x.atan2(to.y).to_degrees() + 0.4,
+        pitch_deg: (to.z / to.truncate().length()).atan().to_degrees() - 0.3,
+        vfov_deg: 5.0,
+        near: 1.0,
+        far: 1e6,
+        roll_deg: 0.0,
+    };
+    (camera, tip, [clat, clon, calt])
+}
+
+/// The tip is in view (rendered, not only probed): the spike's own depth (not terrain behind
+/// it), within 2 % of the tip's, just below its pixel. (The spike is one sample wide: at 70 N
+/// and 10 km it is ~1,300 px tall and ~33 px wide at its base, so within a pixel of the tip
+/// it covers ~0.01 px.)
+fn spike_is_drawn_below_its_tip(f: &OwnedFrame, camera: &Camera, tip: DVec3, (w, h): (u32, u32)) {
+    let e = pixel_of(camera, tip, w, h);
+    let (ex, ey) = (e.x as u32, e.y as u32);
+    assert!(
+        ex > 0 && ex + 1 < w && ey + 24 < h,
+        "tip outside the image: {e}"
+    );
+    let tip_depth = (tip - camera.position).dot(camera.basis().2);
+    let covered = (ey..ey + 24).any(|y| {
+        (ex - 1..=ex + 1).any(|x| {
+            let d = f.depth_at(x, y).unwrap();
+            d > 0.0 && (camera.linear_depth(d) - tip_depth).abs() < 0.02 * tip_depth
+        })
+    });
+    assert!(
+        covered,
+        "the spike is not drawn just below the tip's pixel {e}"
+    );
 }
 
 /// Issue 14 rendered: landmark spikes on a synthetic geographic grid whose heights are above
@@ -539,21 +556,8 @@ fn landmarks_above_the_geoid_project_where_their_ellipsoidal_height_puts_them() 
     let (size, d) = (257u32, 0.002);
     let (w, h) = (1024u32, 768u32);
     let (lat0, lon0) = (28.0, 85.0);
-    let spikes = [
-        ([64i32, 64i32], 1500.0),
-        ([200, 40], 800.0),
-        ([128, 220], 2500.0),
-    ];
-    let heights = |la: f64, lo: f64| {
-        for (s, hgt) in spikes {
-            let (sl, so) = (lat0 + s[1] as f64 * d, lon0 + s[0] as f64 * d);
-            if (la - sl).abs() < d / 2.0 && (lo - so).abs() < d / 2.0 {
-                return hgt;
-            }
-        }
-        20.0
-    };
-    let data = geographic(size, lat0, lon0, d, &heights);
+    let spikes = SPIKES;
+    let data = spiky_grid(size, [lat0, lon0], d);
     let on_ellipsoid = Lattice::geographic(size, size, [lon0, lat0], [d, d]).unwrap();
     let geoid = Geoid::new(GeoidModel::Egm96).unwrap();
     let lattice = on_ellipsoid
@@ -563,26 +567,10 @@ fn landmarks_above_the_geoid_project_where_their_ellipsoidal_height_puts_them() 
     let spike_at = |s: [i32; 2]| (lat0 + s[1] as f64 * d, lon0 + s[0] as f64 * d);
     let n_spikes = egm96_undulations(&spikes.map(|(s, _)| spike_at(s)));
     for dist_km in [10.0, 50.0] {
-        // South-west of the first spike, 3 km up plus the earth's drop, aimed beside it.
-        let (slat, slon) = spike_at(spikes[0].0);
-        let tip = enu(lat0, lon0, slat, slon, spikes[0].1 + n_spikes[0]);
-        let dist = dist_km * 1000.0;
-        let m = metres_per_deg_lat(slat);
-        let clat = slat - dist * 0.6 / m;
-        let clon = slon - dist * 0.8 / (m * slat.to_radians().cos());
-        let calt = 3000.0 + dist * dist / (2.0 * 6.37e6);
+        let (sc, hs) = spikes[0];
+        let (camera, _, [clat, clon, calt]) =
+            camera_beside_spike([lat0, lon0], d, (sc, hs + n_spikes[0]), dist_km);
         let n_camera = egm96_undulations(&[(clat, clon)])[0];
-        let pos = enu(lat0, lon0, clat, clon, calt);
-        let to = tip - pos;
-        let camera = Camera {
-            position: pos,
-            yaw_deg: to.x.atan2(to.y).to_degrees() + 0.4,
-            pitch_deg: (to.z / to.truncate().length()).atan().to_degrees() - 0.3,
-            vfov_deg: 5.0,
-            near: 1.0,
-            far: 1e6,
-            ..Camera::default()
-        };
         // Before: the camera's height in EGM96 at the camera, the terrain on the ellipsoid.
         let before = Camera {
             position: enu(lat0, lon0, clat, clon, calt - n_camera),
@@ -981,60 +969,32 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
         .render(FrameRequest::from(camera), &mut sink)
         .unwrap();
     renderer.finish(&mut sink).unwrap();
-    // Every source sample: (GDAL pixel centre) -> lat/lon -> the grid's sample.
-    let mut pts = Vec::with_capacity(sw * sh);
-    let mut expected = Vec::with_capacity(sw * sh);
-    for gy in 0..sh {
-        for gx in 0..sw {
-            let lon = gt[0] + (gx as f64 + 0.5) * gt[1] + (gy as f64 + 0.5) * gt[2];
-            let lat = gt[3] + (gx as f64 + 0.5) * gt[4] + (gy as f64 + 0.5) * gt[5];
-            let (c, r) = grid_of(lon, lat);
-            assert!(
-                (c - c.round()).abs() < 1e-6 && (r - r.round()).abs() < 1e-6,
-                "source sample ({gx}, {gy}) falls between grid samples: ({c}, {r})"
-            );
-            pts.push(([c.round() as i32, r.round() as i32], [0.0f32, 0.0]));
-            expected.push((lat, lon, source[gy * sw + gx]));
-        }
-    }
+    let (pts, expected) = source_samples_on_the_grid(&source, gt, (sw, sh), grid_of);
     let got = probe_wgsl(&renderer, &pts);
-    let geoid = egm96_undulations(&expected.iter().map(|e| (e.0, e.1)).collect::<Vec<_>>());
     let lattice = config
         .open_lattice(&terrain, vkterrain::render::EarthGeometry::Ellipsoid)
         .unwrap()
         .expect("SRTM on the ellipsoid");
     let n_camera = egm96_undulations(&[(42.2, 1.2)])[0];
     let (w, h) = (320u32, 200u32);
-    let (mut voids, mut height_misses, mut in_view, mut worst_px) = (0, 0, 0, 0.0f64);
-    let (mut worst_m, mut worst_far_m, mut far, mut camera_n_far_m) = (0.0f64, 0.0f64, 0, 0.0f64);
-    for (k, (g, &(lat, lon, src_h))) in got.iter().zip(&expected).enumerate() {
-        if src_h == -32768 {
-            voids += 1;
-            continue;
-        }
-        // In metres: the lattice's point (CPU mirror) against f64 geodesy at H + N.
-        let n = geoid[k];
-        let exact = enu(lat0, lon0, lat, lon, src_h as f64 + n);
-        let s = DVec2::new(pts[k].0[0] as f64, pts[k].0[1] as f64);
-        let miss = (lattice.position(s, src_h as f64) - exact).length();
-        worst_m = worst_m.max(miss);
-        if (exact - camera.position).length() > 30_000.0 {
-            far += 1;
-            worst_far_m = worst_far_m.max(miss);
-            // The old placement: every height converted with the camera's undulation.
-            camera_n_far_m = camera_n_far_m.max((n - n_camera).abs());
-        }
-        if g.heights[0] != src_h as f32 {
-            height_misses += 1;
-        }
-        let px = pixel_of_clip(g.clip, w, h);
-        if g.clip[3] < 10.0 || px.x < 0.0 || px.y < 0.0 || px.x > w as f64 || px.y > h as f64 {
-            continue;
-        }
-        in_view += 1;
-        let want = pixel_of(&camera, exact, w, h);
-        worst_px = worst_px.max((px - want).length());
-    }
+    let SampleMisses {
+        voids,
+        height_misses,
+        in_view,
+        worst_px,
+        worst_m,
+        worst_far_m,
+        far,
+        camera_n_far_m,
+    } = sample_misses(
+        &pts,
+        &expected,
+        &got,
+        &lattice,
+        &camera,
+        (w, h),
+        [lat0, lon0],
+    );
     println!(
         "{} source samples: {voids} voids, {height_misses} heights differ; {in_view} in view, worst {worst_px:.4} px from f64 geodesy at H + N96",
         sw * sh
@@ -1055,6 +1015,113 @@ fn every_source_sample_is_a_vertex_where_it_lies() {
     drop(renderer);
     common::assert_no_validation_messages(&gpu);
     std::fs::remove_dir_all(&tmp).ok();
+}
+
+/// A probe's point: a grid sample and the fraction of a sample past it.
+#[cfg(feature = "gdal")]
+type ProbePoint = ([i32; 2], [f32; 2]);
+
+/// A source sample's latitude, longitude (degrees) and height (m; -32768: void).
+#[cfg(feature = "gdal")]
+type SourceSample = (f64, f64, i16);
+
+/// Every source sample (GDAL pixel centre of geotransform `gt`) -> lat/lon -> the grid's
+/// sample through `grid_of` (asserted to fall on one): the probe's points and, for each, its
+/// latitude, longitude and source height.
+#[cfg(feature = "gdal")]
+fn source_samples_on_the_grid(
+    source: &[i16],
+    gt: [f64; 6],
+    (sw, sh): (usize, usize),
+    grid_of: impl Fn(f64, f64) -> (f64, f64),
+) -> (Vec<ProbePoint>, Vec<SourceSample>) {
+    let mut pts = Vec::with_capacity(sw * sh);
+    let mut expected = Vec::with_capacity(sw * sh);
+    for gy in 0..sh {
+        for gx in 0..sw {
+            let lon = gt[0] + (gx as f64 + 0.5) * gt[1] + (gy as f64 + 0.5) * gt[2];
+            let lat = gt[3] + (gx as f64 + 0.5) * gt[4] + (gy as f64 + 0.5) * gt[5];
+            let (c, r) = grid_of(lon, lat);
+            assert!(
+                (c - c.round()).abs() < 1e-6 && (r - r.round()).abs() < 1e-6,
+                "source sample ({gx}, {gy}) falls between grid samples: ({c}, {r})"
+            );
+            pts.push(([c.round() as i32, r.round() as i32], [0.0f32, 0.0]));
+            expected.push((lat, lon, source[gy * sw + gx]));
+        }
+    }
+    (pts, expected)
+}
+
+/// How far the renderer's vertices at the source samples lie from f64 geodesy at `H + N96`.
+#[cfg(feature = "gdal")]
+struct SampleMisses {
+    voids: usize,
+    /// Samples whose vertex height is not the source's.
+    height_misses: usize,
+    in_view: usize,
+    /// Worst distance in pixels of an in-view vertex from the projected exact point.
+    worst_px: f64,
+    /// Worst distance in metres of the CPU lattice's point from the exact one, and of those
+    /// 30+ km from the camera (`far` of them).
+    worst_m: f64,
+    worst_far_m: f64,
+    far: usize,
+    /// The negative control: how far the camera's undulation misses the far samples'.
+    camera_n_far_m: f64,
+}
+
+#[cfg(feature = "gdal")]
+fn sample_misses(
+    pts: &[ProbePoint],
+    expected: &[SourceSample],
+    got: &[TerrainProbePoint],
+    lattice: &Lattice,
+    camera: &Camera,
+    (w, h): (u32, u32),
+    [lat0, lon0]: [f64; 2],
+) -> SampleMisses {
+    let geoid = egm96_undulations(&expected.iter().map(|e| (e.0, e.1)).collect::<Vec<_>>());
+    let n_camera = egm96_undulations(&[(42.2, 1.2)])[0];
+    let mut m = SampleMisses {
+        voids: 0,
+        height_misses: 0,
+        in_view: 0,
+        worst_px: 0.0,
+        worst_m: 0.0,
+        worst_far_m: 0.0,
+        far: 0,
+        camera_n_far_m: 0.0,
+    };
+    for (k, (g, &(lat, lon, src_h))) in got.iter().zip(expected).enumerate() {
+        if src_h == -32768 {
+            m.voids += 1;
+            continue;
+        }
+        // In metres: the lattice's point (CPU mirror) against f64 geodesy at H + N.
+        let n = geoid[k];
+        let exact = enu(lat0, lon0, lat, lon, src_h as f64 + n);
+        let s = DVec2::new(pts[k].0[0] as f64, pts[k].0[1] as f64);
+        let miss = (lattice.position(s, src_h as f64) - exact).length();
+        m.worst_m = m.worst_m.max(miss);
+        if (exact - camera.position).length() > 30_000.0 {
+            m.far += 1;
+            m.worst_far_m = m.worst_far_m.max(miss);
+            // The old placement: every height converted with the camera's undulation.
+            m.camera_n_far_m = m.camera_n_far_m.max((n - n_camera).abs());
+        }
+        if g.heights[0] != src_h as f32 {
+            m.height_misses += 1;
+        }
+        let px = pixel_of_clip(g.clip, w, h);
+        if g.clip[3] < 10.0 || px.x < 0.0 || px.y < 0.0 || px.x > w as f64 || px.y > h as f64 {
+            continue;
+        }
+        m.in_view += 1;
+        let want = pixel_of(camera, exact, w, h);
+        m.worst_px = m.worst_px.max((px - want).length());
+    }
+    m
 }
 
 /// SRTM3 N42E001's 1201 x 1201 heights read independently of the renderer (GDAL's SRTMHGT
@@ -1083,7 +1150,7 @@ fn srtm3_source(zip: &std::path::Path) -> (Vec<i16>, [f64; 6]) {
 /// height), and it is in view, so the caller's check placed it within 0.5 px.
 #[cfg(feature = "gdal")]
 fn summit_is_where_published(
-    expected: &[(f64, f64, i16)],
+    expected: &[SourceSample],
     got: &[TerrainProbePoint],
     [lat0, lon0]: [f64; 2],
     (w, h): (u32, u32),
@@ -1198,34 +1265,8 @@ fn udlod_through_the_clipmap_is_watertight_on_a_native_geographic_grid() {
         brute.render(FrameRequest::from(*c), &mut sink).unwrap();
         brute.finish(&mut sink).unwrap();
         let reference = sink.frames.pop().unwrap();
-        // Converged: nothing loading, no fallback. Bounded by time, not frames: the loader's
-        // threads share the CPU with this file's other tests (a frame count ran out once).
-        let started = std::time::Instant::now();
-        let frame = loop {
-            let mut sink = CollectSink::default();
-            udlod.render(FrameRequest::from(*c), &mut sink).unwrap();
-            udlod.finish(&mut sink).unwrap();
-            let frame = sink.frames.pop();
-            frames_total += 1;
-            let cm = udlod.clipmap().unwrap();
-            if cm.busy() == 0 && cm.views.iter().all(|v| v.fallback_cells == 0) {
-                break frame;
-            }
-            if cm.busy() > 0 {
-                std::thread::sleep(std::time::Duration::from_millis(2));
-            }
-            assert!(
-                started.elapsed() < std::time::Duration::from_secs(120),
-                "pose {i}: the clipmap did not converge: {} busy, {:?} fallback cells, {:?}",
-                cm.busy(),
-                cm.views
-                    .iter()
-                    .map(|v| v.fallback_cells)
-                    .collect::<Vec<_>>(),
-                cm.counters
-            );
-        };
-        let f = frame.unwrap();
+        let (f, frames) = converged_frame(&mut udlod, c, i);
+        frames_total += frames;
         for y in 0..h {
             for x in 0..w {
                 if reference.depth_at(x, y).unwrap() > 0.0 && f.depth_at(x, y).unwrap() == 0.0 {
@@ -1234,25 +1275,7 @@ fn udlod_through_the_clipmap_is_watertight_on_a_native_geographic_grid() {
             }
         }
     }
-    // CPU == GPU height queries on the last view.
-    let points: Vec<[f32; 2]> = (0..4096u32)
-        .map(|k| {
-            let u = (k as f32 * 0.618_034).fract() * 1200.0;
-            let v = (k as f32 * 0.414_213_6).fract() * 1200.0;
-            if k % 2 == 0 {
-                [u.floor(), v.floor()]
-            } else {
-                [u, v]
-            }
-        })
-        .collect();
-    let gpu_h = udlod.probe_heights_in_view(0, &points).unwrap();
-    let cm = udlod.clipmap().unwrap();
-    let worst = points
-        .iter()
-        .zip(&gpu_h)
-        .map(|(p, g)| (cm.sample_height(0, *p) - g[0]).abs())
-        .fold(0f32, f32::max);
+    let worst = clipmap_cpu_gpu_worst(&udlod);
     println!(
         "{} poses, {frames_total} clipmap frames: {holes} hole pixels; CPU vs GPU heights worst {worst:e} m",
         cameras.len()
@@ -1351,6 +1374,63 @@ fn the_earth_culling_box_holds_its_terrain() {
         g.x
     );
     assert!(n_hull > 0 && n_flat_r > 0, "{n_hull} {n_flat_r}");
+}
+
+/// Renders `c` through UDLOD's clipmap until it has converged (nothing loading, no
+/// fallback): the converged frame and the frames it took. Bounded by time, not frames: the
+/// loader's threads share the CPU with this file's other tests (a frame count ran out once).
+#[cfg(feature = "gdal")]
+fn converged_frame(udlod: &mut Renderer, c: &Camera, pose: usize) -> (OwnedFrame, usize) {
+    let started = std::time::Instant::now();
+    let mut frames = 0;
+    loop {
+        let mut sink = CollectSink::default();
+        udlod.render(FrameRequest::from(*c), &mut sink).unwrap();
+        udlod.finish(&mut sink).unwrap();
+        let frame = sink.frames.pop();
+        frames += 1;
+        let cm = udlod.clipmap().unwrap();
+        if cm.busy() == 0 && cm.views.iter().all(|v| v.fallback_cells == 0) {
+            return (frame.unwrap(), frames);
+        }
+        if cm.busy() > 0 {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(120),
+            "pose {pose}: the clipmap did not converge: {} busy, {:?} fallback cells, {:?}",
+            cm.busy(),
+            cm.views
+                .iter()
+                .map(|v| v.fallback_cells)
+                .collect::<Vec<_>>(),
+            cm.counters
+        );
+    }
+}
+
+/// The clipmap's CPU height query against the GPU's at 4,096 points of view 0 (half on
+/// samples, half between): the largest difference.
+#[cfg(feature = "gdal")]
+fn clipmap_cpu_gpu_worst(udlod: &Renderer) -> f32 {
+    let points: Vec<[f32; 2]> = (0..4096u32)
+        .map(|k| {
+            let u = (k as f32 * 0.618_034).fract() * 1200.0;
+            let v = (k as f32 * 0.414_213_6).fract() * 1200.0;
+            if k % 2 == 0 {
+                [u.floor(), v.floor()]
+            } else {
+                [u, v]
+            }
+        })
+        .collect();
+    let gpu_h = udlod.probe_heights_in_view(0, &points).unwrap();
+    let cm = udlod.clipmap().unwrap();
+    points
+        .iter()
+        .zip(&gpu_h)
+        .map(|(p, g)| (cm.sample_height(0, *p) - g[0]).abs())
+        .fold(0f32, f32::max)
 }
 
 /// PGM's reference sphere on the CPU (`lod::pgm::earth::Sphere`, the shader's formula in f64):

@@ -180,32 +180,9 @@ fn render_within_budget(gpu: &Arc<Gpu>, dir: &Path, grid: u32, d: u32, level0_by
     let reader = Arc::new(PyramidReader::open(dir).unwrap());
     let source = DatasetSource::open(dir).unwrap();
     let geometry = Geometry::of(&source.dataset);
-    let settings = ClipmapSettings {
-        enabled: true,
-        atlas_capacity: 96,
-        node_count: 6,
-        max_in_flight: 16,
-        max_uploads_per_frame: 8,
-        workers: 1,
-        retry_frames: 30,
-        blend_nodes: 0.5,
-    };
     let side = geometry.side() as usize;
-    let (ex, ey) = reader.extent();
-    let cameras: Vec<Camera> = (0..24)
-        .map(|k| {
-            let f = 0.2 + 0.6 * k as f64 / 24.0;
-            let (x, y) = (f * ex, (1.0 - f) * ey);
-            let ground = reader.bilinear(x, y).unwrap();
-            Camera {
-                position: DVec3::new(x, y, ground + 300.0),
-                yaw_deg: 30.0,
-                pitch_deg: -20.0,
-                ..Camera::default()
-            }
-        })
-        .collect();
-    let cm = Clipmap::new(geometry, settings, Arc::new(source), 1).unwrap();
+    let cameras = diagonal_flight(&reader);
+    let cm = Clipmap::new(geometry, small_clipmap(), Arc::new(source), 1).unwrap();
     let udlod = UdlodSettings {
         grid_size: grid,
         field_density: d,
@@ -287,4 +264,37 @@ fn render_within_budget(gpu: &Arc<Gpu>, dir: &Path, grid: u32, d: u32, level0_by
     assert!(reader.cached_bytes() <= reader.max_cached_bytes());
     drop(renderer);
     common::assert_no_validation_messages(gpu);
+}
+
+/// A clipmap of 96 atlas layers, 6 nodes per view and one loader thread.
+fn small_clipmap() -> ClipmapSettings {
+    ClipmapSettings {
+        enabled: true,
+        atlas_capacity: 96,
+        node_count: 6,
+        max_in_flight: 16,
+        max_uploads_per_frame: 8,
+        workers: 1,
+        retry_frames: 30,
+        blend_nodes: 0.5,
+    }
+}
+
+/// 24 cameras 300 m above the terrain on the diagonal from (0.2, 0.8) to (0.8, 0.2) of its
+/// extent, looking 20 degrees down.
+fn diagonal_flight(reader: &PyramidReader) -> Vec<Camera> {
+    let (ex, ey) = reader.extent();
+    (0..24)
+        .map(|k| {
+            let f = 0.2 + 0.6 * k as f64 / 24.0;
+            let (x, y) = (f * ex, (1.0 - f) * ey);
+            let ground = reader.bilinear(x, y).unwrap();
+            Camera {
+                position: DVec3::new(x, y, ground + 300.0),
+                yaw_deg: 30.0,
+                pitch_deg: -20.0,
+                ..Camera::default()
+            }
+        })
+        .collect()
 }

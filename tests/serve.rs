@@ -137,17 +137,7 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
     }
 
     // Every message was counted: accepted == valid, rejected == invalid.
-    let start = Instant::now();
-    let s = loop {
-        let s = status_json(&status_path);
-        if s["control_accepted"].as_u64().unwrap() + s["control_rejected"].as_u64().unwrap()
-            == valid + invalid
-        {
-            break s;
-        }
-        assert!(start.elapsed() < Duration::from_secs(30), "status: {s}");
-        std::thread::sleep(Duration::from_millis(200));
-    };
+    let s = status_counting(&status_path, valid + invalid);
     assert_eq!(s["control_accepted"].as_u64(), Some(valid), "{s}");
     assert_eq!(s["control_rejected"].as_u64(), Some(invalid), "{s}");
     assert_eq!(s["state"], "running");
@@ -170,8 +160,33 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
     );
 
     // Resolution change: a new ring generation at the new size.
+    resize_starts_a_new_generation(&sock, &sock_path, &mut r);
+
+    // SIGTERM: frame in flight finished, ring closed, exit 0, nothing left behind.
+    let paths = [sock_path.as_path(), &status_path];
+    terminate_and_check_clean(child, &mut r, tmp.path(), &name, paths);
+}
+
+/// The status file once its accepted and rejected control messages add up to `messages`
+/// (within 30 s).
+fn status_counting(status_path: &Path, messages: u64) -> serde_json::Value {
+    let start = Instant::now();
+    loop {
+        let s = status_json(status_path);
+        if s["control_accepted"].as_u64().unwrap() + s["control_rejected"].as_u64().unwrap()
+            == messages
+        {
+            break s;
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "status: {s}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// A resolution message starts a new ring generation whose frames have the new size.
+fn resize_starts_a_new_generation(sock: &UnixDatagram, sock_path: &Path, r: &mut RingReader) {
     let g1 = r.generation();
-    sock.send_to(br#"{"resolution":[48,32]}"#, &sock_path)
+    sock.send_to(br#"{"resolution":[48,32]}"#, sock_path)
         .unwrap();
     let start = Instant::now();
     loop {
@@ -185,12 +200,8 @@ fn serve_fuzzed_control_resize_status_and_sigterm() {
         }
         assert!(start.elapsed() < Duration::from_secs(60), "no restart");
     }
-    let m = next_frame(&mut r);
+    let m = next_frame(r);
     assert_eq!((m.width, m.height, r.pixels().len()), (48, 32, 48 * 32 * 4));
-
-    // SIGTERM: frame in flight finished, ring closed, exit 0, nothing left behind.
-    let paths = [sock_path.as_path(), &status_path];
-    terminate_and_check_clean(child, &mut r, tmp.path(), &name, paths);
 }
 
 /// Sends random bytes, broken JSON, NaN and absurd values, an oversized datagram and some

@@ -411,22 +411,7 @@ fn live_xyz_source_streams_through_the_clipmap_under_faults() {
     s.timeout_s = 4.0;
     let store = Arc::new(XyzPyramid::open(&s).unwrap());
     let reader = Arc::new(PyramidReader::from_store(store.clone()).unwrap());
-    let cm = Clipmap::new(
-        Geometry::of_store(&*store),
-        ClipmapSettings {
-            enabled: true,
-            atlas_capacity: 200,
-            node_count: 8,
-            max_in_flight: 16,
-            max_uploads_per_frame: 16,
-            workers: 2,
-            retry_frames: 2,
-            blend_nodes: 0.5,
-        },
-        Arc::new(StoreSource(store.clone())),
-        1,
-    )
-    .unwrap();
+    let cm = live_clipmap(&store);
     let (ex, ey) = reader.extent();
     let [_, hi] = store.height_range;
     let cam = Camera {
@@ -447,28 +432,7 @@ fn live_xyz_source_streams_through_the_clipmap_under_faults() {
     // The first frame builds pipelines; time the streaming frames after it.
     server.set(Fault::Errors(ZOOM));
     renderer.render(cam, &mut sink).unwrap();
-    let mut slowest = Duration::ZERO;
-    let mut times = Vec::new();
-    for fault in [
-        Fault::Errors(ZOOM),
-        Fault::Slow(ZOOM, Duration::from_secs(8)),
-        Fault::Corrupt(ZOOM),
-    ] {
-        server.set(fault);
-        // 25 frames each; the corrupt phase goes on until a corrupt tile was fetched (up to
-        // 250 frames): fetches of the slow phase may still hold every worker for their 8 s
-        // timeout when it begins, so on a loaded machine 25 frames can pass without a fetch.
-        for frame in 0..250 {
-            let t = Instant::now();
-            renderer.render(cam, &mut sink).unwrap();
-            slowest = slowest.max(t.elapsed());
-            times.push(t.elapsed().as_millis());
-            let corrupt_seen = || renderer.clipmap().unwrap().tile_counts().unwrap().corrupt > 0;
-            if frame + 1 >= 25 && (!matches!(fault, Fault::Corrupt(_)) || corrupt_seen()) {
-                break;
-            }
-        }
-    }
+    let (slowest, times) = render_under_faults(&mut renderer, &server, cam, &mut sink);
     renderer.finish(&mut sink).unwrap();
     let cm = renderer.clipmap().unwrap();
     let c = cm.counters;
@@ -517,4 +481,60 @@ fn live_xyz_source_streams_through_the_clipmap_under_faults() {
     }
     drop(renderer);
     common::assert_no_validation_messages(&gpu);
+}
+
+/// The clipmap over the live source `store`: one view of 8 nodes, two loader threads, up to
+/// 16 requests in flight, a failed node retried after 2 frames.
+#[cfg(feature = "gdal")]
+fn live_clipmap(store: &Arc<XyzPyramid>) -> Clipmap {
+    Clipmap::new(
+        Geometry::of_store(&**store),
+        ClipmapSettings {
+            enabled: true,
+            atlas_capacity: 200,
+            node_count: 8,
+            max_in_flight: 16,
+            max_uploads_per_frame: 16,
+            workers: 2,
+            retry_frames: 2,
+            blend_nodes: 0.5,
+        },
+        Arc::new(StoreSource(store.clone())),
+        1,
+    )
+    .unwrap()
+}
+
+/// Renders `cam` while the server answers ZOOM's tiles with errors, then slowly (8 s), then
+/// corrupt: 25 frames each, the corrupt phase until a corrupt tile was fetched (up to 250
+/// frames): fetches of the slow phase may still hold every worker for their 8 s timeout when
+/// it begins, so on a loaded machine 25 frames can pass without a fetch. The slowest frame and
+/// every frame's time in ms.
+#[cfg(feature = "gdal")]
+fn render_under_faults(
+    renderer: &mut Renderer,
+    server: &Server,
+    cam: Camera,
+    sink: &mut CollectSink,
+) -> (Duration, Vec<u128>) {
+    let mut slowest = Duration::ZERO;
+    let mut times = Vec::new();
+    for fault in [
+        Fault::Errors(ZOOM),
+        Fault::Slow(ZOOM, Duration::from_secs(8)),
+        Fault::Corrupt(ZOOM),
+    ] {
+        server.set(fault);
+        for frame in 0..250 {
+            let t = Instant::now();
+            renderer.render(cam, sink).unwrap();
+            slowest = slowest.max(t.elapsed());
+            times.push(t.elapsed().as_millis());
+            let corrupt_seen = || renderer.clipmap().unwrap().tile_counts().unwrap().corrupt > 0;
+            if frame + 1 >= 25 && (!matches!(fault, Fault::Corrupt(_)) || corrupt_seen()) {
+                break;
+            }
+        }
+    }
+    (slowest, times)
 }

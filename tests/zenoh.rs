@@ -136,11 +136,43 @@ fn two_boards_two_subscribers_control_and_status_over_zenoh() {
     });
 
     // Subscriber 1 (Rust, another process) on board A.
-    let png = tmp.path().join("a.png");
+    rust_subscriber_sees_its_board(tmp.path(), &ea);
+    // Subscriber 2 (Python) on board B: board B's pose, never board A's.
+    if python_with_zenoh() {
+        python_subscriber_sees_its_board(tmp.path(), &eb);
+    }
+
+    // Status as a queryable: board B's own status.
+    let o = subscribe(tmp.path(), "board-b", &eb, &["--status", "--seconds", "30"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{out}");
+    let s: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(s["ring"], "board-b");
+    assert!(s["zenoh"]["published"].as_u64() > Some(0), "{s}");
+
+    for child in [&mut board_a, &mut board_b] {
+        // SAFETY: signalling our own children.
+        unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    }
+    for child in [board_a, board_b] {
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+}
+
+/// Five frames of board A (its ring `board-a` at `endpoint`) through the Rust subscriber in
+/// another process: board A's size and pose (x 111, 41 degrees), rising frame numbers, a PNG.
+fn rust_subscriber_sees_its_board(tmp: &Path, endpoint: &str) {
+    let png = tmp.join("a.png");
     let o = subscribe(
-        tmp.path(),
+        tmp,
         "board-a",
-        &ea,
+        endpoint,
         &[
             "--frames",
             "5",
@@ -173,61 +205,40 @@ fn two_boards_two_subscribers_control_and_status_over_zenoh() {
     let nums: Vec<u64> = frames.iter().map(|f| f["frame"].parse().unwrap()).collect();
     assert!(nums.windows(2).all(|w| w[1] > w[0]), "{out}");
     assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+}
 
-    // Subscriber 2 (Python) on board B: board B's pose, never board A's.
-    if python_with_zenoh() {
-        let png_b = tmp.path().join("b.png");
-        let o = Command::new("python3")
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("consumers/python/zenoh_subscriber.py"))
-            .args([
-                "--ring",
-                "board-b",
-                "--connect",
-                &eb,
-                "--frames",
-                "5",
-                "--seconds",
-                "60",
-            ])
-            .arg("--save")
-            .arg(&png_b)
-            .output()
-            .unwrap();
-        let out = String::from_utf8_lossy(&o.stdout);
-        assert!(
-            o.status.success(),
-            "{out}\n{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        let frames = frames_of(&out);
-        assert_eq!(frames.len(), 5, "{out}");
-        for f in &frames {
-            assert_eq!(f["x"].as_str(), "222.0", "{out}");
-        }
-        assert!(std::fs::read(&png_b).unwrap().starts_with(b"\x89PNG"));
-    }
-
-    // Status as a queryable: board B's own status.
-    let o = subscribe(tmp.path(), "board-b", &eb, &["--status", "--seconds", "30"]);
+/// Five frames of board B (ring `board-b` at `endpoint`) through the Python subscriber: board
+/// B's pose (x 222), never board A's, and a PNG.
+fn python_subscriber_sees_its_board(tmp: &Path, endpoint: &str) {
+    let png_b = tmp.join("b.png");
+    let o = Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("consumers/python/zenoh_subscriber.py"))
+        .args([
+            "--ring",
+            "board-b",
+            "--connect",
+            endpoint,
+            "--frames",
+            "5",
+            "--seconds",
+            "60",
+        ])
+        .arg("--save")
+        .arg(&png_b)
+        .output()
+        .unwrap();
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{out}");
-    let s: serde_json::Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(s["ring"], "board-b");
-    assert!(s["zenoh"]["published"].as_u64() > Some(0), "{s}");
-
-    for child in [&mut board_a, &mut board_b] {
-        // SAFETY: signalling our own children.
-        unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let frames = frames_of(&out);
+    assert_eq!(frames.len(), 5, "{out}");
+    for f in &frames {
+        assert_eq!(f["x"].as_str(), "222.0", "{out}");
     }
-    for child in [board_a, board_b] {
-        let o = child.wait_with_output().unwrap();
-        assert_eq!(
-            o.status.code(),
-            Some(0),
-            "{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-    }
+    assert!(std::fs::read(&png_b).unwrap().starts_with(b"\x89PNG"));
 }
 
 fn rate(status: &Path, seconds: f64) -> f64 {
