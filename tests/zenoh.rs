@@ -67,7 +67,10 @@ fn wait_for(what: &str, mut ok: impl FnMut() -> bool) {
 }
 
 /// `key=value` pairs of every line of a subscriber's output.
-fn frames_of(out: &str) -> Vec<std::collections::BTreeMap<String, String>> {
+/// A subscriber's `frame=...` line as key/value pairs.
+type FrameFields = std::collections::BTreeMap<String, String>;
+
+fn frames_of(out: &str) -> Vec<FrameFields> {
     out.lines()
         .filter(|l| l.starts_with("frame="))
         .map(|l| {
@@ -77,6 +80,19 @@ fn frames_of(out: &str) -> Vec<std::collections::BTreeMap<String, String>> {
                 .collect()
         })
         .collect()
+}
+
+/// A subscriber's output that succeeded and printed five frames: its stdout and the frames.
+fn five_frames(o: &Output) -> (String, Vec<FrameFields>) {
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let frames = frames_of(&out);
+    assert_eq!(frames.len(), 5, "{out}");
+    (out, frames)
 }
 
 fn python_with_zenoh() -> bool {
@@ -182,14 +198,7 @@ fn rust_subscriber_sees_its_board(tmp: &Path, endpoint: &str) {
             png.to_str().unwrap(),
         ],
     );
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let frames = frames_of(&out);
-    assert_eq!(frames.len(), 5, "{out}");
+    let (out, frames) = five_frames(&o);
     for f in &frames {
         assert_eq!(
             (f["width"].as_str(), f["height"].as_str()),
@@ -227,14 +236,7 @@ fn python_subscriber_sees_its_board(tmp: &Path, endpoint: &str) {
         .arg(&png_b)
         .output()
         .unwrap();
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let frames = frames_of(&out);
-    assert_eq!(frames.len(), 5, "{out}");
+    let (out, frames) = five_frames(&o);
     for f in &frames {
         assert_eq!(f["x"].as_str(), "222.0", "{out}");
     }
