@@ -467,7 +467,7 @@ impl<'a> TauView<'a> {
                 let tiles = select_generic(levels, &sp, |t| sub_rect_splits(levels, &sp, t, sub));
                 n += tiles.len();
                 for t in &tiles {
-                    let mask = morph::tile_mask(levels, &sp, *t);
+                    let mask = select::tile_mask(levels, &sp, *t);
                     tris += grid::mask_triangles(levels.grid_size, mask);
                 }
             }
@@ -499,7 +499,7 @@ struct Drawn {
     over_rule: usize,
     over_chain: usize,
     /// Triangles as drawn (quadrants whose odd vertices all lie fully on the parent's grid
-    /// drawn as that grid, those outside the frustum not at all: `morph::tile_mask`), and the
+    /// drawn as that grid, those outside the frustum not at all: `select::tile_mask`), and the
     /// quadrants collapsed.
     drawn_triangles: u64,
     collapsed_quadrants: u32,
@@ -547,7 +547,7 @@ impl Drawn {
         let g = levels.grid_size;
         let (mut used, mut used_all) = (HashSet::new(), HashSet::new());
         for t in tiles {
-            let mask = morph::tile_mask(levels, sp, *t);
+            let mask = select::tile_mask(levels, sp, *t);
             self.drawn_triangles += grid::mask_triangles(g, mask);
             self.collapsed_quadrants += mask.quadrants(QuadrantDraw::Collapsed).count_ones();
             let own = mask.quadrants(QuadrantDraw::Own);

@@ -293,7 +293,7 @@ fn seeded_selection_at(data: &Heightmap, cams: &[Camera], lod: UdlodSettings) {
 /// quadrant of a tile whose odd vertices all lie fully on its parent's grid as that grid, and that
 /// is the same surface. Over a low flight (most tiles in their morph zones) and 30 poses, at every
 /// grid size and morph variant, and at grid 2, every quadrant drawn (`cull_quadrants = false`): the
-/// GPU gives every tile the mask the CPU mirror (`morph::tile_mask`, here the collapse of
+/// GPU gives every tile the mask the CPU mirror (`select::tile_mask`, here the collapse of
 /// `morph::tile_collapse_mask` alone) does, and the frames with and without collapsing are
 /// identical, colour and depth, bit for bit, while they draw exactly the triangles the masks
 /// save (`grid::mask_triangles`). Negative control by hand: a threshold of 0.5 instead of
@@ -317,7 +317,7 @@ fn collapsed_tiles_draw_the_same_surface() {
 /// Quadrants outside the view (docs/udlod-rounds.md, "Quadrants outside the view"): the quadrants
 /// of a drawn tile whose boxes lie outside the frustum are not drawn, and that changes no pixel.
 /// Over a low flight and 30 poses at grids 2, 4 and 8: the GPU gives every tile the mask the CPU
-/// mirror (`morph::tile_mask`) does, the frames with and without `cull_quadrants` are identical,
+/// mirror (`select::tile_mask`) does, the frames with and without `cull_quadrants` are identical,
 /// colour and depth, bit for bit, and differ by exactly the dropped quadrants' triangles
 /// (`grid::mask_triangles`). Negative control by hand: `refine` dropping quadrant
 /// `k ^ 1` instead of quadrant `k` fails the mirror at the first pose.
@@ -405,11 +405,11 @@ fn frames_and_masks(
     (sink.frames, drawn)
 }
 
-/// The CPU reference's tiles, each with the mask its mirror gives it (`morph::tile_mask`).
+/// The CPU reference's tiles, each with the mask its mirror gives it (`select::tile_mask`).
 fn cpu_masks(levels: &Levels, p: &SelectionParams) -> HashMap<Tile, TileMask> {
     select::select_tiles(levels, p)
         .into_iter()
-        .map(|t| (t, morph::tile_mask(levels, p, t)))
+        .map(|t| (t, select::tile_mask(levels, p, t)))
         .collect()
 }
 

@@ -21,6 +21,7 @@ pub mod gpu;
 pub mod grid;
 pub mod levels;
 pub mod morph;
+pub mod params;
 #[cfg(feature = "test-support")]
 pub mod probe;
 pub mod seed;

@@ -4,9 +4,8 @@
 
 use glam::Vec3;
 
-use super::grid::TileMask;
 use super::levels::{Levels, Tile};
-use super::select::{SelectionParams, quadrants_culled};
+use super::params::SelectionParams;
 use crate::gpu_constants::UDLOD_COLLAPSE_MARGIN;
 
 /// One step of every morph walk: where grid point `point` slides at level `j`, its lower even
@@ -101,7 +100,7 @@ pub(super) fn cascade_ramp(p: &SelectionParams, d: f32, s: f32, zone: f32) -> f3
 /// even). Their odd vertices coincide with even ones, so the quadrant's triangles are the
 /// parent grid's over its even vertices (each parent quad's two, the same diagonal) and
 /// degenerate ones (`docs/udlod-rounds.md`, "Collapsed quadrants"). At grid 2 a tile is drawn so only
-/// when all four are ([`TileMask::new`]).
+/// when all four are ([`super::grid::TileMask::new`]).
 pub fn tile_collapse_mask(levels: &Levels, p: &SelectionParams, t: Tile) -> u32 {
     if !p.morph {
         return 0;
@@ -124,14 +123,6 @@ pub(super) fn collapse_mask_by(levels: &Levels, t: Tile, ramp: impl Fn([i32; 2])
         }
     }
     super::grid::ALL_QUADRANTS & !keeps
-}
-
-/// How final tile `t` is drawn: its quadrants on the parent grid ([`tile_collapse_mask`]) and
-/// those outside the frustum ([`quadrants_culled`]) as one mask (`tile_mask` in
-/// `shaders/udlod_tiling.wgsl`).
-pub fn tile_mask(levels: &Levels, p: &SelectionParams, t: Tile) -> TileMask {
-    let collapsing = tile_collapse_mask(levels, p, t);
-    TileMask::new(levels.grid_size, collapsing, quadrants_culled(levels, p, t))
 }
 
 /// How a grid point moved in [`morph_cascade`] (`MORPH_*` and `morph_moved` in
