@@ -278,6 +278,25 @@ fn assert_clean(c: &BTreeMap<String, u64>, who: &str, min_received: u64) {
 
 #[test]
 fn c_header_and_python_match_rust_layout() {
+    let want = rust_layout();
+    let tmp = tempfile::tempdir().unwrap();
+    let exe = build_c(tmp.path());
+    let o = Command::new(&exe).arg("--layout").output().unwrap();
+    assert!(o.status.success());
+    let got: BTreeMap<String, usize> = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .filter_map(|l| l.split_once(' '))
+        .map(|(k, v)| (k.to_string(), v.parse().unwrap()))
+        .collect();
+    assert_eq!(got, want, "C header layout differs from the Rust layout");
+    if let Some(py) = python() {
+        python_offsets_match_rust_layout(py);
+    }
+}
+
+/// Sizes and field offsets of the ring's shared structs as Rust lays them out, named as the C
+/// reader's `--layout` prints them (`struct.field`, `struct.size`).
+fn rust_layout() -> BTreeMap<String, usize> {
     use std::mem::{offset_of, size_of};
     let mut want: BTreeMap<String, usize> = BTreeMap::new();
     macro_rules! off {
@@ -344,51 +363,42 @@ fn c_header_and_python_match_rust_layout() {
     ] {
         want.insert(format!("vkt_frame_meta.{c}"), r);
     }
+    want
+}
 
-    let tmp = tempfile::tempdir().unwrap();
-    let exe = build_c(tmp.path());
-    let o = Command::new(&exe).arg("--layout").output().unwrap();
-    assert!(o.status.success());
-    let got: BTreeMap<String, usize> = String::from_utf8_lossy(&o.stdout)
-        .lines()
-        .filter_map(|l| l.split_once(' '))
-        .map(|(k, v)| (k.to_string(), v.parse().unwrap()))
+/// The Python module's offsets and metadata format equal Rust's.
+fn python_offsets_match_rust_layout(py: &str) {
+    use std::mem::{offset_of, size_of};
+    let script = format!(
+        "import sys; sys.path.insert(0, {:?}); import vkterrain_ring as v; \
+         print(v.HEADER_SIZE, v.H_GENERATION, v.H_SLOT_SIZE, v.H_PIXELS_OFFSET, v.H_PID, \
+         v.H_LATEST, v.H_STATE, v.H_FLAGS, v.H_WAKE, v.H_PUBLISHED, v.S_META, v.META_SIZE, v.MAGIC, \
+         __import__('struct').calcsize(v.META_FORMAT[:-1]))",
+        root().join("consumers/python").display().to_string()
+    );
+    let o = Command::new(py).args(["-c", &script]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got: Vec<u64> = String::from_utf8_lossy(&o.stdout)
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
         .collect();
-    assert_eq!(got, want, "C header layout differs from the Rust layout");
-
-    // The Python module's offsets and metadata format.
-    if let Some(py) = python() {
-        let script = format!(
-            "import sys; sys.path.insert(0, {:?}); import vkterrain_ring as v; \
-             print(v.HEADER_SIZE, v.H_GENERATION, v.H_SLOT_SIZE, v.H_PIXELS_OFFSET, v.H_PID, \
-             v.H_LATEST, v.H_STATE, v.H_FLAGS, v.H_WAKE, v.H_PUBLISHED, v.S_META, v.META_SIZE, v.MAGIC, \
-             __import__('struct').calcsize(v.META_FORMAT[:-1]))",
-            root().join("consumers/python").display().to_string()
-        );
-        let o = Command::new(py).args(["-c", &script]).output().unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let got: Vec<u64> = String::from_utf8_lossy(&o.stdout)
-            .split_whitespace()
-            .map(|v| v.parse().unwrap())
-            .collect();
-        let want = vec![
-            size_of::<RingHeader>() as u64,
-            offset_of!(RingHeader, generation) as u64,
-            offset_of!(RingHeader, slot_size) as u64,
-            offset_of!(RingHeader, pixels_offset) as u64,
-            offset_of!(RingHeader, producer_pid) as u64,
-            offset_of!(RingHeader, latest) as u64,
-            offset_of!(RingHeader, state) as u64,
-            offset_of!(RingHeader, flags) as u64,
-            offset_of!(RingHeader, wake) as u64,
-            offset_of!(RingHeader, published) as u64,
-            offset_of!(SlotHeader, meta) as u64,
-            size_of::<FrameMeta>() as u64,
-            layout::MAGIC,
-            offset_of!(FrameMeta, _reserved2) as u64,
-        ];
-        assert_eq!(got, want, "Python offsets differ from the Rust layout");
-    }
+    let want = vec![
+        size_of::<RingHeader>() as u64,
+        offset_of!(RingHeader, generation) as u64,
+        offset_of!(RingHeader, slot_size) as u64,
+        offset_of!(RingHeader, pixels_offset) as u64,
+        offset_of!(RingHeader, producer_pid) as u64,
+        offset_of!(RingHeader, latest) as u64,
+        offset_of!(RingHeader, state) as u64,
+        offset_of!(RingHeader, flags) as u64,
+        offset_of!(RingHeader, wake) as u64,
+        offset_of!(RingHeader, published) as u64,
+        offset_of!(SlotHeader, meta) as u64,
+        size_of::<FrameMeta>() as u64,
+        layout::MAGIC,
+        offset_of!(FrameMeta, _reserved2) as u64,
+    ];
+    assert_eq!(got, want, "Python offsets differ from the Rust layout");
 }
 
 #[test]
