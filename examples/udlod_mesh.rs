@@ -26,7 +26,8 @@ use vkterrain::cli::render::{RenderArgs, prepare};
 use vkterrain::dataset::Heightmap;
 use vkterrain::lod::udlod::levels::{Levels, Tile};
 use vkterrain::lod::udlod::morph;
-use vkterrain::lod::udlod::select::{self, SelectionParams};
+use vkterrain::lod::udlod::params::SelectionParams;
+use vkterrain::lod::udlod::select;
 use vkterrain::lod::{MethodConfig, UdlodSettings};
 use vkterrain::scene::Camera;
 

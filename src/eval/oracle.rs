@@ -31,7 +31,7 @@ use std::collections::HashSet;
 use glam::DVec3;
 
 use crate::dataset::{Heightmap, interp};
-use crate::lod::udlod::select::frustum_planes;
+use crate::lod::udlod::params::frustum_planes;
 use crate::scene::Camera;
 
 /// Per-cell statistics of one level (`k >= 1`).

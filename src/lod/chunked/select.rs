@@ -13,7 +13,7 @@ use glam::{DVec3, Vec3};
 use super::settings::ChunkedSettings;
 use crate::geo::{EarthCull, Lattice};
 use crate::lod::udlod::levels::{Levels, Tile};
-use crate::lod::udlod::select::{frustum_planes, stretch_at_viewer};
+use crate::lod::udlod::params::{frustum_planes, stretch_at_viewer};
 use crate::scene::Camera;
 
 /// The levels a walk visits: it starts at `start` (the root depth below the root) and never

@@ -16,7 +16,7 @@ use ash::vk;
 use glam::DVec3;
 
 use super::blocks::BlockBounds;
-use super::udlod::select::frustum_planes;
+use super::udlod::params::frustum_planes;
 use super::{LodMethod, MethodContext};
 use crate::driver::Gpu;
 use crate::driver::memory::Buffer;

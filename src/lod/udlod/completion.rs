@@ -16,7 +16,7 @@ use super::field::{
 };
 use super::levels::{Levels, QUAD, Tile};
 use super::morph::{cascade_ramp, collapse_mask_by, viewer_distance};
-use super::select::SelectionParams;
+use super::params::SelectionParams;
 
 /// Which of a cell's terms the completion field `r` keeps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

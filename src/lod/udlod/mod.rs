@@ -54,7 +54,7 @@ pub use gpu::{
 use gpu::{SlotBuffers, TileLists};
 use grid::{QuadrantDraw, TileMask};
 use levels::Levels;
-use select::SelectionParams;
+use params::SelectionParams;
 use settings::{BackFaces, LodMetric, UdlodSettings};
 
 pub struct Udlod {

@@ -15,7 +15,8 @@
 //! GPU would have made from the root.
 
 use super::levels::{Levels, Tile};
-use super::select::{self, SelectionParams, Visibility};
+use super::params::SelectionParams;
+use super::select::{self, Visibility};
 use crate::gpu_constants::{
     UDLOD_TILE_CULLED, UDLOD_TILE_DECIDED, UDLOD_TILE_INSIDE, UDLOD_TILE_OUTSIDE, UDLOD_TILE_SPLITS,
 };

@@ -9,7 +9,7 @@ use super::field::SplitField;
 use super::grid::TileMask;
 use super::levels::{Levels, QUAD, Tile};
 use super::morph::{tile_collapse_mask, walk_end};
-pub use super::params::{SelectionParams, frustum_planes, stretch_at_viewer};
+use super::params::SelectionParams;
 
 /// Distance from the LOD viewer to the nearest point of the tile's rectangle at the reference
 /// height, in the LOD metric (grid-frame offsets times [`SelectionParams::stretch`]).
